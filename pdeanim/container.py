@@ -1,0 +1,110 @@
+"""The binary container every pdeanim blob uses: a small JSON header plus little-endian arrays.
+
+Layout (version 1), all integers little-endian::
+
+    0   8 bytes   magic b"PDEANIM\\0"
+    8   uint32    container version (1)
+    12  uint32    H, length of the JSON header in bytes (UTF-8, space-padded to a multiple of 8)
+    16  H bytes   JSON header: {"part": ..., ..., "arrays": {name: {"dtype", "shape", "offset", "nbytes"}}}
+    16+H          array data; each array starts at ``offset`` bytes after the data start, 8-byte aligned
+
+Arrays are C-ordered with dtypes from ALLOWED_DTYPES. The JSON form (for debugging) is the same header with
+each array's values inlined as a flat list under "data" instead of offset/nbytes.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from typing import Any
+
+import numpy as np
+
+from .errors import ClipFormatError
+
+MAGIC = b"PDEANIM\0"
+VERSION = 1
+ALLOWED_DTYPES = ("<f4", "<f8", "<i4", "<u4", "<i2", "<u2", "<u1", "<i1")
+_PREFIX = struct.Struct("<8sII")
+
+
+def _pad8(n: int) -> int:
+    return (n + 7) // 8 * 8
+
+
+def _canonical(arr: np.ndarray) -> np.ndarray:
+    a = np.asarray(arr)
+    dt = a.dtype.newbyteorder("<") if a.dtype.byteorder not in ("<", "|", "=") else a.dtype
+    a = np.ascontiguousarray(a, dtype=dt)
+    if a.dtype.str not in ALLOWED_DTYPES and a.dtype.str.replace("|", "<") not in ALLOWED_DTYPES:
+        raise ValueError(f"dtype {a.dtype} is not allowed in a pdeanim container")
+    return a
+
+
+def pack(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
+    """Encode ``header`` (JSON-able, without "arrays") and named arrays into container bytes."""
+    table: dict[str, dict] = {}
+    chunks: list[bytes] = []
+    offset = 0
+    for name, arr in arrays.items():
+        a = _canonical(arr)
+        raw = a.tobytes()
+        table[name] = {"dtype": a.dtype.str.replace("|", "<"), "shape": list(a.shape), "offset": offset,
+                       "nbytes": len(raw)}
+        chunks.append(raw + b"\0" * (_pad8(len(raw)) - len(raw)))
+        offset += _pad8(len(raw))
+    meta = json.dumps({**header, "arrays": table}, separators=(",", ":"), sort_keys=True).encode()
+    meta += b" " * (_pad8(len(meta)) - len(meta))
+    return _PREFIX.pack(MAGIC, VERSION, len(meta)) + meta + b"".join(chunks)
+
+
+def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError."""
+    if len(blob) < _PREFIX.size:
+        raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
+    magic, version, hlen = _PREFIX.unpack_from(blob, 0)
+    if magic != MAGIC:
+        raise ClipFormatError("not a pdeanim container (bad magic bytes)")
+    if version != VERSION:
+        raise ClipFormatError(f"unsupported container version {version} (this build reads {VERSION})")
+    start = _PREFIX.size + hlen
+    if start > len(blob):
+        raise ClipFormatError("truncated container header")
+    try:
+        header = json.loads(bytes(blob[_PREFIX.size:start]).decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
+    arrays: dict[str, np.ndarray] = {}
+    for name, spec in header.pop("arrays", {}).items():
+        try:
+            dtype = np.dtype(spec["dtype"])
+            shape = tuple(int(s) for s in spec["shape"])
+            lo, n = start + int(spec["offset"]), int(spec["nbytes"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
+        if spec["dtype"] not in ALLOWED_DTYPES or n != int(np.prod(shape, dtype=np.int64)) * dtype.itemsize:
+            raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")
+        if lo < start or lo + n > len(blob):
+            raise ClipFormatError(f"array {name!r} lies outside the container (truncated file?)")
+        arrays[name] = np.frombuffer(blob, dtype=dtype, count=int(np.prod(shape, dtype=np.int64)),
+                                     offset=lo).reshape(shape)
+    return header, arrays
+
+
+def to_json(blob: bytes) -> dict[str, Any]:
+    """The JSON form of a container: its header with arrays inlined (dtype, shape, flat data)."""
+    header, arrays = unpack(blob)
+    header["arrays"] = {name: {"dtype": a.dtype.str, "shape": list(a.shape), "data": a.ravel().tolist()}
+                        for name, a in arrays.items()}
+    return {"container": "pdeanim", "version": VERSION, **header}
+
+
+def from_json(doc: dict[str, Any]) -> bytes:
+    """Inverse of :func:`to_json`: rebuild the binary container from its JSON form."""
+    try:
+        header = {k: v for k, v in doc.items() if k not in ("container", "version", "arrays")}
+        arrays = {name: np.asarray(spec["data"], dtype=np.dtype(spec["dtype"])).reshape(spec["shape"])
+                  for name, spec in doc.get("arrays", {}).items()}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ClipFormatError(f"bad JSON container: {exc}") from exc
+    return pack(header, arrays)

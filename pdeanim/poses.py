@@ -1,0 +1,152 @@
+"""Poses: F frames of the same mesh (same vertex count, same faces), the input of the fit.
+
+On disk a POSES.npz holds ``vertices`` (F, V, 3) float32, ``faces`` (T, 3) int32 and optionally ``times``
+(F,) float seconds (default: 0, 1/30, ...). Animated glTF files are read by :mod:`pdeanim.gltf`.
+"""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LimitError, PosesInputError
+
+DEFAULT_FPS = 30.0
+
+
+@dataclass(frozen=True)
+class PoseLimits:
+    """Explicit limits on what a poses input may hold."""
+
+    max_frames: int = 10_000
+    max_vertices: int = 2_000_000
+    max_values: int = 400_000_000  # frames * vertices * 3
+
+
+@dataclass
+class Poses:
+    """A sequence of frames of one mesh.
+
+    vertices : (F, V, 3) float32 positions per frame, in the original vertex order
+    faces : (T, 3) int32 triangle indices into V (may be empty for point data)
+    times : (F,) float64 strictly increasing seconds
+    meta : free-form provenance (source file, simulation parameters, reports)
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    times: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[1])
+
+    def validate(self, limits: PoseLimits | None = None) -> Poses:
+        """Check shapes, finiteness, index ranges and limits; returns self or raises PosesInputError."""
+        validate_pose_arrays(self.vertices, self.faces, self.times, limits)
+        return self
+
+
+def make_poses(vertices: np.ndarray, faces: np.ndarray | None, times: np.ndarray | None = None,
+               meta: dict | None = None, limits: PoseLimits | None = None) -> Poses:
+    """Build validated Poses with canonical dtypes; ``times`` defaults to 30 fps from 0."""
+    v = np.asarray(vertices)
+    if v.ndim == 2 and v.shape[-1] == 3:
+        v = v[None]
+    if v.ndim != 3 or v.shape[-1] != 3:
+        raise PosesInputError(f"vertices must have shape (F, V, 3), got {v.shape}")
+    f = np.zeros((0, 3), np.int32) if faces is None else np.asarray(faces)
+    if times is None:
+        times = np.arange(v.shape[0], dtype=np.float64) / DEFAULT_FPS
+    validate_pose_arrays(v, f, np.asarray(times), limits)
+    return Poses(v.astype(np.float32, copy=False), f.astype(np.int32, copy=False),
+                 np.asarray(times, dtype=np.float64), dict(meta or {}))
+
+
+def validate_pose_arrays(vertices: np.ndarray, faces: np.ndarray, times: np.ndarray,
+                         limits: PoseLimits | None = None) -> None:
+    """Raise PosesInputError (or LimitError) naming the first problem found."""
+    limits = limits or PoseLimits()
+    if vertices.ndim != 3 or vertices.shape[-1] != 3:
+        raise PosesInputError(f"vertices must have shape (F, V, 3), got {vertices.shape}")
+    n_frames, n_verts = vertices.shape[:2]
+    if n_frames < 1 or n_verts < 1:
+        raise PosesInputError(f"poses need at least one frame and one vertex, got {vertices.shape}")
+    if n_frames > limits.max_frames:
+        raise LimitError("frame count", n_frames, limits.max_frames, "PDEANIM_MAX_FRAMES")
+    if n_verts > limits.max_vertices:
+        raise LimitError("vertex count", n_verts, limits.max_vertices, "PDEANIM_MAX_VERTICES")
+    if vertices.size > limits.max_values:
+        raise LimitError("frames x vertices x 3", vertices.size, limits.max_values)
+    if not np.issubdtype(vertices.dtype, np.number):
+        raise PosesInputError(f"vertices must be numeric, got dtype {vertices.dtype}")
+    if not np.all(np.isfinite(vertices)):
+        bad = np.argwhere(~np.isfinite(vertices))[0]
+        raise PosesInputError(f"vertices contain NaN or infinite values (first at frame {bad[0]}, vertex {bad[1]})")
+    if faces.ndim != 2 or (faces.size and faces.shape[1] != 3):
+        raise PosesInputError(f"faces must have shape (T, 3), got {faces.shape}")
+    if faces.size:
+        if not np.issubdtype(faces.dtype, np.integer):
+            raise PosesInputError(f"faces must be integer indices, got dtype {faces.dtype}")
+        if faces.min() < 0 or faces.max() >= n_verts:
+            raise PosesInputError(f"face indices must lie in [0, {n_verts}), found {faces.min()}..{faces.max()}")
+    if times.shape != (n_frames,):
+        raise PosesInputError(f"times must have shape ({n_frames},), got {times.shape}")
+    if not np.all(np.isfinite(times)):
+        raise PosesInputError("times contain NaN or infinite values")
+    if n_frames > 1 and not np.all(np.diff(times) > 0):
+        raise PosesInputError("times must be strictly increasing")
+
+
+def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None) -> Poses:
+    """Read a POSES.npz (path or bytes): ``vertices`` (F,V,3), ``faces`` (T,3), optional ``times`` (F,)."""
+    try:
+        fh = io.BytesIO(source) if isinstance(source, bytes | bytearray) else open(source, "rb")
+        with fh, np.load(fh, allow_pickle=False) as data:
+            if "vertices" not in data.files:
+                raise PosesInputError(f"poses .npz has no 'vertices' array (found {sorted(data.files)})")
+            vertices = data["vertices"]
+            faces = data["faces"] if "faces" in data.files else None
+            times = data["times"] if "times" in data.files else None
+    except PosesInputError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise PosesInputError(f"cannot read poses .npz: {exc}") from exc
+    return make_poses(vertices, faces, times, {"source": "npz"}, limits)
+
+
+def load_poses(path: str | Path, fps: float = DEFAULT_FPS, limits: PoseLimits | None = None) -> Poses:
+    """Read poses from a .npz or an animated .glb/.gltf (sampled at ``fps``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        return load_poses_npz(path, limits)
+    if suffix in (".glb", ".gltf"):
+        from .gltf.read import read_animated_poses  # glTF reading lives with the glTF code
+
+        return read_animated_poses(path, fps=fps, limits=limits)
+    raise PosesInputError(f"unsupported poses file type {suffix!r}: use .npz, .glb or .gltf")
+
+
+def save_poses(path: str | Path, poses: Poses) -> None:
+    """Write POSES.npz with float32 vertices, int32 faces and float64 times."""
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, vertices=poses.vertices.astype(np.float32), faces=poses.faces.astype(np.int32),
+                            times=poses.times.astype(np.float64))
+
+
+def poses_to_bytes(poses: Poses) -> bytes:
+    """The POSES.npz file as bytes (what ``GET /v1/poses/{id}`` serves)."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, vertices=poses.vertices.astype(np.float32), faces=poses.faces.astype(np.int32),
+                        times=poses.times.astype(np.float64))
+    return buf.getvalue()

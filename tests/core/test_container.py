@@ -1,0 +1,71 @@
+"""Round trips and failure modes of the binary container, clip files and poses files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from pdeanim import container
+from pdeanim.clip import ClipParts, read_clip_file, write_clip_file
+from pdeanim.errors import ClipFormatError, LimitError, PosesInputError
+from pdeanim.poses import PoseLimits, load_poses_npz, make_poses, poses_to_bytes
+
+
+@given(hnp.arrays(np.float32, hnp.array_shapes(max_dims=3, max_side=7), elements=st.floats(-1e6, 1e6, width=32)),
+       hnp.arrays(np.int32, hnp.array_shapes(max_dims=2, max_side=5)))
+def test_pack_unpack_round_trip(a, b):
+    blob = container.pack({"part": "test", "n": 3}, {"a": a, "b": b})
+    header, arrays = container.unpack(blob)
+    assert header == {"part": "test", "n": 3}
+    np.testing.assert_array_equal(arrays["a"], a)
+    np.testing.assert_array_equal(arrays["b"], b)
+    assert arrays["a"].dtype == np.float32 and arrays["b"].dtype == np.int32
+    assert container.from_json(container.to_json(blob)) == blob
+
+
+def test_arrays_are_aligned_and_little_endian():
+    blob = container.pack({"part": "x"}, {"odd": np.arange(3, dtype=np.uint8), "f": np.ones(5, ">f4")})
+    header, arrays = container.unpack(blob)
+    assert arrays["f"].dtype.str == "<f4"
+    assert (arrays["f"].ctypes.data - np.frombuffer(blob, np.uint8).ctypes.data) % 8 == 0
+
+
+@pytest.mark.parametrize("blob", [b"", b"PDEANIM\0", b"garbage" * 10])
+def test_bad_blobs_raise_clear_errors(blob):
+    with pytest.raises(ClipFormatError):
+        container.unpack(blob)
+
+
+def test_truncated_blob_raises():
+    blob = container.pack({"part": "x"}, {"a": np.arange(100, dtype=np.float32)})
+    with pytest.raises(ClipFormatError, match="truncated|outside"):
+        container.unpack(blob[:-16])
+
+
+def test_clip_file_round_trip(tmp_path):
+    parts = ClipParts(container.pack({"part": "topology"}, {}), container.pack({"part": "coefficients"}, {}),
+                      {"rms": 1.0})
+    write_clip_file(tmp_path / "c.clip", parts)
+    back = read_clip_file(tmp_path / "c.clip")
+    assert back.topology == parts.topology and back.coefficients == parts.coefficients
+    assert back.report == {"rms": 1.0}
+
+
+def test_poses_round_trip_and_validation(morph_sphere_path):
+    poses = load_poses_npz(morph_sphere_path)
+    assert poses.vertices.shape == (216, 1876, 3) and poses.faces.shape == (960, 3)
+    again = load_poses_npz(poses_to_bytes(poses))
+    np.testing.assert_array_equal(again.vertices, poses.vertices)
+    bad = poses.vertices[:2].copy()
+    bad[1, 5, 0] = np.nan
+    with pytest.raises(PosesInputError, match="NaN"):
+        make_poses(bad, poses.faces)
+    with pytest.raises(PosesInputError, match="indices"):
+        make_poses(poses.vertices[:2], poses.faces + 5000)
+    with pytest.raises(LimitError):
+        make_poses(poses.vertices, poses.faces, limits=PoseLimits(max_frames=10))
+    with pytest.raises(PosesInputError):
+        load_poses_npz(b"not a zip")
