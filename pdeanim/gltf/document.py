@@ -1,0 +1,173 @@
+"""A parsed glTF 2.0 asset (GLB or .gltf JSON with embedded or neighbouring buffers) and accessor decoding:
+strides, normalized integers, sparse substitution and view-less (all-zero) accessors."""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+from urllib.parse import unquote
+
+import numpy as np
+
+from ..errors import InputError, PosesInputError
+from .glb import COMPONENT_DTYPES, GLB_MAGIC, TYPE_SIZES, unpack_glb
+
+_NORM_DIVISOR = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+MAX_ACCESSOR_VALUES = 60_000_000  # cap on components of one accessor not backed by checked buffer data
+MALFORMED = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError, ZeroDivisionError,
+             RecursionError, np.linalg.LinAlgError)
+# required extensions that change how geometry is stored and that this reader cannot decode
+UNSUPPORTED_GEOMETRY = ("KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression",
+                        "EXT_mesh_gpu_instancing")
+
+
+@contextmanager
+def malformed_as(error: type[InputError]) -> Iterator[None]:
+    """Turn the lookup and type errors a malformed glTF JSON provokes into ``error`` (an InputError)."""
+    try:
+        yield
+    except InputError:
+        raise
+    except MALFORMED as exc:
+        raise error(f"malformed glTF ({type(exc).__name__}: {exc})") from exc
+
+
+class GltfDocument:
+    """The JSON of a glTF asset with its buffers loaded; ``error`` is the InputError class raised on defects."""
+
+    def __init__(self, doc: dict[str, Any], buffers: list[bytes], error: type[InputError] = PosesInputError):
+        self.doc, self.buffers, self.error = doc, buffers, error
+        version = str(doc.get("asset", {}).get("version", ""))
+        if not version.startswith("2."):
+            raise error(f"unsupported glTF version {version!r} (need 2.x)")
+        blocked = sorted(set(doc.get("extensionsRequired", [])) & set(UNSUPPORTED_GEOMETRY))
+        if blocked:
+            raise error(f"the glTF file needs {', '.join(blocked)} to decode its geometry, which pdeanim does "
+                        f"not read; export it without mesh compression")
+
+    def list(self, key: str) -> list[dict[str, Any]]:
+        """A top-level array of the document (``nodes``, ``meshes``...), empty when absent."""
+        value = self.doc.get(key, [])
+        return value if isinstance(value, list) else []
+
+    def item(self, key: str, index: Any) -> dict[str, Any]:
+        """``doc[key][index]`` or a clear error naming the dangling reference."""
+        items = self.list(key)
+        if not isinstance(index, int) or not 0 <= index < len(items):
+            raise self.error(f"glTF refers to {key}[{index}], which does not exist ({len(items)} present)")
+        return items[index]
+
+    def accessor(self, index: int) -> np.ndarray:
+        """Decode accessor ``index`` to (count, components) float64 (normalized ints scaled) or int64."""
+        acc = self.item("accessors", index)
+        try:
+            ctype, count, width = int(acc["componentType"]), int(acc["count"]), TYPE_SIZES[acc["type"]]
+            dtype = COMPONENT_DTYPES[ctype]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise self.error(f"accessor {index} is malformed: {exc}") from exc
+        if count < 0 or count * width > MAX_ACCESSOR_VALUES:
+            raise self.error(f"accessor {index} has an implausible count {count}")
+        if "bufferView" in acc:
+            data = self._strided(acc.get("bufferView"), int(acc.get("byteOffset", 0)), count, width, dtype)
+        else:
+            data = np.zeros((count, width), dtype)
+        if "sparse" in acc:
+            data = self._sparse(acc["sparse"], data, width, dtype, index)
+        if ctype == 5126:
+            return data.astype(np.float64)
+        if acc.get("normalized"):
+            return np.maximum(data.astype(np.float64) / _NORM_DIVISOR[ctype], -1.0)
+        return data.astype(np.int64)
+
+    def matrices(self, index: int) -> np.ndarray:
+        """A MAT4 accessor as (count, 4, 4) float64 matrices (glTF stores them column-major)."""
+        return self.accessor(index).reshape(-1, 4, 4).transpose(0, 2, 1)
+
+    def _strided(self, view_index: Any, offset: int, count: int, width: int, dtype: np.dtype) -> np.ndarray:
+        view = self.item("bufferViews", view_index)
+        buf = self.buffers[view.get("buffer", 0)] if 0 <= view.get("buffer", 0) < len(self.buffers) else None
+        if buf is None:
+            raise self.error(f"bufferView {view_index} refers to a missing buffer")
+        start = int(view.get("byteOffset", 0)) + offset
+        elem = width * dtype.itemsize
+        stride = int(view.get("byteStride", elem))
+        need = (count - 1) * stride + elem if count else 0
+        if start < 0 or offset + need > int(view.get("byteLength", 0)) or start + need > len(buf):
+            raise self.error(f"an accessor on bufferView {view_index} runs past the end of its data")
+        if count == 0:
+            return np.zeros((0, width), dtype)
+        rows = np.lib.stride_tricks.as_strided(np.frombuffer(buf, np.uint8, need, start), (count, elem),
+                                               (stride, 1))
+        return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+
+    def _sparse(self, sparse: dict, data: np.ndarray, width: int, dtype: np.dtype, index: int) -> np.ndarray:
+        try:
+            n = int(sparse["count"])
+            ind, val = sparse["indices"], sparse["values"]
+            idx = self._strided(ind["bufferView"], int(ind.get("byteOffset", 0)), n, 1,
+                                COMPONENT_DTYPES[int(ind["componentType"])])[:, 0].astype(np.int64)
+            values = self._strided(val["bufferView"], int(val.get("byteOffset", 0)), n, width, dtype)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise self.error(f"sparse accessor {index} is malformed: {exc}") from exc
+        if n and (idx.min() < 0 or idx.max() >= len(data)):
+            raise self.error(f"sparse accessor {index} has indices out of range")
+        out = data.copy()
+        out[idx] = values
+        return out
+
+
+def _buffer_bytes(buf: dict, index: int, glb_bin: bytes | None, base: Path | None, error: type[InputError]) -> bytes:
+    uri = buf.get("uri")
+    if uri is None:
+        if index == 0 and glb_bin is not None:
+            return glb_bin
+        raise error(f"buffer {index} has no data (no uri and no GLB binary chunk)")
+    if uri.startswith("data:"):
+        head, _, payload = uri.partition(",")
+        if not head.endswith(";base64"):
+            raise error(f"buffer {index} has a data URI that is not base64")
+        try:
+            return base64.b64decode(payload, validate=True)
+        except binascii.Error as exc:
+            raise error(f"buffer {index} has invalid base64 data: {exc}") from exc
+    if base is None:
+        raise error(f"buffer {index} refers to an external file {uri!r}; upload a GLB or embedded .gltf")
+    path = (base / unquote(uri)).resolve()
+    if base.resolve() not in path.parents:
+        raise error(f"buffer {index} refers to a file outside the asset's folder: {uri!r}")
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise error(f"cannot read buffer {index} from {uri!r}: {exc}") from exc
+
+
+def load_document(source: str | Path | bytes, error: type[InputError] = PosesInputError) -> GltfDocument:
+    """Parse GLB or .gltf (path or bytes); external buffers are read only next to a file given by path."""
+    base = None
+    if isinstance(source, bytes | bytearray | memoryview):
+        data = bytes(source)
+    else:
+        try:
+            data = Path(source).read_bytes()
+        except OSError as exc:
+            raise error(f"cannot read glTF file {source}: {exc}") from exc
+        base = Path(source).parent
+    try:
+        if data[:4] == GLB_MAGIC:
+            doc, glb_bin = unpack_glb(data)
+        else:
+            doc, glb_bin = json.loads(data.decode("utf-8")), None
+    except InputError as exc:
+        raise error(str(exc)) from exc
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise error(f"not a glTF file (neither GLB nor glTF JSON): {exc}") from exc
+    if not isinstance(doc, dict):
+        raise error("glTF JSON must be an object")
+    with malformed_as(error):
+        buffers = [_buffer_bytes(b, i, glb_bin, base, error) for i, b in enumerate(doc.get("buffers", []))]
+        return GltfDocument(doc, buffers, error)

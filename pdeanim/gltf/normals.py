@@ -1,0 +1,67 @@
+"""Area-weighted vertex normals, vectorised over vertices (and frames), with a safe fallback direction for
+vertices that no non-degenerate face touches."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+_TINY = 1e-30
+
+
+def _fallback(positions: np.ndarray) -> np.ndarray:
+    """Unit directions from the centroid to each vertex of (N, 3) points, +Z where that is zero."""
+    d = positions - positions.mean(axis=0)
+    n = np.linalg.norm(d, axis=-1, keepdims=True)
+    out = np.where(n > _TINY, d / np.maximum(n, _TINY), 0.0)
+    out[:, 2] = np.where(n[:, 0] > _TINY, out[:, 2], 1.0)
+    return out
+
+
+def _finish(acc: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """Normalise accumulated normals (..., V, 3); vertices with none get the centroid fallback."""
+    length = np.sqrt(np.einsum("...i,...i->...", acc, acc))
+    bad = ~(length > _TINY * 1e6)
+    unit = acc / np.where(bad, 1.0, length)[..., None]
+    if bad.any():
+        fallback = np.stack([_fallback(frame) for frame in positions.reshape(-1, *positions.shape[-2:])])
+        unit[bad] = fallback.reshape(unit.shape)[bad]
+    return unit.astype(np.float32)
+
+
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals (V, 3) float32 of positions (V, 3): sum of face normals weighted by face area."""
+    p = np.asarray(positions, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    acc = np.zeros_like(p)
+    if len(f):
+        x, y, z = np.ascontiguousarray(p.T)
+        a, b, c = np.ascontiguousarray(f.T)
+        ax, ay, az = np.take(x, a), np.take(y, a), np.take(z, a)
+        e1x, e1y, e1z = np.take(x, b) - ax, np.take(y, b) - ay, np.take(z, b) - az
+        e2x, e2y, e2z = np.take(x, c) - ax, np.take(y, c) - ay, np.take(z, c) - az
+        fn = (e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x)  # |fn| = 2 * area
+        idx = np.concatenate([a, b, c])
+        for k in range(3):
+            acc[:, k] = np.bincount(idx, weights=np.tile(fn[k], 3), minlength=len(p))
+    return _finish(acc, p)
+
+
+def vertex_normals_frames(frames: np.ndarray, faces: np.ndarray, chunk_values: int = 30_000_000) -> np.ndarray:
+    """Unit normals (K, V, 3) float32 of frames (K, V, 3): one sparse product per chunk of frames (chunks
+    keep the float64 temporaries under about ``chunk_values`` numbers)."""
+    p = np.asarray(frames)
+    k, v = p.shape[:2]
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if not len(f):
+        return _finish(np.zeros(p.shape), p.astype(np.float64))
+    t = len(f)
+    incidence = sp.csr_matrix((np.ones(3 * t), (f.ravel(), np.repeat(np.arange(t), 3))), shape=(v, t))
+    out = np.empty((k, v, 3), np.float32)
+    step = max(1, chunk_values // (9 * max(t, v)))
+    for s in range(0, k, step):
+        c = p[s: s + step].astype(np.float64)
+        fn = np.cross(c[:, f[:, 1]] - c[:, f[:, 0]], c[:, f[:, 2]] - c[:, f[:, 0]])  # (Kc, T, 3)
+        acc = incidence @ fn.transpose(1, 0, 2).reshape(t, -1)  # (V, Kc*3)
+        out[s: s + step] = _finish(acc.reshape(v, -1, 3).transpose(1, 0, 2), c)
+    return out

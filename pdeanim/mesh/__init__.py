@@ -1,0 +1,1 @@
+"""Surface mesh ingestion: reading, validating and describing triangle meshes."""

@@ -1,0 +1,112 @@
+"""Error-driven choice of the number and placement of time segments.
+
+Start from one segment; while the target (RMS and/or max distance, absolute) is not met, split the
+segments holding the worst frames at their worst interior frame, refit the time stage (the space stage is
+fitted once), and stop when the target is met, no segment can be split (2-frame segments), or the segment
+budget is spent. Where the spatial floor alone exceeds the target, the search aims just above the floor
+instead (more segments cannot help) and says so.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .fitcore import SpaceStage, TimeStage, time_stage
+from .segments import Segmentation
+
+
+@dataclass
+class Targets:
+    """Absolute error targets (None = not requested): RMS and max of the per-vertex distance."""
+
+    rms: float | None = None
+    max: float | None = None
+
+
+@dataclass
+class AdaptiveResult:
+    """The chosen time stage and what the search did."""
+
+    time: TimeStage
+    met: bool
+    floor_exceeds_target: bool
+    history: list[dict] = field(default_factory=list)
+
+
+def _frame_badness(d: np.ndarray, targets: Targets) -> tuple[np.ndarray, bool]:
+    """(F,) how far each frame is over target (ratio), and whether all targets are met."""
+    ratios = []
+    if targets.rms is not None:
+        ratios.append(np.sqrt(np.mean(d * d, axis=1)) / max(targets.rms, 1e-300))
+        met_rms = np.sqrt(np.mean(d * d)) <= targets.rms
+    else:
+        met_rms = True
+    if targets.max is not None:
+        ratios.append(d.max(axis=1) / max(targets.max, 1e-300))
+    met_max = targets.max is None or d.max() <= targets.max
+    return np.max(ratios, axis=0), bool(met_rms and met_max)
+
+
+def _splits(segm: Segmentation, badness: np.ndarray, n_split: int) -> Segmentation:
+    """Split up to n_split segments with the largest error energy, each near its error-weighted centre.
+
+    The split frame is the error-weighted mean frame, kept inside the middle half of the segment so that
+    long segments are bisected rather than nibbled at their ends.
+    """
+    seg = segm.frame_segment()
+    energy = np.bincount(seg, badness**2, minlength=segm.n_segments)
+    splittable = np.diff(segm.bounds) >= 2
+    score = np.where(splittable, energy, -np.inf)
+    chosen = [s for s in np.argsort(-score, kind="stable")[:n_split] if np.isfinite(score[s]) and score[s] > 0]
+    new_bounds = list(segm.bounds)
+    for s in chosen:
+        lo, hi = int(segm.bounds[s]), int(segm.bounds[s + 1])
+        frames = np.arange(lo, hi + 1)
+        w = badness[frames] ** 2
+        centre = float((frames * w).sum() / w.sum()) if w.sum() > 0 else 0.5 * (lo + hi)
+        quarter = (hi - lo) / 4.0
+        new_bounds.append(int(np.clip(round(centre), max(lo + 1, np.ceil(lo + quarter)),
+                                      min(hi - 1, np.floor(hi - quarter)))))
+    return Segmentation(np.unique(np.array(new_bounds, dtype=np.int64)), segm.t)
+
+
+def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
+                 distances: Callable[[TimeStage], np.ndarray], floor_d: np.ndarray,
+                 max_segments: int, loop: bool = False,
+                 progress: Callable[[float, str], None] | None = None) -> AdaptiveResult:
+    """Refine segmentation until targets are met; ``distances(time)`` gives (F, V) model-to-data distances."""
+    floor_targets, floor_high = _effective_targets(targets, floor_d)
+    history: list[dict] = []
+    while True:
+        time = time_stage(space, segm, loop)
+        d = distances(time)
+        badness, met = _frame_badness(d, floor_targets)
+        history.append({"segments": segm.n_segments, "rms": float(np.sqrt(np.mean(d * d))),
+                        "max": float(d.max())})
+        if progress:
+            progress(min(segm.n_segments / max(max_segments, 1), 1.0), f"segments {segm.n_segments}")
+        if met or segm.n_segments >= max_segments:
+            break
+        n_split = max(1, min(segm.n_segments // 3, max_segments - segm.n_segments))
+        new = _splits(segm, badness, n_split)
+        if new.n_segments == segm.n_segments:
+            break
+        segm = new
+    _, met_real = _frame_badness(d, targets)
+    return AdaptiveResult(time, met_real, floor_high, history)
+
+
+def _effective_targets(targets: Targets, floor_d: np.ndarray) -> tuple[Targets, bool]:
+    """Targets raised to just above the spatial floor where the floor alone exceeds them."""
+    floor_rms = float(np.sqrt(np.mean(floor_d * floor_d)))
+    floor_max = float(floor_d.max()) if floor_d.size else 0.0
+    high = False
+    rms, mx = targets.rms, targets.max
+    if rms is not None and floor_rms >= rms:
+        rms, high = floor_rms * 1.05, True
+    if mx is not None and floor_max >= mx:
+        mx, high = floor_max * 1.05, True
+    return Targets(rms, mx), high

@@ -1,0 +1,148 @@
+"""The "dynamic-pde" clip format (version 1): a topology part and a coefficients part, both pdeanim containers.
+
+Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + curve layout + rest pose)::
+
+    order    (V,)      int32    vertex indices curve by curve (CurveSet CSR order)
+    offsets  (C+1,)    int32    curve c is order[offsets[c]:offsets[c+1]]
+    u        (V, 3)    float32  curve parameter of every vertex (original order), per coordinate
+    faces    (T, 3)    int32    original faces
+    rest     (V, 3)    float32  first-frame positions (original order)
+    header: format_version 1, n_vertices, n_curves, param_mode
+
+Coefficients part (``part: "coefficients"``, ``kind: "dynamic-pde"``, ``topology_id`` = SHA-256 of the
+topology bytes)::
+
+    segment_t   (S+1,)          float64  segment boundaries in normalised clip time t in [0, 1]
+    frame_times (F,)            float64  seconds of the source frames (t = 0 and 1 are the first and last)
+    family      (S, C, 3)       uint8    family code 0..3 (paper Eq. 5-8) per segment, curve, coordinate
+    m           (S, C, 3)       float32  time constant in local segment time tau (>= 0)
+    D           (C, 3)          float32  space constant, shared by all segments of a curve+coordinate
+    knots       (S+1, C, 3, 4)  float32  balanced space coefficients at the segment ends
+    header: format_version 1, motion ("displacement": positions = rest + w; "absolute": positions = w),
+            looping, n_segments, n_curves, n_frames, errors (summary of the fit)
+
+The 8 coefficients of segment s, curve c, coordinate w are C = [knots[s, c, w], knots[s+1, c, w]] (2, 4):
+w(u, tau) = sum_ik C[i, k] phi_i(tau; m) S_k(u; D) in the balanced bases of :mod:`pdeanim.model.families`
+(phi0/phi1 interpolate the segment ends, so adjacent segments share their knot: C0 exactly, also in
+float32). :func:`pdeanim.model.families.paper_coefficients` converts them to the paper's c1..c8. Storing the
+shared knots once instead of 8 values per segment is what makes C0 free and the part ~half the size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import container
+from ..clip import topology_id
+from ..curveset import CurveSet
+from ..errors import ClipFormatError
+
+FORMAT_VERSION = 1
+MOTIONS = ("displacement", "absolute")
+
+
+@dataclass
+class TopologyData:
+    """Decoded topology part (see the module docstring for shapes)."""
+
+    curves: CurveSet
+    u: np.ndarray
+    faces: np.ndarray
+    rest: np.ndarray
+    param_mode: str
+
+
+@dataclass
+class CoefficientData:
+    """Decoded coefficients part (see the module docstring for shapes)."""
+
+    segment_t: np.ndarray
+    frame_times: np.ndarray
+    family: np.ndarray
+    m: np.ndarray
+    D: np.ndarray
+    knots: np.ndarray
+    motion: str
+    looping: bool
+    header: dict[str, Any]
+
+
+def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray,
+                    param_mode: str) -> bytes:
+    """Topology part bytes from curves, u (V, 3), faces (T, 3), rest (V, 3)."""
+    header = {"part": "topology", "model": "dynamic-pde", "format_version": FORMAT_VERSION,
+              "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
+    return container.pack(header, {
+        "order": np.asarray(curves.order, np.int32), "offsets": np.asarray(curves.offsets, np.int32),
+        "u": np.asarray(u, np.float32), "faces": np.asarray(faces, np.int32).reshape(-1, 3),
+        "rest": np.asarray(rest, np.float32)})
+
+
+def encode_coefficients(topology: bytes, data: CoefficientData) -> bytes:
+    """Coefficients part bytes for the given topology part."""
+    S, C = data.family.shape[:2]
+    header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": FORMAT_VERSION,
+              "topology_id": topology_id(topology), "motion": data.motion, "looping": bool(data.looping),
+              "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
+    return container.pack(header, {
+        "segment_t": np.asarray(data.segment_t, np.float64), "frame_times": np.asarray(data.frame_times, np.float64),
+        "family": np.asarray(data.family, np.uint8), "m": np.asarray(data.m, np.float32),
+        "D": np.asarray(data.D, np.float32), "knots": np.asarray(data.knots, np.float32)})
+
+
+def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str) -> np.ndarray:
+    if name not in arrays:
+        raise ClipFormatError(f"{part} part has no {name!r} array")
+    a = arrays[name]
+    if a.ndim != len(shape) or any(want is not None and have != want for have, want in zip(a.shape, shape, strict=True)):
+        raise ClipFormatError(f"{part} array {name!r} has shape {a.shape}, expected {shape}")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        raise ClipFormatError(f"{part} array {name!r} has non-finite values")
+    return a
+
+
+def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> TopologyData:
+    """Validated topology data from a decoded container; raises ClipFormatError."""
+    if header.get("format_version") != FORMAT_VERSION:
+        raise ClipFormatError(f"unsupported dynamic-pde topology version {header.get('format_version')!r}")
+    V = int(header.get("n_vertices", -1))
+    order = _need(arrays, "order", (V,), "topology")
+    offsets = _need(arrays, "offsets", (None,), "topology")
+    curves = CurveSet(order.astype(np.int32), offsets.astype(np.int32))
+    try:
+        curves.validate(V)
+    except Exception as exc:
+        raise ClipFormatError(f"topology curves are invalid: {exc}") from exc
+    faces = _need(arrays, "faces", (None, 3), "topology")
+    if faces.size and (faces.min() < 0 or faces.max() >= V):
+        raise ClipFormatError("topology faces index outside the vertices")
+    return TopologyData(curves, _need(arrays, "u", (V, 3), "topology"), faces,
+                        _need(arrays, "rest", (V, 3), "topology"), str(header.get("param_mode", "chord")))
+
+
+def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n_curves: int) -> CoefficientData:
+    """Validated coefficient data from a decoded container; raises ClipFormatError."""
+    if header.get("format_version") != FORMAT_VERSION:
+        raise ClipFormatError(f"unsupported dynamic-pde coefficients version {header.get('format_version')!r}")
+    S, C = int(header.get("n_segments", -1)), int(n_curves)
+    seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients")
+    if S < 1 or np.any(np.diff(seg_t) < 0):
+        raise ClipFormatError("segment boundaries must be non-decreasing with at least one segment")
+    family = _need(arrays, "family", (S, C, 3), "coefficients")
+    if family.size and family.max() > 3:
+        raise ClipFormatError("family codes must be 0..3")
+    if S > 1 and np.any(family % 2 != family[:1] % 2):
+        raise ClipFormatError("the space kind of a curve+coordinate must be the same in every segment")
+    m = _need(arrays, "m", (S, C, 3), "coefficients")
+    if np.any(m < 0) or np.any((family >= 2) & (m >= np.pi)):
+        raise ClipFormatError("time constants must be >= 0 (and < pi for trig families)")
+    motion = str(header.get("motion"))
+    if motion not in MOTIONS:
+        raise ClipFormatError(f"unknown motion mode {motion!r}")
+    return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients"), family, m,
+                           _need(arrays, "D", (C, 3), "coefficients"),
+                           _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients"), motion,
+                           bool(header.get("looping", False)), header)

@@ -1,0 +1,297 @@
+"""The four closed-form families of m w_tt = D w_uuuu (paper 000, Eq. 5-8), in numerically balanced form.
+
+A family is a time kind ("exp": {e^{mt}, e^{-mt}}, "trig": {cos mt, sin mt}) times a space kind
+("D0": {e^{Du}, e^{-Du}, cos Du, sin Du}; "D1": {e^{a u} cos a u, e^{a u} sin a u, e^{-a u} cos a u,
+e^{-a u} sin a u} with a = D / sqrt 2). Family codes follow the paper's equation order::
+
+    0 = exp x D0 (Eq. 5)   1 = exp x D1 (Eq. 6)   2 = trig x D0 (Eq. 7)   3 = trig x D1 (Eq. 8)
+
+Every family satisfies its PDE: w_tt = +-m^2 w and w_uuuu = +-D^4 w, so w_tt / w_uuuu is a constant.
+
+**Balanced bases** (what the library fits, stores and evaluates; same span as the paper's, no overflow):
+
+* time, in local segment time tau in [0, 1]: the end-interpolating pair
+  phi0 = sinh(m (1 - tau)) / sinh m, phi1 = sinh(m tau) / sinh m (trig: sin; m -> 0 gives 1 - tau, tau).
+  So the two time coefficients of a segment are the values of the track at its two ends.
+* space, with s = u - 1/2: for D < D_SWITCH the "Taylor-stable" set that tends to the cubic polynomials
+  {1, s, s^2, s^3/3} as D -> 0 (D0: (cosh x + cos x)/2, (sinh x + sin x)/(2D), (cosh x - cos x)/D^2,
+  (sinh x - sin x)/D^3 with x = D s; D1: cosh x cos x, (cosh x sin x + sinh x cos x)/(2a), sinh x sin x / a^2,
+  (cosh x sin x - sinh x cos x)/(2a^3) with x = a s); for D >= D_SWITCH the bounded set
+  (D0: e^{-Du}, e^{D(u-1)}, cos Ds, sin Ds; D1: e^{-au} cos as, e^{-au} sin as, e^{a(u-1)} cos as,
+  e^{a(u-1)} sin as), every function in [-1, 1].
+
+**Exact map to the paper's basis**: :func:`space_to_paper` gives M (4, 4) with balanced_k(u) =
+sum_b M[k, b] paper_b(u); :func:`time_to_paper` gives N (2, 2) with phi_i(tau(t)) = sum_a N[i, a] paper_a(t)
+for global t and the global constant m / (t1 - t0). Balanced coefficients C (2, 4) become the paper's
+c1..c8 as (N^T C M).ravel() (:func:`paper_coefficients`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ParameterError
+
+TIME_KINDS = ("exp", "trig")
+SPACE_KINDS = ("D0", "D1")
+D_SWITCH = 4.0
+"""Below this D the Taylor-stable space basis is used, at and above it the bounded exponential one."""
+SQRT2 = math.sqrt(2.0)
+
+
+def family_code(time_kind: str, space_kind: str) -> int:
+    """The family code 0..3 (paper Eq. 5-8) of a time kind and a space kind."""
+    if time_kind not in TIME_KINDS or space_kind not in SPACE_KINDS:
+        raise ParameterError(f"unknown family ({time_kind!r}, {space_kind!r})")
+    return 2 * TIME_KINDS.index(time_kind) + SPACE_KINDS.index(space_kind)
+
+
+def family_kinds(code: int) -> tuple[str, str]:
+    """(time_kind, space_kind) of a family code 0..3."""
+    if code not in (0, 1, 2, 3):
+        raise ParameterError(f"family code must be 0..3, got {code}")
+    return TIME_KINDS[code // 2], SPACE_KINDS[code % 2]
+
+
+# ---------------------------------------------------------------- stable scalar helpers
+
+def _shc(y: np.ndarray) -> np.ndarray:
+    """sinh(y) / y, 1 at 0."""
+    y = np.asarray(y, dtype=np.float64)
+    small = np.abs(y) < 1e-4
+    ys = np.where(small, 1.0, y)
+    return np.where(small, 1.0 + y * y / 6.0, np.sinh(ys) / ys)
+
+
+def _sc(y: np.ndarray) -> np.ndarray:
+    """sin(y) / y, 1 at 0."""
+    y = np.asarray(y, dtype=np.float64)
+    small = np.abs(y) < 1e-4
+    ys = np.where(small, 1.0, y)
+    return np.where(small, 1.0 - y * y / 6.0, np.sin(ys) / ys)
+
+
+def _series(fn_coeffs: list[float], x: np.ndarray) -> np.ndarray:
+    return np.polynomial.polynomial.polyval(x, fn_coeffs)
+
+
+def _taylor(kind: str, n: int = 24) -> np.ndarray:
+    """Taylor coefficients of cosh, sinh, cos, sin up to degree n."""
+    k = np.arange(n + 1)
+    fact = np.array([math.factorial(i) for i in k], dtype=np.float64)
+    even, odd = (k % 2 == 0), (k % 2 == 1)
+    sign = np.where((k // 2) % 2 == 0, 1.0, -1.0)
+    table = {"cosh": even / fact, "sinh": odd / fact, "cos": even * sign / fact, "sin": odd * sign / fact}
+    return table[kind]
+
+
+def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.polynomial.polynomial.polymul(a, b)[: len(a)]
+
+
+_SMS = (_taylor("sinh") - _taylor("sin"))[3:]  # (sinh x - sin x) / x^3
+_CSC = (_mul(_taylor("cosh"), _taylor("sin")) - _mul(_taylor("sinh"), _taylor("cos")))[3:]  # /x^3
+
+
+def _ratio3(x: np.ndarray, coeffs: np.ndarray, direct) -> np.ndarray:
+    """f(x) / x^3 for an odd f with f = O(x^3): series for |x| < 0.5, direct formula elsewhere."""
+    small = np.abs(x) < 0.5
+    xs = np.where(small, 1.0, x)
+    return np.where(small, _series(coeffs, x), direct(xs) / xs**3)
+
+
+# ---------------------------------------------------------------- space bases
+
+def _space_small(u: np.ndarray, D: np.ndarray, space_kind: str) -> np.ndarray:
+    s = u - 0.5
+    if space_kind == "D0":
+        x = D * s
+        g1 = 0.5 * (np.cosh(x) + np.cos(x))
+        g2 = 0.5 * s * (_shc(x) + _sc(x))
+        g3 = 0.5 * s * s * (_shc(0.5 * x) ** 2 + _sc(0.5 * x) ** 2)
+        g4 = s**3 * _ratio3(x, _SMS, lambda z: np.sinh(z) - np.sin(z))
+        return np.stack([g1, g2, g3, g4], axis=-1)
+    x = D / SQRT2 * s
+    ch, c = np.cosh(x), np.cos(x)
+    k1 = ch * c
+    k2 = 0.5 * s * (ch * _sc(x) + _shc(x) * c)
+    k3 = s * s * _shc(x) * _sc(x)
+    k4 = 0.5 * s**3 * _ratio3(x, _CSC, lambda z: np.cosh(z) * np.sin(z) - np.sinh(z) * np.cos(z))
+    return np.stack([k1, k2, k3, k4], axis=-1)
+
+
+def _space_large(u: np.ndarray, D: np.ndarray, space_kind: str) -> np.ndarray:
+    s = u - 0.5
+    if space_kind == "D0":
+        return np.stack([np.exp(-D * u), np.exp(D * (u - 1.0)), np.cos(D * s), np.sin(D * s)], axis=-1)
+    a = D / SQRT2
+    lo, hi, c, sn = np.exp(-a * u), np.exp(a * (u - 1.0)), np.cos(a * s), np.sin(a * s)
+    return np.stack([lo * c, lo * sn, hi * c, hi * sn], axis=-1)
+
+
+def space_basis(u: np.ndarray, D: np.ndarray | float, space_kind: str) -> np.ndarray:
+    """Balanced space basis at parameters u.
+
+    u : (..., N) float, curve parameter in [0, 1]; D : (...) float >= 0 (broadcast against u[..., 0]).
+    Returns (..., N, 4) float64; spans the paper's space basis for D > 0 and the cubics at D = 0.
+    """
+    if space_kind not in SPACE_KINDS:
+        raise ParameterError(f"space kind must be one of {SPACE_KINDS}, got {space_kind!r}")
+    u = np.asarray(u, dtype=np.float64)
+    D = np.abs(np.asarray(D, dtype=np.float64))[..., None]
+    small = _space_small(u, np.minimum(D, D_SWITCH), space_kind)
+    large = _space_large(u, np.maximum(D, D_SWITCH), space_kind)
+    return np.where((D < D_SWITCH)[..., None], small, large)
+
+
+def space_basis_paper(u: np.ndarray, D: np.ndarray | float, space_kind: str) -> np.ndarray:
+    """The paper's own space basis (Eq. 5-8), (..., N, 4) float64; overflows for large D (reference only)."""
+    u = np.asarray(u, dtype=np.float64)
+    D = np.asarray(D, dtype=np.float64)[..., None]
+    if space_kind == "D0":
+        return np.stack([np.exp(D * u), np.exp(-D * u), np.cos(D * u), np.sin(D * u)], axis=-1)
+    a = D / SQRT2
+    ep, em, c, sn = np.exp(a * u), np.exp(-a * u), np.cos(a * u), np.sin(a * u)
+    return np.stack([ep * c, ep * sn, em * c, em * sn], axis=-1)
+
+
+def space_to_paper(D: float, space_kind: str) -> np.ndarray:
+    """M (4, 4) with balanced_k(u) = sum_b M[k, b] paper_b(u), exact closed form; D must be > 0."""
+    D = float(D)
+    if not D > 0:
+        raise ParameterError("the paper's space basis is degenerate at D = 0 (the balanced one is the cubics)")
+    if space_kind == "D0":
+        h = 0.5 * D
+        cosh_, sinh_ = np.array([0.5 * math.exp(-h), 0.5 * math.exp(h), 0, 0]), np.array(
+            [0.5 * math.exp(-h), -0.5 * math.exp(h), 0, 0])
+        cos_, sin_ = np.array([0, 0, math.cos(h), math.sin(h)]), np.array([0, 0, -math.sin(h), math.cos(h)])
+        if D < D_SWITCH:
+            return np.stack([(cosh_ + cos_) / 2, (sinh_ + sin_) / (2 * D), (cosh_ - cos_) / D**2,
+                             (sinh_ - sin_) / D**3])
+        return np.stack([np.array([0, 1.0, 0, 0]), np.array([math.exp(-D), 0, 0, 0]), cos_, sin_])
+    a = D / SQRT2
+    h = 0.5 * a
+    E = {"cosh": np.array([0.5 * math.exp(-h), 0.5 * math.exp(h)]),
+         "sinh": np.array([0.5 * math.exp(-h), -0.5 * math.exp(h)]),
+         "lo": np.array([0.0, 1.0]), "hi": np.array([math.exp(-a), 0.0])}
+    T = {"cos": np.array([math.cos(h), math.sin(h)]), "sin": np.array([-math.sin(h), math.cos(h)])}
+
+    def prod(e: str, t: str) -> np.ndarray:
+        return np.outer(E[e], T[t]).ravel()
+
+    if D < D_SWITCH:
+        return np.stack([prod("cosh", "cos"), (prod("cosh", "sin") + prod("sinh", "cos")) / (2 * a),
+                         prod("sinh", "sin") / a**2, (prod("cosh", "sin") - prod("sinh", "cos")) / (2 * a**3)])
+    return np.stack([prod("lo", "cos"), prod("lo", "sin"), prod("hi", "cos"), prod("hi", "sin")])
+
+
+# ---------------------------------------------------------------- time bases
+
+def time_basis(tau: np.ndarray, m: np.ndarray | float, time_kind: str) -> np.ndarray:
+    """Balanced end-interpolating time pair (phi0, phi1) at local segment time tau.
+
+    tau : (..., F) float in [0, 1]; m : (...) float >= 0 (trig: m < pi). Returns (..., F, 2) float64 with
+    phi0(0) = phi1(1) = 1, phi0(1) = phi1(0) = 0 exactly; m = 0 gives (1 - tau, tau) for both kinds.
+    """
+    tau = np.asarray(tau, dtype=np.float64)
+    m = np.abs(np.asarray(m, dtype=np.float64))[..., None]
+    if time_kind == "exp":
+        phi1 = _sinh_ratio(tau, m)
+        phi0 = _sinh_ratio(1.0 - tau, m)
+    elif time_kind == "trig":
+        if np.any(m >= np.pi):
+            raise ParameterError("trig time constant must be below pi per segment")
+        phi1 = tau * _sc(m * tau) / _sc(m)
+        phi0 = (1.0 - tau) * _sc(m * (1.0 - tau)) / _sc(m)
+    else:
+        raise ParameterError(f"time kind must be one of {TIME_KINDS}, got {time_kind!r}")
+    return np.stack([phi0, phi1], axis=-1)
+
+
+def _sinh_ratio(tau: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """sinh(m tau) / sinh(m) without overflow, -> tau as m -> 0."""
+    mm = np.maximum(m, 1e-300)
+    big = np.exp(mm * (tau - 1.0)) * np.expm1(-2.0 * mm * tau) / np.expm1(-2.0 * mm)
+    return np.where(m < 1e-12, tau, big)
+
+
+def time_basis_signed(tau: np.ndarray, mu: np.ndarray | float) -> np.ndarray:
+    """Time pair with a signed constant: mu > 0 is exp with m = mu, mu < 0 trig with m = -mu. (..., F, 2)."""
+    mu = np.asarray(mu, dtype=np.float64)
+    e = time_basis(tau, np.maximum(mu, 0.0), "exp")
+    t = time_basis(tau, np.clip(-mu, 0.0, np.pi * 0.999), "trig")
+    return np.where((mu < 0)[..., None, None], t, e)
+
+
+def time_basis_paper(t: np.ndarray, m: np.ndarray | float, time_kind: str) -> np.ndarray:
+    """The paper's time basis {e^{mt}, e^{-mt}} or {cos mt, sin mt}, (..., F, 2) (reference only)."""
+    t = np.asarray(t, dtype=np.float64)
+    m = np.asarray(m, dtype=np.float64)[..., None]
+    if time_kind == "exp":
+        return np.stack([np.exp(m * t), np.exp(-m * t)], axis=-1)
+    return np.stack([np.cos(m * t), np.sin(m * t)], axis=-1)
+
+
+def time_to_paper(m: float, time_kind: str, t0: float, t1: float) -> tuple[np.ndarray, float]:
+    """(N (2, 2), m_global): phi_i((t - t0) / (t1 - t0)) = sum_a N[i, a] paper_a(t) with constant m_global."""
+    m, dt = float(m), float(t1) - float(t0)
+    if not m > 0 or not dt > 0:
+        raise ParameterError("the paper's time basis is degenerate at m = 0 (the balanced one is linear)")
+    mg = m / dt
+    if time_kind == "exp":
+        e0 = math.exp(mg * t0)
+        phi1 = np.array([1.0 / e0, -e0]) / (2 * math.sinh(m))
+        phi0 = np.array([-math.exp(-m) / e0, math.exp(m) * e0]) / (2 * math.sinh(m))
+        return np.stack([phi0, phi1]), mg
+    th0, ph = mg * t0, mg * t1
+    phi1 = np.array([-math.sin(th0), math.cos(th0)]) / math.sin(m)
+    phi0 = np.array([math.sin(ph), -math.cos(ph)]) / math.sin(m)
+    return np.stack([phi0, phi1]), mg
+
+
+def paper_coefficients(code: int, m: float, D: float, coef: np.ndarray, t0: float = 0.0,
+                       t1: float = 1.0) -> tuple[float, float, np.ndarray]:
+    """(m_global, D, c (8,)) in the paper's basis and ordering c1..c8 from balanced coefficients (2, 4)."""
+    time_kind, space_kind = family_kinds(code)
+    N, mg = time_to_paper(m, time_kind, t0, t1)
+    M = space_to_paper(D, space_kind)
+    return mg, float(D), (N.T @ np.asarray(coef, dtype=np.float64) @ M).ravel()
+
+
+def evaluate_family(u: np.ndarray, tau: np.ndarray, code: int, m: np.ndarray | float, D: np.ndarray | float,
+                    coef: np.ndarray) -> np.ndarray:
+    """w(u, tau) = T(tau) C S(u)^T for one family in balanced form.
+
+    u : (..., N); tau : (..., F); m, D : (...); coef : (..., 2, 4). Returns (..., F, N) float64.
+    """
+    time_kind, space_kind = family_kinds(code)
+    T = time_basis(tau, m, time_kind)
+    S = space_basis(u, D, space_kind)
+    return np.einsum("...fi,...ik,...nk->...fn", T, np.asarray(coef, dtype=np.float64), S)
+
+
+MU_TRIG_MAX = 0.95 * np.pi
+"""Largest trig time constant per segment (sin m must stay away from 0 for the end-interpolating pair)."""
+
+
+def time_pair(tau: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Elementwise signed time pair: tau and mu of the same shape (...), returns (..., 2) float64.
+
+    mu > 0: exp with m = mu; mu < 0: trig with m = -mu (clipped below pi); mu = 0: linear.
+    """
+    tau, mu = np.broadcast_arrays(np.asarray(tau, dtype=np.float64), np.asarray(mu, dtype=np.float64))
+    out = np.empty(tau.shape + (2,))
+    trig = mu < 0
+    if np.all(~trig):
+        tt, me = tau, mu
+        out[..., 1], out[..., 0] = _sinh_ratio(tt, me), _sinh_ratio(1.0 - tt, me)
+        return out
+    ex = ~trig
+    te, me = tau[ex], mu[ex]
+    out[ex, 1], out[ex, 0] = _sinh_ratio(te, me), _sinh_ratio(1.0 - te, me)
+    tt, mt = tau[trig], np.minimum(-mu[trig], MU_TRIG_MAX)
+    sm = _sc(mt)
+    out[trig, 1], out[trig, 0] = tt * _sc(mt * tt) / sm, (1.0 - tt) * _sc(mt * (1.0 - tt)) / sm
+    return out

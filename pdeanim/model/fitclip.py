@@ -1,0 +1,331 @@
+"""Poses -> dynamic-PDE clip: options, curves, fit (fixed segments or error targets), encoding, report.
+
+The fit is measured honestly: after encoding, the clip is decoded from its float32 parts and evaluated at
+every source frame, and those positions give the errors in the report.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from ..clip import ClipParts
+from ..curveset import CurveSet
+from ..errors import ParameterError, PosesInputError
+from ..poses import Poses
+from ..progress import Progress, sub_progress
+from .adaptive import Targets, fit_adaptive
+from .clipformat import CoefficientData, encode_coefficients, encode_topology
+from .clipmodel import clip_from_parts
+from .fitcore import (
+    SpaceStage,
+    TimeStage,
+    items_from_curves,
+    items_to_vertices,
+    reconstruct_items,
+    space_stage,
+    time_stage,
+)
+from .metrics import bbox_diagonal, error_summary
+from .parameterisation import PARAM_MODES, curve_parameters
+from .segments import Segmentation, uniform_segmentation
+
+MOTIONS = ("displacement", "absolute")
+DEFAULT_TARGET_REL_RMS = 3e-3
+
+
+@dataclass
+class FitOptions:
+    """What to fit and how well. Give error targets or a fixed segment count (not both); none = rel RMS 3e-3.
+
+    target_rms / target_max : absolute per-vertex distance; target_rel_rms / target_rel_max : relative to
+    the first frame's bounding-box diagonal. param_mode "chord" | "paper"; motion "displacement" |
+    "absolute"; loop: periodic knots (last frame flows into the first); max_segments caps the adaptivity.
+    """
+
+    target_rms: float | None = None
+    target_rel_rms: float | None = None
+    target_max: float | None = None
+    target_rel_max: float | None = None
+    segments: int | None = None
+    param_mode: str = "chord"
+    motion: str = "displacement"
+    loop: bool = False
+    max_segments: int = 64
+    curve_points: int = 10
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> FitOptions:
+        """Raise ParameterError on a bad value; returns self."""
+        for name in ("target_rms", "target_rel_rms", "target_max", "target_rel_max"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ParameterError(f"{name} must be a positive number, got {v!r}")
+        if self.segments is not None and not (isinstance(self.segments, int) and self.segments >= 1):
+            raise ParameterError(f"segments must be an integer >= 1, got {self.segments!r}")
+        if self.segments is not None and self.has_targets:
+            raise ParameterError("give either a fixed segment count or error targets, not both")
+        if self.param_mode not in PARAM_MODES:
+            raise ParameterError(f"param_mode must be one of {PARAM_MODES}, got {self.param_mode!r}")
+        if self.motion not in MOTIONS:
+            raise ParameterError(f"motion must be one of {MOTIONS}, got {self.motion!r}")
+        if not isinstance(self.loop, bool):
+            raise ParameterError(f"loop must be true or false, got {self.loop!r}")
+        for name in ("max_segments", "curve_points"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 4096):
+                raise ParameterError(f"{name} must be an integer in 1..4096, got {v!r}")
+        return self
+
+    @property
+    def has_targets(self) -> bool:
+        return any(getattr(self, n) is not None for n in ("target_rms", "target_rel_rms", "target_max",
+                                                             "target_rel_max"))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FitOptions:
+        """Options from a JSON-like dict; unknown keys or bad values raise ParameterError."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ParameterError(f"unknown fit option(s): {', '.join(unknown)}")
+        return cls(**d)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict (round-trips through from_dict)."""
+        return asdict(self)
+
+    def targets(self, diagonal: float) -> Targets:
+        """Absolute targets (the tighter of absolute and relative where both are given)."""
+        def pick(a: float | None, rel: float | None) -> float | None:
+            vals = [v for v in (a, None if rel is None else rel * diagonal) if v is not None]
+            return min(vals) if vals else None
+        rel_rms = self.target_rel_rms
+        if not self.has_targets and self.segments is None:
+            rel_rms = DEFAULT_TARGET_REL_RMS
+        return Targets(pick(self.target_rms, rel_rms), pick(self.target_max, self.target_rel_max))
+
+
+def default_curves(rest: np.ndarray, faces: np.ndarray, curve_points: int = 10) -> CurveSet:
+    """Curves of the curve-extraction package when installed, else the simple fallback layout."""
+    try:
+        from ..curves.extract import extract_curves
+    except ImportError:
+        from .simplecurves import simple_curves
+
+        return simple_curves(rest, max_points=2 * curve_points)
+    return extract_curves(np.asarray(rest, np.float64), faces if len(faces) else None, target_points=curve_points)
+
+
+@dataclass
+class _Problem:
+    """Padded data of one fit."""
+
+    X: np.ndarray  # (F, V, 3) float64 source positions
+    rest: np.ndarray  # (V, 3) float64 (float32 values)
+    idx: np.ndarray
+    mask: np.ndarray
+    u: np.ndarray  # (C, 3, N)
+    Y: np.ndarray  # (F, K, N) fitted values
+    t: np.ndarray  # (F,) normalised times
+
+
+def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
+    X = np.asarray(poses.vertices, np.float64)
+    times = np.asarray(poses.times, np.float64)
+    if len(X) == 1:  # a single frame: a static clip over a unit time span
+        X, times = np.concatenate([X, X]), np.array([times[0], times[0] + 1.0])
+    rest = X[0].copy()
+    idx, mask = curves.padded()
+    u = curve_parameters(X[:, idx] if options.param_mode == "paper" else rest[idx], mask, options.param_mode)
+    base = rest if options.motion == "displacement" else np.zeros_like(rest)
+    Y = items_from_curves(X - base, idx, mask)
+    span = times[-1] - times[0]
+    return _Problem(X, rest, idx, mask, u, Y, (times - times[0]) / span)
+
+
+def _distances(p: _Problem, space: SpaceStage, time_: TimeStage, base: np.ndarray) -> np.ndarray:
+    R = items_to_vertices(reconstruct_items(space, time_), p.idx, p.mask, p.X.shape[1]) + base
+    return np.linalg.norm(R - p.X, axis=-1)
+
+
+def _floor_distances(p: _Problem, space: SpaceStage) -> np.ndarray:
+    proj = np.moveaxis(space.b @ np.swapaxes(space.proj.U, 1, 2), 1, 0)
+    resid = items_to_vertices(p.Y - proj, p.idx, p.mask, p.X.shape[1])
+    return np.linalg.norm(resid, axis=-1)
+
+
+@dataclass
+class _SpaceFit:
+    """The space stage of a fit and what it was measured on."""
+
+    p: _Problem
+    curves: CurveSet
+    space: SpaceStage
+    floor_d: np.ndarray  # (F, V) distance left by the space basis alone
+    targets: Targets
+    diag: float
+    curve_points: int | None
+
+
+def _space_fit(poses: Poses, options: FitOptions, curves: CurveSet | None, progress: Progress) -> _SpaceFit:
+    """Curves + space stage; automatic curves get shorter until the spatial floor leaves room for the target."""
+    auto = curves is None
+    for cp in _curve_point_ladder(options.curve_points if auto else None):
+        progress(0.02, f"curves {cp or 'given'}")
+        cs = _checked_curves(default_curves(poses.vertices[0], poses.faces, cp) if auto else curves,
+                             poses.n_vertices)
+        p = _prepare(poses, options, cs)
+        K, N = p.Y.shape[1], p.Y.shape[2]
+        progress(0.05, "space fit")
+        space = space_stage(p.Y, p.u.reshape(K, N), np.repeat(p.mask, 3, axis=0))
+        diag = bbox_diagonal(p.rest)
+        targets = options.targets(diag)
+        floor_d = _floor_distances(p, space)
+        if options.segments or _floor_leaves_room(floor_d, targets):
+            break
+    return _SpaceFit(p, cs, space, floor_d, targets, diag, cp)
+
+
+def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progress | None = None,
+              curves: CurveSet | None = None) -> ClipParts:
+    """Fit a dynamic-PDE clip to poses (F frames, V vertices); returns both parts and a report."""
+    options = (options or FitOptions()).validate()
+    t_start = time.perf_counter()
+    report_progress = sub_progress(progress, 0.0, 1.0)
+    sf = _space_fit(poses, options, curves, report_progress)
+    p, space = sf.p, sf.space
+    t_space = time.perf_counter()
+    base = p.rest if options.motion == "displacement" else np.zeros_like(p.rest)
+    if options.segments:
+        segm = uniform_segmentation(p.t, options.segments)
+        fitted, met, floor_high, history = time_stage(space, segm, options.loop), None, False, []
+    else:
+        res = fit_adaptive(space, Segmentation(np.array([0, len(p.t) - 1]), p.t), sf.targets,
+                           lambda ts: _distances(p, space, ts, base), sf.floor_d,
+                           min(options.max_segments, len(p.t) - 1), options.loop,
+                           sub_progress(progress, 0.1, 0.9))
+        fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
+    t_time = time.perf_counter()
+    report_progress(0.92, "encode")
+    parts = _encode(p, sf.curves, space, fitted, options, poses)
+    clip = _decode(parts)
+    approx = clip.evaluate(clip.frame_t())
+    exact = _distances(p, space, fitted, base)
+    report = _report(p, approx, exact, sf.floor_d, fitted, sf.targets, met, floor_high, history, options,
+                     sf.curves, sf.diag, poses)
+    report["curve_points"] = sf.curve_points
+    t_end = time.perf_counter()
+    report["timings_s"] = {"curves_and_space": t_space - t_start, "time": t_time - t_space,
+                           "encode_measure": t_end - t_time, "total": t_end - t_start}
+    parts = _encode(p, sf.curves, space, fitted, options, poses, errors=_header_errors(report))
+    parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
+    report_progress(1.0, "done")
+    return parts
+
+
+def _curve_point_ladder(start: int | None) -> list[int | None]:
+    """Curve lengths tried when curves are extracted automatically: shorter until the floor leaves room."""
+    if start is None:
+        return [None]
+    ladder = [start]
+    while ladder[-1] > 3:
+        ladder.append(max(3, int(round(ladder[-1] * 0.7))))
+    return ladder
+
+
+def _floor_leaves_room(floor_d: np.ndarray, targets: Targets) -> bool:
+    """Whether the spatial floor is far enough below the targets for the time fit to meet them."""
+    ok_rms = targets.rms is None or np.sqrt(np.mean(floor_d * floor_d)) <= 0.5 * targets.rms
+    ok_max = targets.max is None or floor_d.max() <= 0.7 * targets.max
+    return bool(ok_rms and ok_max)
+
+
+def _checked_curves(curves: CurveSet, n_vertices: int) -> CurveSet:
+    curves = CurveSet(np.asarray(curves.order, np.int32), np.asarray(curves.offsets, np.int32))
+    try:
+        return curves.validate(n_vertices)
+    except Exception as exc:
+        raise PosesInputError(f"curves do not match the poses: {exc}") from exc
+
+
+def _coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions, times: np.ndarray,
+                      errors: dict) -> CoefficientData:
+    K = space.b.shape[0]
+    C, S = K // 3, fitted.segm.n_segments
+    mu = fitted.mu.reshape(C, 3, S)
+    family = (2 * (mu < 0) + space.proj.kind.reshape(C, 3)[:, :, None]).astype(np.uint8)
+    knots = fitted.knots.reshape(C, 3, S + 1, 4)
+    return CoefficientData(fitted.segm.segment_t, times, np.moveaxis(family, 2, 0),
+                           np.moveaxis(np.abs(mu), 2, 0), space.proj.D.reshape(C, 3),
+                           np.moveaxis(knots, 2, 0), options.motion, options.loop, {"errors": errors})
+
+
+def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, options: FitOptions,
+            poses: Poses, errors: dict | None = None) -> ClipParts:
+    V = p.X.shape[1]
+    u_v = np.zeros((V, 3))
+    u_v[p.idx[p.mask]] = np.moveaxis(p.u, 1, 2)[p.mask]
+    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode)
+    coef = _coefficient_data(space, fitted, options, np.asarray(poses.times, np.float64), errors or {})
+    return ClipParts(topology, encode_coefficients(topology, coef))
+
+
+def _decode(parts: ClipParts):
+    from .. import container
+
+    th, ta = container.unpack(parts.topology)
+    ch, ca = container.unpack(parts.coefficients)
+    return clip_from_parts(th, ta, ch, ca)
+
+
+def _header_errors(report: dict) -> dict:
+    keys = ("rms", "max", "rel_rms", "rel_max", "kg", "floor_rel_rms", "target_met", "floor_exceeds_target")
+    return {k: report[k] for k in keys if k in report}
+
+
+def _report(p, approx, exact, floor_d, fitted, targets, met, floor_high, history, options, curves,
+            diag, poses) -> dict[str, Any]:
+    X = p.X[: poses.n_frames]
+    approx = approx[: poses.n_frames]
+    summary = error_summary(X, approx, diag)
+    d = np.linalg.norm(approx.astype(np.float64) - X, axis=-1)  # (F, V)
+    cid, _ = curves.curve_of_vertex(X.shape[1])
+    n_c = np.bincount(cid, minlength=curves.n_curves) * len(X)
+    curve_rms = np.sqrt(np.bincount(cid, (d * d).sum(0), minlength=curves.n_curves) / np.maximum(n_c, 1))
+    curve_max = np.zeros(curves.n_curves)
+    np.maximum.at(curve_max, cid, d.max(0))
+    floor_rms = float(np.sqrt(np.mean(floor_d * floor_d)))
+    met_now = bool((targets.rms is None or summary["rms"] <= targets.rms)
+                   and (targets.max is None or summary["max"] <= targets.max))
+    return {**summary, "frames": int(poses.n_frames), "vertices": int(X.shape[1]), "curves": curves.n_curves,
+            "segments": fitted.segm.n_segments, "segment_t": fitted.segm.segment_t.tolist(),
+            "segment_frames": fitted.segm.bounds.tolist(),
+            "per_frame_rms": np.sqrt(np.mean(d * d, axis=1)).tolist(), "per_frame_max": d.max(axis=1).tolist(),
+            "per_curve_rms": curve_rms.tolist(), "per_curve_max": curve_max.tolist(),
+            "floor_rms": floor_rms, "floor_rel_rms": floor_rms / diag,
+            "floor_max": float(floor_d.max()), "float32_vs_float64_max": float(np.abs(d - exact[: len(d)]).max()),
+            "targets": {"rms": targets.rms, "max": targets.max}, "target_met": met_now if met is not None else None,
+            "floor_exceeds_target": bool(floor_high), "adaptive_history": history, "options": options.to_dict()}
+
+
+def curve_errors(poses: Poses, curves: CurveSet, options: FitOptions | None = None) -> dict[str, np.ndarray]:
+    """Per-curve errors of fitting poses with the given curves: {"rms": (C,), "max": (C,), "floor_rms": (C,)}.
+
+    For error-bounded curve extraction: fit, then read which curves stay above a target.
+    """
+    parts = fit_poses(poses, options, curves=curves)
+    r = parts.report
+    p = _prepare(poses, options or FitOptions(), curves)
+    K, N = p.Y.shape[1], p.Y.shape[2]
+    space = space_stage(p.Y, p.u.reshape(K, N), np.repeat(p.mask, 3, axis=0))
+    fd = _floor_distances(p, space)
+    cid, _ = curves.curve_of_vertex(p.X.shape[1])
+    n_c = np.bincount(cid, minlength=curves.n_curves) * len(fd)
+    floor_rms = np.sqrt(np.bincount(cid, (fd * fd).sum(0), minlength=curves.n_curves) / np.maximum(n_c, 1))
+    return {"rms": np.asarray(r["per_curve_rms"]), "max": np.asarray(r["per_curve_max"]), "floor_rms": floor_rms}

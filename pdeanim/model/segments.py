@@ -1,0 +1,78 @@
+"""Time segments of a clip: boundaries at frame indices, local time tau per frame.
+
+Segment s covers frames bounds[s] .. bounds[s + 1] (both ends; a boundary frame is the last frame of one
+segment and the first of the next). Normalised clip time t in [0, 1] maps linearly onto the first..last
+frame times, so segment boundaries in t are t[bounds].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ParameterError
+
+
+def normalised_times(times: np.ndarray) -> np.ndarray:
+    """(F,) frame times mapped linearly onto [0, 1] (a single frame gets t = 0)."""
+    times = np.asarray(times, dtype=np.float64)
+    span = times[-1] - times[0]
+    return (times - times[0]) / span if span > 0 else np.zeros_like(times)
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """Segment boundaries (S + 1,) int frame indices over normalised frame times t (F,) float64."""
+
+    bounds: np.ndarray
+    t: np.ndarray
+
+    @property
+    def n_segments(self) -> int:
+        return int(len(self.bounds) - 1)
+
+    @property
+    def segment_t(self) -> np.ndarray:
+        """(S + 1,) segment boundaries in normalised clip time."""
+        return self.t[self.bounds]
+
+    def frame_segment(self) -> np.ndarray:
+        """(F,) segment of every frame (boundary frames go to the later segment, the last frame to the last)."""
+        f = np.arange(len(self.t))
+        return np.clip(np.searchsorted(self.bounds, f, side="right") - 1, 0, self.n_segments - 1)
+
+    def frame_tau(self) -> np.ndarray:
+        """(F,) local time in [0, 1] of every frame within its segment."""
+        seg = self.frame_segment()
+        t0, t1 = self.t[self.bounds[seg]], self.t[self.bounds[seg + 1]]
+        return np.clip((self.t - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
+
+    def frames_of(self, s: int) -> np.ndarray:
+        """Frame indices of segment s, both boundary frames included."""
+        return np.arange(self.bounds[s], self.bounds[s + 1] + 1)
+
+    def split(self, s: int, frame: int) -> Segmentation:
+        """A new segmentation with segment s split at an interior frame."""
+        if not self.bounds[s] < frame < self.bounds[s + 1]:
+            raise ParameterError(f"frame {frame} is not interior to segment {s}")
+        return Segmentation(np.insert(self.bounds, s + 1, frame), self.t)
+
+    def merge(self, s: int) -> Segmentation:
+        """A new segmentation without the boundary between segments s and s + 1."""
+        return Segmentation(np.delete(self.bounds, s + 1), self.t)
+
+
+def uniform_segmentation(times: np.ndarray, n_segments: int) -> Segmentation:
+    """n_segments segments with boundaries at frames as evenly spaced in time as possible."""
+    t = normalised_times(times)
+    F = len(t)
+    if n_segments < 1:
+        raise ParameterError(f"segments must be >= 1, got {n_segments}")
+    n = min(int(n_segments), max(F - 1, 1))
+    targets = np.linspace(0.0, 1.0, n + 1)
+    bounds = np.unique(np.clip(np.searchsorted(t, targets), 0, F - 1))
+    bounds[0], bounds[-1] = 0, F - 1
+    if len(bounds) < 2:
+        bounds = np.array([0, max(F - 1, 0)])
+    return Segmentation(bounds.astype(np.int64), t)

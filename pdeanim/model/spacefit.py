@@ -1,0 +1,112 @@
+"""The space half of the variable projection: choose space kind and D per curve+coordinate.
+
+For fixed (kind, D) the 4 space functions of an item (one curve, one coordinate) span a subspace of its
+N points; the part of every frame orthogonal to it is the *spatial floor*, which no time model can remove.
+With the Gram matrix G = sum_frames y y^T of an item, floor(D) = trace(G) - trace(U^T G U) for an
+orthonormal basis U of the space functions (SVD, so short curves with N < 4 are fine). D is searched on a
+coarse grid for both space kinds, then refined by a golden-section search vectorised over all items.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .families import SPACE_KINDS, space_basis
+
+D_GRID = np.concatenate([[0.0], np.geomspace(0.4, 48.0, 21)])
+"""Coarse grid of D values searched for every item and space kind."""
+RANK_TOL = 1e-10
+
+
+@dataclass
+class SpaceProjection:
+    """Orthonormal space bases of all items at their chosen (kind, D).
+
+    U : (K, N, 4) float64 orthonormal columns (zero columns where the basis is rank-deficient);
+    to_coef : (K, 4, 4) float64, balanced space coefficients a = to_coef @ z for z = U^T y;
+    kind : (K,) int (index into SPACE_KINDS); D : (K,) float64 (already rounded to float32 values).
+    """
+
+    U: np.ndarray
+    to_coef: np.ndarray
+    kind: np.ndarray
+    D: np.ndarray
+
+
+def orthonormal_basis(u: np.ndarray, mask: np.ndarray, D: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """(U (K, N, 4), to_coef (K, 4, 4)) for items with parameters u (K, N), mask (K, N), D (K,)."""
+    S = space_basis(u, D, kind) * mask[..., None]
+    U, s, Vt = np.linalg.svd(S, full_matrices=False)
+    keep = s > RANK_TOL * np.maximum(s[:, :1], 1e-300)
+    U = U * keep[:, None, :]
+    inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+    to_coef = np.swapaxes(Vt, -1, -2) * inv[:, None, :]
+    return U, to_coef
+
+
+def captured_energy(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, D: np.ndarray, kind: str) -> np.ndarray:
+    """(K,) trace(U^T G U): the data energy the space basis at D can represent."""
+    U, _ = orthonormal_basis(u, mask, D, kind)
+    return np.einsum("kna,kna->k", U, gram @ U)
+
+
+def search_D(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, kinds: tuple[str, ...] = SPACE_KINDS,
+             refine_iters: int = 14) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best (kind index (K,), D (K,), floor energy (K,)) per item: coarse grid over D, then golden refinement."""
+    energy = np.trace(gram, axis1=1, axis2=2)
+    K = len(u)
+    cap = np.empty((len(kinds), len(D_GRID), K))
+    for i, kind in enumerate(kinds):
+        for g, d in enumerate(D_GRID):
+            cap[i, g] = captured_energy(u, mask, gram, np.full(K, d), kind)
+    flat = cap.reshape(-1, K)
+    best = np.argmax(flat + 1e-12 * energy * (np.arange(len(flat)) % len(D_GRID) == 0)[:, None], axis=0)
+    kind_i, grid_i = np.divmod(best, len(D_GRID))
+    lo = D_GRID[np.maximum(grid_i - 1, 0)]
+    hi = D_GRID[np.minimum(grid_i + 1, len(D_GRID) - 1)]
+    D, capD = _golden(u, mask, gram, kind_i, lo, hi, D_GRID[grid_i], cap[kind_i, grid_i, np.arange(K)],
+                      kinds, refine_iters)
+    D = D.astype(np.float32).astype(np.float64)
+    return kind_i, D, np.maximum(energy - capD, 0.0)
+
+
+def _captured_mixed(u, mask, gram, kind_i, D, kinds) -> np.ndarray:
+    out = np.empty(len(u))
+    for i, kind in enumerate(kinds):
+        sel = kind_i == i
+        if np.any(sel):
+            out[sel] = captured_energy(u[sel], mask[sel], gram[sel], D[sel], kind)
+    return out
+
+
+def _golden(u, mask, gram, kind_i, lo, hi, best_D, best_cap, kinds, iters):
+    """Vectorised golden-section maximisation of captured energy over D in [lo, hi] per item."""
+    r = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = lo.copy(), hi.copy()
+    c, d = b - r * (b - a), a + r * (b - a)
+    fc, fd = _captured_mixed(u, mask, gram, kind_i, c, kinds), _captured_mixed(u, mask, gram, kind_i, d, kinds)
+    for _ in range(iters):
+        left = fc > fd
+        a, b = np.where(left, a, c), np.where(left, d, b)
+        c, d = np.where(left, b - r * (b - a), d), np.where(left, c, a + r * (b - a))
+        f_new = _captured_mixed(u, mask, gram, kind_i, np.where(left, c, d), kinds)
+        fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
+    x = np.where(fc > fd, c, d)
+    fx = np.maximum(fc, fd)
+    better = fx > best_cap
+    return np.where(better, x, best_D), np.where(better, fx, best_cap)
+
+
+def project_items(u: np.ndarray, mask: np.ndarray, kind_i: np.ndarray, D: np.ndarray,
+                  kinds: tuple[str, ...] = SPACE_KINDS) -> SpaceProjection:
+    """Orthonormal bases and coefficient maps at the chosen (kind, D) of every item."""
+    K, N = u.shape
+    U = np.zeros((K, N, 4))
+    to_coef = np.zeros((K, 4, 4))
+    for i, kind in enumerate(kinds):
+        sel = kind_i == i
+        if np.any(sel):
+            U[sel], to_coef[sel] = orthonormal_basis(u[sel], mask[sel], D[sel], kind)
+    return SpaceProjection(U, to_coef, kind_i.astype(np.int64), D)

@@ -1,0 +1,184 @@
+"""The time half of the variable projection: C0 knot tracks with a time constant per segment.
+
+Every item (curve x coordinate) has a 4-vector track z(t) (its frames projected on the orthonormal space
+basis). On segment s the model is z(tau) = z_s phi0(tau; mu_s) + z_{s+1} phi1(tau; mu_s), so adjacent
+segments share a knot and the track is C0 by construction; for fixed mu the knots are one linear least
+squares problem over all frames (banded design, solved by QR). mu (signed: > 0 exp, < 0 trig, 0 linear)
+is chosen per item and segment: a coarse grid on free per-segment fits, then a golden-section refinement
+with the knots fixed, vectorised over all items, then a final knot solve. ``loop=True`` makes the knots
+periodic (the last knot is the first).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .families import MU_TRIG_MAX, time_pair
+from .segments import Segmentation
+
+MU_GRID = np.array([0.0, -MU_TRIG_MAX, -2.0, -1.0, -0.4, 0.4, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0])
+"""Coarse grid of signed time constants per segment (0 first: ties keep the linear pair)."""
+_CHUNK = 4_000_000
+
+
+def _design(tau: np.ndarray, seg: np.ndarray, mu_f: np.ndarray, n_knots: int, loop: bool) -> np.ndarray:
+    """(K, F, n_knots) banded design for items with per-frame constants mu_f (K, F)."""
+    K, F = mu_f.shape
+    phi = time_pair(np.broadcast_to(tau, (K, F)), mu_f)
+    A = np.zeros((K, F, n_knots))
+    f = np.arange(F)
+    nxt = (seg + 1) % n_knots if loop else seg + 1
+    A[:, f, seg] += phi[..., 0]
+    A[:, f, nxt] += phi[..., 1]
+    return A
+
+
+def solve_knots(b: np.ndarray, segm: Segmentation, mu: np.ndarray, loop: bool = False) -> np.ndarray:
+    """Least-squares C0 knots z (K, S + 1, 4) of tracks b (K, F, 4) for constants mu (K, S), by QR.
+
+    Open clips use a banded QR sweep (one small batched QR per segment, then back substitution); looping
+    clips (cyclic band) use a dense batched QR.
+    """
+    if loop:
+        return _solve_knots_dense(b, segm, mu, loop=True)
+    seg, tau = segm.frame_segment(), segm.frame_tau()
+    phi = time_pair(np.broadcast_to(tau, mu[:, seg].shape), mu[:, seg])  # (K, F, 2)
+    K, F, W = b.shape
+    S = segm.n_segments
+    rows = np.empty((S, K, 2 + W))  # final equation of knot s: R00 z_s + R01 z_{s+1} = rhs
+    carry = np.zeros((K, 1, 2 + W))
+    for s in range(S):
+        lo, hi = int(segm.bounds[s]), int(segm.bounds[s + 1]) if s < S - 1 else F
+        block = np.concatenate([phi[:, lo:hi], b[:, lo:hi]], axis=2)
+        R = np.linalg.qr(np.concatenate([carry, block], axis=1), mode="r")
+        rows[s] = R[:, 0]
+        carry = np.zeros((K, 1, 2 + W))
+        carry[:, 0, 0] = R[:, 1, 1]
+        carry[:, 0, 2:] = R[:, 1, 2:]
+    z = np.empty((K, S + 1, W))
+    z[:, S] = _safe_div(carry[:, 0, 2:], carry[:, 0, :1])
+    for s in range(S - 1, -1, -1):
+        z[:, s] = _safe_div(rows[s, :, 2:] - rows[s, :, 1:2] * z[:, s + 1], rows[s, :, :1])
+    return z
+
+
+def _safe_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    ok = np.abs(den) > 1e-300
+    return np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+
+
+def _solve_knots_dense(b: np.ndarray, segm: Segmentation, mu: np.ndarray, loop: bool) -> np.ndarray:
+    """Dense batched-QR knot solve (periodic knots when loop)."""
+    K, F, _ = b.shape
+    S = segm.n_segments
+    seg, tau = segm.frame_segment(), segm.frame_tau()
+    n_knots = S if loop else S + 1
+    z = np.empty((K, n_knots, b.shape[2]))
+    step = max(1, _CHUNK // max(F * n_knots, 1))
+    for lo in range(0, K, step):
+        A = _design(tau, seg, mu[lo:lo + step][:, seg], n_knots, loop)
+        Q, R = np.linalg.qr(A)
+        rhs = np.swapaxes(Q, 1, 2) @ b[lo:lo + step]
+        try:
+            z[lo:lo + step] = np.linalg.solve(R, rhs)
+        except np.linalg.LinAlgError:
+            z[lo:lo + step] = np.linalg.pinv(A) @ b[lo:lo + step]
+    if loop:
+        z = np.concatenate([z, z[:, :1]], axis=1)
+    return z
+
+
+def predict(z: np.ndarray, segm: Segmentation, mu: np.ndarray) -> np.ndarray:
+    """Model tracks (K, F, 4) from knots z (K, S + 1, 4) and constants mu (K, S)."""
+    seg, tau = segm.frame_segment(), segm.frame_tau()
+    phi = time_pair(np.broadcast_to(tau, mu[:, seg].shape), mu[:, seg])
+    return phi[..., 0:1] * z[:, seg] + phi[..., 1:2] * z[:, seg + 1]
+
+
+def _segment_sum(values: np.ndarray, segm: Segmentation) -> np.ndarray:
+    """(K, S) sums over the frames assigned to each segment of values (K, F)."""
+    onehot = np.eye(segm.n_segments)[segm.frame_segment()]  # (F, S)
+    return values @ onehot
+
+
+def _free_fit_errors(b: np.ndarray, segm: Segmentation, grid: np.ndarray) -> np.ndarray:
+    """(G, K, S) residual energy of per-segment fits with free end values, for every grid constant."""
+    K = b.shape[0]
+    out = np.zeros((len(grid), K, segm.n_segments))
+    for s in range(segm.n_segments):
+        fr = segm.frames_of(s)
+        t0, t1 = segm.t[fr[0]], segm.t[fr[-1]]
+        tau = (segm.t[fr] - t0) / (t1 - t0) if t1 > t0 else np.zeros(len(fr))
+        B = np.moveaxis(b[:, fr], 1, 0).reshape(len(fr), -1)  # (n, K*4)
+        energy = (B * B).sum(0).reshape(K, -1).sum(1)
+        for g, mu in enumerate(grid):
+            Q, _ = np.linalg.qr(time_pair(tau, np.full(len(fr), mu)))
+            cap = ((Q.T @ B) ** 2).sum(0).reshape(K, -1).sum(1)
+            out[g, :, s] = np.maximum(energy - cap, 0.0)
+    return out
+
+
+def _knot_quadratic(b: np.ndarray, z: np.ndarray, segm: Segmentation) -> tuple[np.ndarray, ...]:
+    """Per-frame terms of |phi0 z_s + phi1 z_s+1 - b|^2 with the knots fixed: (zz00, zz01, zz11, zb0, zb1, bb)."""
+    seg = segm.frame_segment()
+    z0, z1 = z[:, seg], z[:, seg + 1]
+    return ((z0 * z0).sum(-1), (z0 * z1).sum(-1), (z1 * z1).sum(-1), (z0 * b).sum(-1), (z1 * b).sum(-1),
+            (b * b).sum(-1))
+
+
+def _fixed_knot_errors(quad: tuple[np.ndarray, ...], segm: Segmentation, mu: np.ndarray) -> np.ndarray:
+    """(K, S) residual energy per segment for constants mu (K, S) with the knots fixed (see _knot_quadratic)."""
+    seg, tau = segm.frame_segment(), segm.frame_tau()
+    mu_f = mu[:, seg]
+    phi = time_pair(np.broadcast_to(tau, mu_f.shape), mu_f)
+    p0, p1 = phi[..., 0], phi[..., 1]
+    a00, a01, a11, b0, b1, bb = quad
+    res = p0 * (p0 * a00 + 2.0 * p1 * a01 - 2.0 * b0) + p1 * (p1 * a11 - 2.0 * b1) + bb
+    return _segment_sum(np.maximum(res, 0.0), segm)
+
+
+def _pick_grid(errs: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Index (K, S) of the best grid constant, keeping mu = 0 unless another is clearly better."""
+    best = np.argmin(errs, axis=0)
+    e0, eb = errs[0], np.take_along_axis(errs, best[None], 0)[0]
+    return np.where(eb < e0 * (1.0 - 1e-9) - 1e-300, best, 0)
+
+
+def _refine(b, z, segm, mu, lo, hi, iters):
+    """Vectorised golden-section minimisation of fixed-knot segment errors over mu in [lo, hi]."""
+    r = (np.sqrt(5.0) - 1.0) / 2.0
+    a, bb = lo.copy(), hi.copy()
+    c, d = bb - r * (bb - a), a + r * (bb - a)
+    quad = _knot_quadratic(b, z, segm)
+    fc, fd = _fixed_knot_errors(quad, segm, c), _fixed_knot_errors(quad, segm, d)
+    for _ in range(iters):
+        left = fc < fd
+        a, bb = np.where(left, a, c), np.where(left, d, bb)
+        c, d = np.where(left, bb - r * (bb - a), d), np.where(left, c, a + r * (bb - a))
+        f_new = _fixed_knot_errors(quad, segm, np.where(left, c, d))
+        fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
+    x, fx = np.where(fc < fd, c, d), np.minimum(fc, fd)
+    f_cur = _fixed_knot_errors(quad, segm, mu)
+    return np.where(fx < f_cur, x, mu)
+
+
+def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_iters: int = 10,
+               rounds: int = 1, grid: np.ndarray = MU_GRID) -> tuple[np.ndarray, np.ndarray]:
+    """Knots z (K, S + 1, 4) and signed constants mu (K, S) (float32-representable) for tracks b (K, F, 4).
+
+    Grid choice on free per-segment fits, then ``rounds`` of (golden refinement with knots fixed, knot solve).
+    """
+    order = np.argsort(grid[1:]) + 1
+    sorted_grid = np.concatenate([[grid[0]], grid[order]])
+    errs = _free_fit_errors(b, segm, sorted_grid)
+    mu = sorted_grid[_pick_grid(errs, sorted_grid)]
+    z = solve_knots(b, segm, mu, loop)
+    ladder = np.sort(sorted_grid)
+    pos = np.searchsorted(ladder, mu)
+    lo = ladder[np.maximum(pos - 1, 0)]
+    hi = ladder[np.minimum(pos + 1, len(ladder) - 1)]
+    for _ in range(rounds if refine_iters > 0 else 0):
+        mu = _refine(b, z, segm, mu, lo, hi, refine_iters)
+        z = solve_knots(b, segm, mu, loop)
+    mu = mu.astype(np.float32).astype(np.float64)
+    return solve_knots(b, segm, mu, loop), mu

@@ -1,0 +1,42 @@
+"""Reduce a large surface before tetrahedralization by vertex clustering.
+
+fast-simplification (trimesh's quadric decimation backend) is not a dependency, so large inputs are reduced by
+snapping vertices to a uniform grid and averaging each cell: crude for rendering but enough for a
+simulation cage, since fTetWild accepts the non-manifold soup clustering can leave and rebuilds a clean volume.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """Snap (V, 3) vertices to a grid of ``cell`` size; returns (V', 3) cell means and the surviving (T', 3) faces."""
+    keys = np.floor((vertices - vertices.min(axis=0)) / cell).astype(np.int64)
+    _, label = np.unique(keys, axis=0, return_inverse=True)
+    label = label.reshape(-1)
+    n = int(label.max()) + 1
+    counts = np.bincount(label, minlength=n).astype(np.float64)
+    means = np.stack([np.bincount(label, vertices[:, d], minlength=n) for d in range(3)], axis=1) / counts[:, None]
+    new_faces = label[faces]
+    keep = (new_faces[:, 0] != new_faces[:, 1]) & (new_faces[:, 1] != new_faces[:, 2]) \
+        & (new_faces[:, 2] != new_faces[:, 0])
+    new_faces = new_faces[keep]
+    _, first = np.unique(np.sort(new_faces, axis=1), axis=0, return_index=True)
+    return means, new_faces[np.sort(first)]
+
+
+def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cluster until at most ``max_faces`` (T, 3) faces remain (unchanged if already small enough)."""
+    if len(faces) <= max_faces:
+        return vertices, faces
+    extent = float(np.ptp(vertices, axis=0).max())
+    area = 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                                         vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1).sum()
+    cell = max(np.sqrt(2.0 * area / max_faces), extent * 1e-4)  # ~ edge length giving max_faces triangles
+    for _ in range(20):
+        v, f = cluster_vertices(vertices, faces, cell)
+        if len(f) <= max_faces:
+            return v, f
+        cell *= 1.25
+    return v, f

@@ -1,0 +1,123 @@
+"""Simulate a surface mesh: tetrahedralize, run XPBD under the scene, and sample the embedded surface as Poses."""
+
+from __future__ import annotations
+
+import math
+import time
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..mesh.io import SurfaceMesh
+from ..poses import Poses, make_poses
+from ..progress import Progress, sub_progress
+from . import kernels
+from .drivers import build_kinematics
+from .embedding import Embedding, embed_vertices
+from .scene import SceneParams
+from .tetmesh import TetMesh
+from .tetra import TetParams, tetrahedralize
+from .xpbd import Ground, Material, SimModel, build_model, project_ground, rest_state, step
+
+COURANT = 0.22
+"""Automatic substep: dt <= COURANT * l / c_p (l: 5th-percentile tet size, c_p: pressure-wave speed).
+
+Measured on the cantilever test: at this ratio the settled XPBD deflection is within 5% of a static linear FEM
+solve on the same tets, at every resolution; larger steps make XPBD softer as the mesh is refined."""
+
+__all__ = ["SceneParams", "simulate_mesh", "simulate_tets", "auto_substeps"]
+
+
+def characteristic_length(tets: TetMesh) -> float:
+    """5th percentile over tets of the edge of a regular tet of the same volume (robust to a few slivers)."""
+    return float(np.percentile((6.0 * math.sqrt(2.0) * tets.volumes()) ** (1.0 / 3.0), 5))
+
+
+def auto_substeps(tets: TetMesh, material: Material, frame_dt: float, cap: int) -> tuple[int, bool]:
+    """(substeps per frame, capped?) that resolve the material's fastest waves on this mesh."""
+    mu, lam = material.lame()
+    wave_speed = math.sqrt((lam + 2.0 * mu) / material.density)
+    dt_max = COURANT * characteristic_length(tets) / wave_speed
+    need = max(1, math.ceil(frame_dt / dt_max))
+    return min(need, cap), need > cap
+
+
+def build_scene_model(tets: TetMesh, vertices: np.ndarray, scene: SceneParams) -> tuple[SimModel, Embedding]:
+    """The XPBD model (material, gravity, pins, drivers, ground) and the surface embedding."""
+    embedding = embed_vertices(tets, vertices)
+    times = scene.frame_times()
+    kin = build_kinematics(scene.pins, scene.drivers, tets.points, embedding, len(vertices), float(times[-1]))
+    material = Material(scene.young, scene.poisson, scene.density, scene.damping)
+    ground = None
+    if scene.ground is not None:
+        g = scene.ground
+        ground = Ground(tuple(g.get("point", (0.0, 0.0, 0.0))), tuple(g.get("normal", (0.0, 1.0, 0.0))),
+                        float(g.get("friction", 0.0)))
+    model = build_model(tets, material, scene.gravity, kin.fixed, kin if len(kin.fixed) else None, ground,
+                        scene.iterations)
+    return model, embedding
+
+
+def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene: SceneParams,
+                  progress: Progress | None = None) -> Poses:
+    """Poses (F, V, 3) float32 of surface vertices (V, 3) embedded in ``tets`` under ``scene``."""
+    started = time.perf_counter()
+    report = progress or (lambda fraction, stage: None)
+    model, embedding = build_scene_model(tets, np.asarray(vertices, np.float64), scene)
+    times = scene.frame_times()
+    frame_dt = float(times[1] - times[0]) if len(times) > 1 else 1.0 / scene.fps
+    material = Material(scene.young, scene.poisson, scene.density, scene.damping)
+    substeps, capped = (scene.substeps, False) if scene.substeps else \
+        auto_substeps(tets, material, frame_dt, scene.max_substeps)
+    dt = frame_dt / substeps
+    kernels.set_threads(scene.threads)
+    state, spare = rest_state(model), rest_state(model)
+    frames = np.empty((len(times), len(vertices), 3), np.float32)
+    frames[0] = surface_positions(model, embedding, state.x)
+    for f in range(1, len(times)):
+        for _ in range(substeps):
+            step(model, state, spare, dt)
+            state, spare = spare, state
+        if not np.all(np.isfinite(state.x)):
+            raise ParameterError(f"simulation became non-finite at frame {f}: reduce the step or the stiffness")
+        frames[f] = surface_positions(model, embedding, state.x)
+        report(f / (len(times) - 1), f"simulate {f}/{len(times) - 1}")
+    meta = {"source": "simulate", "scene": scene.to_dict(), "tets": tets.n_tets, "tet_points": tets.n_points,
+            "substeps": substeps, "substeps_capped": capped, "dt": dt, "colors": len(model.blocks),
+            "backend": model.backend, "seconds": round(time.perf_counter() - started, 3), "versions": versions()}
+    return make_poses(frames, faces, times, meta)
+
+
+def surface_positions(model: SimModel, embedding: Embedding, x: np.ndarray) -> np.ndarray:
+    """(V, 3) embedded surface positions for tet points x (N, 3), kept on the allowed side of the ground."""
+    surface = embedding.apply(x)
+    if model.ground is not None:
+        project_ground(model.ground, surface, surface)
+    return surface
+
+
+def simulate_mesh(mesh: SurfaceMesh, scene: SceneParams, progress: Progress | None = None,
+                  workdir: Path | None = None, cache_dir: Path | None = None) -> Poses:
+    """Tetrahedralize ``mesh`` (cached) and simulate it; frames of mesh.vertices order (F, V, 3) float32."""
+    if progress is not None:
+        progress(0.0, "tetrahedralize")
+    started = time.perf_counter()
+    tets = tetrahedralize(mesh, TetParams(target_tets=scene.target_tets), cache_dir=cache_dir, workdir=workdir)
+    tet_seconds = time.perf_counter() - started
+    poses = simulate_tets(tets, mesh.vertices, mesh.faces, scene, sub_progress(progress, 0.2, 1.0))
+    poses.meta.update(tetrahedralize_seconds=round(tet_seconds, 3), mesh_hash=mesh.content_hash,
+                      source_file=mesh.source)
+    return poses
+
+
+def versions() -> dict:
+    """Versions of the libraries that determine the result, for the job record."""
+    out = {}
+    for name in ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild", "numba"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = None
+    return out

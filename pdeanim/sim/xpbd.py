@@ -1,0 +1,186 @@
+"""XPBD time stepping (Macklin et al. 2016) with small steps (Macklin et al. 2019) over coloured tets.
+
+An immutable rest model (:class:`SimModel`) holds everything derived from the tet mesh and the material; a
+:class:`SimState` holds positions, velocities and time; ``step(model, state_in, state_out, dt)`` advances one
+substep. Compliances come from Lame parameters times rest volume, so stiffness is independent of iteration
+count, step size and resolution; inverse masses are lumped from density.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ParameterError
+from .coloring import color_tets
+from . import kernels
+from .constraints import deviatoric_correction, hydrostatic_correction
+from .tetmesh import TetMesh
+
+Kinematic = Callable[[float], np.ndarray]
+"""``positions(t) -> (K, 3)`` prescribed positions of the model's fixed points at time t."""
+
+
+@dataclass(frozen=True)
+class Material:
+    """Young's modulus (Pa), Poisson ratio, density (kg/m^3) and mass-proportional velocity damping (1/s)."""
+
+    young: float = 1e5
+    poisson: float = 0.3
+    density: float = 1000.0
+    damping: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (self.young > 0 and 0.0 <= self.poisson < 0.5 and self.density > 0 and self.damping >= 0):
+            raise ParameterError("material needs young > 0, 0 <= poisson < 0.5, density > 0, damping >= 0")
+
+    def lame(self) -> tuple[float, float]:
+        """(mu, lambda) of linear elasticity."""
+        mu = self.young / (2.0 * (1.0 + self.poisson))
+        lam = self.young * self.poisson / ((1.0 + self.poisson) * (1.0 - 2.0 * self.poisson))
+        return mu, lam
+
+
+@dataclass(frozen=True)
+class Ground:
+    """A half-space (x - point) . normal >= 0 the points must stay in; friction in [0, 1] damps sliding."""
+
+    point: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    normal: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    friction: float = 0.0
+
+
+@dataclass(frozen=True)
+class ColorBlock:
+    """Per-colour constant arrays: tet ids (K,), tets (K, 4), dm_inv (K, 3, 3), w (K, 4), alpha_d, alpha_h (K,)."""
+
+    ids: np.ndarray
+    tets: np.ndarray
+    dm_inv: np.ndarray
+    w: np.ndarray
+    alpha_d: np.ndarray
+    alpha_h: np.ndarray
+
+
+@dataclass(frozen=True)
+class SimModel:
+    """The immutable rest model: points (N, 3), inverse masses (N,), colour blocks, forces and constraints."""
+
+    rest: np.ndarray
+    inv_mass: np.ndarray
+    blocks: tuple[ColorBlock, ...]
+    gravity: np.ndarray
+    damping: float
+    fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    kinematic: Kinematic | None = None
+    ground: Ground | None = None
+    iterations: int = 1
+    backend: str = "numba" if kernels.AVAILABLE else "numpy"
+
+
+@dataclass
+class SimState:
+    """Positions x (N, 3), velocities v (N, 3), per-tet rotation guesses rot (M, 4) (w, x, y, z), time t (s)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    rot: np.ndarray
+    t: float = 0.0
+
+    def copy(self) -> SimState:
+        """A deep copy (the solver writes into state_out)."""
+        return SimState(self.x.copy(), self.v.copy(), self.rot.copy(), self.t)
+
+
+def lumped_masses(tets: TetMesh, density: float) -> np.ndarray:
+    """(N,) point masses: a quarter of each adjacent tet's mass."""
+    vol = tets.volumes()
+    return np.bincount(tets.tets.ravel(), np.repeat(density * vol / 4.0, 4), minlength=tets.n_points)
+
+
+def build_model(tets: TetMesh, material: Material, gravity=(0.0, -9.81, 0.0), fixed: np.ndarray | None = None,
+                kinematic: Kinematic | None = None, ground: Ground | None = None, iterations: int = 1,
+                backend: str | None = None) -> SimModel:
+    """Precompute rest shapes, masses, compliances and the colouring; ``fixed`` points get zero inverse mass."""
+    backend = backend or ("numba" if kernels.AVAILABLE else "numpy")
+    if backend not in ("numba", "numpy") or (backend == "numba" and not kernels.AVAILABLE):
+        raise ParameterError(f"solver backend {backend!r} is not available")
+    fixed = np.zeros(0, np.int64) if fixed is None else np.unique(np.asarray(fixed, np.int64))
+    inv_mass = 1.0 / lumped_masses(tets, material.density)
+    inv_mass[fixed] = 0.0
+    mu, lam = material.lame()
+    lam = max(lam, 1e-9 * mu)  # Poisson 0: (almost) no volume stiffness, but a finite compliance
+    p = tets.points[tets.tets]
+    dm_inv = np.linalg.inv((p[:, 1:] - p[:, :1]).transpose(0, 2, 1))
+    vol = tets.volumes()
+    blocks = []
+    for idx in color_tets(tets.tets, tets.n_points):
+        t = tets.tets[idx]
+        blocks.append(ColorBlock(idx, t, dm_inv[idx], inv_mass[t], 1.0 / (2.0 * mu * vol[idx]),
+                                 1.0 / (lam * vol[idx])))
+    return SimModel(tets.points.copy(), inv_mass, tuple(blocks), np.asarray(gravity, np.float64),
+                    material.damping, fixed, kinematic, ground, max(int(iterations), 1), backend)
+
+
+def rest_state(model: SimModel) -> SimState:
+    """The state at rest: rest positions (fixed points at their t = 0 positions), zero velocity."""
+    x = model.rest.copy()
+    if model.kinematic is not None and len(model.fixed):
+        x[model.fixed] = model.kinematic(0.0)
+    rot = np.zeros((sum(len(b.ids) for b in model.blocks), 4))
+    rot[:, 0] = 1.0
+    return SimState(x, np.zeros_like(x), rot, 0.0)
+
+
+def step(model: SimModel, state_in: SimState, state_out: SimState, dt: float) -> None:
+    """Advance one substep of length dt from state_in into state_out (which may not alias state_in)."""
+    free = (model.inv_mass > 0)[:, None]
+    v = state_in.v * np.exp(-model.damping * dt) + dt * model.gravity * free
+    x = state_out.x
+    np.add(state_in.x, dt * v, out=x)
+    t = state_in.t + dt
+    if len(model.fixed):
+        x[model.fixed] = model.kinematic(t) if model.kinematic is not None else state_in.x[model.fixed]
+    state_out.rot[:] = state_in.rot
+    solve_constraints(model, x, dt, state_out.rot)
+    if model.ground is not None:
+        project_ground(model.ground, x, state_in.x)
+    np.subtract(x, state_in.x, out=state_out.v)
+    state_out.v /= dt
+    state_out.t = t
+
+
+def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray) -> None:
+    """Gauss-Seidel over colours (all tets of one colour in one pass), in place on x (N, 3) and rot (M, 4)."""
+    inv_dt2 = 1.0 / (dt * dt)
+    lams = [(np.zeros(len(b.tets)), np.zeros(len(b.tets))) for b in model.blocks]
+    for _ in range(model.iterations):
+        for b, (lam_d, lam_h) in zip(model.blocks, lams, strict=True):
+            if model.backend == "numba":
+                kernels.solve_color(x, rot, b.ids, b.tets, b.dm_inv, b.w, b.alpha_d, b.alpha_h, lam_d, lam_h,
+                                    inv_dt2)
+                continue
+            dx, dlam, rot[b.ids] = deviatoric_correction(x[b.tets], b.w, b.dm_inv, b.alpha_d * inv_dt2, lam_d,
+                                                         rot[b.ids])
+            x[b.tets] += dx
+            lam_d += dlam
+            dx, dlam = hydrostatic_correction(x[b.tets], b.w, b.dm_inv, b.alpha_h * inv_dt2, lam_h)
+            x[b.tets] += dx
+            lam_h += dlam
+
+
+def project_ground(ground: Ground, x: np.ndarray, x_prev: np.ndarray) -> None:
+    """Move points behind the ground plane onto it; friction removes part of their sliding this substep."""
+    n = np.asarray(ground.normal, np.float64)
+    n = n / np.linalg.norm(n)
+    depth = (x - np.asarray(ground.point, np.float64)) @ n
+    hit = depth < 0
+    if not hit.any():
+        return
+    x[hit] -= depth[hit, None] * n
+    if ground.friction > 0:
+        d = x[hit] - x_prev[hit]
+        tangential = d - (d @ n)[:, None] * n
+        x[hit] -= min(ground.friction, 1.0) * tangential

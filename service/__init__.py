@@ -1,0 +1,1 @@
+"""The pdeanim web service: FastAPI API (``service.api``), storage shared with the worker (``service.store``)."""

@@ -1,0 +1,32 @@
+"""Tenant-scoped row access: another tenant's ids look exactly like missing ones (404)."""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+from sqlalchemy.orm import Session
+
+from .errors import ApiError
+from .schemas import ErrorOut
+
+T = TypeVar("T")
+
+
+def owned(session: Session, model: type[T], row_id: str, tenant_id: str, what: str) -> T:
+    """The row ``row_id`` of ``model`` if it belongs to ``tenant_id``; else 404 naming ``what``."""
+    row = session.get(model, row_id)
+    if row is None or row.tenant_id != tenant_id:
+        raise ApiError(404, "not_found", f"{what} {row_id!r} not found")
+    return row
+
+
+DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malformed request",
+                401: "missing or invalid API key", 404: "not found (or another tenant's)",
+                413: "over a configured limit", 415: "wrong content type",
+                422: "invalid input or parameters", 501: "stage not available in this build"}
+
+
+def responses(*statuses: int) -> dict[int | str, dict]:
+    """OpenAPI ``responses`` for the error statuses a route may answer, all with the one error shape."""
+    return {s: ({"description": DESCRIPTIONS[s]} if s == 304 else
+                {"model": ErrorOut, "description": DESCRIPTIONS[s]}) for s in statuses}

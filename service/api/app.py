@@ -1,0 +1,46 @@
+"""The FastAPI application factory: settings in, app out (no import-time engine or global settings)."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+from ..settings import Settings
+from ..store.context import Store
+from .cache import ClipCache
+from .errors import install_error_handlers
+from .routes import clips, health, jobs, meshes, poses
+
+API_VERSION = "1.0.0"
+DESCRIPTION = ("Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
+               "Every 4xx/5xx answers `{\"error\": {\"code\", \"message\"}}`; every /v1 route needs "
+               "`Authorization: Bearer KEY`.")
+
+
+def create_app(settings: Settings | None = None, store: Store | None = None) -> FastAPI:
+    """Build the API on ``settings`` (default: from the environment); ``store`` may be injected by tests."""
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        own = app.state.store is None
+        if own:
+            app.state.store = Store.open(settings)
+        yield
+        if own:
+            app.state.store.close()
+
+    app = FastAPI(title="pdeanim", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan)
+    app.state.store = store
+    app.state.clip_cache = ClipCache(settings.max_clip_cache)
+    install_error_handlers(app)
+    for module in (health, meshes, poses, jobs, clips):
+        app.include_router(module.router)
+    return app
+
+
+def app_from_environment() -> FastAPI:
+    """Factory used by ``pdeanim serve`` (uvicorn ``factory=True``): settings from PDEANIM_* variables."""
+    return create_app(Settings())

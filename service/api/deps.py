@@ -1,0 +1,62 @@
+"""Dependencies of the routes, declared once as ``Annotated`` aliases."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Annotated
+
+from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy.orm import Session
+
+from ..settings import Settings
+from ..store.context import Store
+from ..store.tenants import tenant_for_key
+from .cache import ClipCache
+from .errors import ApiError
+
+bearer = HTTPBearer(auto_error=False, description="an API key made with `pdeanim keys create --tenant NAME`")
+
+
+def get_store(request: Request) -> Store:
+    """The app's Store (engine, queue, blobs)."""
+    return request.app.state.store
+
+
+def get_settings(request: Request) -> Settings:
+    """The app's Settings."""
+    return request.app.state.store.settings
+
+
+def get_clip_cache(request: Request) -> ClipCache:
+    """The app's decoded-clip cache."""
+    return request.app.state.clip_cache
+
+
+StoreDep = Annotated[Store, Depends(get_store)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+ClipCacheDep = Annotated[ClipCache, Depends(get_clip_cache)]
+
+
+def get_session(store: StoreDep) -> Iterator[Session]:
+    """A database session for one request."""
+    with store.sessions() as session:
+        yield session
+
+
+SessionDep = Annotated[Session, Depends(get_session)]
+
+
+def get_tenant(creds: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)], store: StoreDep) -> str:
+    """The tenant id of the request's ``Authorization: Bearer KEY``; 401 when missing or unknown."""
+    challenge = {"WWW-Authenticate": "Bearer"}
+    if creds is None or not creds.credentials:
+        raise ApiError(401, "unauthorized", "missing API key: send Authorization: Bearer KEY", challenge)
+    with store.sessions() as session:
+        tenant = tenant_for_key(session, creds.credentials)
+    if tenant is None:
+        raise ApiError(401, "unauthorized", "invalid API key", challenge)
+    return tenant
+
+
+TenantDep = Annotated[str, Depends(get_tenant)]

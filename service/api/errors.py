@@ -1,0 +1,63 @@
+"""One JSON error shape, ``{"error": {"code", "message"}}``, for every 4xx and 5xx the API returns."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from pdeanim.errors import InputError
+
+log = logging.getLogger("pdeanim.api")
+
+STATUS_CODES = {400: "bad_request", 401: "unauthorized", 403: "forbidden", 404: "not_found",
+                405: "method_not_allowed", 406: "not_acceptable", 409: "conflict", 413: "payload_too_large",
+                415: "unsupported_media_type", 422: "validation_error", 501: "not_implemented",
+                503: "unavailable"}
+
+
+class ApiError(StarletteHTTPException):
+    """An HTTP error with a stable machine-readable ``code``."""
+
+    def __init__(self, status: int, code: str, message: str, headers: dict[str, str] | None = None):
+        super().__init__(status, message, headers)
+        self.code = code
+
+
+def error_body(code: str, message: str) -> dict:
+    """The error document."""
+    return {"error": {"code": code, "message": message}}
+
+
+def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+    code = getattr(exc, "code", None) or STATUS_CODES.get(exc.status_code, f"http_{exc.status_code}")
+    message = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
+    return JSONResponse(error_body(code, message), exc.status_code, headers=getattr(exc, "headers", None))
+
+
+def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+    parts = []
+    for err in exc.errors()[:5]:
+        loc = ".".join(str(p) for p in err.get("loc", ()))
+        parts.append(f"{loc}: {err.get('msg', 'invalid')}")
+    return JSONResponse(error_body("validation_error", "; ".join(parts) or "invalid request"), 422)
+
+
+def _input(_: Request, exc: InputError) -> JSONResponse:
+    return JSONResponse(error_body(exc.code, str(exc)), int(getattr(exc, "status", 422)))
+
+
+def _unexpected(_: Request, exc: Exception) -> JSONResponse:
+    log.exception("unhandled error", exc_info=exc)
+    return JSONResponse(error_body("internal", f"internal error ({type(exc).__name__})"), 500)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Map HTTP errors, validation errors, library InputErrors and anything unexpected to the error shape."""
+    app.add_exception_handler(StarletteHTTPException, _http)
+    app.add_exception_handler(RequestValidationError, _validation)
+    app.add_exception_handler(InputError, _input)
+    app.add_exception_handler(Exception, _unexpected)

@@ -1,0 +1,28 @@
+"""ETag and long-lived cache headers for immutable resources (clips never change), with 304 handling."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from fastapi import Request, Response
+
+IMMUTABLE = "public, max-age=31536000, immutable"
+
+
+def etag_matches(request: Request, etag: str) -> bool:
+    """Whether the request's If-None-Match names ``etag`` (quoted) or is ``*``."""
+    header = request.headers.get("if-none-match")
+    if not header:
+        return False
+    tags = [t.strip().removeprefix("W/") for t in header.split(",")]
+    return "*" in tags or etag in tags
+
+
+def immutable_response(request: Request, tag: str, body: Callable[[], bytes], media_type: str,
+                       headers: dict[str, str] | None = None) -> Response:
+    """304 if the client has ``tag`` already, else the body with ETag and immutable caching."""
+    etag = f'"{tag}"'
+    common = {"ETag": etag, "Cache-Control": IMMUTABLE, **(headers or {})}
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=common)
+    return Response(body(), media_type=media_type, headers=common)

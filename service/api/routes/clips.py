@@ -1,0 +1,140 @@
+"""Clips: metadata, the coefficient set (binary or JSON), one frame at t, and the whole animation as GLB."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+
+import numpy as np
+from fastapi import APIRouter, Query, Request, Response
+
+from pdeanim.errors import LimitError
+
+from ...store.context import Store
+from ...store.models import ClipRecord
+from ..access import owned, responses
+from ..cache import CachedClip
+from ..deps import ClipCacheDep, SessionDep, StoreDep, TenantDep
+from ..errors import ApiError
+from ..httpcache import immutable_response
+from ..schemas import ClipOut
+
+router = APIRouter(tags=["clips"])
+GLB = "model/gltf-binary"
+GLB_RESPONSE = {200: {"content": {GLB: {}}, "description": "a binary glTF 2.0 file"}}
+SUMMARY_KEYS = ("rms", "max", "rel_rms", "rel_max", "p95", "target")
+
+
+def _cached(clip_id: str, tenant: str, store: Store, cache, session) -> CachedClip:  # noqa: ANN001
+    def load() -> CachedClip:
+        from pdeanim.clip import load_clip
+
+        row = session.get(ClipRecord, clip_id)
+        if row is None:
+            raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
+        clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+        return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip)
+
+    item = cache.get(clip_id, load)
+    if item.tenant_id != tenant:
+        raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
+    return item
+
+
+def clip_out(row: ClipRecord, info: dict) -> ClipOut:
+    """Wire form of a clip: counts from the clip's info, errors and sizes from the producer's report."""
+    report = row.report or {}
+    errors = {k: report[k] for k in SUMMARY_KEYS if k in report and not isinstance(report[k], list | dict)}
+    errors.update(report.get("errors", {}) if isinstance(report.get("errors"), dict) else {})
+    pick = {k: info.get(k, report.get(k)) for k in ("frames", "segments", "curves")}
+    for k, v in list(pick.items()):
+        pick[k] = len(v) if isinstance(v, list) else (v if isinstance(v, int) else None)
+    return ClipOut(id=row.id, kind=row.kind, mesh_id=row.mesh_id, poses_id=row.poses_id, job_id=row.job_id,
+                   topology_id=row.topology_id, looping=info.get("looping"), sizes=report.get("sizes", {}),
+                   errors=errors, info=info, created_at=row.created_at, **pick)
+
+
+@router.get("/v1/clips/{clip_id}", operation_id="getClip", response_model=ClipOut, responses=responses(401, 404))
+def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreDep, cache: ClipCacheDep) -> ClipOut:
+    """Frames, segments, curves, sizes in bytes and the errors achieved."""
+    row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    item = _cached(clip_id, tenant, store, cache, session)
+    info = json.loads(json.dumps(item.clip.info(), default=_jsonable))
+    info.setdefault("looping", bool(item.clip.looping))
+    return clip_out(row, info)
+
+
+def _jsonable(value):  # noqa: ANN001, ANN202
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+@router.get("/v1/clips/{clip_id}/coefficients", operation_id="getClipCoefficients", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}, "application/json": {}},
+                             "description": "the coefficients part: pdeanim container, or its JSON form"},
+                       **responses(304, 401, 404)})
+def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep,
+                     store: StoreDep) -> Response:
+    """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form)."""
+    row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    if "application/json" in request.headers.get("accept", ""):
+        from pdeanim.container import to_json
+
+        return immutable_response(request, row.coefficients_key + "-json",
+                                  lambda: json.dumps(to_json(store.blobs.get(row.coefficients_key))).encode(),
+                                  "application/json", {"Vary": "Accept"})
+    return immutable_response(request, row.coefficients_key, lambda: store.blobs.get(row.coefficients_key),
+                              "application/octet-stream", {"Vary": "Accept"})
+
+
+@router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
+            responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
+def get_frame(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
+              cache: ClipCacheDep, t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")
+              ) -> Response:
+    """One evaluated frame at ``t`` as a GLB."""
+    item = _cached(clip_id, tenant, store, cache, session)
+    if not math.isfinite(t) or (not item.clip.looping and not 0.0 <= t <= 1.0):
+        raise ApiError(422, "t_out_of_range", f"t must lie in [0, 1] for this clip, got {t}")
+    tag = hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest()
+
+    def body() -> bytes:
+        from pdeanim.gltf.write import frame_glb
+
+        return frame_glb(np.asarray(item.clip.evaluate(float(t))), item.clip.faces)
+
+    return immutable_response(request, tag, body, GLB)
+
+
+def animation_times(clip, fps: float, max_frames: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+    """Normalised times (K,) and seconds (K,) sampling the clip at ``fps`` (looping: one period, no endpoint)."""
+    times = np.asarray(clip.frame_times, dtype=np.float64)
+    duration = float(times[-1] - times[0]) if len(times) > 1 else 0.0
+    k = max(int(round(duration * fps)) + (0 if clip.looping else 1), 1)
+    if k > max_frames:
+        raise LimitError("animation frame count", k, max_frames, "PDEANIM_MAX_FRAMES")
+    t = np.linspace(0.0, 1.0, k, endpoint=not clip.looping) if k > 1 else np.zeros(1)
+    return t, t * duration
+
+
+@router.get("/v1/clips/{clip_id}/animation", operation_id="getClipAnimation", response_class=Response,
+            responses={**GLB_RESPONSE, **responses(304, 401, 404, 413, 422)})
+def get_animation(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
+                  cache: ClipCacheDep, fps: float = Query(30.0, gt=0, le=240, description="frames per second")
+                  ) -> Response:
+    """The whole clip sampled at ``fps`` as a GLB with one morph target per frame and a weights animation."""
+    item = _cached(clip_id, tenant, store, cache, session)
+    t, seconds = animation_times(item.clip, fps, store.settings.max_frames)
+    tag = hashlib.sha256(f"{item.coefficients_key}:animation:{fps!r}".encode()).hexdigest()
+
+    def body() -> bytes:
+        from pdeanim.gltf.write import animation_glb
+
+        frames = np.asarray(item.clip.evaluate(t)).reshape(len(t), -1, 3)
+        return animation_glb(frames, seconds, item.clip.faces, loop=bool(item.clip.looping))
+
+    return immutable_response(request, tag, body, GLB)

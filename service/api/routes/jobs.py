@@ -1,0 +1,64 @@
+"""Jobs: submit simulate / fit / cyclic work (parameters validated now), and follow its state."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from ...jobspec import StageUnavailable, normalize_request
+from ...store.models import Job, Mesh, PosesRecord
+from ..access import owned, responses
+from ..deps import SessionDep, StoreDep, TenantDep
+from ..errors import ApiError
+from ..schemas import ErrorBody, JobOut, JobRequest, JobResult
+
+router = APIRouter(tags=["jobs"])
+
+
+def job_out(job: Job) -> JobOut:
+    """Wire form of a job row."""
+    error = ErrorBody(code=job.error_code or "error", message=job.error) if job.error else None
+    return JobOut(id=job.id, kind=job.kind, state=job.state, progress=job.progress, stage=job.stage, error=error,
+                  attempt=job.attempt, mesh_id=job.mesh_id, poses_id=job.poses_id,
+                  result=JobResult(**(job.result or {})), params=job.params, versions=job.versions,
+                  created_at=job.created_at, started_at=job.started_at, finished_at=job.finished_at)
+
+
+def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  # noqa: ANN001
+    if req.kind == "fit":
+        if not req.poses_id:
+            raise ApiError(422, "invalid_parameter", "a fit job needs poses_id")
+        poses = owned(session, PosesRecord, req.poses_id, tenant, "poses")
+        if req.mesh_id and req.mesh_id != poses.mesh_id:
+            raise ApiError(422, "invalid_parameter", f"poses {poses.id} belong to mesh {poses.mesh_id}")
+        return poses.mesh_id, poses.id
+    if not req.mesh_id:
+        raise ApiError(422, "invalid_parameter", f"a {req.kind} job needs mesh_id")
+    if req.poses_id:
+        raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no poses_id")
+    return owned(session, Mesh, req.mesh_id, tenant, "mesh").id, None
+
+
+@router.post("/v1/jobs", status_code=202, operation_id="createJob", response_model=JobOut,
+             responses=responses(401, 404, 413, 422, 501))
+def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: StoreDep) -> JobOut:
+    """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""
+    mesh_id, poses_id = _inputs(req, tenant, session)
+    try:
+        spec = normalize_request(req.kind, req.params, req.then_fit, req.fit)
+    except StageUnavailable as exc:
+        raise ApiError(501, "not_implemented", str(exc)) from exc
+    frames = spec["params"].get("frames")
+    if isinstance(frames, int) and frames > store.settings.max_frames:
+        from pdeanim.errors import LimitError
+
+        raise LimitError("frames", frames, store.settings.max_frames, "PDEANIM_MAX_FRAMES")
+    job = store.queue.enqueue(session, tenant_id=tenant, kind=req.kind, params=spec, mesh_id=mesh_id,
+                              poses_id=poses_id)
+    session.commit()
+    return job_out(job)
+
+
+@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut, responses=responses(401, 404))
+def get_job(job_id: str, tenant: TenantDep, session: SessionDep) -> JobOut:
+    """State (queued, running, succeeded, failed), progress 0..1, stage, error and result ids."""
+    return job_out(owned(session, Job, job_id, tenant, "job"))

@@ -1,0 +1,78 @@
+"""Meshes: upload (validated by the library's mesh reader), stats, and the static topology part."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request, Response
+from sqlalchemy import select
+from starlette.concurrency import run_in_threadpool
+
+from ...settings import Settings
+from ...store.models import ClipRecord, Mesh
+from ..access import owned, responses
+from ..deps import SessionDep, SettingsDep, StoreDep, TenantDep
+from ..errors import ApiError
+from ..httpcache import immutable_response
+from ..schemas import MeshOut
+from ..uploads import UPLOAD_BODY, Upload, receive_file
+
+router = APIRouter(tags=["meshes"])
+
+
+def mesh_out(row: Mesh) -> MeshOut:
+    """Wire form of a mesh row."""
+    return MeshOut(id=row.id, filename=row.filename, vertices=row.n_vertices, faces=row.n_faces, stats=row.stats,
+                   created_at=row.created_at)
+
+
+def _ingest(upload: Upload, settings: Settings) -> dict:
+    from pdeanim.mesh.io import MeshLimits, load_mesh
+
+    limits = MeshLimits(settings.max_upload_bytes, settings.max_vertices, settings.max_faces)
+    return load_mesh(upload.path, filename=upload.filename, limits=limits).stats()
+
+
+@router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
+             openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 413, 415, 422))
+async def upload_mesh(request: Request, tenant: TenantDep, store: StoreDep) -> MeshOut:
+    """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
+    settings = store.settings
+    upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+    try:
+        stats = await run_in_threadpool(_ingest, upload, settings)
+        key = await run_in_threadpool(store.blobs.put_file, upload.path)
+    finally:
+        upload.path.unlink(missing_ok=True)
+    row = Mesh(tenant_id=tenant, filename=upload.filename[:255], blob_key=key, n_vertices=stats["vertices"],
+               n_faces=stats["faces"], stats=stats)
+    with store.sessions() as session:
+        session.add(row)
+        session.commit()
+    return mesh_out(row)
+
+
+@router.get("/v1/meshes/{mesh_id}", operation_id="getMesh", response_model=MeshOut,
+            responses=responses(401, 404))
+def get_mesh(mesh_id: str, tenant: TenantDep, session: SessionDep) -> MeshOut:
+    """The mesh's stats: vertices, faces, components, watertight, bbox."""
+    return mesh_out(owned(session, Mesh, mesh_id, tenant, "mesh"))
+
+
+@router.get("/v1/meshes/{mesh_id}/topology", operation_id="getMeshTopology", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}},
+                             "description": "the topology part (pdeanim container)"},
+                       **responses(304, 401, 404)})
+def get_topology(mesh_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
+                 settings: SettingsDep, clip_id: str | None = None) -> Response:
+    """The static part of the mesh's latest clip (or of ``clip_id``), needed once per mesh by clients."""
+    owned(session, Mesh, mesh_id, tenant, "mesh")
+    if clip_id is not None:
+        clip = owned(session, ClipRecord, clip_id, tenant, "clip")
+        if clip.mesh_id != mesh_id:
+            raise ApiError(404, "not_found", f"clip {clip_id!r} does not belong to mesh {mesh_id!r}")
+    else:
+        clip = session.execute(select(ClipRecord).where(ClipRecord.mesh_id == mesh_id, ClipRecord.tenant_id == tenant)
+                               .order_by(ClipRecord.created_at.desc()).limit(1)).scalar_one_or_none()
+        if clip is None:
+            raise ApiError(404, "not_found", f"mesh {mesh_id!r} has no clip yet (run a fit or cyclic job)")
+    return immutable_response(request, clip.topology_key, lambda: store.blobs.get(clip.topology_key),
+                              "application/octet-stream")

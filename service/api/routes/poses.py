@@ -1,0 +1,95 @@
+"""Poses: upload poses made elsewhere for a mesh (.npz or animated GLB) and download any poses as .npz."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import APIRouter, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
+
+from pdeanim.errors import PosesInputError
+
+from ...settings import Settings
+from ...store.context import Store
+from ...store.models import Mesh, PosesRecord
+from ..access import owned, responses
+from ..deps import SessionDep, StoreDep, TenantDep
+from ..schemas import PosesOut
+from ..uploads import UPLOAD_BODY, Upload, receive_file
+
+router = APIRouter(tags=["poses"])
+
+
+def poses_out(row: PosesRecord) -> PosesOut:
+    """Wire form of a poses row."""
+    return PosesOut(id=row.id, mesh_id=row.mesh_id, source=row.source, frames=row.n_frames,
+                    vertices=row.n_vertices, job_id=row.job_id, created_at=row.created_at)
+
+
+def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float):  # noqa: ANN202 - pdeanim Poses
+    from pdeanim.poses import PoseLimits, load_poses_npz, make_poses
+
+    settings: Settings = store.settings
+    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices)
+    suffix = Path(upload.filename).suffix.lower()
+    if suffix == ".npz":
+        poses = load_poses_npz(upload.path.read_bytes(), limits)
+    elif suffix in (".glb", ".gltf"):
+        from pdeanim.gltf.read import read_animated_poses
+
+        poses = read_animated_poses(upload.path, fps=fps, limits=limits)
+    else:
+        raise PosesInputError(f"unsupported poses file type {suffix or upload.filename!r}: use .npz or .glb")
+    if poses.n_vertices != mesh.n_vertices:
+        raise PosesInputError(f"poses have {poses.n_vertices} vertices but mesh {mesh.id} has {mesh.n_vertices}")
+    if poses.faces.size == 0:
+        from pdeanim.mesh.io import load_mesh
+
+        faces = load_mesh(store.blobs.get(mesh.blob_key), filename=mesh.filename).faces
+        poses = make_poses(poses.vertices, faces, poses.times, poses.meta, limits)
+    return poses
+
+
+def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float) -> tuple[str, int]:
+    from pdeanim.poses import poses_to_bytes
+
+    poses = _read_poses(upload, mesh, store, fps)
+    return store.blobs.put(poses_to_bytes(poses)), poses.n_frames
+
+
+@router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses", response_model=PosesOut,
+             openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 404, 413, 415, 422))
+async def upload_poses(mesh_id: str, request: Request, tenant: TenantDep, store: StoreDep,
+                       fps: float = Query(30.0, gt=0, le=1000, description="sampling rate for animated GLB")
+                       ) -> PosesOut:
+    """Upload poses of this mesh: a .npz with ``vertices`` (F,V,3) (optional ``faces``, ``times``) or an
+    animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
+    with store.sessions() as session:
+        mesh = owned(session, Mesh, mesh_id, tenant, "mesh")
+    settings = store.settings
+    upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+    try:
+        key, frames = await run_in_threadpool(_store_poses, upload, mesh, store, fps)
+    finally:
+        upload.path.unlink(missing_ok=True)
+    row = PosesRecord(tenant_id=tenant, mesh_id=mesh_id, source="upload", blob_key=key, n_frames=frames,
+                      n_vertices=mesh.n_vertices, meta={"filename": upload.filename[:255]})
+    with store.sessions() as session:
+        session.add(row)
+        session.commit()
+    return poses_out(row)
+
+
+@router.get("/v1/poses/{poses_id}", operation_id="getPoses", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}, "application/json": {
+                "schema": PosesOut.model_json_schema()}},
+                "description": "POSES.npz (vertices, faces, times); metadata with Accept: application/json"},
+                **responses(401, 404)})
+def get_poses(poses_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep) -> Response:
+    """The poses as a .npz (``vertices`` (F,V,3) float32, ``faces``, ``times``), or metadata as JSON."""
+    row = owned(session, PosesRecord, poses_id, tenant, "poses")
+    if "application/json" in request.headers.get("accept", ""):
+        return Response(poses_out(row).model_dump_json(), media_type="application/json")
+    return Response(store.blobs.get(row.blob_key), media_type="application/octet-stream",
+                    headers={"Content-Disposition": f'attachment; filename="{poses_id}.npz"',
+                             "ETag": f'"{row.blob_key}"'})

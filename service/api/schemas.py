@@ -1,0 +1,101 @@
+"""Wire schemas (pydantic v2) of the API, kept apart from the storage models."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class ErrorBody(BaseModel):
+    code: str = Field(description="stable machine-readable code, e.g. invalid_mesh, not_found")
+    message: str = Field(description="what went wrong, for people")
+
+
+class ErrorOut(BaseModel):
+    """Every 4xx/5xx answer."""
+
+    error: ErrorBody
+
+
+class Health(BaseModel):
+    status: Literal["ok", "degraded"]
+    database: str
+    blobs: str
+
+
+class MeshOut(BaseModel):
+    id: str
+    filename: str
+    vertices: int
+    faces: int
+    stats: dict[str, Any] = Field(description="vertices, faces, components, watertight, bbox, diagonal")
+    created_at: float
+
+
+class PosesOut(BaseModel):
+    id: str
+    mesh_id: str
+    source: Literal["upload", "simulate"]
+    frames: int
+    vertices: int
+    job_id: str | None = None
+    created_at: float
+
+
+class JobRequest(BaseModel):
+    """A job. ``simulate``: mesh_id + params (scene parameters), optionally then_fit + fit (fit options);
+    ``fit``: poses_id + params (fit options); ``cyclic``: mesh_id + params (cyclic options)."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
+        {"kind": "simulate", "mesh_id": "mesh_...", "params": {"frames": 60}, "then_fit": True,
+         "fit": {"target_rel_rms": 0.002}},
+        {"kind": "fit", "poses_id": "poses_...", "params": {"segments": 4}},
+        {"kind": "cyclic", "mesh_id": "mesh_...", "params": {"mode": "eel"}}]})
+
+    kind: Literal["simulate", "fit", "cyclic"]
+    mesh_id: str | None = Field(None, description="required for simulate and cyclic; optional check for fit")
+    poses_id: str | None = Field(None, description="required for fit")
+    params: dict[str, Any] = Field(default_factory=dict, description="options of the job's kind")
+    then_fit: bool = Field(False, description="simulate only: fit the simulated poses in the same job")
+    fit: dict[str, Any] | None = Field(None, description="fit options when then_fit is true")
+
+
+class JobResult(BaseModel):
+    poses_id: str | None = None
+    clip_id: str | None = None
+
+
+class JobOut(BaseModel):
+    id: str
+    kind: str
+    state: Literal["queued", "running", "succeeded", "failed"]
+    progress: float = Field(description="0..1")
+    stage: str = Field(description='e.g. "simulate 40/100"')
+    error: ErrorBody | None = None
+    attempt: int
+    mesh_id: str | None
+    poses_id: str | None
+    result: JobResult
+    params: dict[str, Any] = Field(description="the validated request as the worker runs it")
+    versions: dict[str, Any] = Field(description="library versions of the latest attempt")
+    created_at: float
+    started_at: float | None
+    finished_at: float | None
+
+
+class ClipOut(BaseModel):
+    id: str
+    kind: str
+    mesh_id: str
+    poses_id: str | None
+    job_id: str | None
+    topology_id: str = Field(description="SHA-256 of the topology part (GET /v1/meshes/{id}/topology)")
+    frames: int | None = None
+    segments: int | None = None
+    curves: int | None = None
+    looping: bool | None = None
+    sizes: dict[str, Any] = Field(default_factory=dict)
+    errors: dict[str, Any] = Field(default_factory=dict, description="rms, max, rel_rms, ... achieved")
+    info: dict[str, Any] = Field(default_factory=dict, description="the clip's own metadata")
+    created_at: float

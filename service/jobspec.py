@@ -1,0 +1,63 @@
+"""What a job of each kind needs from the library: its options class (validated at submission by the API,
+rebuilt by the worker) and the library versions recorded with every attempt. Imports are lazy so the
+API starts even when a stage is not installed in this build."""
+
+from __future__ import annotations
+
+import importlib
+from importlib import metadata
+from typing import Any
+
+from pdeanim.errors import ParameterError
+
+OPTIONS = {
+    "simulate": "pdeanim.sim.scene:SceneParams",
+    "fit": "pdeanim.model.fitclip:FitOptions",
+    "cyclic": "pdeanim.cyclic.job:CyclicOptions",
+}
+DISTRIBUTIONS = ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild")
+
+
+class StageUnavailable(RuntimeError):
+    """The library stage for a job kind cannot be imported in this build."""
+
+
+def options_class(kind: str) -> type:
+    """The options dataclass of ``kind`` (with ``from_dict``/``to_dict``)."""
+    if kind not in OPTIONS:
+        raise ParameterError(f"unknown job kind {kind!r} (known: {', '.join(OPTIONS)})")
+    module, _, name = OPTIONS[kind].partition(":")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as exc:
+        raise StageUnavailable(f"the {kind} stage ({OPTIONS[kind]}) is not available: {exc}") from exc
+
+
+def normalize(kind: str, params: dict[str, Any] | None) -> dict[str, Any]:
+    """Validate options of ``kind`` (ParameterError on unknown/bad keys) and return them with defaults."""
+    if params is not None and not isinstance(params, dict):
+        raise ParameterError(f"{kind} parameters must be a JSON object")
+    return options_class(kind).from_dict(dict(params or {})).to_dict()
+
+
+def normalize_request(kind: str, params: dict[str, Any], then_fit: bool, fit: dict[str, Any] | None) -> dict:
+    """The job's stored parameters: {"params": ..., "then_fit": ..., "fit": ...}, all validated."""
+    if then_fit and kind != "simulate":
+        raise ParameterError("then_fit applies to simulate jobs only")
+    if fit is not None and not then_fit:
+        raise ParameterError("fit options are given but then_fit is false")
+    spec: dict[str, Any] = {"params": normalize(kind, params), "then_fit": bool(then_fit)}
+    if then_fit:
+        spec["fit"] = normalize("fit", fit)
+    return spec
+
+
+def library_versions() -> dict[str, str]:
+    """Installed versions of the distributions whose code produces results."""
+    out = {}
+    for name in DISTRIBUTIONS:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "absent"
+    return out

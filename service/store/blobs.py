@@ -1,0 +1,182 @@
+"""Blob stores: immutable byte objects under string keys, on a local directory or on S3.
+
+Keys default to the SHA-256 hex of the content (``put`` without a key), so writing the same result twice
+(a retried attempt) stores one object. Local writes are atomic (temp file + ``os.replace``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Protocol
+from urllib.parse import urlparse
+
+from ..settings import Settings
+
+_CHUNK = 1 << 20
+
+
+class BlobNotFound(KeyError):
+    """No blob under that key."""
+
+
+class BlobStore(Protocol):
+    """The interface both stores implement."""
+
+    def put(self, data: bytes, key: str | None = None) -> str: ...
+    def put_file(self, path: Path, key: str | None = None) -> str: ...
+    def get(self, key: str) -> bytes: ...
+    def exists(self, key: str) -> bool: ...
+    def delete(self, key: str) -> None: ...
+    def ping(self) -> None: ...
+
+
+def content_key(data: bytes) -> str:
+    """The content-hash key of ``data``."""
+    return hashlib.sha256(data).hexdigest()
+
+
+def file_key(path: Path) -> str:
+    """The content-hash key of a file, read in chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(_CHUNK):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _check_key(key: str) -> str:
+    if not key or key.startswith("/") or ".." in key.split("/") or "\\" in key:
+        raise ValueError(f"invalid blob key {key!r}")
+    return key
+
+
+class LocalBlobStore:
+    """Blobs as files under a directory, sharded by the key's first two characters."""
+
+    def __init__(self, root: Path):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    def _path(self, key: str) -> Path:
+        key = _check_key(key)
+        return self.root / key[:2] / key
+
+    def _write_atomic(self, key: str, fill) -> str:  # noqa: ANN001 - fill(fileobj) writes the content
+        target = self._path(key)
+        if target.exists():
+            return key
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fill(fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, target)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return key
+
+    def put(self, data: bytes, key: str | None = None) -> str:
+        """Store ``data``; returns its key (content hash unless given)."""
+        return self._write_atomic(key or content_key(data), lambda fh: fh.write(data))
+
+    def put_file(self, path: Path, key: str | None = None) -> str:
+        """Store a file's content without loading it whole."""
+        def copy(fh) -> None:  # noqa: ANN001
+            with open(path, "rb") as src:
+                shutil.copyfileobj(src, fh, _CHUNK)
+        return self._write_atomic(key or file_key(path), copy)
+
+    def get(self, key: str) -> bytes:
+        """The bytes under ``key``; BlobNotFound if absent."""
+        try:
+            return self._path(key).read_bytes()
+        except FileNotFoundError as exc:
+            raise BlobNotFound(key) from exc
+
+    def exists(self, key: str) -> bool:
+        """Whether a blob is stored under ``key``."""
+        return self._path(key).is_file()
+
+    def delete(self, key: str) -> None:
+        """Remove the blob (no error if absent)."""
+        self._path(key).unlink(missing_ok=True)
+
+    def ping(self) -> None:
+        """Raise if the directory is not writable."""
+        if not os.access(self.root, os.W_OK):
+            raise OSError(f"blob directory {self.root} is not writable")
+
+
+class S3BlobStore:
+    """Blobs as objects in an S3 bucket under a prefix (boto3; endpoint configurable for MinIO/moto)."""
+
+    def __init__(self, bucket: str, prefix: str = "", endpoint_url: str | None = None, region: str = "us-east-1"):
+        import boto3  # only the S3 store needs it
+
+        self.bucket, self.prefix = bucket, prefix.strip("/")
+        self.client = boto3.client("s3", endpoint_url=endpoint_url, region_name=region)
+
+    def _name(self, key: str) -> str:
+        key = _check_key(key)
+        return f"{self.prefix}/{key}" if self.prefix else key
+
+    def put(self, data: bytes, key: str | None = None) -> str:
+        """Store ``data``; returns its key (content hash unless given)."""
+        key = key or content_key(data)
+        self.client.put_object(Bucket=self.bucket, Key=self._name(key), Body=data)
+        return key
+
+    def put_file(self, path: Path, key: str | None = None) -> str:
+        """Upload a file (multipart for large files) under its content hash unless a key is given."""
+        key = key or file_key(path)
+        self.client.upload_file(str(path), self.bucket, self._name(key))
+        return key
+
+    def get(self, key: str) -> bytes:
+        """The bytes under ``key``; BlobNotFound if absent."""
+        from botocore.exceptions import ClientError
+
+        try:
+            return self.client.get_object(Bucket=self.bucket, Key=self._name(key))["Body"].read()
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("NoSuchKey", "404"):
+                raise BlobNotFound(key) from exc
+            raise
+
+    def exists(self, key: str) -> bool:
+        """Whether an object is stored under ``key``."""
+        from botocore.exceptions import ClientError
+
+        try:
+            self.client.head_object(Bucket=self.bucket, Key=self._name(key))
+            return True
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("NoSuchKey", "404", "NotFound"):
+                return False
+            raise
+
+    def delete(self, key: str) -> None:
+        """Remove the object (no error if absent)."""
+        self.client.delete_object(Bucket=self.bucket, Key=self._name(key))
+
+    def ping(self) -> None:
+        """Raise if the bucket cannot be reached."""
+        self.client.head_bucket(Bucket=self.bucket)
+
+
+def open_blob_store(settings: Settings) -> LocalBlobStore | S3BlobStore:
+    """The blob store named by ``settings.blob_url`` (file://DIR or s3://BUCKET/PREFIX)."""
+    url = settings.resolved_blob_url()
+    parsed = urlparse(url)
+    if parsed.scheme == "file":
+        return LocalBlobStore(Path(parsed.netloc + parsed.path))
+    if parsed.scheme == "s3":
+        return S3BlobStore(parsed.netloc, parsed.path, settings.s3_endpoint_url, settings.s3_region)
+    raise ValueError(f"unsupported PDEANIM_BLOB_URL {url!r}: use file:///dir or s3://bucket/prefix")

@@ -1,0 +1,83 @@
+"""The "cyclic-spine" clip kind: the Clip protocol, rest reproduction, the loop and a valid looping GLB."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pdeanim import container
+from pdeanim.clip import Clip, ClipParts, load_clip, read_clip_file, write_clip_file
+from pdeanim.cyclic.clipcyclic import clip_from_parts
+from pdeanim.errors import ClipFormatError
+
+
+def test_parts_follow_the_clip_contract(trout_parts):
+    th, ta = container.unpack(trout_parts.topology)
+    ch, ca = container.unpack(trout_parts.coefficients)
+    assert th["part"] == "topology" and ch["part"] == "coefficients"
+    assert ch["kind"] == "cyclic-spine" and ch["topology_id"] == trout_parts.topology_id
+    assert {"faces", "rest", "vertex_patch", "vertex_uv", "vertex_offset", "curves"} <= ta.keys()
+    assert ca["spine"].shape == (12, 4, 3)
+    assert len(trout_parts.coefficients) < 2000
+
+
+def test_clip_protocol_and_rest_pose(trout_clip, trout_mesh):
+    assert isinstance(trout_clip, Clip)
+    assert trout_clip.looping and trout_clip.kind == "cyclic-spine"
+    assert trout_clip.n_vertices == len(trout_mesh.vertices)
+    assert np.array_equal(trout_clip.faces, trout_mesh.faces.astype(np.int32))
+    rest = trout_clip.evaluate(0.0)
+    assert rest.dtype == np.float32 and rest.shape == (trout_clip.n_vertices, 3)
+    assert np.array_equal(rest, trout_mesh.vertices.astype(np.float32))
+    info = trout_clip.info()
+    assert info["frames"] == 25 and info["looping"] and info["period"] == pytest.approx(0.5)
+    assert trout_clip.frame_times[-1] == pytest.approx(0.5)
+
+
+def test_loop_and_vectorised_evaluation(trout_clip):
+    t = np.linspace(0.0, 1.0, 25)
+    frames = trout_clip.evaluate(t)
+    assert frames.shape == (25, trout_clip.n_vertices, 3) and frames.dtype == np.float32
+    assert np.abs(frames[-1] - frames[0]).max() < 1e-6
+    assert np.array_equal(frames[7], trout_clip.evaluate(float(t[7])))
+    shifted = trout_clip.evaluate(t + 3.0)
+    assert np.abs(shifted - frames).max() < 1e-6
+    period = trout_clip.params.period
+    assert np.abs(trout_clip.evaluate_seconds(0.3) - trout_clip.evaluate_seconds(0.3 + period)).max() < 1e-6
+    assert np.abs(frames - frames[0]).max() > 0.05  # it does swim (trout: 8% of the length at the tail)
+
+
+def test_file_round_trip(tmp_path, trout_parts, trout_clip):
+    path = tmp_path / "trout.clip"
+    write_clip_file(path, trout_parts)
+    again = read_clip_file(path)
+    clip = load_clip(again.topology, again.coefficients)
+    assert np.array_equal(clip.evaluate([0.1, 0.6]), trout_clip.evaluate([0.1, 0.6]))
+
+
+def test_broken_parts_raise(trout_parts):
+    th, ta = container.unpack(trout_parts.topology)
+    ch, ca = container.unpack(trout_parts.coefficients)
+    with pytest.raises(ClipFormatError):
+        clip_from_parts(th, {k: v for k, v in ta.items() if k != "rest"}, ch, ca)
+    with pytest.raises(ClipFormatError):
+        clip_from_parts(th, ta, {**ch, "swim": {"mode": "eel", "frequency": -1}}, ca)
+    with pytest.raises(ClipFormatError):
+        clip_from_parts(th, ta, ch, {"spine": ca["spine"][:2]})
+    other = container.pack({**th, "producer": "x"}, ta)
+    with pytest.raises(ClipFormatError):
+        load_clip(other, trout_parts.coefficients)  # topology_id mismatch
+    assert isinstance(ClipParts(trout_parts.topology, trout_parts.coefficients), ClipParts)
+
+
+def test_looping_glb_is_valid(trout_clip):
+    validate = pytest.importorskip("pdeanim.gltf.validate")
+    export = pytest.importorskip("pdeanim.gltf.clipexport")
+    glb = export.clip_animation_glb(trout_clip, fps=30)
+    frame = export.clip_frame_glb(trout_clip, 0.37)
+    try:
+        reports = validate.validate_many([glb, frame])
+    except validate.ValidatorUnavailable as exc:
+        pytest.skip(str(exc))
+    for report in reports:
+        assert report["issues"]["numErrors"] == 0, validate.issue_lines(report)

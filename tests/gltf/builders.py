@@ -1,0 +1,125 @@
+"""Hand-built glTF assets for the reader tests: a two-bone skinned bar and node-animated meshes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pdeanim.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
+
+BAR_X = np.array([0.0, 0.5, 1.0, 1.5, 2.0])
+
+
+def bar_geometry() -> tuple[np.ndarray, np.ndarray]:
+    """A flat bar along x: two rows of 5 vertices (y = 0 and y = 0.2), 8 triangles."""
+    v = np.concatenate([np.stack([BAR_X, np.zeros(5), np.zeros(5)], 1),
+                        np.stack([BAR_X, np.full(5, 0.2), np.zeros(5)], 1)]).astype(np.float32)
+    quads = [(i, i + 1, i + 6, i + 5) for i in range(4)]
+    f = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], np.uint16)
+    return v, f
+
+
+def bar_weights() -> tuple[np.ndarray, np.ndarray]:
+    """Joints/weights per vertex: x < 1 on joint 0, x > 1 on joint 1, x = 1 shared; several sums != 1."""
+    raw = {0.0: (1.0, 0.0), 0.5: (0.5, 0.0), 1.0: (0.3, 0.3), 1.5: (0.0, 1.0), 2.0: (0.0, 0.8)}
+    w = np.array([raw[x] for x in BAR_X] * 2, np.float32)
+    wj = np.zeros((10, 4), np.float32)
+    wj[:, :2] = w
+    joints = np.zeros((10, 4), np.uint8)
+    joints[:, 1] = np.where(wj[:, 1] > 0, 1, 0)  # unused slots point at joint 0, as the spec asks
+    return joints, wj
+
+
+def skinned_bar_glb(interpolation: str = "LINEAR", middle: bool = False) -> bytes:
+    """Two joints (root at the origin, child at x = 1); the child turns 90 degrees about z over 1 s.
+    ``middle`` puts a non-joint node (z + 0.5) between the two joints."""
+    b = GlbBuilder("pdeanim-tests")
+    v, f = bar_geometry()
+    joints, weights = bar_weights()
+    attrs = {"POSITION": b.add_accessor(v, target=ARRAY_BUFFER, minmax=True),
+             "JOINTS_0": b.add_accessor(joints, target=ARRAY_BUFFER),
+             "WEIGHTS_0": b.add_accessor(weights, target=ARRAY_BUFFER)}
+    idx = b.add_accessor(f.reshape(-1), target=ELEMENT_ARRAY_BUFFER, acc_type="SCALAR")
+    ibm = np.stack([np.eye(4), np.eye(4)]).astype(np.float32)
+    ibm[1, 0, 3] = -1.0  # inverse of the child's bind transform (translation by +1 in x)
+    if middle:
+        ibm[1, 2, 3] = -0.5
+    ibm_acc = b.add_accessor(ibm.transpose(0, 2, 1).reshape(2, 16), acc_type="MAT4")
+    keys = b.add_accessor(np.array([0.0, 1.0], np.float32), minmax=True, acc_type="SCALAR")
+    s = np.sqrt(0.5)
+    quats = np.array([[0, 0, 0, 1], [0, 0, s, s]], np.float32)
+    if interpolation == "CUBICSPLINE":
+        zero = np.zeros(4, np.float32)
+        quats = np.array([zero, quats[0], zero, zero, quats[1], zero], np.float32)
+    rot = b.add_accessor(quats)
+    nodes = [{"name": "root", "children": [1]}, {"name": "tip", "translation": [1.0, 0.0, 0.0]},
+             {"name": "bar", "mesh": 0, "skin": 0, "translation": [50.0, 0, 0]}]
+    if middle:
+        nodes[0]["children"] = [3]
+        nodes.append({"name": "offset", "translation": [0.0, 0.0, 0.5], "children": [1]})
+    b.doc.update({
+        "scene": 0, "scenes": [{"nodes": [0, 2]}],
+        "nodes": nodes,
+        "meshes": [{"primitives": [{"attributes": attrs, "indices": idx}]}],
+        "skins": [{"joints": [0, 1], "inverseBindMatrices": ibm_acc}],
+        "animations": [{"name": "bend", "samplers": [{"input": keys, "output": rot,
+                                                      "interpolation": interpolation}],
+                        "channels": [{"sampler": 0, "target": {"node": 1, "path": "rotation"}}]}],
+    })
+    return b.to_glb()
+
+
+def expected_bar(angle: float) -> np.ndarray:
+    """Analytic skinned bar for a child rotation ``angle`` about z (weights renormalised)."""
+    v, _ = bar_geometry()
+    _, w = bar_weights()
+    w = w[:, :2] / w[:, :2].sum(axis=1, keepdims=True)
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    moved = (v - [1, 0, 0]) @ rot.T + [1, 0, 0]
+    return w[:, :1] * v + w[:, 1:2] * moved
+
+
+def two_node_glb() -> bytes:
+    """Two triangle meshes; the second's parent node translates linearly from 0 to (0, 0, 2) over 2 s."""
+    b = GlbBuilder("pdeanim-tests")
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    pos0 = b.add_accessor(tri, target=ARRAY_BUFFER, minmax=True)
+    pos1 = b.add_accessor(tri * 2, target=ARRAY_BUFFER, minmax=True)
+    keys = b.add_accessor(np.array([0.0, 2.0], np.float32), minmax=True, acc_type="SCALAR")
+    moves = b.add_accessor(np.array([[0, 0, 0], [0, 0, 2]], np.float32))
+    b.doc.update({
+        "scene": 0, "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0, "scale": [1, 1, 3]}, {"children": [2]}, {"mesh": 1, "translation": [5, 0, 0]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": pos0}}]},
+                   {"primitives": [{"attributes": {"POSITION": pos1}}]}],
+        "animations": [{"samplers": [{"input": keys, "output": moves}],
+                        "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}]}],
+    })
+    return b.to_glb()
+
+
+def sparse_morph_glb() -> bytes:
+    """A quad whose single morph target is a sparse accessor (vertex 2 moves by +1 in z), STEP weights 0 -> 1
+    at t = 1 s, on a node scaled by 2."""
+    b = GlbBuilder("pdeanim-tests")
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    pos = b.add_accessor(quad, target=ARRAY_BUFFER, minmax=True)
+    idx = b.add_accessor(np.array([0, 1, 2, 0, 2, 3], np.uint16), target=ELEMENT_ARRAY_BUFFER, acc_type="SCALAR")
+    sparse_idx = b.add_view(np.array([2], np.uint32).tobytes())
+    sparse_val = b.add_view(np.array([0, 0, 1], np.float32).tobytes())
+    b.doc["accessors"].append({"componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0],
+                               "max": [0, 0, 1], "sparse": {"count": 1,
+                                                            "indices": {"bufferView": sparse_idx,
+                                                                        "componentType": 5125},
+                                                            "values": {"bufferView": sparse_val}}})
+    target = len(b.doc["accessors"]) - 1
+    keys = b.add_accessor(np.array([0.0, 1.0], np.float32), minmax=True, acc_type="SCALAR")
+    weights = b.add_accessor(np.array([0.0, 1.0], np.float32), acc_type="SCALAR")
+    b.doc.update({
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "scale": [2, 2, 2]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": pos}, "indices": idx,
+                                    "targets": [{"POSITION": target}]}], "weights": [0.0]}],
+        "animations": [{"samplers": [{"input": keys, "output": weights, "interpolation": "STEP"}],
+                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
+    })
+    return b.to_glb()

@@ -1,0 +1,111 @@
+"""Clip export to GLB: the CLI and the library functions, on an analytic clip (the Clip protocol) and on a
+real looping cyclic clip file; every output validator-clean, loops seamless, frames as evaluated."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from pdeanim.cli import main
+from pdeanim.clip import Clip, write_clip_file
+from pdeanim.errors import LimitError, ParameterError
+from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb, export_times
+from pdeanim.gltf.read import read_animated_poses
+from pdeanim.gltf.validate import assert_clean, validate_many
+
+
+class WaveClip:
+    """A bar-shaped analytic clip: vertices wave in z with one cycle over t in [0, 1]."""
+
+    kind = "test-wave"
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, looping: bool, seconds: float = 1.3) -> None:
+        self.rest, self.faces, self.looping = vertices.astype(np.float32), faces.astype(np.int32), looping
+        self.n_vertices = len(vertices)
+        self.frame_times = np.linspace(0.0, seconds, 40)
+
+    def evaluate(self, t):
+        tt = np.atleast_1d(np.asarray(t, np.float64))
+        z = 0.1 * np.sin(2 * np.pi * (tt[:, None] + self.rest[None, :, 0]))
+        out = np.repeat(self.rest[None], len(tt), axis=0)
+        out[..., 2] += z.astype(np.float32)
+        return out[0] if np.ndim(t) == 0 else out
+
+    def info(self):
+        return {"kind": self.kind}
+
+
+@pytest.fixture
+def wave(spot):
+    v, f = spot
+    return WaveClip(v, f, looping=True)
+
+
+def test_wave_clip_is_a_clip(wave):
+    assert isinstance(wave, Clip)
+
+
+def test_export_samples_with_last_frame_and_loops_seamlessly(wave):
+    glb = clip_animation_glb(wave, fps=10)
+    poses = read_animated_poses(glb, fps=10)
+    seconds = export_times(1.3, 10)
+    np.testing.assert_allclose(seconds, np.arange(14) / 10)  # 1.3 s lies on the grid
+    np.testing.assert_allclose(export_times(1.25, 10), [*np.arange(13) / 10, 1.25])  # off-grid end appended
+    assert poses.n_frames == len(seconds)
+    want = wave.evaluate(seconds / 1.3)
+    np.testing.assert_allclose(poses.vertices[:-1], want[:-1], atol=1e-6)
+    np.testing.assert_array_equal(poses.vertices[-1], poses.vertices[0])  # seamless wrap
+    once = WaveClip(wave.rest, wave.faces, looping=False)
+    p2 = read_animated_poses(clip_animation_glb(once, fps=10), fps=10)
+    np.testing.assert_allclose(p2.vertices, once.evaluate(seconds / 1.3), atol=1e-6)
+
+
+def test_frame_and_bad_parameters(wave):
+    with pytest.raises(ParameterError):
+        clip_animation_glb(wave, fps=0)
+    with pytest.raises(LimitError):
+        clip_animation_glb(wave, fps=1e6)
+    with pytest.raises(ParameterError):
+        clip_frame_glb(wave, float("nan"))
+    reports = validate_many([clip_frame_glb(wave, 0.37), clip_animation_glb(wave, 8, quantize=True)])
+    for label, report in zip(["frame", "quantised animation"], reports, strict=True):
+        assert_clean(report, label)
+
+
+def test_cli_export_of_a_real_cyclic_clip(data_dir, tmp_path, capsys):
+    job = pytest.importorskip("pdeanim.cyclic.job")
+    mesh = trimesh.load(data_dir / "fish_capsule.obj", process=False)
+    parts = job.make_cyclic_clip(mesh, job.CyclicOptions.from_dict({"mode": "eel", "frames": 12}))
+    clip_path, out = tmp_path / "swim.clip", tmp_path / "swim.glb"
+    write_clip_file(clip_path, parts)
+    assert main(["export", str(clip_path), "--fps", "12", "--out", str(out), "--quantize"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    glb = out.read_bytes()
+    assert_clean(validate_many([glb])[0], "cyclic export")
+    poses = read_animated_poses(glb, fps=12)
+    np.testing.assert_array_equal(poses.vertices[-1], poses.vertices[0])
+    assert main(["export", str(tmp_path / "missing.clip"), "--out", str(out)]) == 2
+
+
+def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
+    """End to end through the model's fit: animated GLB -> poses -> dynamic-PDE clip -> validator-clean GLB,
+    and the error pictures of the fit."""
+    fitclip = pytest.importorskip("pdeanim.model.fitclip")
+    from pdeanim.clip import load_clip
+    from pdeanim.gltf.write import animation_glb
+    from pdeanim.pictures import fit_error_pictures
+
+    frames, faces, times = morph
+    poses = read_animated_poses(animation_glb(frames[:30], times[:30], faces), fps=30)
+    parts = fitclip.fit_poses(poses, fitclip.FitOptions.from_dict({"target_rel_rms": 1e-2}))
+    clip = load_clip(parts.topology, parts.coefficients)
+    glb = clip_animation_glb(clip, 30, quantize=True)
+    assert_clean(validate_many([glb])[0], "fitted clip export")
+    back = read_animated_poses(glb, fps=30)
+    assert back.n_frames == 30
+    diag = float(np.linalg.norm(np.ptp(frames[0], axis=0)))
+    rms = float(np.sqrt(((back.vertices - poses.vertices) ** 2).sum(axis=-1).mean()))
+    assert rms / diag < 2e-2  # the fit's target, plus quantisation
+    paths = fit_error_pictures(poses.vertices, back.vertices, faces, poses.times, tmp_path, "sphere")
+    assert all(p.stat().st_size > 10_000 for p in paths.values())

@@ -1,0 +1,65 @@
+"""pdeanim fit / pdeanim frame through the console entry point."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pdeanim.cli import main
+from pdeanim.clip import load_clip_file
+from pdeanim.poses import make_poses, save_poses
+
+
+@pytest.fixture(scope="module")
+def poses_file(tmp_path_factory, morph_poses):
+    path = tmp_path_factory.mktemp("cli") / "poses.npz"
+    p = morph_poses
+    save_poses(path, make_poses(p.vertices[::6], p.faces, p.times[::6]))
+    return path
+
+
+@pytest.fixture(scope="module")
+def clip_file(poses_file):
+    out = poses_file.parent / "x.clip"
+    assert main(["fit", str(poses_file), "--out", str(out), "--target-rel-rms", "3e-3"]) == 0
+    return out
+
+
+def test_fit_meets_target_and_prints_summary(clip_file, capsys):
+    clip = load_clip_file(clip_file)
+    assert clip.info()["errors"]["rel_rms"] <= 3e-3
+    assert clip.info()["errors"]["target_met"] is True
+
+
+def test_frame_single_list_and_all(clip_file, poses_file, tmp_path):
+    data = np.load(poses_file)
+    out = tmp_path / "f.npz"
+    assert main(["frame", str(clip_file), "--t", "0.37", "--out", str(out)]) == 0
+    with np.load(out) as f:
+        assert f["vertices"].shape == (data["vertices"].shape[1], 3)
+        np.testing.assert_array_equal(f["faces"], data["faces"])
+    assert main(["frame", str(clip_file), "--t", "0,0.5,1", "--out", str(out)]) == 0
+    with np.load(out) as f:
+        assert f["vertices"].shape == (3, data["vertices"].shape[1], 3)
+    assert main(["frame", str(clip_file), "--t", "all", "--out", str(out)]) == 0
+    with np.load(out) as f:
+        v = f["vertices"]
+        assert v.shape == data["vertices"].shape
+        diag = np.linalg.norm(data["vertices"][0].max(0) - data["vertices"][0].min(0))
+        rms = np.sqrt(np.mean(np.sum((v - data["vertices"]) ** 2, axis=-1)))
+        assert rms / diag <= 3e-3
+
+
+def test_bad_arguments_exit_2(clip_file, poses_file, tmp_path, capsys):
+    assert main(["frame", str(clip_file), "--t", "abc", "--out", str(tmp_path / "f.npz")]) == 2
+    assert main(["frame", str(clip_file), "--t", "0.1", "--out", str(tmp_path / "f.txt")]) == 2
+    assert main(["frame", str(tmp_path / "missing.clip"), "--t", "0.1", "--out", str(tmp_path / "f.npz")]) == 2
+    assert main(["fit", str(poses_file), "--out", str(tmp_path / "y.clip"), "--segments", "0"]) == 2
+    assert "error" in capsys.readouterr().err
+
+
+def test_fixed_segments_fit(poses_file, tmp_path, capsys):
+    out = tmp_path / "s.clip"
+    assert main(["fit", str(poses_file), "--out", str(out), "--segments", "3", "--motion", "absolute"]) == 0
+    assert load_clip_file(out).info()["n_segments"] == 3
+    assert "segments" in capsys.readouterr().out

@@ -1,0 +1,146 @@
+"""fit_poses end to end on AnimatedMorphSphere: targets met, honest errors, clip format round trips."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pdeanim import container
+from pdeanim.clip import load_clip, read_clip_file, write_clip_file
+from pdeanim.curveset import CurveSet
+from pdeanim.errors import ClipFormatError, ParameterError, PosesInputError
+from pdeanim.model.fitclip import FitOptions, curve_errors, fit_poses
+from pdeanim.model.metrics import error_summary
+from pdeanim.poses import make_poses
+
+
+@pytest.fixture(scope="module")
+def fixed_fit(morph_small, short_curves):
+    return fit_poses(morph_small, FitOptions(segments=6), curves=short_curves)
+
+
+def test_fixed_segments_clip_evaluates_to_reported_errors(fixed_fit, morph_small):
+    clip = load_clip(fixed_fit.topology, fixed_fit.coefficients)
+    r = fixed_fit.report
+    assert clip.kind == "dynamic-pde" and r["segments"] == 6
+    frames = clip.evaluate(clip.frame_t())
+    assert frames.shape == morph_small.vertices.shape and frames.dtype == np.float32
+    s = error_summary(morph_small.vertices, frames)
+    assert s["rms"] == pytest.approx(r["rms"], rel=1e-9)
+    assert s["max"] == pytest.approx(r["max"], rel=1e-9)
+    assert len(r["per_frame_rms"]) == morph_small.n_frames and len(r["per_curve_rms"]) == r["curves"]
+    assert r["sizes"]["coefficients_bytes"] == len(fixed_fit.coefficients)
+    assert clip.evaluate(0.0).shape == (morph_small.n_vertices, 3)
+    d0 = np.linalg.norm(clip.evaluate(0.0) - morph_small.vertices[0], axis=1).max()
+    assert d0 == pytest.approx(r["per_frame_max"][0], rel=1e-6)
+
+
+def test_segments_join_exactly_c0(fixed_fit):
+    clip = load_clip(fixed_fit.topology, fixed_fit.coefficients)
+    for s in range(1, len(clip.segment_t) - 1):
+        np.testing.assert_array_equal(clip._frame(s - 1, 1.0), clip._frame(s, 0.0))
+
+
+def test_float32_wire_error_is_tiny(fixed_fit):
+    r = fixed_fit.report
+    assert r["float32_vs_float64_max"] < 1e-5 * r["diagonal"]
+
+
+@pytest.mark.parametrize("target", [1e-2, 3e-3])
+def test_relative_rms_target_is_met(morph_small, short_curves, target):
+    parts = fit_poses(morph_small, FitOptions(target_rel_rms=target), curves=short_curves)
+    r = parts.report
+    assert r["target_met"] is True and r["rel_rms"] <= target
+    assert r["sizes"]["ratio_total_to_raw"] < 0.5
+
+
+def test_max_target_is_met_and_tighter_needs_more_segments(morph_small, short_curves):
+    loose = fit_poses(morph_small, FitOptions(target_rel_max=0.05), curves=short_curves).report
+    tight = fit_poses(morph_small, FitOptions(target_rel_max=0.01), curves=short_curves).report
+    assert loose["rel_max"] <= 0.05 and tight["rel_max"] <= 0.01
+    assert tight["segments"] > loose["segments"]
+
+
+def test_floor_above_target_is_reported(morph_small):
+    V = morph_small.n_vertices
+    long_curves = CurveSet(np.arange(V, dtype=np.int32), np.linspace(0, V, 20).astype(np.int32))
+    r = fit_poses(morph_small, FitOptions(target_rel_rms=1e-3, max_segments=4), curves=long_curves).report
+    assert r["floor_exceeds_target"] is True and r["target_met"] is False
+    assert r["floor_rel_rms"] > 1e-3
+
+
+def test_clip_file_and_json_round_trip(fixed_fit, tmp_path):
+    path = tmp_path / "x.clip"
+    write_clip_file(path, fixed_fit)
+    back = read_clip_file(path)
+    assert back.topology == fixed_fit.topology and back.coefficients == fixed_fit.coefficients
+    doc = container.to_json(fixed_fit.coefficients)
+    assert doc["kind"] == "dynamic-pde" and doc["topology_id"] == fixed_fit.topology_id
+    h1, a1 = container.unpack(container.from_json(doc))
+    h2, a2 = container.unpack(fixed_fit.coefficients)
+    assert h1 == h2 and all(np.array_equal(a1[k], a2[k]) for k in a2)
+
+
+def test_corrupt_parts_raise_clip_format_error(fixed_fit):
+    th, ta = container.unpack(fixed_fit.topology)
+    ch, ca = container.unpack(fixed_fit.coefficients)
+    bad = dict(ca)
+    bad["family"] = np.full_like(ca["family"], 7)
+    with pytest.raises(ClipFormatError):
+        load_clip(fixed_fit.topology, container.pack({k: v for k, v in ch.items()}, bad))
+    with pytest.raises(ClipFormatError):
+        load_clip(fixed_fit.topology, container.pack({**ch, "n_segments": 99}, dict(ca)))
+    other = container.pack({**th, "param_mode": "paper"}, dict(ta))
+    with pytest.raises(ClipFormatError):
+        load_clip(other, fixed_fit.coefficients)
+    with pytest.raises(ClipFormatError):
+        load_clip(fixed_fit.topology, fixed_fit.coefficients[:-40])
+
+
+def test_options_validation_and_round_trip():
+    o = FitOptions(target_rel_rms=2e-3, param_mode="paper", loop=True)
+    assert FitOptions.from_dict(o.to_dict()) == o
+    with pytest.raises(ParameterError):
+        FitOptions.from_dict({"segmnts": 3})
+    with pytest.raises(ParameterError):
+        FitOptions(segments=3, target_rms=0.1)
+    with pytest.raises(ParameterError):
+        FitOptions(target_rel_rms=-1.0)
+    with pytest.raises(ParameterError):
+        FitOptions(motion="wobble")
+
+
+def test_absolute_and_paper_modes_fit_without_nan(morph_small, short_curves):
+    for opts in (FitOptions(segments=3, motion="absolute"), FitOptions(segments=3, param_mode="paper")):
+        r = fit_poses(morph_small, opts, curves=short_curves).report
+        assert np.isfinite(r["rms"]) and r["rel_rms"] < 0.1
+
+
+def test_loop_clip_wraps_and_closes(morph_small, short_curves):
+    v = morph_small.vertices
+    cyc = make_poses(np.concatenate([v[:20], v[19::-1]]), morph_small.faces)
+    clip = load_clip(*_parts(fit_poses(cyc, FitOptions(segments=4, loop=True), curves=short_curves)))
+    assert clip.looping
+    np.testing.assert_array_equal(clip.evaluate(0.0), clip.evaluate(1.0))
+    np.testing.assert_allclose(clip.evaluate(1.25), clip.evaluate(0.25), atol=1e-6)
+
+
+def _parts(parts):
+    return parts.topology, parts.coefficients
+
+
+def test_single_frame_and_point_curves(morph_small):
+    one = make_poses(morph_small.vertices[:1], morph_small.faces)
+    V = one.n_vertices
+    pts = CurveSet(np.arange(V, dtype=np.int32), np.arange(V + 1, dtype=np.int32))
+    parts = fit_poses(one, FitOptions(segments=1), curves=pts)
+    clip = load_clip(*_parts(parts))
+    np.testing.assert_allclose(clip.evaluate(0.5), one.vertices[0], atol=1e-6)
+    with pytest.raises(PosesInputError):
+        fit_poses(one, FitOptions(segments=1), curves=CurveSet.from_lists([[0, 1]]))
+
+
+def test_curve_errors_per_curve(morph_small, short_curves):
+    sub = make_poses(morph_small.vertices[::4], morph_small.faces)
+    e = curve_errors(sub, short_curves, FitOptions(segments=2))
+    assert e["rms"].shape == (short_curves.n_curves,) and np.all(e["floor_rms"] <= e["rms"] + 1e-6)

@@ -1,0 +1,117 @@
+"""Backends for the service tests: the embedded default (SQLite + local blobs) and, as a second run of the
+same tests, PostgreSQL on 127.0.0.1:5432 (a database created and dropped per session) with S3 on moto."""
+
+from __future__ import annotations
+
+import os
+import socket
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from service.settings import Settings
+
+PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Backend:
+    """Environment variables selecting one backend; ``settings()`` builds the same in-process."""
+
+    name: str
+    env: dict[str, str] = field(default_factory=dict)
+
+    def settings(self, **overrides) -> Settings:
+        values = {k.removeprefix("PDEANIM_").lower(): v for k, v in self.env.items() if k.startswith("PDEANIM_")}
+        return Settings(**{**values, **overrides})
+
+
+def _pg_available() -> str | None:
+    try:
+        import psycopg
+
+        with psycopg.connect("host=127.0.0.1 port=5432 user=postgres dbname=postgres", connect_timeout=3):
+            return None
+    except Exception as exc:  # noqa: BLE001
+        return f"PostgreSQL on 127.0.0.1:5432 is unreachable ({type(exc).__name__}: {exc})"
+
+
+def _admin(sql: str) -> None:
+    import psycopg
+
+    with psycopg.connect("host=127.0.0.1 port=5432 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(sql)
+
+
+@pytest.fixture(scope="session")
+def s3_server():
+    """moto's S3 server on a free loopback port, with dummy credentials in the environment."""
+    from moto.server import ThreadedMotoServer
+
+    for k, v in {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing",
+                 "AWS_DEFAULT_REGION": "us-east-1"}.items():
+        os.environ.setdefault(k, v)
+    port = free_port()
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
+    server.start()
+    yield f"http://127.0.0.1:{port}"
+    server.stop()
+
+
+def _make_bucket(endpoint: str, name: str) -> None:
+    import boto3
+
+    boto3.client("s3", endpoint_url=endpoint, region_name="us-east-1").create_bucket(Bucket=name)
+
+
+@pytest.fixture(scope="session", params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def backend_kind(request) -> str:
+    return request.param
+
+
+@contextmanager
+def open_backend(kind: str, data_dir: Path, request) -> Iterator[Backend]:
+    """An empty backend: its own data dir, and on PostgreSQL its own database and bucket (dropped after)."""
+    env = {"PDEANIM_DATA_DIR": str(data_dir)}
+    if kind == "sqlite":
+        yield Backend("sqlite", env)
+        return
+    reason = _pg_available()
+    if reason:
+        pytest.skip(reason)
+    endpoint = request.getfixturevalue("s3_server")
+    name = f"pdeanim_test_{uuid.uuid4().hex[:12]}"
+    _admin(f"CREATE DATABASE {name}")
+    _make_bucket(endpoint, name.replace("_", "-"))
+    env.update({"PDEANIM_DATABASE_URL": f"postgresql+psycopg://postgres@127.0.0.1:5432/{name}",
+                "PDEANIM_BLOB_URL": f"s3://{name.replace('_', '-')}/blobs", "PDEANIM_S3_ENDPOINT_URL": endpoint,
+                "AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing",
+                "AWS_DEFAULT_REGION": "us-east-1"})
+    try:
+        yield Backend("postgres", env)
+    finally:
+        _admin(f"DROP DATABASE IF EXISTS {name} WITH (FORCE)")
+
+
+@pytest.fixture
+def backend(backend_kind, tmp_path: Path, request) -> Iterator[Backend]:
+    """A fresh backend per test."""
+    with open_backend(backend_kind, tmp_path / "data", request) as b:
+        yield b
+
+
+@pytest.fixture(scope="module")
+def module_backend(backend_kind, tmp_path_factory, request) -> Iterator[Backend]:
+    """A backend shared by the tests of one module (one server and its workers)."""
+    with open_backend(backend_kind, tmp_path_factory.mktemp("data"), request) as b:
+        yield b

@@ -1,0 +1,108 @@
+"""One job attempt in a child process: memory limit, parent watchdog, progress messages over a pipe.
+
+Messages child -> parent: ``("progress", fraction, stage)``, then exactly one of ``("done", result)`` or
+``("error", code, message, retry)``. A child that dies without either (crash, kill, OOM) is a failed
+attempt that the parent retries; the worker itself keeps running.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import resource
+import shutil
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "trimesh", "worker.stages"]
+
+
+def child_context() -> multiprocessing.context.BaseContext:
+    """A forkserver context that preloads the heavy libraries once, so each attempt starts fast and clean."""
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(PRELOAD)
+    return ctx
+
+
+def _watch_parent(parent_pid: int) -> None:
+    while True:
+        time.sleep(1.0)
+        if os.getppid() == 1 or not _alive(parent_pid):
+            os._exit(3)  # the worker is gone: nobody will take our result
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+        return True
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+
+
+def child_main(conn, job: dict[str, Any], settings_json: str, parent_pid: int) -> None:  # noqa: ANN001
+    """Entry point of the child: run the job's stage, send the outcome on ``conn``, and exit at once."""
+    threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
+    code = 0
+    try:
+        _run(conn, job, settings_json)
+    except BaseException:  # noqa: BLE001 - even sending failed (broken pipe, no memory): just exit
+        code = 4
+    finally:
+        try:
+            conn.close()
+        finally:
+            os._exit(code)  # skip interpreter teardown: nothing left to flush, and it can hang under RLIMIT_AS
+
+
+def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
+    from pdeanim.errors import InputError
+    from service.settings import Settings
+    from service.store.blobs import open_blob_store
+
+    from .stages import STAGES
+
+    settings = Settings.model_validate_json(settings_json)
+    workdir = Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))
+    last = [0.0]
+
+    def progress(fraction: float, stage: str) -> None:
+        now = time.monotonic()
+        if now - last[0] >= 0.2 or fraction >= 1.0:
+            last[0] = now
+            conn.send(("progress", float(fraction), str(stage)))
+
+    try:
+        blobs = open_blob_store(settings)
+        if settings.job_memory_bytes:
+            resource.setrlimit(resource.RLIMIT_AS, (settings.job_memory_bytes, resource.RLIM_INFINITY))
+        result = STAGES[job["kind"]](job, blobs, settings, progress, workdir)
+        conn.send(("done", result))
+    except InputError as exc:
+        conn.send(("error", exc.code, str(exc), False))
+    except MemoryError:
+        conn.send(("error", "out_of_memory", f"out of memory (limit {settings.job_memory_bytes} bytes)", True))
+    except Exception as exc:  # noqa: BLE001 - unexpected: reported for a retry
+        traceback.print_exc()
+        conn.send(("error", type(exc).__name__, f"{type(exc).__name__}: {exc}", True))
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+        sys.stderr.flush()
+
+
+@dataclass
+class Outcome:
+    """How an attempt ended: ``done`` (result), ``error`` (code, message, retry), ``lost``, ``stopped``."""
+
+    status: str
+    result: dict | None = None
+    code: str = ""
+    message: str = ""
+    retry: bool = True

@@ -1,0 +1,120 @@
+"""The worker loop: reap expired leases, claim a job, run the attempt in a child, write the outcome.
+
+SIGTERM/SIGINT: stop claiming; let the running attempt finish for up to ``shutdown_grace_seconds``, then
+stop it and give the job back to the queue (no failure counted), and return 0.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import threading
+import time
+
+from service.jobspec import library_versions
+from service.settings import Settings
+from service.store.context import Store
+from service.store.models import Mesh, PosesRecord
+from service.store.queue import Claimed
+
+from .attempt import run_attempt
+from .child import Outcome, child_context
+from .results import result_writer
+
+log = logging.getLogger("pdeanim.worker")
+
+
+class Worker:
+    """One worker process: claims and runs jobs one at a time until stopped."""
+
+    def __init__(self, settings: Settings, store: Store | None = None):
+        self.settings = settings
+        self.store = store or Store.open(settings)
+        self.id = f"{socket.gethostname()}:{os.getpid()}"
+        self.stop_requested = threading.Event()
+        self.stop_at: float | None = None
+        self.versions = library_versions()
+        self.ctx = child_context()
+        self.jobs_done = 0
+
+    def request_stop(self, *_: object) -> None:
+        """Signal handler: stop after the current attempt (or abandon it after the grace period)."""
+        if not self.stop_requested.is_set():
+            self.stop_at = time.monotonic() + self.settings.shutdown_grace_seconds
+            self.stop_requested.set()
+
+    def install_signals(self) -> None:
+        """Route SIGTERM and SIGINT to :meth:`request_stop`."""
+        signal.signal(signal.SIGTERM, self.request_stop)
+        signal.signal(signal.SIGINT, self.request_stop)
+
+    def run(self, max_jobs: int | None = None, exit_when_idle: bool = False) -> int:
+        """Loop until stopped (or ``max_jobs`` handled / queue empty when asked); returns the exit code."""
+        log.info("worker %s started", self.id)
+        while not self.stop_requested.is_set():
+            self._reap()
+            job = self.store.queue.claim(self.id, self.versions)
+            if job is None:
+                if exit_when_idle:
+                    break
+                self.stop_requested.wait(self.settings.poll_seconds)
+                continue
+            self.handle(job)
+            self.jobs_done += 1
+            if max_jobs is not None and self.jobs_done >= max_jobs:
+                break
+        log.info("worker %s stopped after %d jobs", self.id, self.jobs_done)
+        return 0
+
+    def _reap(self) -> None:
+        try:
+            if n := self.store.queue.reap():
+                log.warning("returned %d jobs with expired leases to the queue", n)
+        except Exception:  # noqa: BLE001 - the next loop tries again
+            log.warning("reaper failed", exc_info=True)
+
+    def _payload(self, job: Claimed) -> dict:
+        payload = {"id": job.id, "kind": job.kind, "attempt": job.attempt, "params": job.params}
+        with self.store.sessions() as session:
+            if job.mesh_id:
+                mesh = session.get(Mesh, job.mesh_id)
+                payload["mesh"] = {"blob_key": mesh.blob_key, "filename": mesh.filename}
+            if job.poses_id:
+                payload["poses"] = {"blob_key": session.get(PosesRecord, job.poses_id).blob_key}
+        return payload
+
+    def _should_stop(self) -> bool:
+        return self.stop_at is not None and time.monotonic() > self.stop_at
+
+    def handle(self, job: Claimed) -> Outcome:
+        """Run one claimed attempt and record its outcome (fenced)."""
+        log.info("job %s (%s) attempt %d", job.id, job.kind, job.attempt)
+        started = time.monotonic()
+        outcome = run_attempt(self.ctx, self.store.queue, job, self._payload(job), self.settings.model_dump_json(),
+                              self._should_stop, self.settings.job_timeout_seconds)
+        self._record(job, outcome)
+        log.info("job %s attempt %d: %s %s (%.2fs)", job.id, job.attempt, outcome.status, outcome.code,
+                 time.monotonic() - started)
+        return outcome
+
+    def _record(self, job: Claimed, outcome: Outcome) -> None:
+        queue = self.store.queue
+        if outcome.status == "done":
+            if not queue.finish(job.id, job.attempt, result_writer(job, outcome.result or {})):
+                log.warning("job %s attempt %d was fenced out; its result is discarded", job.id, job.attempt)
+        elif outcome.status == "error":
+            queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
+        elif outcome.status == "stopped":
+            queue.release(job.id, job.attempt)
+
+
+def main(settings: Settings | None = None) -> int:
+    """Run a worker on the environment's settings until SIGTERM."""
+    worker = Worker(settings or Settings())
+    worker.install_signals()
+    try:
+        return worker.run()
+    finally:
+        worker.store.close()

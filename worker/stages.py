@@ -1,0 +1,95 @@
+"""The pipeline stages a job runs (inside the child process): simulate, fit, cyclic. Library modules are
+imported here, lazily, so the worker starts even before a stage exists in this build."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from pdeanim.poses import poses_to_bytes
+from pdeanim.progress import Progress, sub_progress
+from service.settings import Settings
+from service.store.blobs import BlobStore
+
+SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` with numpy scalars/arrays as Python values and non-finite floats as None (JSON-safe)."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if hasattr(value, "tolist"):
+        return jsonable(value.tolist())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, bool | int | str):
+        return value
+    return str(value)
+
+
+def _mesh(job: dict, blobs: BlobStore, settings: Settings):  # noqa: ANN202 - SurfaceMesh
+    from pdeanim.mesh.io import MeshLimits, load_mesh
+
+    limits = MeshLimits(settings.max_upload_bytes, settings.max_vertices, settings.max_faces)
+    return load_mesh(blobs.get(job["mesh"]["blob_key"]), filename=job["mesh"]["filename"], limits=limits)
+
+
+def _store_clip(parts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict:  # noqa: ANN001
+    from pdeanim.container import unpack
+
+    header, _ = unpack(parts.coefficients)
+    report = jsonable(parts.report)
+    report.setdefault("sizes", jsonable(parts.sizes(n_frames, n_vertices)))
+    return {"kind": str(header.get("kind")), "topology_id": parts.topology_id,
+            "topology_key": blobs.put(parts.topology), "coefficients_key": blobs.put(parts.coefficients),
+            "report": report}
+
+
+def _fit(poses, options: dict, blobs: BlobStore, progress: Progress) -> dict:  # noqa: ANN001
+    from pdeanim.model.fitclip import FitOptions, fit_poses
+
+    parts = fit_poses(poses, FitOptions.from_dict(options), progress=progress)
+    return _store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
+
+
+def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path) -> dict:
+    """Mesh -> poses (stored as POSES.npz), and the fit of them when ``then_fit``."""
+    from pdeanim.sim.scene import SceneParams
+    from pdeanim.sim.simulate import simulate_mesh
+
+    spec = job["params"]
+    share = SIMULATE_SHARE if spec.get("then_fit") else 1.0
+    mesh = _mesh(job, blobs, settings)
+    scene = SceneParams.from_dict(spec["params"])
+    poses = simulate_mesh(mesh, scene, progress=sub_progress(progress, 0.0, share), workdir=workdir,
+                          cache_dir=settings.cache_dir())
+    out: dict[str, Any] = {"poses": {"blob_key": blobs.put(poses_to_bytes(poses)), "n_frames": poses.n_frames,
+                                     "n_vertices": poses.n_vertices, "meta": jsonable(poses.meta)}}
+    if spec.get("then_fit"):
+        out["clip"] = _fit(poses, spec["fit"], blobs, sub_progress(progress, share, 1.0))
+    return out
+
+
+def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path) -> dict:
+    """Stored poses -> clip."""
+    from pdeanim.poses import PoseLimits, load_poses_npz
+
+    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices)
+    poses = load_poses_npz(blobs.get(job["poses"]["blob_key"]), limits)
+    return {"clip": _fit(poses, job["params"]["params"], blobs, progress)}
+
+
+def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path) -> dict:
+    """Mesh -> loopable swim-cycle clip."""
+    from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
+
+    mesh = _mesh(job, blobs, settings)
+    parts = make_cyclic_clip(mesh, CyclicOptions.from_dict(job["params"]["params"]), progress=progress)
+    frames = int(parts.report.get("frames", 1)) if isinstance(parts.report.get("frames"), int) else 1
+    return {"clip": _store_clip(parts, blobs, frames, len(mesh.vertices))}
+
+
+STAGES = {"simulate": run_simulate, "fit": run_fit, "cyclic": run_cyclic}
