@@ -113,9 +113,8 @@ def pca_bytes(x: np.ndarray, rms: float, n_faces: int) -> tuple[int, int]:
 def fit_row(name: str, p: Poses, target: float, label: str, curves) -> None:
     """Fit one target with bounded curves ("bounded") or the fit's own curves (None) and print a row."""
     t0 = time.perf_counter()
-    rep_c = {}
     if curves == "bounded":
-        curves, rep_c = bounded_curves(p.vertices, p.faces, target, motion="displacement")
+        curves, _ = bounded_curves(p.vertices, p.faces, target, motion="displacement")
     t1 = time.perf_counter()
     parts = fit_poses(p, FitOptions(target_rel_rms=target), curves=curves)
     t2 = time.perf_counter()
@@ -123,7 +122,7 @@ def fit_row(name: str, p: Poses, target: float, label: str, curves) -> None:
     total = len(parts.topology) + len(parts.coefficients)
     raw = p.n_frames * p.n_vertices * 12
     k, pb = pca_bytes(p.vertices, r["rms"], len(p.faces))
-    n_pts = rep_c.get("mean_points", float("nan"))
+    n_pts = p.n_vertices / max(1, r["curves"])
     print(f"{name:14s} {target:7.0e} {label:8s} {r['curves']:5d} {n_pts:5.1f} {r['segments']:4d} "
           f"{r['rel_rms']:9.2e} {r['rel_max']:9.2e} {str(r['target_met']):>5s} {total:9d} {total / raw:7.4f} "
           f"{k:4d} {pb:9d} {total / pb:6.2f} {t1 - t0:6.2f} {t2 - t1:6.2f}", flush=True)
@@ -132,7 +131,7 @@ def fit_row(name: str, p: Poses, target: float, label: str, curves) -> None:
 def fit_table(data: dict[str, Poses]) -> None:
     """Print the error-bounded curves + fit table."""
     print("\n## Error-bounded curves + fit (motion displacement); bytes = topology + coefficients")
-    print(f"{'data':14s} {'target':>7s} {'curves':8s} {'C':>5s} {'pts':>5s} {'seg':>4s} {'rel_rms':>9s} "
+    print(f"{'data':14s} {'target':>7s} {'curves':8s} {'C':>5s} {'V/C':>5s} {'seg':>4s} {'rel_rms':>9s} "
           f"{'rel_max':>9s} {'met':>5s} {'bytes':>9s} {'/raw':>7s} {'pcaK':>4s} {'pca_B':>9s} {'/pca':>6s} "
           f"{'t_cur':>6s} {'t_fit':>6s}")
     for name, p in data.items():

@@ -50,6 +50,8 @@ def row(name: str, mode: str, pictures: Path | None) -> dict:
         spine = BodySurface.from_curves(curves, modes=r["modes"]).spine.polyline()
         plot_body_spine(pictures / f"{name}_spine.png", mesh.vertices, mesh.faces, frame, spine, curves)
         plot_swim_frames(pictures / f"{name}_{mode}_frames.png", clip, np.linspace(0.0, 1.0, 7)[:-1])
+        plot_swim_frames(pictures / f"{name}_{mode}_surface.png", clip, np.linspace(0.0, 1.0, 7)[:-1],
+                         surface=True)
     return {"body": name, "V": len(mesh.vertices), "curves": r["curves"], "coef_B": len(parts.coefficients),
             "topo_B": len(parts.topology), "mesh_B": r["mesh_bytes"],
             "cycle_raw_B": r["sizes"]["raw_float32_bytes"], "rel_mean": r["rest_distance"]["rel_mean"],

@@ -53,15 +53,26 @@ class Worker:
     def run(self, max_jobs: int | None = None, exit_when_idle: bool = False) -> int:
         """Loop until stopped (or ``max_jobs`` handled / queue empty when asked); returns the exit code."""
         log.info("worker %s started", self.id)
+        errors = 0
         while not self.stop_requested.is_set():
-            self._reap()
-            job = self.store.queue.claim(self.id, self.versions)
+            try:
+                self._reap()
+                job = self.store.queue.claim(self.id, self.versions)
+                errors = 0
+            except Exception:  # noqa: BLE001 - database not reachable or not migrated yet: wait and retry
+                errors += 1
+                log.warning("cannot claim jobs (try %d); retrying", errors, exc_info=errors == 1)
+                self.stop_requested.wait(min(self.settings.poll_seconds * 2 ** min(errors, 6), 10.0))
+                continue
             if job is None:
                 if exit_when_idle:
                     break
                 self.stop_requested.wait(self.settings.poll_seconds)
                 continue
-            self.handle(job)
+            try:
+                self.handle(job)
+            except Exception:  # noqa: BLE001 - the lease expires and another worker retries the job
+                log.exception("job %s attempt %d could not be recorded", job.id, job.attempt)
             self.jobs_done += 1
             if max_jobs is not None and self.jobs_done >= max_jobs:
                 break

@@ -51,7 +51,10 @@ def _store_clip(parts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict
 def _fit(poses, options: dict, blobs: BlobStore, progress: Progress) -> dict:  # noqa: ANN001
     from pdeanim.model.fitclip import FitOptions, fit_poses
 
-    parts = fit_poses(poses, FitOptions.from_dict(options), progress=progress)
+    def labelled(fraction: float, stage: str) -> None:
+        progress(fraction, stage if stage.startswith("fit") else f"fit: {stage}")
+
+    parts = fit_poses(poses, FitOptions.from_dict(options), progress=labelled)
     return _store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
 
 

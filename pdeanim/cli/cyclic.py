@@ -45,7 +45,12 @@ def register(subparsers: Any) -> None:
         p.add_argument(f"--{name}", type=kind, help=f"override the preset's {name}")
     p.add_argument("--wave", choices=["standing", "travelling"], help="standing (paper Eq. 11) or travelling")
     p.add_argument("--radial", choices=["rotate", "translate"], help="how points follow the bent spine")
+    p.add_argument("--direction", choices=["lateral", "vertical"], help="side to side (fish) or up and down (dolphin)")
     p.add_argument("--plot", help="also write a PNG of the body, its spine and a few frames to this path")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="walk/run parameter (step_height, step_length, height_right, lift_left, hip_bob, ...)")
+    for joint in ("hip", "right-foot", "left-foot"):
+        p.add_argument(f"--{joint}", help=f"walk/run: name of the {joint.replace('-', ' ')} joint (default: by name)")
     p.set_defaults(func=run)
 
 
@@ -69,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if args.mode in GAITS:
         return run_gait(args)
 
-    over = {k: getattr(args, k) for k in [*SWIM_FLAGS, "wave", "radial"] if getattr(args, k) is not None}
+    over = {k: getattr(args, k) for k in [*SWIM_FLAGS, "wave", "radial", "direction"] if getattr(args, k) is not None}
     options = CyclicOptions.from_dict({"mode": args.mode, "overrides": over, "n_curves": args.curves,
                                        "points": args.points, "modes": args.modes, "frames": args.frames,
                                        "head": args.head, "tail": args.tail, "lateral": args.lateral})
@@ -110,8 +115,14 @@ def run_gait(args: argparse.Namespace) -> int:
     out = args.out.lower()
     if not out.endswith((".npz", ".glb")):
         raise ParameterError("for walk/run cycles --out must be a .npz (poses) or .glb (animation) file")
-    over = {k: getattr(args, k) for k in ("frequency",) if getattr(args, k) is not None}
-    poses = step_cycle(load_skinned(args.mesh), StepParams.preset(args.mode, **over), frames=args.frames)
+    over: dict[str, Any] = {k: getattr(args, k) for k in ("frequency",) if getattr(args, k) is not None}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ParameterError(f"--set expects KEY=VALUE, got {item!r}")
+        over[key.strip()] = value.strip().lower() in ("1", "true", "yes") if key.strip() == "literal" else value
+    joints = {"hip": args.hip, "right_foot": args.right_foot, "left_foot": args.left_foot}
+    poses = step_cycle(load_skinned(args.mesh), StepParams.preset(args.mode, **over), frames=args.frames, **joints)
     if out.endswith(".npz"):
         save_poses(args.out, poses)
     else:

@@ -106,7 +106,7 @@ def _join_round(g: WeldedGraph, succ: np.ndarray, pred: np.ndarray, thr: float,
     after /= np.maximum(np.linalg.norm(after, axis=1), 1e-300)[:, None]
     score = 0.5 * (np.einsum("ij,ij->i", before, step) + np.einsum("ij,ij->i", step, after))
     ok &= score >= thr
-    s2, p2 = _mutual_links(t, h, score, ok, g.n_points)
+    s2, _ = _mutual_links(t, h, score, ok, g.n_points)
     new = s2 >= 0
     succ[new], pred[s2[new]] = s2[new], np.flatnonzero(new)
     return succ, pred

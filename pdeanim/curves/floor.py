@@ -60,10 +60,11 @@ def chord_parameters(rest: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.
     return np.where(mask, u, 1.0)
 
 
-def kabsch_residual(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Residual of each curve after its best rigid motion from the rest curve.
+def rigid_motions(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Best rigid motion (Kabsch, no reflection) of every curve from rest to every frame.
 
-    rest : (C, N, 3); frames : (F, C, N, 3); mask : (C, N) bool. Returns (F, C, N, 3) float64.
+    rest : (C, N, 3); frames : (F, C, N, 3); mask : (C, N) bool (padding ignored).
+    Returns rot (F, C, 3, 3) and shift (F, C, 3) float64 with frame ~= rest @ rot + shift per curve.
     """
     w = mask[..., None].astype(np.float64)
     n = np.maximum(w.sum(axis=1), 1.0)  # (C, 1)
@@ -78,8 +79,17 @@ def kabsch_residual(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> n
     vt = vt.copy()
     vt[..., 2, :] *= det[..., None]
     rot = np.einsum("fcij,fcjk->fcik", u, vt)  # p @ rot maps rest onto the frame
-    fitted = np.einsum("cni,fcij->fcnj", rest - pc[:, None], rot) + qc[:, :, None]
-    return (frames - fitted) * w[None]
+    return rot, qc - np.einsum("ci,fcij->fcj", pc, rot)
+
+
+def kabsch_residual(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Residual of each curve after its best rigid motion from the rest curve.
+
+    rest : (C, N, 3); frames : (F, C, N, 3); mask : (C, N) bool. Returns (F, C, N, 3) float64.
+    """
+    rot, shift = rigid_motions(rest, frames, mask)
+    fitted = np.einsum("cni,fcij->fcnj", rest, rot) + shift[:, :, None]
+    return (frames - fitted) * mask[None, ..., None]
 
 
 def motion_targets(frames: np.ndarray, idx: np.ndarray, mask: np.ndarray, motion: str) -> np.ndarray:

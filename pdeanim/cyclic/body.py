@@ -12,6 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 from trimesh import intersections
 
 from ..errors import InputError, MeshInputError
@@ -141,8 +144,11 @@ def chain_segments(segments: np.ndarray, tol: float) -> tuple[list[np.ndarray], 
     if len(segments) == 0:
         return [], []
     pts = segments.reshape(-1, 3)
-    _, first, node = np.unique(np.round(pts / tol).astype(np.int64), axis=0, return_index=True,
-                               return_inverse=True)
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")  # ends closer than tol are one point
+    link = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(pts), len(pts)))
+    _, node = connected_components(link, directed=False)
+    first = np.full(node.max() + 1, len(pts))
+    np.minimum.at(first, node, np.arange(len(pts)))
     node = node.reshape(-1, 2)
     node = node[node[:, 0] != node[:, 1]]
     adj: dict[int, list[int]] = {}
@@ -236,7 +242,7 @@ def cut_body(vertices: np.ndarray, faces: np.ndarray, frame: BodyFrame, n_curves
         raise MeshInputError("the mesh has no triangle faces to cut into cross-sections")
     verts = np.asarray(vertices, dtype=np.float64)
     mesh = trimesh.Trimesh(verts, faces, process=False)
-    tol = 1e-9 * max(frame.length, 1e-300)
+    tol = 1e-8 * max(frame.length, 1e-300)
     lo, hi = (0.0, 1.0) if close_ends else (margin, 1.0 - margin)
     stations = frame.x_min + frame.length * np.linspace(lo, hi, n_curves)
     inner = range(1, n_curves - 1) if close_ends else range(n_curves)

@@ -50,7 +50,9 @@ class CyclicClip:
     looping = True
 
     def __init__(self, faces: np.ndarray, rest: np.ndarray, s: np.ndarray, spine: Spine, frame: BodyFrame,
-                 params: SwimParams, frames: int, extra: dict[str, Any] | None = None) -> None:
+                 params: SwimParams, frames: int, extra: dict[str, Any] | None = None,
+                 curves: np.ndarray | None = None) -> None:
+        self.curves = None if curves is None else np.asarray(curves, dtype=np.float64)
         self.faces = np.asarray(faces, dtype=np.int32)
         self.rest = np.asarray(rest, dtype=np.float32)
         self.n_vertices = int(len(self.rest))
@@ -60,11 +62,12 @@ class CyclicClip:
         self.dxds = spine.at(self.s, deriv=1) @ frame.axis
         self.frame_times = np.arange(int(frames) + 1) * (params.period / int(frames))
         self.extra = extra or {}
+        self.bend = params.bend_axis(frame.lateral, frame.up)
 
     def displacement(self, t: float | np.ndarray) -> np.ndarray:
         """Displacement (K, V, 3) float64 at clip times t (K,) (one cycle per unit of t)."""
         sec = np.asarray(t, dtype=np.float64).reshape(-1) * self.params.period
-        return body_displacement(self.params, self.s, self.rel, self.dxds, self.frame.axis, self.frame.lateral,
+        return body_displacement(self.params, self.s, self.rel, self.dxds, self.frame.axis, self.bend,
                                  sec, self.frame.length)
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
@@ -75,6 +78,26 @@ class CyclicClip:
         out = (self.rest[None].astype(np.float64) + self.displacement(t)).astype(np.float32)
         return out[0] if scalar else out
 
+    def surface_frames(self, t: float | np.ndarray, n_s: int = 97, n_v: int = 32) -> tuple[np.ndarray, np.ndarray]:
+        """The PDE-surface representation itself: grid points (K, n_s n_v, 3) float32 at clip times t (K,)
+        moving with the same spine wave, and the grid's faces (T, 3) int32 (the lighter alternative to the
+        mesh; rebuilt from the boundary curves of the topology part)."""
+        from .chain import BodySurface
+
+        if self.curves is None:
+            raise ClipFormatError("this cyclic clip carries no boundary curves")
+        settings = self.extra.get("surface", {})
+        surface = BodySurface.from_curves(self.curves, modes=int(settings.get("modes", 6)),
+                                          a=float(settings.get("a", 1.0)))
+        pts, faces = surface.grid_mesh(n_s, n_v)
+        s = np.repeat(np.linspace(0.0, 1.0, n_s), n_v)
+        rel = pts - self.spine.at(s)
+        dxds = self.spine.at(s, deriv=1) @ self.frame.axis
+        sec = np.asarray(t, dtype=np.float64).reshape(-1) * self.params.period
+        disp = body_displacement(self.params, s, rel, dxds, self.frame.axis, self.bend, sec,
+                                 self.frame.length)
+        return (pts[None] + disp).astype(np.float32), faces
+
     def evaluate_seconds(self, seconds: float | np.ndarray) -> np.ndarray:
         """Positions at times in seconds (the cycle repeats every 1 / frequency seconds)."""
         return self.evaluate(np.asarray(seconds, dtype=np.float64) / self.params.period)
@@ -83,7 +106,7 @@ class CyclicClip:
         """The moving spine at clip time t: (samples, 3) float64 (rest spine + lateral wave)."""
         s = np.linspace(0.0, 1.0, samples)
         delta, _ = lateral_wave(self.params, s, np.array([t * self.params.period]), self.frame.length)
-        return self.spine.at(s) + delta[0][:, None] * self.frame.lateral
+        return self.spine.at(s) + delta[0][:, None] * self.bend
 
     def info(self) -> dict[str, Any]:
         """Frames, period, curves, patches, swim parameters (JSON-able)."""
@@ -118,7 +141,7 @@ def clip_from_parts(th: dict, ta: dict[str, np.ndarray], ch: dict, ca: dict[str,
         raise ClipFormatError("cyclic-spine clip arrays do not fit together")
     s = (patch + u) / spine.n_patches
     extra = {"curves": int(ta["curves"].shape[0]) if "curves" in ta else None, "surface": th.get("surface", {})}
-    return CyclicClip(ta["faces"], rest, s, spine, frame, params, frames, extra)
+    return CyclicClip(ta["faces"], rest, s, spine, frame, params, frames, extra, ta.get("curves"))
 
 
 def make_parts(faces: np.ndarray, rest: np.ndarray, vmap: VertexMap, spine: Spine, curves: np.ndarray,

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..clip import ClipParts
 from ..errors import MeshInputError, ParameterError
-from ..progress import Progress, no_progress
+from ..progress import Progress, no_progress, sub_progress
 from .body import body_frame, cut_body
 from .chain import BodySurface, valid_curve_count
 from .clipcyclic import make_parts
@@ -142,7 +142,7 @@ def make_cyclic_clip(mesh: Any, options: CyclicOptions, progress: Progress | Non
     surface = BodySurface.from_curves(body.curves, modes=options.modes, a=options.a)
     t1 = time.perf_counter()
     progress(0.5, "cyclic: map vertices to the surface")
-    vmap = map_to_surface(surface, verts)
+    vmap = map_to_surface(surface, verts, progress=sub_progress(progress, 0.5, 0.95))
     t2 = time.perf_counter()
     diag = float(np.linalg.norm(np.ptp(verts, axis=0)))
     dist = vmap.distance

@@ -57,24 +57,30 @@ def plot_body_spine(path: str | Path, vertices: np.ndarray, faces: np.ndarray, f
     return Path(path)
 
 
-def plot_swim_frames(path: str | Path, clip: object, times: np.ndarray, view: str = "top") -> Path:
-    """Frames of a CyclicClip at clip times (K,), stacked one above the other, each with its moving spine."""
+def plot_swim_frames(path: str | Path, clip: object, times: np.ndarray, view: str = "top",
+                     surface: bool = False) -> Path:
+    """Frames of a CyclicClip at clip times (K,), stacked one above the other, each with its moving spine;
+    surface=True draws the PDE-surface representation instead of the mesh."""
     times = np.asarray(times, dtype=np.float64)
-    frames = clip.evaluate(times)
+    if surface:
+        frames, faces = clip.surface_frames(times)
+    else:
+        frames, faces = clip.evaluate(times), clip.faces
     frame = clip.frame
     gap = 1.6 * max(np.ptp(frame.to_local(clip.rest)[:, VIEWS[view][1]]), 0.25 * frame.length)
     fig, ax = plt.subplots(figsize=(7, 1.2 + 1.1 * len(times)), dpi=110)
     i, j = VIEWS[view]
     for k, t in enumerate(times):
         shift = -k * gap
-        _draw_mesh(ax, frame.to_local(frames[k]), clip.faces, view, "#6a9f58", shift)
+        _draw_mesh(ax, frame.to_local(frames[k]), faces, view, "#c9a227" if surface else "#6a9f58", shift)
         sp = frame.to_local(clip.spine_at(float(t)))
         ax.plot(sp[:, i], sp[:, j] + shift, color="#d62728", lw=1.5)
         ax.text(frame.x_min - 0.05 * frame.length, shift, f"t={t:.3f}", ha="right", va="center", fontsize=8)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlim(frame.x_min - 0.25 * frame.length, frame.x_max + 0.05 * frame.length)
-    ax.set_title(f"{clip.params.mode} swim cycle, {view} view (head left)")
+    what = "PDE surface" if surface else "mesh"
+    ax.set_title(f"{clip.params.mode} swim cycle of the {what}, {view} view (head left)")
     ax.axis("off")
     fig.tight_layout()
     fig.savefig(path)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..progress import Progress, no_progress
 from .chain import BodySurface
 from .spine import split_s
 
@@ -50,8 +51,8 @@ def _gauss_newton_step(surface: BodySurface, p: np.ndarray, s: np.ndarray, v: np
     return step
 
 
-def _refine(surface: BodySurface, p: np.ndarray, s: np.ndarray, v: np.ndarray,
-            iters: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _refine(surface: BodySurface, p: np.ndarray, s: np.ndarray, v: np.ndarray, iters: int,
+            progress: Progress) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gauss-Newton steps on |X(s, v) - p|^2 with backtracking (full, half, quarter, eighth step): a point
     moves only where that lowers its distance, so the result is never worse than the start. Points stop
     iterating once no trial step improves them or the step is negligible."""
@@ -59,7 +60,8 @@ def _refine(surface: BodySurface, p: np.ndarray, s: np.ndarray, v: np.ndarray,
     x = surface.evaluate(s, v)
     d2 = np.sum((p - x) ** 2, axis=1)
     active = np.arange(len(p))
-    for _ in range(iters):
+    for it in range(iters):
+        progress(it / iters, f"map vertices: refine {it + 1}/{iters} ({len(active)} moving)")
         step = _gauss_newton_step(surface, p[active], s[active], v[active], x[active])
         moved = np.zeros(len(active), dtype=bool)
         todo = np.arange(len(active))
@@ -83,14 +85,14 @@ def _refine(surface: BodySurface, p: np.ndarray, s: np.ndarray, v: np.ndarray,
     return s, v, x
 
 
-def map_to_surface(surface: BodySurface, points: np.ndarray, *, samples_per_patch: int = 12,
-                   samples_around: int = 96, iters: int = 8) -> VertexMap:
+def map_to_surface(surface: BodySurface, points: np.ndarray, *, samples_per_patch: int = 24,
+                   samples_around: int = 192, iters: int = 8, progress: Progress | None = None) -> VertexMap:
     """Nearest surface point of every point (V, 3) on the body surface at rest, vectorised over points."""
     p = np.asarray(points, dtype=np.float64)
     grid, s_grid, v_grid = surface.grid(surface.n_patches * samples_per_patch + 1, samples_around)
     _, idx = cKDTree(grid.reshape(-1, 3)).query(p)
     i_s, i_v = np.divmod(idx, samples_around)
-    s, v, x = _refine(surface, p, s_grid[i_s], v_grid[i_v], iters)
+    s, v, x = _refine(surface, p, s_grid[i_s], v_grid[i_v], iters, progress or no_progress)
     return VertexMap(s, v, p - x)
 
 

@@ -6,7 +6,8 @@ with Omega(U) = omega0 + omega1 U / (2 pi) (the amplitude law of the swim-mode t
 tail, L the body length, A the peak displacement as a fraction of L (the table's Omega is in the units of the
 authors' models, so its shape is kept and its peak normalised), t in seconds. With wave = "travelling" the
 factor cos(alpha U + phi) sin(2 pi omega t) becomes sin(2 pi omega t - alpha U - phi), a wave running from head
-to tail. Every point keeps its offset from the spine ("translate", as in the paper) or has it turned with the
+to tail. The wave moves the spine along the body's lateral axis, or along its up axis with
+direction = "vertical" (the dorso-ventral beat of dolphins and whales). Every point keeps its offset from the spine ("translate", as in the paper) or has it turned with the
 local bend of the spine ("rotate", so cross-sections stay square to the spine). Both repeat with period 1/omega.
 """
 
@@ -33,6 +34,7 @@ ALIASES = {"anguilliform": "eel", "subcarangiform": "trout", "carangiform": "tro
 
 WAVES = ("standing", "travelling")
 RADIAL = ("rotate", "translate")
+DIRECTIONS = ("lateral", "vertical")
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,11 @@ class SwimParams:
     amplitude: float = 0.08
     wave: str = "standing"
     radial: str = "rotate"
+    direction: str = "lateral"
+
+    def bend_axis(self, lateral: np.ndarray, up: np.ndarray) -> np.ndarray:
+        """The direction (3,) the spine moves in: the body's lateral or up axis."""
+        return np.asarray(up if self.direction == "vertical" else lateral, dtype=np.float64)
 
     @staticmethod
     def preset(mode: str, **overrides: Any) -> SwimParams:
@@ -66,7 +73,7 @@ class SwimParams:
         if unknown:
             raise ParameterError(f"unknown swim parameter(s): {', '.join(sorted(unknown))}")
         try:
-            vals = {k: (str(v) if k in ("mode", "wave", "radial") else float(v)) for k, v in d.items()}
+            vals = {k: (str(v) if k in ("mode", "wave", "radial", "direction") else float(v)) for k, v in d.items()}
         except (TypeError, ValueError) as exc:
             raise ParameterError(f"bad swim parameter value: {exc}") from exc
         params = replace(SwimParams(), **vals)
@@ -86,8 +93,8 @@ class SwimParams:
             raise ParameterError(f"frequency must be > 0, got {self.frequency}")
         if not 0 <= self.amplitude <= 1:
             raise ParameterError(f"amplitude is a fraction of the body length in [0, 1], got {self.amplitude}")
-        if self.wave not in WAVES or self.radial not in RADIAL:
-            raise ParameterError(f"wave must be one of {WAVES} and radial one of {RADIAL}")
+        if self.wave not in WAVES or self.radial not in RADIAL or self.direction not in DIRECTIONS:
+            raise ParameterError(f"wave must be one of {WAVES}, radial one of {RADIAL}, direction one of {DIRECTIONS}")
 
     @property
     def period(self) -> float:
@@ -128,12 +135,12 @@ def body_displacement(params: SwimParams, s: np.ndarray, rel: np.ndarray, dxds: 
 
     rel (V, 3): each point minus its spine point at rest; dxds (V,): rate of the spine's axial coordinate
     along s; axis, lateral (3,): body axes. The spine moves by Delta along lateral; with radial = "rotate"
-    rel also turns in the axis-lateral plane by atan(dDelta/dx).
+    rel also turns in the axis-lateral plane by atan(dDelta/dx) (dx/ds floored at 0.1 L where the spine folds).
     """
     delta, slope = lateral_wave(params, s, t, length)
     disp = delta[..., None] * lateral
     if params.radial == "rotate":
-        g = slope / np.maximum(np.asarray(dxds, dtype=np.float64), 1e-9 * length)[None, :]
+        g = slope / np.maximum(np.asarray(dxds, dtype=np.float64), 0.1 * length)[None, :]  # spine folds
         c = 1.0 / np.sqrt(1.0 + g * g)
         sn = g * c
         ra, rl = rel @ axis, rel @ lateral

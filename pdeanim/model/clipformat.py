@@ -18,7 +18,11 @@ topology bytes)::
     m           (S, C, 3)       float32  time constant in local segment time tau (>= 0)
     D           (C, 3)          float32  space constant, shared by all segments of a curve+coordinate
     knots       (S+1, C, 3, 4)  float32  balanced space coefficients at the segment ends
-    header: format_version 1, motion ("displacement": positions = rest + w; "absolute": positions = w),
+    rigid_*     only for motion "rigid" (see pdeanim.model.rigid): rigid_segment_t (Sr+1,) float64,
+                rigid_centre (C, 3), rigid_rot_knots / rigid_trans_knots (Sr+1, C, 3) and signed
+                rigid_rot_mu / rigid_trans_mu (Sr, C) float32 (> 0 exp, < 0 trig, 0 linear)
+    header: format_version 1, motion ("displacement": positions = rest + w; "absolute": positions = w;
+            "rigid": positions = R(t) (rest - centre + w) + c(t)),
             looping, n_segments, n_curves, n_frames, errors (summary of the fit)
 
 The 8 coefficients of segment s, curve c, coordinate w are C = [knots[s, c, w], knots[s+1, c, w]] (2, 4):
@@ -30,7 +34,7 @@ shared knots once instead of 8 values per segment is what makes C0 free and the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -41,7 +45,7 @@ from ..curveset import CurveSet
 from ..errors import ClipFormatError
 
 FORMAT_VERSION = 1
-MOTIONS = ("displacement", "absolute")
+MOTIONS = ("displacement", "absolute", "rigid")
 
 
 @dataclass
@@ -68,6 +72,7 @@ class CoefficientData:
     motion: str
     looping: bool
     header: dict[str, Any]
+    extra: dict[str, np.ndarray] = field(default_factory=dict)  # "rigid_*" arrays of motion "rigid"
 
 
 def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray,
@@ -90,7 +95,7 @@ def encode_coefficients(topology: bytes, data: CoefficientData) -> bytes:
     return container.pack(header, {
         "segment_t": np.asarray(data.segment_t, np.float64), "frame_times": np.asarray(data.frame_times, np.float64),
         "family": np.asarray(data.family, np.uint8), "m": np.asarray(data.m, np.float32),
-        "D": np.asarray(data.D, np.float32), "knots": np.asarray(data.knots, np.float32)})
+        "D": np.asarray(data.D, np.float32), "knots": np.asarray(data.knots, np.float32), **data.extra})
 
 
 def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str) -> np.ndarray:
@@ -142,7 +147,24 @@ def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n
     motion = str(header.get("motion"))
     if motion not in MOTIONS:
         raise ClipFormatError(f"unknown motion mode {motion!r}")
+    extra = _rigid_arrays(arrays, C) if motion == "rigid" else {}
     return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients"), family, m,
                            _need(arrays, "D", (C, 3), "coefficients"),
                            _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients"), motion,
-                           bool(header.get("looping", False)), header)
+                           bool(header.get("looping", False)), header, extra)
+
+
+def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray]:
+    """The validated rigid-track arrays of motion "rigid"."""
+    seg = _need(arrays, "rigid_segment_t", (None,), "coefficients")
+    Sr = len(seg) - 1
+    if Sr < 1 or np.any(np.diff(seg) < 0):
+        raise ClipFormatError("rigid segment boundaries must be non-decreasing with at least one segment")
+    out = {"rigid_segment_t": seg, "rigid_centre": _need(arrays, "rigid_centre", (C, 3), "coefficients")}
+    for name in ("rot", "trans"):
+        out[f"rigid_{name}_knots"] = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients")
+        mu = _need(arrays, f"rigid_{name}_mu", (Sr, C), "coefficients")
+        if np.any(mu <= -np.pi):
+            raise ClipFormatError("rigid trig time constants must be above -pi")
+        out[f"rigid_{name}_mu"] = mu
+    return out

@@ -14,6 +14,7 @@ import numpy as np
 
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import SPACE_KINDS, space_basis
+from .rigid import RigidTracks
 
 
 class DynamicClip:
@@ -33,8 +34,13 @@ class DynamicClip:
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
         self._knot_fields = self._precompute(fam[0] % 2)
-        self._base = (topo.rest.astype(np.float32) if coef.motion == "displacement"
-                      else np.zeros((self.n_vertices, 3), np.float32))
+        self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
+        if coef.motion == "displacement":
+            self._base = topo.rest.astype(np.float32)
+        elif self._rigid is not None:
+            self._base = (topo.rest - self._rigid.centre0[self._cid]).astype(np.float32)
+        else:
+            self._base = np.zeros((self.n_vertices, 3), np.float32)
         item_of = (self._cid[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item of every value
         self._gather = [st.position[item_of].astype(np.intp) for st in self._time]  # per segment
 
@@ -58,7 +64,7 @@ class DynamicClip:
         seg = np.clip(np.searchsorted(self.segment_t, t, side="right") - 1, 0, S - 1)
         t0, t1 = self.segment_t[seg], self.segment_t[seg + 1]
         tau = np.clip((t - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
-        return seg, tau
+        return seg, tau, t
 
     def _frame(self, s: int, tau: float) -> np.ndarray:
         phi0, phi1 = self._time[s].pair(tau)  # (C*3,) each
@@ -74,8 +80,11 @@ class DynamicClip:
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
         """Positions in the original vertex order: (V, 3) float32 for scalar t, (K, V, 3) for an array."""
         scalar = np.ndim(t) == 0
-        seg, tau = self._locate(np.atleast_1d(t))
+        seg, tau, tw = self._locate(np.atleast_1d(t))
         out = np.stack([self._frame(int(s), float(x)) for s, x in zip(seg, tau, strict=True)])
+        if self._rigid is not None:
+            R, c = self._rigid.at(tw)  # (K, C, 3, 3), (K, C, 3)
+            out = (np.einsum("kvij,kvj->kvi", R[:, self._cid], out) + c[:, self._cid]).astype(np.float32)
         return out[0] if scalar else out
 
     def frame_t(self) -> np.ndarray:

@@ -13,10 +13,11 @@ Every family satisfies its PDE: w_tt = +-m^2 w and w_uuuu = +-D^4 w, so w_tt / w
 * time, in local segment time tau in [0, 1]: the end-interpolating pair
   phi0 = sinh(m (1 - tau)) / sinh m, phi1 = sinh(m tau) / sinh m (trig: sin; m -> 0 gives 1 - tau, tau).
   So the two time coefficients of a segment are the values of the track at its two ends.
-* space, with s = u - 1/2: for D < D_SWITCH the "Taylor-stable" set that tends to the cubic polynomials
-  {1, s, s^2, s^3/3} as D -> 0 (D0: (cosh x + cos x)/2, (sinh x + sin x)/(2D), (cosh x - cos x)/D^2,
-  (sinh x - sin x)/D^3 with x = D s; D1: cosh x cos x, (cosh x sin x + sinh x cos x)/(2a), sinh x sin x / a^2,
-  (cosh x sin x - sinh x cos x)/(2a^3) with x = a s); for D >= D_SWITCH the bounded set
+* space, with s = u - 1/2: for D < D_SWITCH the "Taylor-stable" set, scaled by SMALL_SCALE = (1, 2, 4, 24)
+  so that it tends to the cubic monomials {1, 2s, 4s^2, 8s^3} on [-1, 1] as D -> 0 (D0: (cosh x + cos x)/2,
+  (sinh x + sin x)/(2D), (cosh x - cos x)/D^2, (sinh x - sin x)/D^3 with x = D s; D1: cosh x cos x,
+  (cosh x sin x + sinh x cos x)/(2a), sinh x sin x / a^2, (cosh x sin x - sinh x cos x)/(2a^3) with x = a s,
+  each times its scale); for D >= D_SWITCH the bounded set
   (D0: e^{-Du}, e^{D(u-1)}, cos Ds, sin Ds; D1: e^{-au} cos as, e^{-au} sin as, e^{a(u-1)} cos as,
   e^{a(u-1)} sin as), every function in [-1, 1].
 
@@ -104,7 +105,15 @@ def _ratio3(x: np.ndarray, coeffs: np.ndarray, direct) -> np.ndarray:
 
 # ---------------------------------------------------------------- space bases
 
+SMALL_SCALE = np.array([1.0, 2.0, 4.0, 24.0])
+"""Scale of the Taylor-stable functions so that they tend to {1, x, x^2, x^3} with x = 2u - 1 in [-1, 1]."""
+
+
 def _space_small(u: np.ndarray, D: np.ndarray, space_kind: str) -> np.ndarray:
+    return _space_small_unscaled(u, D, space_kind) * SMALL_SCALE
+
+
+def _space_small_unscaled(u: np.ndarray, D: np.ndarray, space_kind: str) -> np.ndarray:
     s = u - 0.5
     if space_kind == "D0":
         x = D * s
@@ -140,10 +149,19 @@ def space_basis(u: np.ndarray, D: np.ndarray | float, space_kind: str) -> np.nda
     if space_kind not in SPACE_KINDS:
         raise ParameterError(f"space kind must be one of {SPACE_KINDS}, got {space_kind!r}")
     u = np.asarray(u, dtype=np.float64)
-    D = np.abs(np.asarray(D, dtype=np.float64))[..., None]
-    small = _space_small(u, np.minimum(D, D_SWITCH), space_kind)
-    large = _space_large(u, np.maximum(D, D_SWITCH), space_kind)
-    return np.where((D < D_SWITCH)[..., None], small, large)
+    D = np.abs(np.asarray(D, dtype=np.float64))
+    lead = np.broadcast_shapes(u.shape[:-1], D.shape)
+    u = np.broadcast_to(u, lead + u.shape[-1:])
+    D = np.broadcast_to(D, lead)
+    small = D < D_SWITCH
+    if np.all(small):
+        return _space_small(u, D[..., None], space_kind)
+    if not np.any(small):
+        return _space_large(u, D[..., None], space_kind)
+    out = np.empty(u.shape + (4,))
+    out[small] = _space_small(u[small], D[small][:, None], space_kind)
+    out[~small] = _space_large(u[~small], D[~small][:, None], space_kind)
+    return out
 
 
 def space_basis_paper(u: np.ndarray, D: np.ndarray | float, space_kind: str) -> np.ndarray:
@@ -168,8 +186,8 @@ def space_to_paper(D: float, space_kind: str) -> np.ndarray:
             [0.5 * math.exp(-h), -0.5 * math.exp(h), 0, 0])
         cos_, sin_ = np.array([0, 0, math.cos(h), math.sin(h)]), np.array([0, 0, -math.sin(h), math.cos(h)])
         if D < D_SWITCH:
-            return np.stack([(cosh_ + cos_) / 2, (sinh_ + sin_) / (2 * D), (cosh_ - cos_) / D**2,
-                             (sinh_ - sin_) / D**3])
+            return SMALL_SCALE[:, None] * np.stack([(cosh_ + cos_) / 2, (sinh_ + sin_) / (2 * D),
+                                                    (cosh_ - cos_) / D**2, (sinh_ - sin_) / D**3])
         return np.stack([np.array([0, 1.0, 0, 0]), np.array([math.exp(-D), 0, 0, 0]), cos_, sin_])
     a = D / SQRT2
     h = 0.5 * a
@@ -182,8 +200,9 @@ def space_to_paper(D: float, space_kind: str) -> np.ndarray:
         return np.outer(E[e], T[t]).ravel()
 
     if D < D_SWITCH:
-        return np.stack([prod("cosh", "cos"), (prod("cosh", "sin") + prod("sinh", "cos")) / (2 * a),
-                         prod("sinh", "sin") / a**2, (prod("cosh", "sin") - prod("sinh", "cos")) / (2 * a**3)])
+        return SMALL_SCALE[:, None] * np.stack([
+            prod("cosh", "cos"), (prod("cosh", "sin") + prod("sinh", "cos")) / (2 * a),
+            prod("sinh", "sin") / a**2, (prod("cosh", "sin") - prod("sinh", "cos")) / (2 * a**3)])
     return np.stack([prod("lo", "cos"), prod("lo", "sin"), prod("hi", "cos"), prod("hi", "sin")])
 
 

@@ -15,9 +15,13 @@ import numpy as np
 
 from .families import SPACE_KINDS, space_basis
 
-D_GRID = np.concatenate([[0.0], np.geomspace(0.4, 48.0, 21)])
+D_GRID = np.concatenate([[0.0], np.geomspace(0.5, 48.0, 15)])
 """Coarse grid of D values searched for every item and space kind."""
-RANK_TOL = 1e-10
+RANK_TOL = 1e-6
+GAIN_TOL = 1e-9
+"""Relative energy gain needed to move away from D = 0 or from the grid value (ties keep the simpler D)."""
+COND_MAX = 1e4
+"""Largest condition number of a curve's space basis kept; beyond it float32 coefficients lose accuracy."""
 
 
 @dataclass
@@ -46,30 +50,71 @@ def orthonormal_basis(u: np.ndarray, mask: np.ndarray, D: np.ndarray, kind: str)
     return U, to_coef
 
 
-def captured_energy(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, D: np.ndarray, kind: str) -> np.ndarray:
-    """(K,) trace(U^T G U): the data energy the space basis at D can represent."""
-    U, _ = orthonormal_basis(u, mask, D, kind)
-    return np.einsum("kna,kna->k", U, gram @ U)
+def _pinv_sym(M: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse of symmetric positive semi-definite (..., 4, 4) matrices (eigh, relative cut-off)."""
+    w, V = np.linalg.eigh(M)
+    keep = w > (RANK_TOL**2) * np.maximum(w[..., -1:], 1e-300)
+    inv = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    return (V * inv[..., None, :]) @ np.swapaxes(V, -1, -2)
+
+
+def captured_energy(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, D: np.ndarray, kind: str,
+                    per_curve: int = 1) -> np.ndarray:
+    """(K,) energy of the items' data that the space basis at D represents: trace((S^T S)^+ S^T G S).
+
+    u, mask : (K / per_curve, N) shared by ``per_curve`` consecutive items (3 when x, y, z share u);
+    gram : (K, N, N); D : (K / per_curve,). Used for the D search; the final projection uses an SVD.
+    """
+    S = space_basis(u, D, kind) * mask[..., None]  # (C, N, 4)
+    inv = _pinv_sym(np.swapaxes(S, 1, 2) @ S)  # (C, 4, 4)
+    K, N = gram.shape[:2]
+    Sk = np.repeat(S, per_curve, axis=0) if per_curve > 1 else S
+    A = np.swapaxes(Sk, 1, 2) @ (gram @ Sk)  # (K, 4, 4)
+    invk = np.repeat(inv, per_curve, axis=0) if per_curve > 1 else inv
+    return np.einsum("kab,kab->k", invk, A)
+
+
+def _shared_u(u: np.ndarray) -> bool:
+    """Whether consecutive item triples share their u (chord mode)."""
+    return len(u) % 3 == 0 and np.array_equal(u[0::3], u[1::3]) and np.array_equal(u[0::3], u[2::3])
 
 
 def search_D(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, kinds: tuple[str, ...] = SPACE_KINDS,
-             refine_iters: int = 14) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             refine_iters: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Best (kind index (K,), D (K,), floor energy (K,)) per item: coarse grid over D, then golden refinement."""
     energy = np.trace(gram, axis1=1, axis2=2)
     K = len(u)
+    share = 3 if _shared_u(u) else 1
+    uc, mc = u[::share], mask[::share]
     cap = np.empty((len(kinds), len(D_GRID), K))
     for i, kind in enumerate(kinds):
         for g, d in enumerate(D_GRID):
-            cap[i, g] = captured_energy(u, mask, gram, np.full(K, d), kind)
+            cap[i, g] = captured_energy(uc, mc, gram, np.full(len(uc), d), kind, share)
     flat = cap.reshape(-1, K)
-    best = np.argmax(flat + 1e-12 * energy * (np.arange(len(flat)) % len(D_GRID) == 0)[:, None], axis=0)
+    # D = 0 (the cubics, best conditioned) wins unless another D captures clearly more
+    best = np.argmax(flat + GAIN_TOL * energy * (np.arange(len(flat)) % len(D_GRID) == 0)[:, None], axis=0)
     kind_i, grid_i = np.divmod(best, len(D_GRID))
     lo = D_GRID[np.maximum(grid_i - 1, 0)]
     hi = D_GRID[np.minimum(grid_i + 1, len(D_GRID) - 1)]
     D, capD = _golden(u, mask, gram, kind_i, lo, hi, D_GRID[grid_i], cap[kind_i, grid_i, np.arange(K)],
                       kinds, refine_iters)
     D = D.astype(np.float32).astype(np.float64)
+    D, kind_i, capD = _well_conditioned(u, mask, gram, kind_i, D, capD, cap[0, 0], kinds)
     return kind_i, D, np.maximum(energy - capD, 0.0)
+
+
+def _well_conditioned(u, mask, gram, kind_i, D, capD, cap0, kinds):
+    """Fall back to D = 0 where the chosen basis is ill-conditioned on the curve's points (float32 safety)."""
+    cond = np.ones(len(u))
+    for i, kind in enumerate(kinds):
+        sel = kind_i == i
+        if np.any(sel):
+            s = np.linalg.svd(space_basis(u[sel], D[sel], kind) * mask[sel][..., None], compute_uv=False)
+            n_pts = mask[sel].sum(axis=1)
+            k = np.minimum(n_pts, 4) - 1
+            cond[sel] = s[:, 0] / np.maximum(s[np.arange(len(s)), k], 1e-300)
+    bad = cond > COND_MAX
+    return np.where(bad, 0.0, D), np.where(bad, 0, kind_i), np.where(bad, cap0, capD)
 
 
 def _captured_mixed(u, mask, gram, kind_i, D, kinds) -> np.ndarray:
@@ -95,7 +140,7 @@ def _golden(u, mask, gram, kind_i, lo, hi, best_D, best_cap, kinds, iters):
         fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
     x = np.where(fc > fd, c, d)
     fx = np.maximum(fc, fd)
-    better = fx > best_cap
+    better = fx > best_cap + GAIN_TOL * np.trace(gram, axis1=1, axis2=2)
     return np.where(better, x, best_D), np.where(better, fx, best_cap)
 
 

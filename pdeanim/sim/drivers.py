@@ -43,6 +43,7 @@ class RigidPath:
     rotations: Rotation
     translations: np.ndarray
     center: np.ndarray
+    slerp: Slerp | None = None
 
     @classmethod
     def from_keyframes(cls, keyframes: list[dict], center: np.ndarray) -> RigidPath:
@@ -57,14 +58,16 @@ class RigidPath:
             axis = np.array([ax, ay, az], np.float64)
             rotvecs.append(axis / np.linalg.norm(axis) * np.deg2rad(deg))
         translations = np.array([k.get("translate", (0.0, 0.0, 0.0)) for k in keys], np.float64)
-        return cls(times, Rotation.from_rotvec(np.array(rotvecs)), translations, np.asarray(center, np.float64))
+        rotations = Rotation.from_rotvec(np.array(rotvecs))
+        slerp = Slerp(times, rotations) if len(times) > 1 else None
+        return cls(times, rotations, translations, np.asarray(center, np.float64), slerp)
 
     def transform(self, s: float) -> tuple[Rotation, np.ndarray]:
         """Rotation and translation at normalised time s (held constant outside the keyframes)."""
         s = float(np.clip(s, self.times[0], self.times[-1]))
-        if len(self.times) == 1:
+        if self.slerp is None:
             return self.rotations[0], self.translations[0]
-        rot = Slerp(self.times, self.rotations)([s])[0]
+        rot = self.slerp([s])[0]
         trans = np.array([np.interp(s, self.times, self.translations[:, d]) for d in range(3)])
         return rot, trans
 

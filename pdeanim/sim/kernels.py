@@ -89,73 +89,88 @@ CHUNK = 256
 """Tets per parallel work item (scratch arrays are allocated once per chunk, not per tet)."""
 
 
-def _solve_color(x, rot, ids, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters):  # pragma: no cover
-    """In place on x (N, 3) and rot (M, 4): a deviatoric then a volume XPBD update for each tet of a colour."""
-    n = tets.shape[0]
-    for chunk in prange((n + CHUNK - 1) // CHUNK):
+def _solve_range(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,  # pragma: no cover
+                 start, stop):
+    """Deviatoric then volume XPBD update of tets start:stop (one colour: no shared points, any order)."""
+    for chunk in prange((stop - start + CHUNK - 1) // CHUNK):
         f = np.empty((3, 3))
         r = np.empty((3, 3))
         d = np.empty((3, 3))
         g = np.empty((4, 3))
-        for k in range(chunk * CHUNK, min(n, (chunk + 1) * CHUNK)):
-            _solve_tet(x, rot, ids, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters, k, f, r, d, g)
+        for k in range(start + chunk * CHUNK, min(stop, start + (chunk + 1) * CHUNK)):
+            _solve_tet(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters, k, f, r, d, g)
 
 
-def _solve_tet(x, rot, ids, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters, k, f, r, d, g):  # noqa: E501 # pragma: no cover
+def _solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,  # pragma: no cover
+                 offsets, parallel):
+    """One Gauss-Seidel sweep: the colours in order, each colour's tets independently."""
+    for c in range(offsets.shape[0] - 1):
+        if parallel:
+            _solve_range_parallel(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,
+                                  offsets[c], offsets[c + 1])
+        else:
+            _solve_range_serial(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,
+                                offsets[c], offsets[c + 1])
+
+
+def _solve_tet(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,  # pragma: no cover
+               k, f, r, d, g):
     """Deviatoric then volume update of tet k, with scratch arrays f, r, d (3, 3) and g (4, 3)."""
-    if True:
-        t = tets[k]
-        q = rot[ids[k]]
-        _deformation(x, t, dm_inv, k, f)
-        _rotation(f, q, r, rot_iters)
-        _quat_matrix(q, r)
-        c = 0.0
-        for i in range(3):
-            for j in range(3):
-                d[i, j] = f[i, j] - r[i, j]
-                c += d[i, j] * d[i, j]
-        c = np.sqrt(c)
-        inv = 1.0 / max(c, 1e-12)
-        for i in range(3):
-            for j in range(3):
-                d[i, j] *= inv
-        lam_d[k] += _project(x, t, dm_inv, w, k, c, d, alpha_d[k] * inv_dt2, lam_d[k], g)
-        _deformation(x, t, dm_inv, k, f)
-        for i in range(3):
-            i1, i2 = (i + 1) % 3, (i + 2) % 3
-            for j in range(3):
-                j1, j2 = (j + 1) % 3, (j + 2) % 3
-                d[i, j] = f[i1, j1] * f[i2, j2] - f[i1, j2] * f[i2, j1]
-        c = f[0, 0] * d[0, 0] + f[0, 1] * d[0, 1] + f[0, 2] * d[0, 2] - 1.0
-        lam_h[k] += _project(x, t, dm_inv, w, k, c, d, alpha_h[k] * inv_dt2, lam_h[k], g)
+    t = tets[k]
+    q = rot[k]
+    _deformation(x, t, dm_inv, k, f)
+    _rotation(f, q, r, rot_iters)
+    _quat_matrix(q, r)
+    c = 0.0
+    for i in range(3):
+        for j in range(3):
+            d[i, j] = f[i, j] - r[i, j]
+            c += d[i, j] * d[i, j]
+    c = np.sqrt(c)
+    inv = 1.0 / max(c, 1e-12)
+    for i in range(3):
+        for j in range(3):
+            d[i, j] *= inv
+    lam_d[k] += _project(x, t, dm_inv, w, k, c, d, alpha_d[k] * inv_dt2, lam_d[k], g)
+    _deformation(x, t, dm_inv, k, f)
+    for i in range(3):
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for j in range(3):
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            d[i, j] = f[i1, j1] * f[i2, j2] - f[i1, j2] * f[i2, j1]
+    c = f[0, 0] * d[0, 0] + f[0, 1] * d[0, 1] + f[0, 2] * d[0, 2] - 1.0
+    lam_h[k] += _project(x, t, dm_inv, w, k, c, d, alpha_h[k] * inv_dt2, lam_h[k], g)
 
 
 PARALLEL_MIN_TETS = 4096
-"""Colours smaller than this run serially: a parallel launch costs more than it saves (and stalls on busy cores)."""
+"""Meshes with fewer tets run serially: a parallel launch per colour costs more than it saves (and stalls on
+busy cores)."""
 
 if AVAILABLE:
-    _deformation = njit(inline="always", cache=True)(_deformation)
-    _quat_matrix = njit(inline="always", cache=True)(_quat_matrix)
-    _rotation = njit(inline="always", cache=True)(_rotation)
-    _project = njit(inline="always", cache=True)(_project)
-    _solve_tet = njit(cache=True)(_solve_tet)
-    solve_color_parallel = njit(parallel=True, cache=True)(_solve_color)
-    solve_color_serial = njit(parallel=False, cache=True)(_solve_color)
+    _deformation = njit(inline="always", cache=True, fastmath=True)(_deformation)
+    _quat_matrix = njit(inline="always", cache=True, fastmath=True)(_quat_matrix)
+    _rotation = njit(inline="always", cache=True, fastmath=True)(_rotation)
+    _project = njit(inline="always", cache=True, fastmath=True)(_project)
+    _solve_tet = njit(inline="always", cache=True, fastmath=True)(_solve_tet)
+    _solve_range_serial = njit(cache=True, fastmath=True)(_solve_range)
+    _solve_range_parallel = njit(parallel=True, cache=True)(_solve_range)
+    _solve_sweep = njit(cache=True)(_solve_sweep)
 else:  # pragma: no cover
-    solve_color_parallel = solve_color_serial = None
+    _solve_sweep = None
 
 _threads = 1
 
 
 def set_threads(n: int) -> None:
-    """Use up to n worker threads for large colours (1, the default, keeps the solver single-threaded)."""
+    """Use up to n worker threads on large meshes (1, the default, keeps the solver single-threaded)."""
     global _threads
     if AVAILABLE:
         _threads = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
         numba.set_num_threads(_threads)
 
 
-def solve_color(x, rot, ids, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2) -> None:
-    """Dispatch one colour to the serial or the parallel kernel (same result either way)."""
-    kernel = solve_color_parallel if _threads > 1 and len(tets) >= PARALLEL_MIN_TETS else solve_color_serial
-    kernel(x, rot, ids, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, ROTATION_ITERATIONS)
+def solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, offsets) -> None:
+    """One sweep over all colours in a single compiled call (serial or parallel: the same result)."""
+    parallel = _threads > 1 and len(tets) >= PARALLEL_MIN_TETS
+    _solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, ROTATION_ITERATIONS, offsets,
+                 parallel)

@@ -85,7 +85,7 @@ def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene:
         frames[f] = surface_positions(model, embedding, state.x)
         report(f / (len(times) - 1), f"simulate {f}/{len(times) - 1}")
     meta = {"source": "simulate", "scene": scene.to_dict(), "tets": tets.n_tets, "tet_points": tets.n_points,
-            "substeps": substeps, "substeps_capped": capped, "dt": dt, "colors": len(model.blocks),
+            "substeps": substeps, "substeps_capped": capped, "dt": dt, "colors": model.elements.n_colors,
             "backend": model.backend, "seconds": round(time.perf_counter() - started, 3), "versions": versions()}
     return make_poses(frames, faces, times, meta)
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ParameterError
-from .coloring import color_tets
 from . import kernels
+from .coloring import color_tets
 from .constraints import deviatoric_correction, hydrostatic_correction
 from .tetmesh import TetMesh
 
@@ -53,24 +53,32 @@ class Ground:
 
 
 @dataclass(frozen=True)
-class ColorBlock:
-    """Per-colour constant arrays: tet ids (K,), tets (K, 4), dm_inv (K, 3, 3), w (K, 4), alpha_d, alpha_h (K,)."""
+class Elements:
+    """Tets in colour order: colour c is rows offsets[c]:offsets[c + 1] (no shared point within a colour).
 
-    ids: np.ndarray
+    tets (M, 4) int64, dm_inv (M, 3, 3) rest inverses, w (M, 4) corner inverse masses, alpha_d and alpha_h (M,)
+    compliances of the deviatoric and volume constraints, offsets (C + 1,) int64.
+    """
+
     tets: np.ndarray
     dm_inv: np.ndarray
     w: np.ndarray
     alpha_d: np.ndarray
     alpha_h: np.ndarray
+    offsets: np.ndarray
+
+    @property
+    def n_colors(self) -> int:
+        return len(self.offsets) - 1
 
 
 @dataclass(frozen=True)
 class SimModel:
-    """The immutable rest model: points (N, 3), inverse masses (N,), colour blocks, forces and constraints."""
+    """The immutable rest model: points (N, 3), inverse masses (N,), coloured elements, forces, constraints."""
 
     rest: np.ndarray
     inv_mass: np.ndarray
-    blocks: tuple[ColorBlock, ...]
+    elements: Elements
     gravity: np.ndarray
     damping: float
     fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -82,7 +90,7 @@ class SimModel:
 
 @dataclass
 class SimState:
-    """Positions x (N, 3), velocities v (N, 3), per-tet rotation guesses rot (M, 4) (w, x, y, z), time t (s)."""
+    """Positions x (N, 3), velocities v (N, 3), rotation guesses rot (M, 4) (w, x, y, z) per element, time t."""
 
     x: np.ndarray
     v: np.ndarray
@@ -115,12 +123,13 @@ def build_model(tets: TetMesh, material: Material, gravity=(0.0, -9.81, 0.0), fi
     p = tets.points[tets.tets]
     dm_inv = np.linalg.inv((p[:, 1:] - p[:, :1]).transpose(0, 2, 1))
     vol = tets.volumes()
-    blocks = []
-    for idx in color_tets(tets.tets, tets.n_points):
-        t = tets.tets[idx]
-        blocks.append(ColorBlock(idx, t, dm_inv[idx], inv_mass[t], 1.0 / (2.0 * mu * vol[idx]),
-                                 1.0 / (lam * vol[idx])))
-    return SimModel(tets.points.copy(), inv_mass, tuple(blocks), np.asarray(gravity, np.float64),
+    colors = color_tets(tets.tets, tets.n_points)
+    order = np.concatenate(colors)
+    offsets = np.concatenate([[0], np.cumsum([len(c) for c in colors])]).astype(np.int64)
+    t = np.ascontiguousarray(tets.tets[order])
+    elements = Elements(t, np.ascontiguousarray(dm_inv[order]), np.ascontiguousarray(inv_mass[t]),
+                        1.0 / (2.0 * mu * vol[order]), 1.0 / (lam * vol[order]), offsets)
+    return SimModel(tets.points.copy(), inv_mass, elements, np.asarray(gravity, np.float64),
                     material.damping, fixed, kinematic, ground, max(int(iterations), 1), backend)
 
 
@@ -129,7 +138,7 @@ def rest_state(model: SimModel) -> SimState:
     x = model.rest.copy()
     if model.kinematic is not None and len(model.fixed):
         x[model.fixed] = model.kinematic(0.0)
-    rot = np.zeros((sum(len(b.ids) for b in model.blocks), 4))
+    rot = np.zeros((len(model.elements.tets), 4))
     rot[:, 0] = 1.0
     return SimState(x, np.zeros_like(x), rot, 0.0)
 
@@ -154,21 +163,24 @@ def step(model: SimModel, state_in: SimState, state_out: SimState, dt: float) ->
 
 def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray) -> None:
     """Gauss-Seidel over colours (all tets of one colour in one pass), in place on x (N, 3) and rot (M, 4)."""
+    e = model.elements
     inv_dt2 = 1.0 / (dt * dt)
-    lams = [(np.zeros(len(b.tets)), np.zeros(len(b.tets))) for b in model.blocks]
+    lam_d, lam_h = np.zeros(len(e.tets)), np.zeros(len(e.tets))
     for _ in range(model.iterations):
-        for b, (lam_d, lam_h) in zip(model.blocks, lams, strict=True):
-            if model.backend == "numba":
-                kernels.solve_color(x, rot, b.ids, b.tets, b.dm_inv, b.w, b.alpha_d, b.alpha_h, lam_d, lam_h,
-                                    inv_dt2)
-                continue
-            dx, dlam, rot[b.ids] = deviatoric_correction(x[b.tets], b.w, b.dm_inv, b.alpha_d * inv_dt2, lam_d,
-                                                         rot[b.ids])
-            x[b.tets] += dx
-            lam_d += dlam
-            dx, dlam = hydrostatic_correction(x[b.tets], b.w, b.dm_inv, b.alpha_h * inv_dt2, lam_h)
-            x[b.tets] += dx
-            lam_h += dlam
+        if model.backend == "numba":
+            kernels.solve_sweep(x, rot, e.tets, e.dm_inv, e.w, e.alpha_d, e.alpha_h, lam_d, lam_h, inv_dt2,
+                                e.offsets)
+            continue
+        for c in range(e.n_colors):
+            s = slice(e.offsets[c], e.offsets[c + 1])
+            t = e.tets[s]
+            dx, dlam, rot[s] = deviatoric_correction(x[t], e.w[s], e.dm_inv[s], e.alpha_d[s] * inv_dt2, lam_d[s],
+                                                     rot[s])
+            x[t] += dx
+            lam_d[s] += dlam
+            dx, dlam = hydrostatic_correction(x[t], e.w[s], e.dm_inv[s], e.alpha_h[s] * inv_dt2, lam_h[s])
+            x[t] += dx
+            lam_h[s] += dlam
 
 
 def project_ground(ground: Ground, x: np.ndarray, x_prev: np.ndarray) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pdeanim.curves import extract_curves
 from pdeanim.curves.bounded import bounded_curves, floor_errors, refine_curves, split_curves
@@ -62,6 +64,18 @@ def test_custom_error_function_and_seams_kept_together(messy):
     cid, _ = curves.curve_of_vertex(len(v))
     for w in np.flatnonzero(np.bincount(g.weld) > 1):
         assert len(set(cid[g.weld == w])) == 1
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 40))
+def test_refine_keeps_a_partition(seed, n):
+    rng = np.random.default_rng(seed)
+    rest = rng.integers(0, 4, size=(n, 3)).astype(float)
+    frames = np.stack([rest, rest + rng.normal(0, 0.3, rest.shape), rest * 1.3])
+    start = extract_curves(rest, rng.integers(0, n, size=(n, 3)), target_points=int(rng.integers(1, 9)))
+    curves, rep = refine_curves(frames, start, float(rng.choice([1e-3, 1e-2, 1.0])), motion="rigid")
+    curves.validate(n)
+    assert rep["curves"] == curves.n_curves
 
 
 def test_split_halves_distinct_points():

@@ -60,6 +60,8 @@ def test_no_faces_and_empty():
     assert empty.n_curves == 0 and len(empty.order) == 0
     one = extract_curves(np.zeros((1, 3)), None)
     assert one.n_curves == 1
+    same = extract_curves(np.ones((5, 3)), np.array([[0, 1, 2], [2, 3, 4]]))
+    assert same.n_curves == 1 and same.order.tolist() == [0, 1, 2, 3, 4]
 
 
 def test_deterministic(spot):

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from pdeanim.curves import extract_curves
 from pdeanim.curves.deform import bend_twist
-from pdeanim.curves.floor import kabsch_residual, spatial_floor
+from pdeanim.curves.floor import kabsch_residual, rigid_motions, spatial_floor
 from pdeanim.curves.naive import greedy_edge_curves
 from pdeanim.curveset import CurveSet
 from pdeanim.errors import InputError, ParameterError
@@ -68,6 +68,8 @@ def test_kabsch_recovers_random_rigid_motion(seed, n):
     frames = np.einsum("cni,fcji->fcnj", rest, rot) + rng.standard_normal((3, 2, 1, 3))
     res = kabsch_residual(rest, frames, np.ones((2, n), bool))
     assert np.abs(res).max() < 1e-9
+    r, _ = rigid_motions(rest, frames, np.ones((2, n), bool))
+    assert np.allclose(r, np.swapaxes(rot, -1, -2), atol=1e-9)  # frames use rot @ x, i.e. x @ rot.T
 
 
 def test_floor_decreases_absolute_displacement_rigid_on_morph_sphere(morph):

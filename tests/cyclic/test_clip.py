@@ -81,3 +81,16 @@ def test_looping_glb_is_valid(trout_clip):
         pytest.skip(str(exc))
     for report in reports:
         assert report["issues"]["numErrors"] == 0, validate.issue_lines(report)
+
+
+def test_pde_surface_representation_moves_with_the_mesh(trout_clip):
+    rest_grid, faces = trout_clip.surface_frames(0.0, n_s=37, n_v=32)
+    assert rest_grid.shape == (1, 37 * 32, 3) and faces.max() < 37 * 32
+    assert np.abs(rest_grid[0].reshape(37, 32, 3) - trout_clip.curves).max() < 1e-5  # grid rows = curves
+    moved, _ = trout_clip.surface_frames(np.array([0.25, 1.25]), n_s=37, n_v=32)
+    assert np.abs(moved[0] - moved[1]).max() < 1e-6
+    grid_shift = (moved[0] - rest_grid[0]).reshape(37, 32, 3).mean(axis=1) @ trout_clip.frame.lateral
+    s = np.linspace(0, 1, 37)
+    mesh_shift = (trout_clip.evaluate(0.25) - trout_clip.rest) @ trout_clip.frame.lateral
+    near = np.abs(trout_clip.s[:, None] - s[None]).argmin(axis=0)
+    assert np.abs(grid_shift - mesh_shift[near]).max() < 0.01  # both follow the same spine wave

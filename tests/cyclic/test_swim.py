@@ -82,3 +82,19 @@ def test_rotation_keeps_distance_to_the_spine():
     assert np.allclose(np.linalg.norm(moved_rel, axis=1), np.linalg.norm(rel, axis=1), atol=1e-12)
     trans = body_displacement(SwimParams.preset("eel", radial="translate"), s, rel, np.ones(40), axis, lat, t, 1.0)
     assert np.allclose(trans[0], delta[0][:, None] * lat)
+
+
+def test_vertical_wave_clip(trout_parts):
+    from pdeanim import container
+    from pdeanim.clip import load_clip
+    from pdeanim.cyclic.clipcyclic import encode_coefficients
+    from pdeanim.cyclic.spine import Spine
+
+    _, ca = container.unpack(trout_parts.coefficients)
+    params = SwimParams.preset("dolphin", direction="vertical")
+    coef = encode_coefficients(trout_parts.topology, Spine(ca["spine"]), params, 24)
+    clip = load_clip(trout_parts.topology, coef)
+    shift = clip.evaluate(0.25) - clip.evaluate(0.0)
+    up = np.abs(shift @ clip.frame.up).max()
+    side = np.abs(shift @ clip.frame.lateral).max()
+    assert up > 0.05 and side < 1e-6

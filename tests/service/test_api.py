@@ -200,3 +200,40 @@ def test_input_error_fails_the_job_without_retry(api, sphere, services):
         pytest.skip("the cyclic options reject this input at submission already")
     job = wait_job(api, r.json()["id"])
     assert job["state"] == "failed" and job["attempt"] == 1 and job["error"]["message"], job
+
+
+SCENE = {"frames": 12, "target_tets": 600}
+
+
+def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, services):
+    mesh = upload(api, "spot.obj", (data_dir / "spot.obj").read_bytes()).json()
+    r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE, "then_fit": True,
+                                   "fit": {"target_rel_rms": 0.005}})
+    assert r.status_code == 202, r.text
+    assert r.json()["params"]["params"]["seed"] == 0  # the record keeps every parameter, seed included
+    job = wait_job(api, r.json()["id"], timeout=240)
+    assert job["state"] == "succeeded", (job, services.logs())
+    poses = np.load(io.BytesIO(api.get(f"/v1/poses/{job['result']['poses_id']}").content))
+    assert poses["vertices"].shape == (12, mesh["vertices"], 3)
+    clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
+    assert clip["frames"] == 12 and clip["segments"] >= 1 and clip["looping"] is False
+    assert clip["errors"]["rel_rms"] <= 0.005 + 1e-9 and clip["poses_id"] == job["result"]["poses_id"]
+    frame = api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.37})
+    assert frame.status_code == 200 and frame.content[:4] == b"glTF"
+    assert_error(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 1.5}), 422, "t_out_of_range")
+    anim = api.get(f"/v1/clips/{clip['id']}/animation", params={"fps": 30})
+    assert anim.status_code == 200 and anim.content[:4] == b"glTF"
+
+
+def test_fit_job_on_uploaded_poses(api, sphere, services):
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"], "params": {"segments": 2}})
+    assert r.status_code == 202, r.text
+    assert r.json()["mesh_id"] == sphere["mesh"]["id"]
+    job = wait_job(api, r.json()["id"])
+    assert job["state"] == "succeeded", (job, services.logs())
+    clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
+    assert clip["kind"] == "dynamic-pde" and clip["segments"] == 2 and clip["poses_id"] == sphere["poses"]["id"]
+    assert_error(api.post("/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"],
+                                            "params": {"segments": -3}}), 422, "invalid_parameter")
+    assert_error(api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": sphere["mesh"]["id"],
+                                            "params": {"frames": 10 ** 6}}), 422)

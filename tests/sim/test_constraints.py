@@ -6,13 +6,18 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from scipy.linalg import polar
 from scipy.spatial.transform import Rotation
 
 from pdeanim.sim import kernels
-from scipy.linalg import polar
-
-from pdeanim.sim.constraints import corner_gradients, deformation_gradient, deviatoric_correction, \
-    extract_rotation, hydrostatic_correction, quat_to_matrix
+from pdeanim.sim.constraints import (
+    corner_gradients,
+    deformation_gradient,
+    deviatoric_correction,
+    extract_rotation,
+    hydrostatic_correction,
+    quat_to_matrix,
+)
 from pdeanim.sim.grid import box_tet_mesh
 from pdeanim.sim.xpbd import Material, build_model, rest_state, solve_constraints
 

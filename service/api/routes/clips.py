@@ -42,20 +42,31 @@ def _cached(clip_id: str, tenant: str, store: Store, cache, session) -> CachedCl
     return item
 
 
+def _count(info: dict, report: dict, name: str) -> int | None:
+    for source in (info, report):
+        for key in (name, f"n_{name}"):
+            value = source.get(key)
+            if isinstance(value, list):
+                return len(value)
+            if isinstance(value, int) and not isinstance(value, bool):
+                return value
+    return None
+
+
 def clip_out(row: ClipRecord, info: dict) -> ClipOut:
     """Wire form of a clip: counts from the clip's info, errors and sizes from the producer's report."""
     report = row.report or {}
     errors = {k: report[k] for k in SUMMARY_KEYS if k in report and not isinstance(report[k], list | dict)}
-    errors.update(report.get("errors", {}) if isinstance(report.get("errors"), dict) else {})
-    pick = {k: info.get(k, report.get(k)) for k in ("frames", "segments", "curves")}
-    for k, v in list(pick.items()):
-        pick[k] = len(v) if isinstance(v, list) else (v if isinstance(v, int) else None)
+    for source in (report.get("errors"), info.get("errors")):
+        if isinstance(source, dict):
+            errors.update({k: v for k, v in source.items() if not isinstance(v, list | dict)})
     return ClipOut(id=row.id, kind=row.kind, mesh_id=row.mesh_id, poses_id=row.poses_id, job_id=row.job_id,
                    topology_id=row.topology_id, looping=info.get("looping"), sizes=report.get("sizes", {}),
-                   errors=errors, info=info, created_at=row.created_at, **pick)
+                   errors=errors, info=info, created_at=row.created_at, frames=_count(info, report, "frames"),
+                   segments=_count(info, report, "segments"), curves=_count(info, report, "curves"))
 
 
-@router.get("/v1/clips/{clip_id}", operation_id="getClip", response_model=ClipOut, responses=responses(401, 404))
+@router.get("/v1/clips/{clip_id}", operation_id="getClip", response_model=ClipOut, responses=responses(401, 404, 422))
 def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreDep, cache: ClipCacheDep) -> ClipOut:
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
@@ -76,7 +87,7 @@ def _jsonable(value):  # noqa: ANN001, ANN202
 @router.get("/v1/clips/{clip_id}/coefficients", operation_id="getClipCoefficients", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}, "application/json": {}},
                              "description": "the coefficients part: pdeanim container, or its JSON form"},
-                       **responses(304, 401, 404)})
+                       **responses(304, 401, 404, 422)})
 def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep,
                      store: StoreDep) -> Response:
     """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form)."""

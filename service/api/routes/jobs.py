@@ -58,7 +58,7 @@ def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: S
     return job_out(job)
 
 
-@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut, responses=responses(401, 404))
+@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut, responses=responses(401, 404, 422))
 def get_job(job_id: str, tenant: TenantDep, session: SessionDep) -> JobOut:
     """State (queued, running, succeeded, failed), progress 0..1, stage, error and result ids."""
     return job_out(owned(session, Job, job_id, tenant, "job"))

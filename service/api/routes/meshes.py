@@ -51,7 +51,7 @@ async def upload_mesh(request: Request, tenant: TenantDep, store: StoreDep) -> M
 
 
 @router.get("/v1/meshes/{mesh_id}", operation_id="getMesh", response_model=MeshOut,
-            responses=responses(401, 404))
+            responses=responses(401, 404, 422))
 def get_mesh(mesh_id: str, tenant: TenantDep, session: SessionDep) -> MeshOut:
     """The mesh's stats: vertices, faces, components, watertight, bbox."""
     return mesh_out(owned(session, Mesh, mesh_id, tenant, "mesh"))
@@ -60,7 +60,7 @@ def get_mesh(mesh_id: str, tenant: TenantDep, session: SessionDep) -> MeshOut:
 @router.get("/v1/meshes/{mesh_id}/topology", operation_id="getMeshTopology", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}},
                              "description": "the topology part (pdeanim container)"},
-                       **responses(304, 401, 404)})
+                       **responses(304, 401, 404, 422)})
 def get_topology(mesh_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
                  settings: SettingsDep, clip_id: str | None = None) -> Response:
     """The static part of the mesh's latest clip (or of ``clip_id``), needed once per mesh by clients."""

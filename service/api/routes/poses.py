@@ -84,7 +84,7 @@ async def upload_poses(mesh_id: str, request: Request, tenant: TenantDep, store:
             responses={200: {"content": {"application/octet-stream": {}, "application/json": {
                 "schema": PosesOut.model_json_schema()}},
                 "description": "POSES.npz (vertices, faces, times); metadata with Accept: application/json"},
-                **responses(401, 404)})
+                **responses(401, 404, 422)})
 def get_poses(poses_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep) -> Response:
     """The poses as a .npz (``vertices`` (F,V,3) float32, ``faces``, ``times``), or metadata as JSON."""
     row = owned(session, PosesRecord, poses_id, tenant, "poses")

@@ -1,0 +1,81 @@
+"""Fast checks without servers: OpenAPI drift, docker-compose.yml, settings, the clip cache, ETags."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from service.api.cache import CachedClip, ClipCache
+from service.api.openapi import DEFAULT_PATH, openapi_text
+from service.settings import Settings
+from service.store.queue import QueuePolicy
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_openapi_file_matches_the_app():
+    assert DEFAULT_PATH.read_text() == openapi_text(), "openapi/openapi.json drifted: python -m service.api.openapi"
+
+
+def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
+    import json
+
+    doc = json.loads(openapi_text())
+    ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
+    assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
+                   "getJob", "getClip", "getClipCoefficients", "getClipFrame", "getClipAnimation"}
+    assert "HTTPValidationError" not in doc["components"]["schemas"]
+
+
+@pytest.mark.skipif(shutil.which("docker-compose") is None, reason="docker-compose is not installed")
+def test_docker_compose_file_is_valid():
+    out = subprocess.run(["docker-compose", "-f", str(ROOT / "docker-compose.yml"), "config", "-q"],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+
+
+def test_settings_defaults_and_environment(tmp_path, monkeypatch):
+    s = Settings(data_dir=tmp_path)
+    assert s.resolved_database_url() == f"sqlite:///{tmp_path / 'pdeanim.sqlite3'}"
+    assert s.resolved_blob_url() == f"file://{tmp_path / 'blobs'}"
+    monkeypatch.setenv("PDEANIM_DATABASE_URL", "postgresql+psycopg://u@h/db")
+    monkeypatch.setenv("PDEANIM_MAX_ATTEMPTS", "7")
+    s = Settings()
+    assert s.resolved_database_url() == "postgresql+psycopg://u@h/db" and s.max_attempts == 7
+    monkeypatch.setenv("PDEANIM_MAX_ATTEMPTS", "0")
+    with pytest.raises(ValueError):
+        Settings()
+
+
+def test_backoff_doubles_up_to_the_cap():
+    p = QueuePolicy(backoff_seconds=2, backoff_max_seconds=10)
+    assert [p.backoff(n) for n in (1, 2, 3, 4)] == [2, 4, 8, 10]
+
+
+def test_clip_cache_is_a_bounded_lru():
+    cache, loads = ClipCache(2), []
+
+    def loader(name):
+        def load():
+            loads.append(name)
+            return CachedClip("t", name, name, object())
+        return load
+
+    for name in ("a", "b", "a", "c", "b"):
+        cache.get(name, loader(name))
+    assert loads == ["a", "b", "c", "b"] and len(cache) == 2
+
+
+def test_etag_matching():
+    from starlette.requests import Request
+
+    from service.api.httpcache import etag_matches
+
+    def req(value):
+        return Request({"type": "http", "headers": [(b"if-none-match", value.encode())]})
+
+    assert etag_matches(req('"x", "abc"'), '"abc"') and etag_matches(req("*"), '"abc"')
+    assert etag_matches(req('W/"abc"'), '"abc"') and not etag_matches(req('"abd"'), '"abc"')
