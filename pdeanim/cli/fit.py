@@ -21,8 +21,9 @@ def register(subparsers) -> None:  # noqa: ANN001
     g.add_argument("--target-rel-max", type=float, help="max target relative to the bbox diagonal")
     g.add_argument("--segments", type=int, help="fixed number of time segments")
     p.add_argument("--param", choices=["chord", "paper"], default="chord", help="curve parameterisation")
-    p.add_argument("--motion", choices=["displacement", "absolute"], default="displacement",
-                   help="fit displacement from the first frame (default) or absolute positions")
+    p.add_argument("--motion", choices=["displacement", "absolute", "rigid"], default="displacement",
+                   help="fit displacement from the first frame (default), absolute positions, or per-curve "
+                        "rigid motion plus a residual")
     p.add_argument("--loop", action="store_true", help="make the clip loop (last frame flows into the first)")
     p.add_argument("--fps", type=float, default=30.0, help="sampling rate for glTF input")
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")

@@ -57,7 +57,7 @@ class DynamicClip:
         knots = self.coef.knots.astype(np.float64)[:, self._cid]  # (S+1, V, 3, 4)
         return np.einsum("vwk,svwk->svw", B, knots).astype(np.float32)
 
-    def _locate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _locate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t = np.asarray(t, dtype=np.float64)
         t = t - np.floor(t) if self.looping else np.clip(t, 0.0, 1.0)
         S = len(self.segment_t) - 1

@@ -31,9 +31,10 @@ from .fitcore import (
 )
 from .metrics import bbox_diagonal, error_summary
 from .parameterisation import PARAM_MODES, curve_parameters
+from .rigid import RigidTracks, fit_rigid, local_residual
 from .segments import Segmentation, uniform_segmentation
 
-MOTIONS = ("displacement", "absolute")
+MOTIONS = ("displacement", "absolute", "rigid")
 DEFAULT_TARGET_REL_RMS = 3e-3
 
 
@@ -43,7 +44,7 @@ class FitOptions:
 
     target_rms / target_max : absolute per-vertex distance; target_rel_rms / target_rel_max : relative to
     the first frame's bounding-box diagonal. param_mode "chord" | "paper"; motion "displacement" |
-    "absolute"; loop: periodic knots (last frame flows into the first); max_segments caps the adaptivity.
+    "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last frame flows into the first); max_segments caps the adaptivity.
     """
 
     target_rms: float | None = None
@@ -64,9 +65,11 @@ class FitOptions:
         """Raise ParameterError on a bad value; returns self."""
         for name in ("target_rms", "target_rel_rms", "target_max", "target_rel_max"):
             v = getattr(self, name)
-            if v is not None and not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+            if v is not None and not (isinstance(v, int | float) and not isinstance(v, bool)
+                                      and np.isfinite(v) and v > 0):
                 raise ParameterError(f"{name} must be a positive number, got {v!r}")
-        if self.segments is not None and not (isinstance(self.segments, int) and self.segments >= 1):
+        if self.segments is not None and not (isinstance(self.segments, int) and not isinstance(self.segments, bool)
+                                              and self.segments >= 1):
             raise ParameterError(f"segments must be an integer >= 1, got {self.segments!r}")
         if self.segments is not None and self.has_targets:
             raise ParameterError("give either a fixed segment count or error targets, not both")
@@ -131,8 +134,10 @@ class _Problem:
     idx: np.ndarray
     mask: np.ndarray
     u: np.ndarray  # (C, 3, N)
-    Y: np.ndarray  # (F, K, N) fitted values
+    values: np.ndarray  # (F, V, 3) what the curves fit (displacement, positions or rigid residual)
+    Y: np.ndarray  # (F, K, N) the same values as padded items
     t: np.ndarray  # (F,) normalised times
+    rigid: RigidTracks | None = None
 
 
 def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
@@ -143,15 +148,20 @@ def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
     rest = X[0].copy()
     idx, mask = curves.padded()
     u = curve_parameters(X[:, idx] if options.param_mode == "paper" else rest[idx], mask, options.param_mode)
-    base = rest if options.motion == "displacement" else np.zeros_like(rest)
-    Y = items_from_curves(X - base, idx, mask)
-    span = times[-1] - times[0]
-    return _Problem(X, rest, idx, mask, u, Y, (times - times[0]) / span)
+    t = (times - times[0]) / (times[-1] - times[0])
+    rigid = None
+    if options.motion == "rigid":
+        rigid = fit_rigid(rest[idx], X[:, idx], mask, t, options.loop)
+        values = local_residual(X, rest, curves.curve_of_vertex(len(rest))[0], rigid, t)
+    else:
+        values = X - rest if options.motion == "displacement" else X
+    return _Problem(X, rest, idx, mask, u, values, items_from_curves(values, idx, mask), t, rigid)
 
 
-def _distances(p: _Problem, space: SpaceStage, time_: TimeStage, base: np.ndarray) -> np.ndarray:
-    R = items_to_vertices(reconstruct_items(space, time_), p.idx, p.mask, p.X.shape[1]) + base
-    return np.linalg.norm(R - p.X, axis=-1)
+def _distances(p: _Problem, space: SpaceStage, time_: TimeStage) -> np.ndarray:
+    """(F, V) model-to-data distances (for rigid motion measured in the curves' frames: the same lengths)."""
+    R = items_to_vertices(reconstruct_items(space, time_), p.idx, p.mask, p.X.shape[1])
+    return np.linalg.norm(R - p.values, axis=-1)
 
 
 def _floor_distances(p: _Problem, space: SpaceStage) -> np.ndarray:
@@ -201,13 +211,12 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     sf = _space_fit(poses, options, curves, report_progress)
     p, space = sf.p, sf.space
     t_space = time.perf_counter()
-    base = p.rest if options.motion == "displacement" else np.zeros_like(p.rest)
     if options.segments:
         segm = uniform_segmentation(p.t, options.segments)
         fitted, met, floor_high, history = time_stage(space, segm, options.loop), None, False, []
     else:
         res = fit_adaptive(space, Segmentation(np.array([0, len(p.t) - 1]), p.t), sf.targets,
-                           lambda ts: _distances(p, space, ts, base), sf.floor_d,
+                           lambda ts: _distances(p, space, ts), sf.floor_d,
                            min(options.max_segments, len(p.t) - 1), options.loop,
                            sub_progress(progress, 0.1, 0.9))
         fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
@@ -216,7 +225,7 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     parts = _encode(p, sf.curves, space, fitted, options, poses)
     clip = _decode(parts)
     approx = clip.evaluate(clip.frame_t())
-    exact = _distances(p, space, fitted, base)
+    exact = _distances(p, space, fitted)
     report = _report(p, approx, exact, sf.floor_d, fitted, sf.targets, met, floor_high, history, options,
                      sf.curves, sf.diag, poses)
     report["curve_points"] = sf.curve_points
@@ -273,6 +282,8 @@ def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage,
     u_v[p.idx[p.mask]] = np.moveaxis(p.u, 1, 2)[p.mask]
     topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode)
     coef = _coefficient_data(space, fitted, options, np.asarray(poses.times, np.float64), errors or {})
+    if p.rigid is not None:
+        coef.extra = p.rigid.arrays()
     return ClipParts(topology, encode_coefficients(topology, coef))
 
 

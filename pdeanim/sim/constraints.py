@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-ROTATION_ITERATIONS = 2
+ROTATION_ITERATIONS = 1
 """Warm-started iterations of the rotation extraction of Muller et al. 2016 per constraint solve (the guess
 carries over from the previous substep, so the rotation is tracked, not recomputed from scratch)."""
 

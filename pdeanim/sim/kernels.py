@@ -147,12 +147,12 @@ PARALLEL_MIN_TETS = 4096
 busy cores)."""
 
 if AVAILABLE:
-    _deformation = njit(inline="always", cache=True, fastmath=True)(_deformation)
-    _quat_matrix = njit(inline="always", cache=True, fastmath=True)(_quat_matrix)
-    _rotation = njit(inline="always", cache=True, fastmath=True)(_rotation)
-    _project = njit(inline="always", cache=True, fastmath=True)(_project)
-    _solve_tet = njit(inline="always", cache=True, fastmath=True)(_solve_tet)
-    _solve_range_serial = njit(cache=True, fastmath=True)(_solve_range)
+    _deformation = njit(inline="always", cache=True)(_deformation)
+    _quat_matrix = njit(inline="always", cache=True)(_quat_matrix)
+    _rotation = njit(inline="always", cache=True)(_rotation)
+    _project = njit(inline="always", cache=True)(_project)
+    _solve_tet = njit(inline="always", cache=True)(_solve_tet)
+    _solve_range_serial = njit(cache=True)(_solve_range)
     _solve_range_parallel = njit(parallel=True, cache=True)(_solve_range)
     _solve_sweep = njit(cache=True)(_solve_sweep)
 else:  # pragma: no cover

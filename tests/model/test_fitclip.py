@@ -144,3 +144,46 @@ def test_curve_errors_per_curve(morph_small, short_curves):
     sub = make_poses(morph_small.vertices[::4], morph_small.faces)
     e = curve_errors(sub, short_curves, FitOptions(segments=2))
     assert e["rms"].shape == (short_curves.n_curves,) and np.all(e["floor_rms"] <= e["rms"] + 1e-6)
+
+
+def test_every_frame_is_used_and_progress_reported(morph_small, short_curves):
+    """Moving one interior frame (not a segment end) changes the fit; progress goes from 0 to 1."""
+    calls = []
+    base = fit_poses(morph_small, FitOptions(segments=2), curves=short_curves,
+                     progress=lambda f, s: calls.append((f, s)))
+    v = morph_small.vertices.copy()
+    v[17] += 0.05
+    moved = fit_poses(make_poses(v, morph_small.faces, morph_small.times), FitOptions(segments=2),
+                      curves=short_curves)
+    assert 17 not in base.report["segment_frames"]
+    assert base.coefficients != moved.coefficients
+    fractions = [f for f, _ in calls]
+    assert fractions[-1] == 1.0 and all(0.0 <= f <= 1.0 for f in fractions)
+    assert fractions == sorted(fractions)
+
+
+def test_paper_coefficients_of_a_stored_segment(fixed_fit):
+    """The stored knots convert to the paper's c1..c8 and evaluate to the same curve."""
+    from pdeanim.model.families import (
+        evaluate_family,
+        family_kinds,
+        paper_coefficients,
+        space_basis_paper,
+        time_basis_paper,
+    )
+
+    ch, ca = container.unpack(fixed_fit.coefficients)
+    th, ta = container.unpack(fixed_fit.topology)
+    s, c, w = 2, 5, 1
+    code, m, D = int(ca["family"][s, c, w]), float(ca["m"][s, c, w]), float(ca["D"][c, w])
+    if m == 0 or D == 0:
+        m, D = max(m, 0.3), max(D, 0.7)  # the paper's basis is degenerate at 0; check the map elsewhere
+    coef = np.stack([ca["knots"][s, c, w], ca["knots"][s + 1, c, w]]).astype(np.float64)
+    t0, t1 = float(ca["segment_t"][s]), float(ca["segment_t"][s + 1])
+    u = np.linspace(0, 1, 9)
+    tau = np.linspace(0, 1, 5)
+    ours = evaluate_family(u, tau, code, m, D, coef)
+    mg, _, c8 = paper_coefficients(code, m, D, coef, t0, t1)
+    tk, sk = family_kinds(code)
+    paper = time_basis_paper(t0 + tau * (t1 - t0), mg, tk) @ c8.reshape(2, 4) @ space_basis_paper(u, D, sk).T
+    np.testing.assert_allclose(paper, ours, atol=1e-8 * max(1.0, np.abs(c8).max()))
