@@ -31,12 +31,14 @@ class StageClock:
     seconds: dict[str, float] = field(default_factory=dict)
 
     def see(self, stage: str, now: float) -> None:
+        """Account the time since the last change to the previous stage."""
         name = (stage.split() or ["?"])[0].rstrip(":")
         if name != self.current:
             self.stop(now)
             self.current, self.since = name, now
 
     def stop(self, now: float) -> None:
+        """Close the running stage."""
         if self.current is not None:
             self.seconds[self.current] = self.seconds.get(self.current, 0.0) + now - self.since
             self.current = None
@@ -63,6 +65,7 @@ class DemoServices:
         self.log = open(data_dir / "services.log", "ab")  # noqa: SIM115 - closed in stop()
 
     def start(self) -> str:
+        """Start both processes and wait for /healthz; returns the base URL."""
         for args in (["serve", "--port", str(self.port)], ["worker", "--log-level", "WARNING"]):
             self.procs.append(subprocess.Popen(CLI + args, env=self.env, stdout=self.log, stderr=subprocess.STDOUT))
         url = f"http://127.0.0.1:{self.port}"
@@ -78,6 +81,7 @@ class DemoServices:
         raise RuntimeError("the API server did not answer /healthz within 90 s")
 
     def stop(self) -> None:
+        """SIGTERM both and wait (kill after 30 s)."""
         for proc in self.procs:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)

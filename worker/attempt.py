@@ -25,6 +25,7 @@ class Heartbeat(threading.Thread):
         self.lost, self.done = threading.Event(), threading.Event()
 
     def run(self) -> None:
+        """Beat until done or lost."""
         interval = max(self.queue.policy.lease_seconds / 3.0, 0.05)
         while not self.done.wait(interval):
             try:

@@ -47,6 +47,14 @@ def _alive(pid: int) -> bool:
         return True
 
 
+def _warm_blas() -> None:
+    import numpy as np
+
+    a = np.ones((256, 256))
+    np.dot(a, a)
+    np.linalg.solve(a + 256 * np.eye(256), a[0])
+
+
 def child_main(conn, job: dict[str, Any], settings_json: str, parent_pid: int) -> None:  # noqa: ANN001
     """Entry point of the child: run the job's stage, send the outcome on ``conn``, and exit at once."""
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
@@ -82,6 +90,7 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
     try:
         blobs = open_blob_store(settings)
         if settings.job_memory_bytes:
+            _warm_blas()  # BLAS allocates its buffers now: under the limit it may hang instead of failing
             resource.setrlimit(resource.RLIMIT_AS, (settings.job_memory_bytes, resource.RLIM_INFINITY))
         result = STAGES[job["kind"]](job, blobs, settings, progress, workdir)
         conn.send(("done", result))

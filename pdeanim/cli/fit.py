@@ -50,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fmt(v: float | None) -> str:
+    return "-" if v is None else f"{v:.4g}"
+
+
 def summary_text(r: dict, seconds: float, out: str) -> str:
     """A few lines: achieved errors, target, sizes against raw, time."""
     s = r["sizes"]
@@ -60,7 +64,7 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         f"{r['segments']} segments",
         f"rms {r['rms']:.4g} (rel {r['rel_rms']:.3g})  max {r['max']:.4g} (rel {r['rel_max']:.3g})  "
         f"KG {r['kg']:.3g}  spatial floor rel rms {r['floor_rel_rms']:.3g}",
-        f"target rms={target.get('rms')} max={target.get('max')}: "
+        f"target rms={_fmt(target.get('rms'))} max={_fmt(target.get('max'))}: "
         + ("met" if met else "fixed segments" if met is None else "NOT met")
         + (" (the curves' spatial floor is above the target)" if r.get("floor_exceeds_target") else ""),
         f"bytes: topology {s['topology_bytes']}, coefficients {s['coefficients_bytes']}, "

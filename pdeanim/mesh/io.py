@@ -106,6 +106,7 @@ def load_mesh(source: str | Path | bytes, *, filename: str | None = None, limits
               merge_seams: bool = False) -> SurfaceMesh:
     """Read and validate a mesh from a path, or from bytes plus ``filename`` (for its extension)."""
     limits = limits or MeshLimits()
+    folder = None  # external glTF buffers resolve next to a file on disk, never for uploaded bytes
     if isinstance(source, bytes | bytearray | memoryview):
         data = bytes(source)
         name = filename or ""
@@ -118,12 +119,13 @@ def load_mesh(source: str | Path | bytes, *, filename: str | None = None, limits
         if size > limits.max_file_bytes:
             raise LimitError("mesh file size in bytes", size, limits.max_file_bytes, "PDEANIM_MAX_MESH_BYTES")
         data = path.read_bytes()
+        folder = path.parent
     if len(data) > limits.max_file_bytes:
         raise LimitError("mesh file size in bytes", len(data), limits.max_file_bytes, "PDEANIM_MAX_MESH_BYTES")
     file_type = file_type_of(name)
     if len(data) == 0:
         raise MeshInputError(f"mesh file {name!r} is empty")
-    vertices, faces = parse_mesh(data, file_type, name)
+    vertices, faces = parse_mesh(data, file_type, name, folder)
     validate_arrays(vertices, faces, name, limits)
     mesh = SurfaceMesh(vertices, faces, source=name)
     return merge_duplicate_vertices(mesh) if merge_seams else mesh
@@ -137,11 +139,16 @@ def file_type_of(name: str) -> str:
     return FORMATS[suffix]
 
 
-def parse_mesh(data: bytes, file_type: str, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """Parse bytes with trimesh into raw (V, 3) float64 vertices and (T, 3) int64 faces (not yet validated)."""
+def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Parse bytes with trimesh into raw (V, 3) float64 vertices and (T, 3) int64 faces (not yet validated).
+
+    ``folder`` lets a .gltf on disk load its external buffers; bytes from an upload get no resolver.
+    """
     import trimesh
 
-    kwargs = {"process": False}
+    kwargs: dict = {"process": False}
+    if folder is not None:
+        kwargs["resolver"] = trimesh.resolvers.FilePathResolver(str(folder))
     if file_type == "obj":
         kwargs["maintain_order"] = True
     logger = logging.getLogger("trimesh")

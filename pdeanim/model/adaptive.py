@@ -81,7 +81,7 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
     floor_targets, floor_high = _effective_targets(targets, floor_d)
     history: list[dict] = []
     while True:
-        time = time_stage(space, segm, loop)
+        time = time_stage(space, segm, loop, refine_iters=SEARCH_REFINE)
         d = distances(time)
         badness, met = _frame_badness(d, floor_targets)
         history.append({"segments": segm.n_segments, "rms": float(np.sqrt(np.mean(d * d))),
@@ -95,8 +95,52 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
         if new.n_segments == segm.n_segments:
             break
         segm = new
+    if met and not floor_high:
+        time, d = _merge(space, time, d, floor_targets, distances, loop, history)
+    time, d = _polish(space, time, d, distances, loop, floor_targets)
     _, met_real = _frame_badness(d, targets)
     return AdaptiveResult(time, met_real, floor_high, history)
+
+
+MAX_MERGE_TRIES = 3
+SEARCH_REFINE = 3
+"""Golden steps for the time constants while searching segmentations (the chosen one gets the full count)."""
+
+
+def _polish(space: SpaceStage, time: TimeStage, d: np.ndarray, distances: Callable[[TimeStage], np.ndarray],
+            loop: bool, targets: Targets) -> tuple[TimeStage, np.ndarray]:
+    """Refit the chosen segmentation with the full refinement; keep it only if it is better and still meets
+    every target the search met."""
+    fine = time_stage(space, time.segm, loop)
+    df = distances(fine)
+    met_before, met_after = _frame_badness(d, targets)[1], _frame_badness(df, targets)[1]
+    better = np.sum(df * df) <= np.sum(d * d) and (met_after or not met_before)
+    return (fine, df) if better else (time, d)
+
+
+def _merge(space: SpaceStage, time: TimeStage, d: np.ndarray, targets: Targets,
+           distances: Callable[[TimeStage], np.ndarray], loop: bool, history: list[dict]
+           ) -> tuple[TimeStage, np.ndarray]:
+    """Greedily remove segment boundaries (quietest neighbours first) while the targets stay met."""
+    tries = 0
+    while time.segm.n_segments > 1 and tries < MAX_MERGE_TRIES:
+        segm = time.segm
+        badness, _ = _frame_badness(d, targets)
+        energy = np.bincount(segm.frame_segment(), badness**2, minlength=segm.n_segments)
+        order = np.argsort(energy[:-1] + energy[1:], kind="stable")
+        merged = False
+        for s in order[: MAX_MERGE_TRIES - tries]:
+            tries += 1
+            cand = time_stage(space, segm.merge(int(s)), loop, refine_iters=SEARCH_REFINE)
+            dc = distances(cand)
+            if _frame_badness(dc, targets)[1]:
+                time, d, merged = cand, dc, True
+                history.append({"segments": cand.segm.n_segments, "rms": float(np.sqrt(np.mean(dc * dc))),
+                                "max": float(dc.max()), "merged": True})
+                break
+        if not merged:
+            break
+    return time, d
 
 
 def _effective_targets(targets: Targets, floor_d: np.ndarray) -> tuple[Targets, bool]:

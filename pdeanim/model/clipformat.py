@@ -4,7 +4,8 @@ Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + c
 
     order    (V,)      int32    vertex indices curve by curve (CurveSet CSR order)
     offsets  (C+1,)    int32    curve c is order[offsets[c]:offsets[c+1]]
-    u        (V, 3)    float32  curve parameter of every vertex (original order), per coordinate
+    u        (V, 1|3)  float32  curve parameter of every vertex (original order): one column when x, y, z
+                                share it (chord length), per coordinate otherwise (paper mode)
     faces    (T, 3)    int32    original faces
     rest     (V, 3)    float32  first-frame positions (original order)
     header: format_version 1, n_vertices, n_curves, param_mode
@@ -80,9 +81,12 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
     """Topology part bytes from curves, u (V, 3), faces (T, 3), rest (V, 3)."""
     header = {"part": "topology", "model": "dynamic-pde", "format_version": FORMAT_VERSION,
               "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
+    u = np.asarray(u, np.float32)
+    if u.ndim == 2 and u.shape[1] == 3 and np.array_equal(u[:, :1], u[:, 1:2]) and np.array_equal(u[:, :1], u[:, 2:]):
+        u = u[:, :1]
     return container.pack(header, {
         "order": np.asarray(curves.order, np.int32), "offsets": np.asarray(curves.offsets, np.int32),
-        "u": np.asarray(u, np.float32), "faces": np.asarray(faces, np.int32).reshape(-1, 3),
+        "u": u, "faces": np.asarray(faces, np.int32).reshape(-1, 3),
         "rest": np.asarray(rest, np.float32)})
 
 
@@ -124,7 +128,10 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
     faces = _need(arrays, "faces", (None, 3), "topology")
     if faces.size and (faces.min() < 0 or faces.max() >= V):
         raise ClipFormatError("topology faces index outside the vertices")
-    return TopologyData(curves, _need(arrays, "u", (V, 3), "topology"), faces,
+    u = _need(arrays, "u", (V, None), "topology")
+    if u.shape[1] not in (1, 3):
+        raise ClipFormatError(f"topology array 'u' must have 1 or 3 columns, got {u.shape[1]}")
+    return TopologyData(curves, np.broadcast_to(u, (V, 3)), faces,
                         _need(arrays, "rest", (V, 3), "topology"), str(header.get("param_mode", "chord")))
 
 

@@ -8,6 +8,7 @@ positions = rest + phi0 * P[s] + phi1 * P[s+1] (a few multiply-adds per vertex).
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
@@ -33,7 +34,8 @@ class DynamicClip:
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
-        self._knot_fields = self._precompute(fam[0] % 2)
+        self._knot_fields = self._precompute(fam[0] % 2).reshape(len(self._mu) + 1, -1)  # (S+1, V*3)
+        self._local = threading.local()
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
@@ -41,6 +43,7 @@ class DynamicClip:
             self._base = (topo.rest - self._rigid.centre0[self._cid]).astype(np.float32)
         else:
             self._base = np.zeros((self.n_vertices, 3), np.float32)
+        self._base_flat = self._base.ravel()
         item_of = (self._cid[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item of every value
         self._gather = [st.position[item_of].astype(np.intp) for st in self._time]  # per segment
 
@@ -68,14 +71,17 @@ class DynamicClip:
 
     def _frame(self, s: int, tau: float) -> np.ndarray:
         phi0, phi1 = self._time[s].pair(tau)  # (C*3,) each
-        shape = (self.n_vertices, 3)
-        out = np.take(phi0, self._gather[s]).reshape(shape)
-        out *= self._knot_fields[s]
-        p1 = np.take(phi1, self._gather[s]).reshape(shape)
-        p1 *= self._knot_fields[s + 1]
-        out += p1
-        out += self._base
-        return out
+        bufs = getattr(self._local, "bufs", None)
+        if bufs is None:  # per-thread scratch (avoids fresh large allocations on every frame)
+            bufs = self._local.bufs = (np.empty(self.n_vertices * 3, np.float32),
+                                       np.empty(self.n_vertices * 3, np.float32))
+        b0, b1 = bufs
+        np.take(phi0, self._gather[s], out=b0)
+        np.multiply(b0, self._knot_fields[s], out=b0)
+        np.take(phi1, self._gather[s], out=b1)
+        np.multiply(b1, self._knot_fields[s + 1], out=b1)
+        np.add(b0, b1, out=b0)
+        return np.add(b0, self._base_flat).reshape(self.n_vertices, 3)
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
         """Positions in the original vertex order: (V, 3) float32 for scalar t, (K, V, 3) for an array."""

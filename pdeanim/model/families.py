@@ -197,6 +197,7 @@ def space_to_paper(D: float, space_kind: str) -> np.ndarray:
     T = {"cos": np.array([math.cos(h), math.sin(h)]), "sin": np.array([-math.sin(h), math.cos(h)])}
 
     def prod(e: str, t: str) -> np.ndarray:
+        """Paper-basis coefficients of (exponential part e) x (trigonometric part t)."""
         return np.outer(E[e], T[t]).ravel()
 
     if D < D_SWITCH:
@@ -310,7 +311,7 @@ def time_pair(tau: np.ndarray, mu: np.ndarray) -> np.ndarray:
     ex = ~trig
     te, me = tau[ex], mu[ex]
     out[ex, 1], out[ex, 0] = _sinh_ratio(te, me), _sinh_ratio(1.0 - te, me)
-    tt, mt = tau[trig], np.minimum(-mu[trig], MU_TRIG_MAX)
-    sm = _sc(mt)
-    out[trig, 1], out[trig, 0] = tt * _sc(mt * tt) / sm, (1.0 - tt) * _sc(mt * (1.0 - tt)) / sm
+    tt, mt = tau[trig], np.clip(-mu[trig], 1e-150, MU_TRIG_MAX)
+    inv = 1.0 / np.sin(mt)  # 0 < m < pi: sin m > 0, and sin(m tau) / sin(m) -> tau as m -> 0
+    out[trig, 1], out[trig, 0] = np.sin(mt * tt) * inv, np.sin(mt * (1.0 - tt)) * inv
     return out

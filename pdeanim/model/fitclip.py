@@ -87,6 +87,7 @@ class FitOptions:
 
     @property
     def has_targets(self) -> bool:
+        """Whether any error target is set."""
         return any(getattr(self, n) is not None for n in ("target_rms", "target_rel_rms", "target_max",
                                                              "target_rel_max"))
 
@@ -106,6 +107,7 @@ class FitOptions:
     def targets(self, diagonal: float) -> Targets:
         """Absolute targets (the tighter of absolute and relative where both are given)."""
         def pick(a: float | None, rel: float | None) -> float | None:
+            """The tighter of an absolute and a relative target (None if neither)."""
             vals = [v for v in (a, None if rel is None else rel * diagonal) if v is not None]
             return min(vals) if vals else None
         rel_rms = self.target_rel_rms

@@ -63,9 +63,9 @@ def space_stage(Y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> SpaceStage:
     return SpaceStage(proj, b, floor)
 
 
-def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False) -> TimeStage:
+def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine_iters: int = 8) -> TimeStage:
     """Fit C0 knot tracks for one segmentation; errors per item and frame include the spatial floor."""
-    z, mu = fit_tracks(space.b, segm, loop)
+    z, mu = fit_tracks(space.b, segm, loop, refine_iters=refine_iters)
     pred = predict(z, segm, mu)
     err = space.floor_frames + ((space.b - pred) ** 2).sum(-1)
     knots = np.einsum("kab,ksb->ksa", space.proj.to_coef, z)

@@ -62,6 +62,7 @@ def kabsch(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> tuple[np.n
     """Best rotation per frame and curve: (R (F, C, 3, 3), centroids (F, C, 3), centre0 (C, 3)).
 
     rest : (C, N, 3); frames : (F, C, N, 3); mask : (C, N) bool. x_f ~ R_f (p - centre0) + centroid_f.
+    Curves whose points are (nearly) collinear get the identity rotation.
     """
     w = mask[..., None].astype(np.float64)
     n = np.maximum(w.sum(axis=1), 1.0)
@@ -76,6 +77,9 @@ def kabsch(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> tuple[np.n
     Dm = np.ones(H.shape[:-1])
     Dm[..., 2] = d
     R = np.swapaxes(Vt, -1, -2) @ (Dm[..., None] * np.swapaxes(U, -1, -2))
+    sv = np.linalg.svd(P, compute_uv=False)  # (C, 3): a curve on a line has no defined roll
+    flat = (sv[:, 1] <= 1e-6 * np.maximum(sv[:, 0], 1e-300)) if sv.shape[1] > 1 else np.ones(len(sv), bool)
+    R[:, flat] = np.eye(3)  # points or collinear curves: translation only (the residual takes the rest)
     return R, cf, c0
 
 

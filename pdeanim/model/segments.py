@@ -30,6 +30,7 @@ class Segmentation:
 
     @property
     def n_segments(self) -> int:
+        """Number of segments S."""
         return int(len(self.bounds) - 1)
 
     @property

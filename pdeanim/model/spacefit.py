@@ -4,7 +4,8 @@ For fixed (kind, D) the 4 space functions of an item (one curve, one coordinate)
 N points; the part of every frame orthogonal to it is the *spatial floor*, which no time model can remove.
 With the Gram matrix G = sum_frames y y^T of an item, floor(D) = trace(G) - trace(U^T G U) for an
 orthonormal basis U of the space functions (SVD, so short curves with N < 4 are fine). D is searched on a
-coarse grid for both space kinds, then refined by a golden-section search vectorised over all items.
+coarse grid for both space kinds, then refined (one parabolic step, then a few golden-section steps),
+vectorised over all items.
 """
 
 from __future__ import annotations
@@ -40,11 +41,17 @@ class SpaceProjection:
 
 
 def orthonormal_basis(u: np.ndarray, mask: np.ndarray, D: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """(U (K, N, 4), to_coef (K, 4, 4)) for items with parameters u (K, N), mask (K, N), D (K,)."""
+    """(U (K, N, 4), to_coef (K, 4, 4)) for items with parameters u (K, N), mask (K, N), D (K,).
+
+    Directions the curve's points cannot determine (N < 4, coincident points) get zero columns.
+    """
     S = space_basis(u, D, kind) * mask[..., None]
+    K, N = S.shape[:2]
+    if N < 4:  # pad with zero rows so the SVD always has 4 columns of U
+        S = np.concatenate([S, np.zeros((K, 4 - N, 4))], axis=1)
     U, s, Vt = np.linalg.svd(S, full_matrices=False)
     keep = s > RANK_TOL * np.maximum(s[:, :1], 1e-300)
-    U = U * keep[:, None, :]
+    U = (U * keep[:, None, :])[:, :N]
     inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
     to_coef = np.swapaxes(Vt, -1, -2) * inv[:, None, :]
     return U, to_coef
@@ -80,8 +87,9 @@ def _shared_u(u: np.ndarray) -> bool:
 
 
 def search_D(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, kinds: tuple[str, ...] = SPACE_KINDS,
-             refine_iters: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Best (kind index (K,), D (K,), floor energy (K,)) per item: coarse grid over D, then golden refinement."""
+             refine_iters: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best (kind index (K,), D (K,), floor energy (K,)) per item: coarse grid over D, one parabolic step,
+    then (refine_iters > 0) golden-section refinement."""
     energy = np.trace(gram, axis1=1, axis2=2)
     K = len(u)
     share = 3 if _shared_u(u) else 1
@@ -96,8 +104,11 @@ def search_D(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, kinds: tuple[str
     kind_i, grid_i = np.divmod(best, len(D_GRID))
     lo = D_GRID[np.maximum(grid_i - 1, 0)]
     hi = D_GRID[np.minimum(grid_i + 1, len(D_GRID) - 1)]
-    D, capD = _golden(u, mask, gram, kind_i, lo, hi, D_GRID[grid_i], cap[kind_i, grid_i, np.arange(K)],
-                      kinds, refine_iters)
+    ar = np.arange(K)
+    f = [cap[kind_i, np.clip(grid_i + k, 0, len(D_GRID) - 1), ar] for k in (-1, 0, 1)]
+    D, capD = _parabolic(u, mask, gram, kind_i, lo, D_GRID[grid_i], hi, f, kinds)
+    if refine_iters > 0:
+        D, capD = _golden(u, mask, gram, kind_i, lo, hi, D, capD, kinds, refine_iters)
     D = D.astype(np.float32).astype(np.float64)
     D, kind_i, capD = _well_conditioned(u, mask, gram, kind_i, D, capD, cap[0, 0], kinds)
     return kind_i, D, np.maximum(energy - capD, 0.0)
@@ -111,7 +122,7 @@ def _well_conditioned(u, mask, gram, kind_i, D, capD, cap0, kinds):
         if np.any(sel):
             s = np.linalg.svd(space_basis(u[sel], D[sel], kind) * mask[sel][..., None], compute_uv=False)
             n_pts = mask[sel].sum(axis=1)
-            k = np.minimum(n_pts, 4) - 1
+            k = np.minimum(np.minimum(n_pts, 4), s.shape[1]) - 1
             cond[sel] = s[:, 0] / np.maximum(s[np.arange(len(s)), k], 1e-300)
     bad = cond > COND_MAX
     return np.where(bad, 0.0, D), np.where(bad, 0, kind_i), np.where(bad, cap0, capD)
@@ -124,6 +135,19 @@ def _captured_mixed(u, mask, gram, kind_i, D, kinds) -> np.ndarray:
         if np.any(sel):
             out[sel] = captured_energy(u[sel], mask[sel], gram[sel], D[sel], kind)
     return out
+
+
+def _parabolic(u, mask, gram, kind_i, x0, x1, x2, f, kinds):
+    """One parabolic step through the best grid value and its neighbours; kept where it captures more."""
+    f0, f1, f2 = f
+    a, b = (x1 - x0) * (f1 - f2), (x1 - x2) * (f1 - f0)
+    den = a - b
+    ok = (np.abs(den) > 1e-300) & (x0 < x1) & (x1 < x2)
+    vertex = x1 - 0.5 * ((x1 - x0) * a - (x1 - x2) * b) / np.where(ok, den, 1.0)
+    vertex = np.where(ok, np.clip(vertex, x0, x2), x1)
+    fv = _captured_mixed(u, mask, gram, kind_i, vertex, kinds)
+    better = fv > f1 + GAIN_TOL * np.trace(gram, axis1=1, axis2=2)
+    return np.where(better, vertex, x1), np.where(better, fv, f1)
 
 
 def _golden(u, mask, gram, kind_i, lo, hi, best_D, best_cap, kinds, iters):

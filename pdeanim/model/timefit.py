@@ -162,7 +162,7 @@ def _refine(b, z, segm, mu, lo, hi, iters):
     return np.where(fx < f_cur, x, mu)
 
 
-def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_iters: int = 10,
+def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_iters: int = 8,
                rounds: int = 1, grid: np.ndarray = MU_GRID) -> tuple[np.ndarray, np.ndarray]:
     """Knots z (K, S + 1, 4) and signed constants mu (K, S) (float32-representable) for tracks b (K, F, 4).
 
@@ -171,14 +171,13 @@ def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_ite
     order = np.argsort(grid[1:]) + 1
     sorted_grid = np.concatenate([[grid[0]], grid[order]])
     errs = _free_fit_errors(b, segm, sorted_grid)
-    mu = sorted_grid[_pick_grid(errs, sorted_grid)]
+    mu = sorted_grid[_pick_grid(errs, sorted_grid)].astype(np.float32).astype(np.float64)
     z = solve_knots(b, segm, mu, loop)
     ladder = np.sort(sorted_grid)
     pos = np.searchsorted(ladder, mu)
     lo = ladder[np.maximum(pos - 1, 0)]
     hi = ladder[np.minimum(pos + 1, len(ladder) - 1)]
     for _ in range(rounds if refine_iters > 0 else 0):
-        mu = _refine(b, z, segm, mu, lo, hi, refine_iters)
+        mu = _refine(b, z, segm, mu, lo, hi, refine_iters).astype(np.float32).astype(np.float64)
         z = solve_knots(b, segm, mu, loop)
-    mu = mu.astype(np.float32).astype(np.float64)
-    return solve_knots(b, segm, mu, loop), mu
+    return z, mu

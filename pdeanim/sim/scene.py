@@ -5,7 +5,8 @@ Regions (for pins and drivers) are dicts with one of
 ``{"plane": [px, py, pz, nx, ny, nz]}`` (the side (x - p) . n <= 0), plus ``"relative": true`` to give points
 as fractions of the rest bounding box. A driver is ``{"region": REGION, "keyframes": [{"t": 0..1,
 "rotate": [ax, ay, az, degrees], "translate": [x, y, z]}, ...], "center": [x, y, z] (default: region centroid)}``
-with t normalised over the clip; rotations are slerped and translations lerped between keyframes.
+with t normalised over the clip; rotations are slerped and translations lerped between keyframes. ``seed`` is
+recorded with the job; the solver has no randomness (the same mesh, tets and parameters give the same poses).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ class SceneParams:
     duration: float | None = None
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     damping: float = 1.0
-    young: float = 1e5
+    young: float = 1e6
     poisson: float = 0.3
     density: float = 1000.0
     pins: list[dict] = field(default_factory=list)

@@ -2,8 +2,9 @@
 
 An immutable rest model (:class:`SimModel`) holds everything derived from the tet mesh and the material; a
 :class:`SimState` holds positions, velocities and time; ``step(model, state_in, state_out, dt)`` advances one
-substep. Compliances come from Lame parameters times rest volume, so stiffness is independent of iteration
-count, step size and resolution; inverse masses are lumped from density.
+substep. Compliances come from Lame parameters times rest volume, so the stiffness the solver converges to does
+not depend on iteration count or resolution; steps too long for the material's waves make any XPBD softer
+than it should be (``simulate.auto_substeps`` picks them short enough). Inverse masses are lumped from density.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ Kinematic = Callable[[float], np.ndarray]
 class Material:
     """Young's modulus (Pa), Poisson ratio, density (kg/m^3) and mass-proportional velocity damping (1/s)."""
 
-    young: float = 1e5
+    young: float = 1e6
     poisson: float = 0.3
     density: float = 1000.0
     damping: float = 1.0
@@ -108,7 +109,8 @@ def lumped_masses(tets: TetMesh, density: float) -> np.ndarray:
     return np.bincount(tets.tets.ravel(), np.repeat(density * vol / 4.0, 4), minlength=tets.n_points)
 
 
-def build_model(tets: TetMesh, material: Material, gravity=(0.0, -9.81, 0.0), fixed: np.ndarray | None = None,
+def build_model(tets: TetMesh, material: Material, gravity: tuple[float, float, float] = (0.0, -9.81, 0.0),
+                fixed: np.ndarray | None = None,
                 kinematic: Kinematic | None = None, ground: Ground | None = None, iterations: int = 1,
                 backend: str | None = None) -> SimModel:
     """Precompute rest shapes, masses, compliances and the colouring; ``fixed`` points get zero inverse mass."""

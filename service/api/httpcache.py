@@ -7,6 +7,7 @@ from collections.abc import Callable
 from fastapi import Request, Response
 
 IMMUTABLE = "public, max-age=31536000, immutable"
+REVALIDATE = "no-cache"  # for URLs whose content may change (e.g. "the latest clip's topology")
 
 
 def etag_matches(request: Request, etag: str) -> bool:
@@ -19,10 +20,10 @@ def etag_matches(request: Request, etag: str) -> bool:
 
 
 def immutable_response(request: Request, tag: str, body: Callable[[], bytes], media_type: str,
-                       headers: dict[str, str] | None = None) -> Response:
-    """304 if the client has ``tag`` already, else the body with ETag and immutable caching."""
+                       headers: dict[str, str] | None = None, cache_control: str = IMMUTABLE) -> Response:
+    """304 if the client has ``tag`` already, else the body with ETag and (by default) immutable caching."""
     etag = f'"{tag}"'
-    common = {"ETag": etag, "Cache-Control": IMMUTABLE, **(headers or {})}
+    common = {"ETag": etag, "Cache-Control": cache_control, **(headers or {})}
     if etag_matches(request, etag):
         return Response(status_code=304, headers=common)
     return Response(body(), media_type=media_type, headers=common)

@@ -8,6 +8,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 
 class ErrorBody(BaseModel):
+    """The inside of every error answer."""
+
     code: str = Field(description="stable machine-readable code, e.g. invalid_mesh, not_found")
     message: str = Field(description="what went wrong, for people")
 
@@ -19,12 +21,16 @@ class ErrorOut(BaseModel):
 
 
 class Health(BaseModel):
+    """Reachability of what the service depends on."""
+
     status: Literal["ok", "degraded"]
     database: str
     blobs: str
 
 
 class MeshOut(BaseModel):
+    """An uploaded mesh and its stats."""
+
     id: str
     filename: str
     vertices: int
@@ -34,6 +40,8 @@ class MeshOut(BaseModel):
 
 
 class PosesOut(BaseModel):
+    """Poses of a mesh (download the frames from GET /v1/poses/{id})."""
+
     id: str
     mesh_id: str
     source: Literal["upload", "simulate"]
@@ -62,11 +70,15 @@ class JobRequest(BaseModel):
 
 
 class JobResult(BaseModel):
+    """Ids of what a succeeded job made."""
+
     poses_id: str | None = None
     clip_id: str | None = None
 
 
 class JobOut(BaseModel):
+    """A job: state, progress, stage, error and result ids."""
+
     id: str
     kind: str
     state: Literal["queued", "running", "succeeded", "failed"]
@@ -85,6 +97,8 @@ class JobOut(BaseModel):
 
 
 class ClipOut(BaseModel):
+    """Clip metadata: counts, sizes in bytes and the errors achieved."""
+
     id: str
     kind: str
     mesh_id: str

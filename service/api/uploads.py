@@ -47,24 +47,30 @@ class _FilePart:
         self.upload: Upload | None = None
 
     def callbacks(self) -> dict:
+        """The callback table of python-multipart's MultipartParser."""
         return {"on_part_begin": self.begin, "on_header_field": self.hfield, "on_header_value": self.hvalue,
                 "on_header_end": self.hend, "on_headers_finished": self.headers_done,
                 "on_part_data": self.data, "on_part_end": self.end}
 
     def begin(self) -> None:
+        """A new part starts."""
         self.headers = {}
 
     def hfield(self, data: bytes, start: int, end: int) -> None:
+        """More of a header name."""
         self._name += data[start:end]
 
     def hvalue(self, data: bytes, start: int, end: int) -> None:
+        """More of a header value."""
         self._value += data[start:end]
 
     def hend(self) -> None:
+        """A header is complete."""
         self.headers[self._name.decode("latin-1").lower()] = self._value.decode("utf-8", "replace")
         self._name = self._value = b""
 
     def headers_done(self) -> None:
+        """Headers complete: open the temp file if this is the wanted field."""
         _, params = parse_options_header(self.headers.get("content-disposition", ""))
         if params.get(b"name", b"").decode() == self.field and self.upload is None:
             filename = os.path.basename(params.get(b"filename", b"upload").decode("utf-8", "replace"))
@@ -73,6 +79,7 @@ class _FilePart:
             self.upload = Upload(Path(path), filename or "upload", 0)
 
     def data(self, data: bytes, start: int, end: int) -> None:
+        """Part data: counted against the limit, written to the temp file."""
         if self.fh is None:
             return
         self.upload.size += end - start
@@ -81,6 +88,7 @@ class _FilePart:
         self.fh.write(data[start:end])
 
     def end(self) -> None:
+        """The part is complete."""
         if self.fh is not None:
             self.fh.close()
             self.fh = None

@@ -24,6 +24,8 @@ class Base(DeclarativeBase):
 
 
 class Tenant(Base):
+    """A customer; every row below belongs to one."""
+
     __tablename__ = "tenants"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("ten"))
     name: Mapped[str] = mapped_column(String(200), unique=True)
@@ -31,6 +33,8 @@ class Tenant(Base):
 
 
 class ApiKey(Base):
+    """An API key of a tenant, stored as its SHA-256 only."""
+
     __tablename__ = "api_keys"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("key"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)
@@ -41,6 +45,8 @@ class ApiKey(Base):
 
 
 class Mesh(Base):
+    """An uploaded mesh: the original file as a blob, plus its stats."""
+
     __tablename__ = "meshes"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("mesh"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)
@@ -53,6 +59,8 @@ class Mesh(Base):
 
 
 class PosesRecord(Base):
+    """Frames of a mesh (POSES.npz blob), uploaded or simulated by a job."""
+
     __tablename__ = "poses"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("poses"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)
@@ -67,6 +75,8 @@ class PosesRecord(Base):
 
 
 class ClipRecord(Base):
+    """A clip: topology and coefficients blobs plus the producer's report."""
+
     __tablename__ = "clips"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("clip"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)
@@ -82,6 +92,8 @@ class ClipRecord(Base):
 
 
 class Job(Base):
+    """A queued unit of work and its attempts (see service.store.queue)."""
+
     __tablename__ = "jobs"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("job"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)

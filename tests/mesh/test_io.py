@@ -119,3 +119,13 @@ def test_limits_name_their_setting(spot_path):
 def test_single_triangle_stats():
     mesh = load_mesh(TRIANGLE, filename="t.obj")
     assert mesh.stats()["watertight"] is False and mesh.stats()["components"] == 1
+
+
+def test_gltf_on_disk_reads_its_external_buffers_but_bytes_do_not(tmp_path):
+    files = trimesh.creation.box().export(file_type="gltf")  # model.gltf + external .bin buffers
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    mesh = load_mesh(tmp_path / "model.gltf")
+    assert mesh.stats()["faces"] == 12 and mesh.stats()["watertight"]
+    with pytest.raises(MeshInputError):
+        load_mesh(files["model.gltf"], filename="model.gltf")

@@ -27,6 +27,6 @@ def short_curves(morph_poses):
     return simple_curves(morph_poses.vertices[0], max_points=4)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture()
 def rng():
     return np.random.default_rng(1234)

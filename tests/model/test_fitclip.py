@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pdeanim import container
 from pdeanim.clip import load_clip, read_clip_file, write_clip_file
@@ -187,3 +189,26 @@ def test_paper_coefficients_of_a_stored_segment(fixed_fit):
     tk, sk = family_kinds(code)
     paper = time_basis_paper(t0 + tau * (t1 - t0), mg, tk) @ c8.reshape(2, 4) @ space_basis_paper(u, D, sk).T
     np.testing.assert_allclose(paper, ours, atol=1e-8 * max(1.0, np.abs(c8).max()))
+
+
+@settings(max_examples=25, deadline=None)
+@given(F=st.integers(1, 6), V=st.integers(1, 9), seed=st.integers(0, 10_000),
+       motion=st.sampled_from(["displacement", "absolute", "rigid"]), param=st.sampled_from(["chord", "paper"]),
+       loop=st.booleans(), target=st.booleans())
+def test_tiny_inputs_always_fit(F, V, seed, motion, param, loop, target):
+    """Any small pose set fits (1-frame, 1-vertex, short curves included) and evaluates to finite positions."""
+    v = np.random.default_rng(seed).normal(size=(F, V, 3)).astype(np.float32)
+    opts = FitOptions(target_rel_rms=1e-2, motion=motion, param_mode=param, loop=loop) if target else \
+        FitOptions(segments=2, motion=motion, param_mode=param, loop=loop)
+    parts = fit_poses(make_poses(v, None), opts)
+    clip = load_clip(parts.topology, parts.coefficients)
+    out = clip.evaluate(np.array([0.0, 0.4, 1.0, 1.3]))
+    assert out.shape == (4, V, 3) and np.all(np.isfinite(out))
+    assert np.isfinite(parts.report["rms"])
+
+
+def test_knot_at_every_frame_reproduces_frames(rng):
+    v = rng.normal(size=(6, 5, 3)).astype(np.float32)
+    pts = CurveSet(np.arange(5, dtype=np.int32), np.arange(6, dtype=np.int32))
+    r = fit_poses(make_poses(v, None), FitOptions(segments=5), curves=pts).report
+    assert r["max"] < 1e-5

@@ -17,7 +17,7 @@ CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
 @pytest.fixture(scope="module")
 def services(module_backend, tmp_path_factory):
     svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
-                   env_extra={"PDEANIM_MAX_UPLOAD_BYTES": str(UPLOAD_LIMIT)})
+                   env_extra={"PDEANIM_MAX_UPLOAD_BYTES": str(UPLOAD_LIMIT), "PDEANIM_MAX_VERTICES": "5000"})
     svc.start_server()
     svc.start_worker()
     yield svc
@@ -237,3 +237,44 @@ def test_fit_job_on_uploaded_poses(api, sphere, services):
                                             "params": {"segments": -3}}), 422, "invalid_parameter")
     assert_error(api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": sphere["mesh"]["id"],
                                             "params": {"frames": 10 ** 6}}), 422)
+
+
+def test_poses_upload_from_an_animated_glb(api, sphere):
+    from pdeanim.gltf.write import animation_glb
+
+    verts = sphere["verts"][:10]
+    glb = animation_glb(verts, np.arange(10) / 30.0, sphere["faces"])
+    r = upload(api, "morph.glb", glb, f"/v1/meshes/{sphere['mesh']['id']}/poses?fps=30")
+    assert r.status_code == 201, r.text
+    assert (r.json()["frames"], r.json()["vertices"]) == (10, verts.shape[1])
+    got = np.load(io.BytesIO(api.get(f"/v1/poses/{r.json()['id']}").content))["vertices"]
+    assert np.allclose(got, verts, atol=1e-5 * float(np.ptp(verts)))
+    assert_error(upload(api, "broken.glb", glb[: len(glb) // 2], f"/v1/meshes/{sphere['mesh']['id']}/poses"), 422)
+
+
+def test_size_limit_is_enforced_while_streaming_without_content_length(api, services):
+    boundary = "pdeanimtestboundary"
+    head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"big.obj\"\r\n"
+            "Content-Type: application/octet-stream\r\n\r\n").encode()
+    sent = []
+
+    def body():
+        yield head
+        for _ in range(UPLOAD_LIMIT // 65536 + 40):
+            sent.append(65536)
+            yield b"v 0 0 0\n" * 8192
+        yield f"\r\n--{boundary}--\r\n".encode()
+
+    try:
+        r = api.post("/v1/meshes", content=body(),
+                     headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+    except Exception:  # noqa: BLE001 - the server may close the connection while we are still sending
+        r = None
+    if r is not None:
+        assert_error(r, 413, "payload_too_large")
+    assert client(services, None).get("/healthz").status_code == 200
+
+
+def test_vertex_limit_gives_413(api, data_dir):
+    err = assert_error(upload(api, "bob.obj", (data_dir / "bob.obj").read_bytes()), 413, "limit_exceeded")
+    assert "PDEANIM_MAX_VERTICES" in err["message"]

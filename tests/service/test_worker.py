@@ -169,8 +169,11 @@ def test_crashed_job_process_is_retried_and_the_worker_survives(services, api, m
 
 
 def test_out_of_memory_fails_after_max_attempts_and_the_worker_survives(services, api, mesh_id):
-    services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(520 * 2**20), "PDEANIM_MAX_ATTEMPTS": "2"})
+    # Native code (OpenBLAS) may hang instead of raising when an allocation fails under RLIMIT_AS: the job
+    # timeout stops such an attempt, which then counts as failed like any other.
+    services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(520 * 2**20), "PDEANIM_JOB_TIMEOUT_SECONDS": "15"})
     worker = services.start_worker()
-    job = wait_job(api, submit(api, mesh_id, HEAVY), timeout=120)
-    assert job["state"] == "failed" and "gave up after" in job["error"]["message"], job
+    job = wait_job(api, submit(api, mesh_id, HEAVY), timeout=150)
+    assert job["state"] == "failed" and "gave up after 3 attempts" in job["error"]["message"], job
+    assert job["error"]["code"] in ("out_of_memory", "timeout", "crashed"), job
     assert worker.poll() is None

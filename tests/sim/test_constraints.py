@@ -110,3 +110,19 @@ def test_numba_and_numpy_backends_agree():
         out[backend] = x
     np.testing.assert_allclose(out["numba"], out["numpy"], atol=1e-12)
     assert np.abs(out["numpy"] - (mesh.points + 0.05 * np.sin(mesh.points))).max() > 1e-3  # it did move
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba not installed")
+def test_parallel_sweep_gives_the_serial_result():
+    mesh = box_tet_mesh((1, 1, 1), (10, 10, 10), split=5)
+    assert mesh.n_tets >= kernels.PARALLEL_MIN_TETS
+    out = []
+    for threads in (1, 2):
+        kernels.set_threads(threads)
+        model = build_model(mesh, Material(young=1e6), fixed=np.arange(20))
+        state = rest_state(model)
+        x = state.x + 0.02 * np.sin(3 * mesh.points)
+        solve_constraints(model, x, 1e-3, state.rot)
+        out.append(x)
+    kernels.set_threads(1)
+    np.testing.assert_array_equal(out[0], out[1])

@@ -141,3 +141,13 @@ def test_simulation_is_deterministic():
     b = simulate_tets(mesh, mesh.points, mesh.surface_faces(), scene)
     np.testing.assert_array_equal(a.vertices, b.vertices)
     assert np.abs(a.vertices[-1] - a.vertices[0]).max() > 1e-3
+
+
+def test_an_unconstrained_body_lands_on_a_default_ground_and_settles():
+    mesh = box_tet_mesh((0.4, 0.4, 0.4), (3, 3, 3), split=5, origin=(0.0, 1.0, 0.0))
+    poses = simulate_tets(mesh, mesh.points, mesh.surface_faces(), SceneParams(frames=31, young=2e4, damping=5.0))
+    assert poses.meta["ground"]["point"][1] == pytest.approx(1.0) and poses.meta["ground"]["normal"] == [0, 1, 0]
+    assert poses.vertices[:, :, 1].min() >= 1.0 - 1e-6  # rests on the plane under its lowest point
+    top = mesh.points[:, 1] > 1.39
+    sag = 1.4 - poses.vertices[-1, top, 1].mean()
+    assert 1e-3 < sag < 0.1  # squashed under its own weight, not collapsed

@@ -63,3 +63,14 @@ def test_a_region_that_selects_nothing_is_a_parameter_error(spot_path, cache):
     scene = SceneParams(frames=2, target_tets=600, pins=[{"box": [10, 10, 10, 11, 11, 11]}])
     with pytest.raises(ParameterError, match="selects no simulation point"):
         simulate_mesh(load_mesh(spot_path), scene, cache_dir=cache)
+
+
+def test_too_much_work_is_a_limit_error():
+    from pdeanim.errors import LimitError
+    from pdeanim.sim.grid import box_tet_mesh
+    from pdeanim.sim.simulate import simulate_tets
+
+    mesh = box_tet_mesh((1, 1, 1), (2, 2, 2))
+    scene = SceneParams(frames=10_000, substeps=10_000, iterations=100)
+    with pytest.raises(LimitError, match="simulation work"):
+        simulate_tets(mesh, mesh.points, mesh.surface_faces(), scene)

@@ -52,3 +52,14 @@ def test_flat_and_degenerate_surfaces_fail_cleanly(tmp_path):
 def test_params_are_checked():
     with pytest.raises(ParameterError):
         TetParams(target_tets=5)
+
+
+def test_large_surfaces_are_decimated_before_fTetWild(tmp_path):
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0)).subdivide_to_size(0.03)
+    mesh = SurfaceMesh(np.asarray(box.vertices), np.asarray(box.faces))
+    assert len(mesh.faces) > 20_000
+    tets = tetrahedralize(mesh, TetParams(target_tets=400, max_surface_faces=1500), workdir=tmp_path)
+    assert tets.volumes().sum() == pytest.approx(2.0, rel=0.05)
+    assert 0.4 * 400 <= tets.n_tets <= 2.0 * 400

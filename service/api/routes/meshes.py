@@ -11,7 +11,7 @@ from ...store.models import ClipRecord, Mesh
 from ..access import owned, responses
 from ..deps import SessionDep, SettingsDep, StoreDep, TenantDep
 from ..errors import ApiError
-from ..httpcache import immutable_response
+from ..httpcache import IMMUTABLE, REVALIDATE, immutable_response
 from ..schemas import MeshOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
 
@@ -75,4 +75,5 @@ def get_topology(mesh_id: str, request: Request, tenant: TenantDep, session: Ses
         if clip is None:
             raise ApiError(404, "not_found", f"mesh {mesh_id!r} has no clip yet (run a fit or cyclic job)")
     return immutable_response(request, clip.topology_key, lambda: store.blobs.get(clip.topology_key),
-                              "application/octet-stream")
+                              "application/octet-stream",
+                              cache_control=IMMUTABLE if clip_id is not None else REVALIDATE)
