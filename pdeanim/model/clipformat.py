@@ -31,6 +31,20 @@ w(u, tau) = sum_ik C[i, k] phi_i(tau; m) S_k(u; D) in the balanced bases of :mod
 (phi0/phi1 interpolate the segment ends, so adjacent segments share their knot: C0 exactly, also in
 float32). :func:`pdeanim.model.families.paper_coefficients` converts them to the paper's c1..c8. Storing the
 shared knots once instead of 8 values per segment is what makes C0 free and the part ~half the size.
+
+Evaluating without this library (e.g. a JavaScript client), for vertex v on curve c, coordinate w, at t:
+
+1. segment s with segment_t[s] <= t <= segment_t[s+1], tau = (t - segment_t[s]) / (segment_t[s+1] -
+   segment_t[s]) (looping clips first take t mod 1);
+2. time pair from family[s, c, w] and m = m[s, c, w]: family 0/1 (exp): phi1 = sinh(m tau)/sinh(m),
+   phi0 = sinh(m (1-tau))/sinh(m); family 2/3 (trig): sin instead of sinh; m == 0: phi0 = 1-tau, phi1 = tau;
+3. space basis S_k(u) with u = u[v, w] (or u[v, 0]), D = D[c, w], space kind D0 (even family) or D1 (odd),
+   exactly as :func:`pdeanim.model.families.space_basis` (s = u - 1/2; D < 4: the scaled Taylor-stable set,
+   whose small-x ratios need series near x = 0; D >= 4: the bounded exponentials);
+4. value = sum_k (phi0 knots[s, c, w, k] + phi1 knots[s+1, c, w, k]) S_k(u); position = rest + value
+   (displacement), value (absolute), or R(t) (rest - centre + value) + c(t) for rigid.
+
+Steps 3 and the knot products do not depend on t and can be precomputed per vertex.
 """
 
 from __future__ import annotations

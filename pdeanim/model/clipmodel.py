@@ -57,8 +57,11 @@ class DynamicClip:
             sel = kind_v == i
             if np.any(sel):
                 B[sel] = space_basis(u[sel][:, None], D[sel], kind)[:, 0, :]
-        knots = self.coef.knots.astype(np.float64)[:, self._cid]  # (S+1, V, 3, 4)
-        return np.einsum("vwk,svwk->svw", B, knots).astype(np.float32)
+        knots = self.coef.knots
+        out = np.empty((len(knots), self.n_vertices, 3), np.float32)
+        for s in range(len(knots)):  # one knot at a time keeps the peak memory at (V, 3, 4)
+            out[s] = np.einsum("vwk,vwk->vw", B, knots[s].astype(np.float64)[self._cid])
+        return out
 
     def _locate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t = np.asarray(t, dtype=np.float64)

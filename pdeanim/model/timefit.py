@@ -6,7 +6,7 @@ segments share a knot and the track is C0 by construction; for fixed mu the knot
 squares problem over all frames (banded design, solved by QR). mu (signed: > 0 exp, < 0 trig, 0 linear)
 is chosen per item and segment: a coarse grid on free per-segment fits, then a golden-section refinement
 with the knots fixed, vectorised over all items, then a final knot solve. ``loop=True`` makes the knots
-periodic (the last knot is the first).
+periodic (the last knot is the first) and restricts trig constants to multiples of 2 pi over the clip.
 """
 
 from __future__ import annotations
@@ -102,16 +102,17 @@ def _segment_sum(values: np.ndarray, segm: Segmentation) -> np.ndarray:
 
 
 def _free_fit_errors(b: np.ndarray, segm: Segmentation, grid: np.ndarray) -> np.ndarray:
-    """(G, K, S) residual energy of per-segment fits with free end values, for every grid constant."""
+    """(G, K, S) residual energy of per-segment fits with free end values, for every constant of the
+    per-segment grid (S, G)."""
     K = b.shape[0]
-    out = np.zeros((len(grid), K, segm.n_segments))
+    out = np.zeros((grid.shape[1], K, segm.n_segments))
     for s in range(segm.n_segments):
         fr = segm.frames_of(s)
         t0, t1 = segm.t[fr[0]], segm.t[fr[-1]]
         tau = (segm.t[fr] - t0) / (t1 - t0) if t1 > t0 else np.zeros(len(fr))
         B = np.moveaxis(b[:, fr], 1, 0).reshape(len(fr), -1)  # (n, K*4)
         energy = (B * B).sum(0).reshape(K, -1).sum(1)
-        for g, mu in enumerate(grid):
+        for g, mu in enumerate(grid[s]):
             Q, _ = np.linalg.qr(time_pair(tau, np.full(len(fr), mu)))
             cap = ((Q.T @ B) ** 2).sum(0).reshape(K, -1).sum(1)
             out[g, :, s] = np.maximum(energy - cap, 0.0)
@@ -162,6 +163,34 @@ def _refine(b, z, segm, mu, lo, hi, iters):
     return np.where(fx < f_cur, x, mu)
 
 
+LOOP_HARMONICS = 8
+"""Multiples k of 2 pi over the clip tried as trig constants in looping clips (m_s = 2 pi k * segment length)."""
+
+
+def _segment_grids(segm: Segmentation, grid: np.ndarray, loop: bool) -> np.ndarray:
+    """(S, G) constants tried per segment, 0 first. Looping clips replace the trig values by the multiples of
+    2 pi over the clip that fit below pi in the segment (the segment then carries an exact harmonic)."""
+    if not loop:
+        return np.broadcast_to(grid, (segm.n_segments, len(grid))).copy()
+    pos = grid[grid > 0]
+    length = np.diff(segm.segment_t)[:, None]  # (S, 1)
+    harmonics = -2.0 * np.pi * np.arange(1, LOOP_HARMONICS + 1)[None, :] * length
+    harmonics = np.where(-harmonics < MU_TRIG_MAX, harmonics, 0.0)
+    return np.concatenate([np.zeros((segm.n_segments, 1)), np.broadcast_to(pos, (segm.n_segments, len(pos))),
+                           harmonics], axis=1)
+
+
+def _brackets(mu: np.ndarray, grid: np.ndarray, loop: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Refinement interval per (K, S): the neighbouring grid values; looping trig constants stay fixed."""
+    ladder = np.sort(np.unique(grid[grid >= 0] if loop else grid))
+    pos = np.searchsorted(ladder, mu)
+    lo = ladder[np.clip(pos - 1, 0, len(ladder) - 1)]
+    hi = ladder[np.minimum(pos + 1, len(ladder) - 1)]
+    if loop:
+        lo, hi = np.where(mu < 0, mu, lo), np.where(mu < 0, mu, hi)
+    return lo, hi
+
+
 def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_iters: int = 8,
                rounds: int = 1, grid: np.ndarray = MU_GRID) -> tuple[np.ndarray, np.ndarray]:
     """Knots z (K, S + 1, 4) and signed constants mu (K, S) (float32-representable) for tracks b (K, F, 4).
@@ -170,13 +199,13 @@ def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_ite
     """
     order = np.argsort(grid[1:]) + 1
     sorted_grid = np.concatenate([[grid[0]], grid[order]])
-    errs = _free_fit_errors(b, segm, sorted_grid)
-    mu = sorted_grid[_pick_grid(errs, sorted_grid)].astype(np.float32).astype(np.float64)
+    seg_grid = _segment_grids(segm, sorted_grid, loop)  # (S, G)
+    errs = _free_fit_errors(b, segm, seg_grid)
+    idx = _pick_grid(errs, seg_grid)  # (K, S)
+    mu = seg_grid[np.arange(segm.n_segments)[None, :], idx]
+    lo, hi = _brackets(mu, sorted_grid, loop)
+    mu = mu.astype(np.float32).astype(np.float64)
     z = solve_knots(b, segm, mu, loop)
-    ladder = np.sort(sorted_grid)
-    pos = np.searchsorted(ladder, mu)
-    lo = ladder[np.maximum(pos - 1, 0)]
-    hi = ladder[np.minimum(pos + 1, len(ladder) - 1)]
     for _ in range(rounds if refine_iters > 0 else 0):
         mu = _refine(b, z, segm, mu, lo, hi, refine_iters).astype(np.float32).astype(np.float64)
         z = solve_knots(b, segm, mu, loop)

@@ -1,8 +1,9 @@
-"""Reduce a large surface before tetrahedralization by vertex clustering.
+"""Reduce a large surface before tetrahedralization.
 
-fast-simplification (trimesh's quadric decimation backend) is not a dependency, so large inputs are reduced by
-snapping vertices to a uniform grid and averaging each cell: crude for rendering but enough for a
-simulation cage, since fTetWild accepts the non-manifold soup clustering can leave and rebuilds a clean volume.
+trimesh's quadric decimation is used when its backend (fast-simplification) is installed; it is not a
+dependency, so the fallback snaps vertices to a uniform grid and keeps one vertex per cell: crude for
+rendering but enough for a simulation cage, since fTetWild accepts the non-manifold soup clustering can leave
+and rebuilds a clean volume.
 """
 
 from __future__ import annotations
@@ -11,13 +12,21 @@ import numpy as np
 
 
 def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """Snap (V, 3) vertices to a grid of ``cell`` size; returns (V', 3) cell means and the surviving (T', 3) faces."""
+    """Snap (V, 3) vertices to a grid of ``cell`` size; returns (V', 3) representatives and the (T', 3) faces.
+
+    Each cell is represented by its input vertex nearest to the cell's mean: unlike the mean itself it lies on
+    the surface, so convex parts do not shrink.
+    """
     keys = np.floor((vertices - vertices.min(axis=0)) / cell).astype(np.int64)
     _, label = np.unique(keys, axis=0, return_inverse=True)
     label = label.reshape(-1)
     n = int(label.max()) + 1
     counts = np.bincount(label, minlength=n).astype(np.float64)
     means = np.stack([np.bincount(label, vertices[:, d], minlength=n) for d in range(3)], axis=1) / counts[:, None]
+    dist = np.linalg.norm(vertices - means[label], axis=1)
+    order = np.lexsort((np.arange(len(label)), dist, label))  # per cell: nearest first, ties by index
+    first = order[np.flatnonzero(np.r_[True, np.diff(label[order]) != 0])]
+    means = vertices[first]
     new_faces = label[faces]
     keep = (new_faces[:, 0] != new_faces[:, 1]) & (new_faces[:, 1] != new_faces[:, 2]) \
         & (new_faces[:, 2] != new_faces[:, 0])
@@ -26,10 +35,24 @@ def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, cell: float) -> tu
     return means, new_faces[np.sort(first)]
 
 
+def quadric_decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Quadric decimation via trimesh when fast-simplification is importable, else None."""
+    try:
+        import fast_simplification  # noqa: F401
+        import trimesh
+    except ImportError:
+        return None
+    reduced = trimesh.Trimesh(vertices, faces, process=False).simplify_quadric_decimation(face_count=max_faces)
+    return np.asarray(reduced.vertices, np.float64), np.asarray(reduced.faces, np.int64)
+
+
 def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
     """Cluster until at most ``max_faces`` (T, 3) faces remain (unchanged if already small enough)."""
     if len(faces) <= max_faces:
         return vertices, faces
+    quadric = quadric_decimate(vertices, faces, max_faces)
+    if quadric is not None:
+        return quadric
     extent = float(np.ptp(vertices, axis=0).max())
     area = 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                                          vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1).sum()

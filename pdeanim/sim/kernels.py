@@ -165,7 +165,8 @@ def set_threads(n: int) -> None:
     global _threads
     if AVAILABLE:
         _threads = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
-        numba.set_num_threads(_threads)
+        if _threads > 1:  # the serial path never starts numba's thread pool
+            numba.set_num_threads(_threads)
 
 
 def solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, offsets) -> None:

@@ -108,3 +108,15 @@ def test_simple_curves_partition_every_vertex(spot_path):
     assert cs.lengths.max() <= 12
     again = simple_curves(v, max_points=12)
     np.testing.assert_array_equal(cs.order, again.order)
+
+
+def test_loop_uses_harmonics_of_the_clip_and_fits_them_exactly(rng):
+    """A motion with period = the clip is fitted exactly by a looping clip: m_s = 2 pi k * segment length."""
+    t = np.linspace(0, 1, 41)
+    segm = uniform_segmentation(t, 4)
+    a, c = rng.normal(size=(3, 1, 4)), rng.normal(size=(3, 1, 4))
+    b = a * np.sin(2 * np.pi * t)[None, :, None] + c * np.cos(2 * np.pi * t)[None, :, None]
+    z, mu = fit_tracks(b, segm, loop=True)
+    assert np.abs(predict(z, segm, mu) - b).max() < 1e-5
+    np.testing.assert_allclose(-mu, 2 * np.pi * 0.25, rtol=1e-6)
+    np.testing.assert_array_equal(z[:, 0], z[:, -1])
