@@ -123,6 +123,7 @@ def test_sigkilled_worker_job_completes_once_on_another(services, api, mesh_id):
 
 def test_four_workers_drain_forty_jobs_each_once(services, api, small_mesh_id):
     ids = [submit(api, small_mesh_id, LIGHT) for _ in range(40)]
+    services.env_extra["PDEANIM_LEASE_SECONDS"] = "15"  # no lease may expire on a starved test machine
     for _ in range(4):
         services.start_worker()
     jobs = [wait_job(api, j, timeout=240) for j in ids]
