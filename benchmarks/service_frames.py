@@ -96,11 +96,12 @@ def main() -> int:
     ap.add_argument("--clients", type=int, default=8)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--max-requests", type=int, default=20000)
+    ap.add_argument("--api-processes", type=int, default=1, help="uvicorn processes of the API (serve --workers)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     out: dict = {}
     with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as tmp:
-        services = DemoServices(Path(tmp))
+        services = DemoServices(Path(tmp), args.api_processes)
         try:
             key, url = _key(Path(tmp)), services.start()
             with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=300) as api:
@@ -117,6 +118,7 @@ def main() -> int:
                 api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5})  # warm the clip cache
                 for clients in sorted({1, args.clients}):
                     res = hammer(url, key, clip["id"], clients, args.seconds, args.max_requests)
+                    res["api_processes"] = args.api_processes
                     out.setdefault("frames", []).append(res)
                     print(f"frames over HTTP: {res}")
         finally:

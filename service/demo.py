@@ -58,15 +58,16 @@ def _bar(fraction: float, stage: str, width: int = 30) -> str:
 class DemoServices:
     """The API server and one worker as child processes, stopped with SIGTERM."""
 
-    def __init__(self, data_dir: Path):
+    def __init__(self, data_dir: Path, api_processes: int = 1):
         self.env = {**os.environ, "PDEANIM_DATA_DIR": str(data_dir)}
-        self.port = _free_port()
+        self.port, self.api_processes = _free_port(), api_processes
         self.procs: list[subprocess.Popen] = []
         self.log = open(data_dir / "services.log", "ab")  # noqa: SIM115 - closed in stop()
 
     def start(self) -> str:
         """Start both processes and wait for /healthz; returns the base URL."""
-        for args in (["serve", "--port", str(self.port)], ["worker", "--log-level", "WARNING"]):
+        serve = ["serve", "--port", str(self.port), "--workers", str(self.api_processes)]
+        for args in (serve, ["worker", "--log-level", "WARNING"]):
             self.procs.append(subprocess.Popen(CLI + args, env=self.env, stdout=self.log, stderr=subprocess.STDOUT))
         url = f"http://127.0.0.1:{self.port}"
         deadline = time.monotonic() + 90
@@ -109,16 +110,21 @@ def _key(data_dir: Path) -> str:
 
 
 def _follow(api: httpx.Client, job_id: str) -> tuple[dict, dict[str, float]]:
-    clock = StageClock()
+    """Poll the job, drawing a progress bar (one line per stage when not on a terminal)."""
+    clock, tty, shown = StageClock(), sys.stdout.isatty(), None
     while True:
         job = api.get(f"/v1/jobs/{job_id}").json()
         now = time.monotonic()
         if job["state"] == "running":
             clock.see(job["stage"], now)
-        print(_bar(job["progress"], job["stage"]), end="", flush=True)
-        if job["state"] in ("succeeded", "failed"):
+        done = job["state"] in ("succeeded", "failed")
+        if tty:
+            print(_bar(job["progress"], job["stage"]), end="\n" if done else "", flush=True)
+        elif done or clock.current != shown:
+            shown = clock.current
+            print(_bar(job["progress"], job["stage"]).lstrip("\r").rstrip(), flush=True)
+        if done:
             clock.stop(now)
-            print()
             return job, clock.seconds
         time.sleep(0.2)
 

@@ -1,8 +1,14 @@
-"""``pdeanim serve [--host H] [--port P]``: migrate the database (embedded default) and run the API."""
+"""``pdeanim serve [--host H] [--port P]``: migrate the database (embedded default) and run the API,
+optionally with job workers started alongside (``--with-workers N``: the embedded one-command setup)."""
 
 from __future__ import annotations
 
 import argparse
+import signal
+import subprocess
+import sys
+
+WORKER_CMD = [sys.executable, "-c", "import sys; from pdeanim.cli import main; sys.exit(main(['worker']))"]
 
 
 def register(subparsers) -> None:  # noqa: ANN001
@@ -10,7 +16,9 @@ def register(subparsers) -> None:  # noqa: ANN001
     p = subparsers.add_parser("serve", help="run the HTTP API (settings from PDEANIM_* environment variables)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
-    p.add_argument("--workers", type=int, default=1, help="uvicorn worker processes (default 1)")
+    p.add_argument("--workers", type=int, default=1, help="uvicorn (HTTP) worker processes (default 1)")
+    p.add_argument("--with-workers", type=int, default=0, metavar="N",
+                   help="also start N job workers (`pdeanim worker`) and stop them on exit (default 0)")
     p.add_argument("--no-migrate", action="store_true",
                    help="do not run migrations first (scale-out: a `serve --migrate-only` step runs them)")
     p.add_argument("--migrate-only", action="store_true", help="run the database migrations and exit")
@@ -18,8 +26,19 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.set_defaults(func=run)
 
 
+def _stop(procs: list[subprocess.Popen]) -> None:
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+    for proc in procs:
+        try:
+            proc.wait(60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
 def run(args: argparse.Namespace) -> int:
-    """Migrate (unless --no-migrate), then serve until interrupted."""
+    """Migrate (unless --no-migrate), start the job workers asked for, then serve until interrupted."""
     import uvicorn
 
     from service.settings import Settings
@@ -31,6 +50,14 @@ def run(args: argparse.Namespace) -> int:
     if args.migrate_only:
         print("pdeanim serve: database is at the newest schema")
         return 0
-    uvicorn.run("service.api.app:app_from_environment", factory=True, host=args.host, port=args.port,
-                workers=args.workers, log_level=args.log_level, access_log=False)
+    workers = [subprocess.Popen(WORKER_CMD) for _ in range(max(args.with_workers, 0))]
+    # uvicorn re-raises SIGTERM/SIGINT after its graceful shutdown; with these handlers in place the
+    # re-raised signal lands here instead of killing the process, so the workers are stopped and we exit 0.
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: None)
+    try:
+        uvicorn.run("service.api.app:app_from_environment", factory=True, host=args.host, port=args.port,
+                    workers=args.workers, log_level=args.log_level, access_log=False)
+    finally:
+        _stop(workers)
     return 0

@@ -58,20 +58,20 @@ def family_kinds(code: int) -> tuple[str, str]:
 
 # ---------------------------------------------------------------- stable scalar helpers
 
-def _shc(y: np.ndarray) -> np.ndarray:
-    """sinh(y) / y, 1 at 0."""
+def _shc(y: np.ndarray, sinh_y: np.ndarray | None = None) -> np.ndarray:
+    """sinh(y) / y, 1 at 0 (sinh_y: np.sinh(y) when already computed)."""
     y = np.asarray(y, dtype=np.float64)
     small = np.abs(y) < 1e-4
     ys = np.where(small, 1.0, y)
-    return np.where(small, 1.0 + y * y / 6.0, np.sinh(ys) / ys)
+    return np.where(small, 1.0 + y * y / 6.0, (np.sinh(ys) if sinh_y is None else sinh_y) / ys)
 
 
-def _sc(y: np.ndarray) -> np.ndarray:
-    """sin(y) / y, 1 at 0."""
+def _sc(y: np.ndarray, sin_y: np.ndarray | None = None) -> np.ndarray:
+    """sin(y) / y, 1 at 0 (sin_y: np.sin(y) when already computed)."""
     y = np.asarray(y, dtype=np.float64)
     small = np.abs(y) < 1e-4
     ys = np.where(small, 1.0, y)
-    return np.where(small, 1.0 - y * y / 6.0, np.sin(ys) / ys)
+    return np.where(small, 1.0 - y * y / 6.0, (np.sin(ys) if sin_y is None else sin_y) / ys)
 
 
 def _series(fn_coeffs: list[float], x: np.ndarray) -> np.ndarray:
@@ -96,11 +96,15 @@ _SMS = (_taylor("sinh") - _taylor("sin"))[3:]  # (sinh x - sin x) / x^3
 _CSC = (_mul(_taylor("cosh"), _taylor("sin")) - _mul(_taylor("sinh"), _taylor("cos")))[3:]  # /x^3
 
 
-def _ratio3(x: np.ndarray, coeffs: np.ndarray, direct) -> np.ndarray:
-    """f(x) / x^3 for an odd f with f = O(x^3): series for |x| < 0.5, direct formula elsewhere."""
+def _ratio3(x: np.ndarray, coeffs: np.ndarray, f_x: np.ndarray) -> np.ndarray:
+    """f(x) / x^3 for an odd f with f = O(x^3), given f_x = f(x): series for |x| < 0.5 (evaluated on those
+    elements only), the direct quotient elsewhere."""
     small = np.abs(x) < 0.5
     xs = np.where(small, 1.0, x)
-    return np.where(small, _series(coeffs, x), direct(xs) / xs**3)
+    out = f_x / xs**3
+    if np.any(small):
+        out[small] = _series(coeffs, x[small])
+    return out
 
 
 # ---------------------------------------------------------------- space bases
@@ -117,17 +121,19 @@ def _space_small_unscaled(u: np.ndarray, D: np.ndarray, space_kind: str) -> np.n
     s = u - 0.5
     if space_kind == "D0":
         x = D * s
+        sh, sn = np.sinh(x), np.sin(x)  # shared by the ratios below (same values as computing them apiece)
         g1 = 0.5 * (np.cosh(x) + np.cos(x))
-        g2 = 0.5 * s * (_shc(x) + _sc(x))
+        g2 = 0.5 * s * (_shc(x, sh) + _sc(x, sn))
         g3 = 0.5 * s * s * (_shc(0.5 * x) ** 2 + _sc(0.5 * x) ** 2)
-        g4 = s**3 * _ratio3(x, _SMS, lambda z: np.sinh(z) - np.sin(z))
+        g4 = s**3 * _ratio3(x, _SMS, sh - sn)
         return np.stack([g1, g2, g3, g4], axis=-1)
     x = D / SQRT2 * s
-    ch, c = np.cosh(x), np.cos(x)
+    ch, c, sh, sn = np.cosh(x), np.cos(x), np.sinh(x), np.sin(x)
+    shc, sc = _shc(x, sh), _sc(x, sn)
     k1 = ch * c
-    k2 = 0.5 * s * (ch * _sc(x) + _shc(x) * c)
-    k3 = s * s * _shc(x) * _sc(x)
-    k4 = 0.5 * s**3 * _ratio3(x, _CSC, lambda z: np.cosh(z) * np.sin(z) - np.sinh(z) * np.cos(z))
+    k2 = 0.5 * s * (ch * sc + shc * c)
+    k3 = s * s * shc * sc
+    k4 = 0.5 * s**3 * _ratio3(x, _CSC, ch * sn - sh * c)
     return np.stack([k1, k2, k3, k4], axis=-1)
 
 

@@ -23,11 +23,12 @@ from .clipmodel import clip_from_parts
 from .fitcore import (
     SpaceStage,
     TimeStage,
+    floor_distances,
     items_from_curves,
-    items_to_vertices,
-    reconstruct_items,
+    model_distances,
     space_stage,
     time_stage,
+    vertex_slots,
 )
 from .metrics import bbox_diagonal, error_summary
 from .parameterisation import PARAM_MODES, curve_parameters
@@ -140,6 +141,7 @@ class _Problem:
     Y: np.ndarray  # (F, K, N) the same values as padded items
     t: np.ndarray  # (F,) normalised times
     rigid: RigidTracks | None = None
+    slots: np.ndarray | None = None  # (V,) slot c * N + n of every vertex in the padded curves
 
 
 def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
@@ -157,19 +159,17 @@ def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
         values = local_residual(X, rest, curves.curve_of_vertex(len(rest))[0], rigid, t)
     else:
         values = X - rest if options.motion == "displacement" else X
-    return _Problem(X, rest, idx, mask, u, values, items_from_curves(values, idx, mask), t, rigid)
+    return _Problem(X, rest, idx, mask, u, values, items_from_curves(values, idx, mask), t, rigid,
+                    vertex_slots(idx, mask, X.shape[1]))
 
 
 def _distances(p: _Problem, space: SpaceStage, time_: TimeStage) -> np.ndarray:
     """(F, V) model-to-data distances (for rigid motion measured in the curves' frames: the same lengths)."""
-    R = items_to_vertices(reconstruct_items(space, time_), p.idx, p.mask, p.X.shape[1])
-    return np.linalg.norm(R - p.values, axis=-1)
+    return model_distances(space, time_, p.slots)
 
 
 def _floor_distances(p: _Problem, space: SpaceStage) -> np.ndarray:
-    proj = np.moveaxis(space.b @ np.swapaxes(space.proj.U, 1, 2), 1, 0)
-    resid = items_to_vertices(p.Y - proj, p.idx, p.mask, p.X.shape[1])
-    return np.linalg.norm(resid, axis=-1)
+    return floor_distances(space, p.slots)
 
 
 @dataclass

@@ -17,11 +17,13 @@ from .timefit import fit_tracks, predict
 
 @dataclass
 class SpaceStage:
-    """Per-item space fit: projection, projected tracks b (K, F, 4), floor energy per item and frame (K, F)."""
+    """Per-item space fit: projection, projected tracks b (K, F, 4), floor energy per item and frame (K, F),
+    and the item data Yk (K, F, N) float64 it was fitted to (for per-point residuals)."""
 
     proj: SpaceProjection
     b: np.ndarray
     floor_frames: np.ndarray
+    Yk: np.ndarray | None = None
 
 
 @dataclass
@@ -36,20 +38,54 @@ class TimeStage:
 
 
 def items_from_curves(values: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Padded item data (F, K, N) float64 from per-vertex values (F, V, 3) and padded curves (C, N)."""
-    v = np.asarray(values, dtype=np.float64)[:, idx, :] * mask[None, :, :, None]  # (F, C, N, 3)
-    F, C, N, _ = v.shape
-    return np.moveaxis(v, 3, 2).reshape(F, C * 3, N)
+    """Padded item data (F, K, N) float64 from per-vertex values (F, V, 3) and padded curves (C, N).
+
+    One gather along the flattened (vertex, coordinate) axis; padding points are zero.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    F = values.shape[0]
+    flat = (idx[:, None, :] * 3 + np.arange(3)[None, :, None]).reshape(-1)  # item k = 3 c + w, point n
+    Y = np.take(values.reshape(F, -1), flat, axis=1).reshape(F, -1, idx.shape[1])
+    Y *= np.repeat(mask, 3, axis=0)
+    return Y
 
 
 def items_to_vertices(items: np.ndarray, idx: np.ndarray, mask: np.ndarray, n_vertices: int) -> np.ndarray:
     """Inverse of :func:`items_from_curves`: (F, K, N) -> (F, V, 3) float64."""
     F, K, N = items.shape
-    C = K // 3
-    v = np.moveaxis(items.reshape(F, C, 3, N), 2, 3)  # (F, C, N, 3)
+    c, n = np.nonzero(mask)
+    flat = ((3 * c)[:, None] + np.arange(3)) * N + n[:, None]  # (M, 3) positions in the flattened items
     out = np.zeros((F, n_vertices, 3))
-    out[:, idx[mask]] = v[:, mask]
+    out[:, idx[c, n]] = np.take(items.reshape(F, K * N), flat, axis=1)
     return out
+
+
+def vertex_slots(idx: np.ndarray, mask: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(V,) int64 slot c * N + n of every vertex in the padded curves (C, N) (each vertex on one curve)."""
+    slots = np.zeros(n_vertices, dtype=np.int64)
+    c, n = np.nonzero(mask)
+    slots[idx[c, n]] = c * idx.shape[1] + n
+    return slots
+
+
+def point_distances(resid: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """(F, V) Euclidean lengths of item residuals resid (K, F, N) at the vertices' slots (see vertex_slots)."""
+    K, F, N = resid.shape
+    r = resid.reshape(K // 3, 3, F, N)
+    sq = r[:, 0] * r[:, 0]
+    sq += r[:, 1] * r[:, 1]  # same summation order as np.linalg.norm over (x, y, z)
+    sq += r[:, 2] * r[:, 2]
+    return np.sqrt(np.take(np.moveaxis(sq, 1, 0).reshape(F, -1), slots, axis=1))
+
+
+def model_distances(space: SpaceStage, time: TimeStage, slots: np.ndarray) -> np.ndarray:
+    """(F, V) model-to-data distances of a fit at every fitted frame (float64)."""
+    return point_distances(time.pred @ np.swapaxes(space.proj.U, 1, 2) - space.Yk, slots)
+
+
+def floor_distances(space: SpaceStage, slots: np.ndarray) -> np.ndarray:
+    """(F, V) distances left by the space basis alone (the data minus its projection)."""
+    return point_distances(space.Yk - space.b @ np.swapaxes(space.proj.U, 1, 2), slots)
 
 
 def space_stage(Y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> SpaceStage:
@@ -60,7 +96,7 @@ def space_stage(Y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> SpaceStage:
     proj = project_items(u, mask, kind_i, D)
     b = Yk @ proj.U
     floor = np.maximum((Yk * Yk).sum(-1) - (b * b).sum(-1), 0.0)
-    return SpaceStage(proj, b, floor)
+    return SpaceStage(proj, b, floor, Yk)
 
 
 def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine_iters: int = 8) -> TimeStage:

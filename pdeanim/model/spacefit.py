@@ -75,10 +75,11 @@ def captured_energy(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, D: np.nda
     S = space_basis(u, D, kind) * mask[..., None]  # (C, N, 4)
     inv = _pinv_sym(np.swapaxes(S, 1, 2) @ S)  # (C, 4, 4)
     K, N = gram.shape[:2]
-    Sk = np.repeat(S, per_curve, axis=0) if per_curve > 1 else S
-    A = np.swapaxes(Sk, 1, 2) @ (gram @ Sk)  # (K, 4, 4)
-    invk = np.repeat(inv, per_curve, axis=0) if per_curve > 1 else inv
-    return np.einsum("kab,kab->k", invk, A)
+    C = len(S)
+    # the items of a curve share S: one (per_curve N, N) @ (N, 4) product per curve (same sums as per item)
+    GS = (gram.reshape(C, per_curve * N, N) @ S).reshape(C, per_curve, N, 4)
+    A = np.swapaxes(S, 1, 2)[:, None] @ GS  # (C, per_curve, 4, 4)
+    return np.einsum("cab,cwab->cw", inv, A).reshape(K)
 
 
 def _shared_u(u: np.ndarray) -> bool:

@@ -1,8 +1,12 @@
 """numba kernels for the coloured Gauss-Seidel sweep (the same math as :mod:`pdeanim.sim.constraints`).
 
 numba is optional: ``AVAILABLE`` is False when it cannot be imported and the solver then uses the numpy path.
-Tets of one colour share no point, so a colour may run in parallel (``prange``) with a deterministic result.
-3 x 3 matrices are passed around as 9-tuples of scalars (row-major) so that they stay in registers.
+Tets of one colour share no point, so a colour is processed in chunks of ``CHUNK`` tets: the chunk's corners
+and rotations are gathered into a small struct-of-arrays buffer, one fused, branch-free pass does both
+constraint updates per tet (it vectorises across tets: SIMD lanes are independent tets), and the buffer is
+scattered back. This is exactly the sequential Gauss-Seidel result, bit for bit, in any chunk order or in
+parallel. 3 x 3 matrices are 9-tuples of scalars (row-major) so that they stay in registers; no fastmath, so
+the arithmetic is the scalar IEEE one in the same order as before.
 """
 
 from __future__ import annotations
@@ -21,18 +25,58 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency; this kee
     numba = None
     prange = range
 
+CHUNK = 128
+"""Tets per chunk: a gather buffer of ROWS x STRIDE float64 (19 KiB) stays in the L1 cache."""
 
-def _deformation(x, a, b, c, d, m):  # pragma: no cover - compiled
-    """F = Ds Dm^-1 (9-tuple) for corners a, b, c, d and the rest inverse m (3, 3)."""
-    e1x, e1y, e1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
-    e2x, e2y, e2z = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
-    e3x, e3y, e3z = x[d, 0] - x[a, 0], x[d, 1] - x[a, 1], x[d, 2] - x[a, 2]
-    m00, m01, m02 = m[0, 0], m[0, 1], m[0, 2]
-    m10, m11, m12 = m[1, 0], m[1, 1], m[1, 2]
-    m20, m21, m22 = m[2, 0], m[2, 1], m[2, 2]
-    return (e1x * m00 + e2x * m10 + e3x * m20, e1x * m01 + e2x * m11 + e3x * m21, e1x * m02 + e2x * m12 + e3x * m22,
-            e1y * m00 + e2y * m10 + e3y * m20, e1y * m01 + e2y * m11 + e3y * m21, e1y * m02 + e2y * m12 + e3y * m22,
-            e1z * m00 + e2z * m10 + e3z * m20, e1z * m01 + e2z * m11 + e3z * m21, e1z * m02 + e2z * m12 + e3z * m22)
+STRIDE = CHUNK + 8
+"""Buffer row stride in float64: rows 1088 bytes apart do not pile onto the same L1 cache sets."""
+
+ROWS = 18
+"""Gather-buffer rows per tet: corners (12), quaternion (4), lambda_d and lambda_h."""
+
+N_CONST = 15
+"""Rows of the per-tet constants (see :func:`pack_constants`): Dm^-1 (9), inverse masses (4), alpha_d, alpha_h."""
+
+
+def chunk_slots(offsets: np.ndarray) -> tuple[np.ndarray, int]:
+    """((M,) int64 slot of each tet in the chunked layout, number of chunks) for colour offsets (C + 1,).
+
+    Each colour is cut into chunks of CHUNK consecutive tets; tet k of chunk h sits in lane k - start(h).
+    """
+    sizes = np.diff(offsets)
+    n_chunks = -(-sizes // CHUNK)
+    first = np.concatenate([[0], np.cumsum(n_chunks)])
+    local = np.arange(offsets[-1]) - np.repeat(offsets[:-1], sizes)
+    chunk = np.repeat(first[:-1], sizes) + local // CHUNK
+    return chunk * STRIDE * N_CONST + local % CHUNK, int(first[-1])
+
+
+def pack_constants(dm_inv: np.ndarray, w: np.ndarray, alpha_d: np.ndarray, alpha_h: np.ndarray,
+                   offsets: np.ndarray) -> np.ndarray:
+    """Per-tet constants in the kernels' chunked struct-of-arrays layout: (chunks * N_CONST * STRIDE,) float64.
+
+    Rows per chunk: Dm^-1 row-major (9), corner inverse masses w0..w3 (4), alpha_d, alpha_h; tets in colour order.
+    """
+    m = len(dm_inv)
+    rows = np.concatenate([np.reshape(dm_inv, (m, 9)), np.reshape(w, (m, 4)), alpha_d[:, None], alpha_h[:, None]],
+                          axis=1)
+    slots, n_chunks = chunk_slots(np.asarray(offsets, np.int64))
+    out = np.zeros(n_chunks * N_CONST * STRIDE)
+    out[slots[:, None] + STRIDE * np.arange(N_CONST)] = rows
+    return out
+
+
+def _deformation(p, m):  # pragma: no cover - compiled
+    """F = Ds Dm^-1 (9-tuple) of the corners p (12-tuple) and the rest inverse m (9-tuple)."""
+    e1x, e1y, e1z = p[3] - p[0], p[4] - p[1], p[5] - p[2]
+    e2x, e2y, e2z = p[6] - p[0], p[7] - p[1], p[8] - p[2]
+    e3x, e3y, e3z = p[9] - p[0], p[10] - p[1], p[11] - p[2]
+    return (e1x * m[0] + e2x * m[3] + e3x * m[6], e1x * m[1] + e2x * m[4] + e3x * m[7],
+            e1x * m[2] + e2x * m[5] + e3x * m[8],
+            e1y * m[0] + e2y * m[3] + e3y * m[6], e1y * m[1] + e2y * m[4] + e3y * m[7],
+            e1y * m[2] + e2y * m[5] + e3y * m[8],
+            e1z * m[0] + e2z * m[3] + e3z * m[6], e1z * m[1] + e2z * m[4] + e3z * m[7],
+            e1z * m[2] + e2z * m[5] + e3z * m[8])
 
 
 def _quat_matrix(w, a, b, c):  # pragma: no cover - compiled
@@ -42,10 +86,9 @@ def _quat_matrix(w, a, b, c):  # pragma: no cover - compiled
             2 * (a * c - w * b), 2 * (b * c + w * a), 1 - 2 * (a * a + b * b))
 
 
-def _rotation(f, q, iterations):  # pragma: no cover - compiled
-    """Refine q (4,) in place towards the rotation closest to f (Muller et al. 2016); returns its matrix."""
-    w, a, b, c = q[0], q[1], q[2], q[3]
-    for _ in range(iterations):
+def _rotation(f, w, a, b, c):  # pragma: no cover - compiled
+    """Refine the quaternion (w, a, b, c) towards the rotation closest to f (Muller et al. 2016)."""
+    for _ in range(ROTATION_ITERATIONS):  # a compile-time constant: unrolled
         r = _quat_matrix(w, a, b, c)
         ox = oy = oz = dot = 0.0
         for i in range(3):  # sum over columns i of r_i x f_i
@@ -63,83 +106,136 @@ def _rotation(f, q, iterations):  # pragma: no cover - compiled
         nc = c + w * dz + (dx * b - dy * a)
         norm = np.sqrt(nw * nw + na * na + nb * nb + nc * nc)
         w, a, b, c = nw / norm, na / norm, nb / norm, nc / norm
-    q[0], q[1], q[2], q[3] = w, a, b, c
-    return _quat_matrix(w, a, b, c)
+    return w, a, b, c
 
 
-def _project(x, i0, i1, i2, i3, m, wk, cval, p, alpha, lam):  # pragma: no cover - compiled
-    """One XPBD update of a constraint with value cval and dC/dF p (9-tuple); returns dlambda."""
-    g1x = p[0] * m[0, 0] + p[1] * m[0, 1] + p[2] * m[0, 2]
-    g1y = p[3] * m[0, 0] + p[4] * m[0, 1] + p[5] * m[0, 2]
-    g1z = p[6] * m[0, 0] + p[7] * m[0, 1] + p[8] * m[0, 2]
-    g2x = p[0] * m[1, 0] + p[1] * m[1, 1] + p[2] * m[1, 2]
-    g2y = p[3] * m[1, 0] + p[4] * m[1, 1] + p[5] * m[1, 2]
-    g2z = p[6] * m[1, 0] + p[7] * m[1, 1] + p[8] * m[1, 2]
-    g3x = p[0] * m[2, 0] + p[1] * m[2, 1] + p[2] * m[2, 2]
-    g3y = p[3] * m[2, 0] + p[4] * m[2, 1] + p[5] * m[2, 2]
-    g3z = p[6] * m[2, 0] + p[7] * m[2, 1] + p[8] * m[2, 2]
+def _project(p, m, wk, cval, d, alpha, lam):  # pragma: no cover - compiled
+    """One XPBD update of a constraint with value cval and dC/dF d (9-tuple): (new corners, dlambda)."""
+    g1x = d[0] * m[0] + d[1] * m[1] + d[2] * m[2]
+    g1y = d[3] * m[0] + d[4] * m[1] + d[5] * m[2]
+    g1z = d[6] * m[0] + d[7] * m[1] + d[8] * m[2]
+    g2x = d[0] * m[3] + d[1] * m[4] + d[2] * m[5]
+    g2y = d[3] * m[3] + d[4] * m[4] + d[5] * m[5]
+    g2z = d[6] * m[3] + d[7] * m[4] + d[8] * m[5]
+    g3x = d[0] * m[6] + d[1] * m[7] + d[2] * m[8]
+    g3y = d[3] * m[6] + d[4] * m[7] + d[5] * m[8]
+    g3z = d[6] * m[6] + d[7] * m[7] + d[8] * m[8]
     g0x, g0y, g0z = -(g1x + g2x + g3x), -(g1y + g2y + g3y), -(g1z + g2z + g3z)
-    w0, w1, w2, w3 = wk[0], wk[1], wk[2], wk[3]
+    w0, w1, w2, w3 = wk
     denom = alpha + w0 * (g0x * g0x + g0y * g0y + g0z * g0z) + w1 * (g1x * g1x + g1y * g1y + g1z * g1z) \
         + w2 * (g2x * g2x + g2y * g2y + g2z * g2z) + w3 * (g3x * g3x + g3y * g3y + g3z * g3z)
-    if denom <= 0.0:
-        return 0.0
-    dlam = (-cval - alpha * lam) / denom
+    dlam = (-cval - alpha * lam) / denom if denom > 0.0 else 0.0  # a select, not a branch
     s0, s1, s2, s3 = w0 * dlam, w1 * dlam, w2 * dlam, w3 * dlam
-    x[i0, 0] += s0 * g0x
-    x[i0, 1] += s0 * g0y
-    x[i0, 2] += s0 * g0z
-    x[i1, 0] += s1 * g1x
-    x[i1, 1] += s1 * g1y
-    x[i1, 2] += s1 * g1z
-    x[i2, 0] += s2 * g2x
-    x[i2, 1] += s2 * g2y
-    x[i2, 2] += s2 * g2z
-    x[i3, 0] += s3 * g3x
-    x[i3, 1] += s3 * g3y
-    x[i3, 2] += s3 * g3z
-    return dlam
+    return (p[0] + s0 * g0x, p[1] + s0 * g0y, p[2] + s0 * g0z, p[3] + s1 * g1x, p[4] + s1 * g1y, p[5] + s1 * g1z,
+            p[6] + s2 * g2x, p[7] + s2 * g2y, p[8] + s2 * g2z, p[9] + s3 * g3x, p[10] + s3 * g3y,
+            p[11] + s3 * g3z), dlam
 
 
-def _solve_tet(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters, k):  # pragma: no cover
-    """Deviatoric (|F - R|) then volume (det F - 1) update of tet k."""
-    i0, i1, i2, i3 = tets[k, 0], tets[k, 1], tets[k, 2], tets[k, 3]
-    m = dm_inv[k]
-    wk = w[k]
-    f = _deformation(x, i0, i1, i2, i3, m)
-    r = _rotation(f, rot[k], rot_iters)
+def _deviatoric(p, q, m, wk, alpha, lam):  # pragma: no cover - compiled
+    """C_D = |F - R|_F update: (new corners, refined quaternion, dlambda)."""
+    f = _deformation(p, m)
+    qw, qa, qb, qc = _rotation(f, q[0], q[1], q[2], q[3])
+    r = _quat_matrix(qw, qa, qb, qc)
     d0, d1, d2 = f[0] - r[0], f[1] - r[1], f[2] - r[2]
     d3, d4, d5 = f[3] - r[3], f[4] - r[4], f[5] - r[5]
     d6, d7, d8 = f[6] - r[6], f[7] - r[7], f[8] - r[8]
     c = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 + d4 * d4 + d5 * d5 + d6 * d6 + d7 * d7 + d8 * d8)
     s = 1.0 / max(c, 1e-12)
-    p = (d0 * s, d1 * s, d2 * s, d3 * s, d4 * s, d5 * s, d6 * s, d7 * s, d8 * s)
-    lam_d[k] += _project(x, i0, i1, i2, i3, m, wk, c, p, alpha_d[k] * inv_dt2, lam_d[k])
-    f00, f01, f02, f10, f11, f12, f20, f21, f22 = _deformation(x, i0, i1, i2, i3, m)
+    d = (d0 * s, d1 * s, d2 * s, d3 * s, d4 * s, d5 * s, d6 * s, d7 * s, d8 * s)
+    p, dlam = _project(p, m, wk, c, d, alpha, lam)
+    return p, (qw, qa, qb, qc), dlam
+
+
+def _volume(p, m, wk, alpha, lam):  # pragma: no cover - compiled
+    """C_H = det F - 1 update: (new corners, dlambda)."""
+    f00, f01, f02, f10, f11, f12, f20, f21, f22 = _deformation(p, m)
     cof = (f11 * f22 - f12 * f21, f12 * f20 - f10 * f22, f10 * f21 - f11 * f20,
            f21 * f02 - f22 * f01, f22 * f00 - f20 * f02, f20 * f01 - f21 * f00,
            f01 * f12 - f02 * f11, f02 * f10 - f00 * f12, f00 * f11 - f01 * f10)
     c = f00 * cof[0] + f01 * cof[1] + f02 * cof[2] - 1.0
-    lam_h[k] += _project(x, i0, i1, i2, i3, m, wk, c, cof, alpha_h[k] * inv_dt2, lam_h[k])
+    return _project(p, m, wk, c, cof, alpha, lam)
 
 
-def _solve_range(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,  # pragma: no cover
-                 start, stop):
-    """Both updates for tets start:stop (one colour: no shared points, so any order or in parallel)."""
-    for k in prange(start, stop):
-        _solve_tet(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters, k)
+def _solve_chunk(b, cst, n, inv_dt2):  # pragma: no cover - compiled
+    """Deviatoric then volume update of the n tets in the chunk buffer b (ROWS * STRIDE,), in place.
+
+    cst (N_CONST * STRIDE,) holds the chunk's constants. Flat arrays with compile-time row offsets:
+    the rows provably never overlap, so the loop vectorises (SIMD lanes are independent tets).
+    """
+    for j in range(n):
+        p = (b[j], b[STRIDE + j], b[2 * STRIDE + j], b[3 * STRIDE + j], b[4 * STRIDE + j], b[5 * STRIDE + j],
+             b[6 * STRIDE + j], b[7 * STRIDE + j], b[8 * STRIDE + j], b[9 * STRIDE + j], b[10 * STRIDE + j],
+             b[11 * STRIDE + j])
+        q = (b[12 * STRIDE + j], b[13 * STRIDE + j], b[14 * STRIDE + j], b[15 * STRIDE + j])
+        o = j
+        m = (cst[o], cst[o + STRIDE], cst[o + 2 * STRIDE], cst[o + 3 * STRIDE], cst[o + 4 * STRIDE],
+             cst[o + 5 * STRIDE], cst[o + 6 * STRIDE], cst[o + 7 * STRIDE], cst[o + 8 * STRIDE])
+        wk = (cst[o + 9 * STRIDE], cst[o + 10 * STRIDE], cst[o + 11 * STRIDE], cst[o + 12 * STRIDE])
+        p, q, dlam_d = _deviatoric(p, q, m, wk, cst[o + 13 * STRIDE] * inv_dt2, b[16 * STRIDE + j])
+        p, dlam_h = _volume(p, m, wk, cst[o + 14 * STRIDE] * inv_dt2, b[17 * STRIDE + j])
+        b[16 * STRIDE + j] += dlam_d
+        b[17 * STRIDE + j] += dlam_h
+        b[j], b[STRIDE + j], b[2 * STRIDE + j], b[3 * STRIDE + j] = p[0], p[1], p[2], p[3]
+        b[4 * STRIDE + j], b[5 * STRIDE + j], b[6 * STRIDE + j], b[7 * STRIDE + j] = p[4], p[5], p[6], p[7]
+        b[8 * STRIDE + j], b[9 * STRIDE + j], b[10 * STRIDE + j], b[11 * STRIDE + j] = p[8], p[9], p[10], p[11]
+        b[12 * STRIDE + j], b[13 * STRIDE + j], b[14 * STRIDE + j], b[15 * STRIDE + j] = q[0], q[1], q[2], q[3]
 
 
-def _solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,  # pragma: no cover
-                 offsets, parallel):
-    """One Gauss-Seidel sweep: the colours in order, each colour's tets independently."""
+def _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, b, chunk, base, n):  # pragma: no cover - compiled
+    """Gather tets base:base+n (chunk number ``chunk`` of one colour) into b, update them, scatter them back.
+
+    Rotations are read from rot_in and written to rot; lam (2, M) or (2, 0) for multipliers that start at 0.
+    """
+    keep = lam.shape[1] > 0
+    for j in range(n):
+        k = base + j
+        for c in range(4):
+            i = tets[k, c]
+            b[3 * c * STRIDE + j], b[(3 * c + 1) * STRIDE + j], b[(3 * c + 2) * STRIDE + j] = x[i, 0], x[i, 1], x[i, 2]
+            b[(12 + c) * STRIDE + j] = rot_in[k, c]
+        b[16 * STRIDE + j] = lam[0, k] if keep else 0.0
+        b[17 * STRIDE + j] = lam[1, k] if keep else 0.0
+    cb = chunk * (N_CONST * STRIDE)
+    _solve_chunk(b, cst[cb:cb + N_CONST * STRIDE], n, inv_dt2)  # a view: indices provably >= 0, no gathers
+    for j in range(n):
+        k = base + j
+        for c in range(4):
+            i = tets[k, c]
+            x[i, 0], x[i, 1], x[i, 2] = b[3 * c * STRIDE + j], b[(3 * c + 1) * STRIDE + j], b[(3 * c + 2) * STRIDE + j]
+            rot[k, c] = b[(12 + c) * STRIDE + j]
+        if keep:
+            lam[0, k], lam[1, k] = b[16 * STRIDE + j], b[17 * STRIDE + j]
+
+
+def _colour_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, first, start, stop):  # pragma: no cover - compiled
+    """One colour's chunks (numbered from ``first``) on numba's thread pool: no shared point, serial result."""
+    for h in prange((stop - start + CHUNK - 1) // CHUNK):
+        base = start + h * CHUNK
+        buf = np.empty(ROWS * STRIDE)
+        _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, buf, first + h, base, min(CHUNK, stop - base))
+
+
+def _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, parallel):  # pragma: no cover - compiled
+    """One Gauss-Seidel sweep: the colours in order, each colour's tets in independent chunks."""
+    buf = np.empty(ROWS * STRIDE)
+    chunk = 0
     for c in range(offsets.shape[0] - 1):
+        start, stop = offsets[c], offsets[c + 1]
         if parallel:
-            _solve_range_parallel(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters,
-                                  offsets[c], offsets[c + 1])
+            _colour_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, chunk, start, stop)
+            chunk += (stop - start + CHUNK - 1) // CHUNK
         else:
-            for k in range(offsets[c], offsets[c + 1]):
-                _solve_tet(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, rot_iters, k)
+            for base in range(start, stop, CHUNK):
+                _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, buf, chunk, base, min(CHUNK, stop - base))
+                chunk += 1
+
+
+def _predict(x_in, v_in, inv_mass, damp, dv, dt, x):  # pragma: no cover - compiled
+    """x = x_in + dt (damp v_in + dv) for free points (inverse mass > 0), x_in + dt damp v_in for pinned ones."""
+    for i in range(x.shape[0]):
+        free = inv_mass[i] > 0
+        for c in range(3):
+            x[i, c] = x_in[i, c] + dt * (v_in[i, c] * damp + (dv[c] if free else 0.0))
 
 
 PARALLEL_MIN_TETS = 4096
@@ -147,15 +243,16 @@ PARALLEL_MIN_TETS = 4096
 busy cores)."""
 
 if AVAILABLE:
-    _deformation = njit(inline="always", cache=True)(_deformation)
-    _quat_matrix = njit(inline="always", cache=True)(_quat_matrix)
-    _rotation = njit(inline="always", cache=True)(_rotation)
-    _project = njit(inline="always", cache=True)(_project)
-    _solve_tet = njit(inline="always", cache=True)(_solve_tet)
-    _solve_range_parallel = njit(parallel=True, cache=True)(_solve_range)
-    _solve_sweep = njit(cache=True)(_solve_sweep)
+    _opts = {"cache": True, "error_model": "numpy", "boundscheck": False}
+    for _name in ("_deformation", "_quat_matrix", "_rotation", "_project", "_deviatoric", "_volume"):
+        globals()[_name] = njit(inline="always", **_opts)(globals()[_name])
+    _solve_chunk = njit(**_opts)(_solve_chunk)
+    _chunk = njit(inline="always", **_opts)(_chunk)
+    _colour_parallel = njit(parallel=True, **_opts)(_colour_parallel)
+    _solve_sweep = njit(**_opts)(_solve_sweep)
+    _predict = njit(**_opts)(_predict)
 else:  # pragma: no cover
-    _solve_sweep = None
+    _solve_sweep = _predict = None
 
 _threads = 1
 
@@ -169,8 +266,20 @@ def set_threads(n: int) -> None:
             numba.set_num_threads(_threads)
 
 
-def solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, offsets) -> None:
-    """One sweep over all colours in a single compiled call (serial or parallel: the same result)."""
+def solve_sweep(x: np.ndarray, rot_in: np.ndarray, rot: np.ndarray, tets: np.ndarray, cst: np.ndarray,
+                lam: np.ndarray, inv_dt2: float, offsets: np.ndarray) -> None:
+    """One sweep over all colours in a single compiled call (serial or parallel: the same result).
+
+    x (N, 3) f64 is updated in place; rotation guesses are read from rot_in (M, 4) f64 and written to rot (M, 4)
+    (the same array or not); tets (M, 4) int64 in colour order; cst from :func:`pack_constants` with the same
+    offsets (C + 1,) int64; lam (2, M) f64 multipliers accumulated in this step, or (2, 0) when they start at 0
+    and are not needed afterwards (a single sweep per step).
+    """
     parallel = _threads > 1 and len(tets) >= PARALLEL_MIN_TETS
-    _solve_sweep(x, rot, tets, dm_inv, w, alpha_d, alpha_h, lam_d, lam_h, inv_dt2, ROTATION_ITERATIONS, offsets,
-                 parallel)
+    _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, parallel)
+
+
+def predict(x_in: np.ndarray, v_in: np.ndarray, inv_mass: np.ndarray, damp: float, dv: np.ndarray, dt: float,
+            x: np.ndarray) -> None:
+    """Explicit prediction of a substep into x (N, 3): damped velocity plus dv (3,) (gravity dt) on free points."""
+    _predict(x_in, v_in, inv_mass, damp, dv, dt, x)

@@ -58,7 +58,8 @@ class Elements:
     """Tets in colour order: colour c is rows offsets[c]:offsets[c + 1] (no shared point within a colour).
 
     tets (M, 4) int64, dm_inv (M, 3, 3) rest inverses, w (M, 4) corner inverse masses, alpha_d and alpha_h (M,)
-    compliances of the deviatoric and volume constraints, offsets (C + 1,) int64.
+    compliances of the deviatoric and volume constraints, offsets (C + 1,) int64; cst the same constants
+    packed in chunks, struct-of-arrays, for the numba kernels (:func:`kernels.pack_constants`).
     """
 
     tets: np.ndarray
@@ -67,6 +68,7 @@ class Elements:
     alpha_d: np.ndarray
     alpha_h: np.ndarray
     offsets: np.ndarray
+    cst: np.ndarray
 
     @property
     def n_colors(self) -> int:
@@ -129,8 +131,9 @@ def build_model(tets: TetMesh, material: Material, gravity: tuple[float, float, 
     order = np.concatenate(colors)
     offsets = np.concatenate([[0], np.cumsum([len(c) for c in colors])]).astype(np.int64)
     t = np.ascontiguousarray(tets.tets[order])
-    elements = Elements(t, np.ascontiguousarray(dm_inv[order]), np.ascontiguousarray(inv_mass[t]),
-                        1.0 / (2.0 * mu * vol[order]), 1.0 / (lam * vol[order]), offsets)
+    dm_inv, w = np.ascontiguousarray(dm_inv[order]), np.ascontiguousarray(inv_mass[t])
+    alpha_d, alpha_h = 1.0 / (2.0 * mu * vol[order]), 1.0 / (lam * vol[order])
+    elements = Elements(t, dm_inv, w, alpha_d, alpha_h, offsets, kernels.pack_constants(dm_inv, w, alpha_d, alpha_h, offsets))
     return SimModel(tets.points.copy(), inv_mass, elements, np.asarray(gravity, np.float64),
                     material.damping, fixed, kinematic, ground, max(int(iterations), 1), backend)
 
@@ -147,15 +150,17 @@ def rest_state(model: SimModel) -> SimState:
 
 def step(model: SimModel, state_in: SimState, state_out: SimState, dt: float) -> None:
     """Advance one substep of length dt from state_in into state_out (which may not alias state_in)."""
-    free = (model.inv_mass > 0)[:, None]
-    v = state_in.v * np.exp(-model.damping * dt) + dt * model.gravity * free
     x = state_out.x
-    np.add(state_in.x, dt * v, out=x)
+    damp, dv = np.exp(-model.damping * dt), dt * model.gravity
+    if model.backend == "numba":
+        kernels.predict(state_in.x, state_in.v, model.inv_mass, damp, dv, dt, x)
+    else:
+        v = state_in.v * damp + dv * (model.inv_mass > 0)[:, None]
+        np.add(state_in.x, dt * v, out=x)
     t = state_in.t + dt
     if len(model.fixed):
         x[model.fixed] = model.kinematic(t) if model.kinematic is not None else state_in.x[model.fixed]
-    state_out.rot[:] = state_in.rot
-    solve_constraints(model, x, dt, state_out.rot)
+    solve_constraints(model, x, dt, state_out.rot, state_in.rot)
     if model.ground is not None:
         project_ground(model.ground, x, state_in.x)
     np.subtract(x, state_in.x, out=state_out.v)
@@ -163,16 +168,24 @@ def step(model: SimModel, state_in: SimState, state_out: SimState, dt: float) ->
     state_out.t = t
 
 
-def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray) -> None:
-    """Gauss-Seidel over colours (all tets of one colour in one pass), in place on x (N, 3) and rot (M, 4)."""
+def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray,
+                      rot_in: np.ndarray | None = None) -> None:
+    """Gauss-Seidel over colours (all tets of one colour in one pass), in place on x (N, 3) and rot (M, 4).
+
+    rot_in (M, 4), when given, holds the rotation guesses to start from (rot is then only written).
+    """
     e = model.elements
     inv_dt2 = 1.0 / (dt * dt)
+    if model.backend == "numba":
+        lam = np.zeros((2, len(e.tets) if model.iterations > 1 else 0))  # one sweep: every lambda starts at 0
+        for i in range(model.iterations):
+            kernels.solve_sweep(x, rot if rot_in is None or i else rot_in, rot, e.tets, e.cst, lam, inv_dt2,
+                                e.offsets)
+        return
+    if rot_in is not None:
+        rot[:] = rot_in
     lam_d, lam_h = np.zeros(len(e.tets)), np.zeros(len(e.tets))
     for _ in range(model.iterations):
-        if model.backend == "numba":
-            kernels.solve_sweep(x, rot, e.tets, e.dm_inv, e.w, e.alpha_d, e.alpha_h, lam_d, lam_h, inv_dt2,
-                                e.offsets)
-            continue
         for c in range(e.n_colors):
             s = slice(e.offsets[c], e.offsets[c + 1])
             t = e.tets[s]

@@ -10,6 +10,7 @@ from fastapi import FastAPI
 from ..settings import Settings
 from ..store.context import Store
 from .cache import ClipCache
+from .deps import KeyCache
 from .errors import install_error_handlers
 from .routes import clips, health, jobs, meshes, poses
 
@@ -35,6 +36,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app = FastAPI(title="pdeanim", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan)
     app.state.store = store
     app.state.clip_cache = ClipCache(settings.max_clip_cache)
+    app.state.key_cache = KeyCache(ttl=30.0)
     install_error_handlers(app)
     for module in (health, meshes, poses, jobs, clips):
         app.include_router(module.router)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Iterator
 from typing import Annotated
 
@@ -11,7 +13,7 @@ from sqlalchemy.orm import Session
 
 from ..settings import Settings
 from ..store.context import Store
-from ..store.tenants import tenant_for_key
+from ..store.tenants import hash_key, tenant_for_key
 from .cache import ClipCache
 from .errors import ApiError
 
@@ -47,13 +49,38 @@ def get_session(store: StoreDep) -> Iterator[Session]:
 SessionDep = Annotated[Session, Depends(get_session)]
 
 
-def get_tenant(creds: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)], store: StoreDep) -> str:
+class KeyCache:
+    """Recently verified API keys (by hash) -> tenant, for ``ttl`` seconds, so hot routes skip a query."""
+
+    def __init__(self, ttl: float = 30.0, max_entries: int = 10_000):
+        self.ttl, self.max_entries = ttl, max_entries
+        self._items: dict[str, tuple[str, float]] = {}
+        self._lock = threading.Lock()
+
+    def lookup(self, key: str, store: Store) -> str | None:
+        """The tenant owning ``key`` (cached if verified less than ``ttl`` seconds ago), or None."""
+        digest, now = hash_key(key), time.monotonic()
+        with self._lock:
+            hit = self._items.get(digest)
+        if hit is not None and hit[1] > now:
+            return hit[0]
+        with store.sessions() as session:
+            tenant = tenant_for_key(session, key)
+        if tenant is not None:
+            with self._lock:
+                if len(self._items) >= self.max_entries:
+                    self._items.clear()
+                self._items[digest] = (tenant, now + self.ttl)
+        return tenant
+
+
+def get_tenant(creds: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)], store: StoreDep,
+               request: Request) -> str:
     """The tenant id of the request's ``Authorization: Bearer KEY``; 401 when missing or unknown."""
     challenge = {"WWW-Authenticate": "Bearer"}
     if creds is None or not creds.credentials:
         raise ApiError(401, "unauthorized", "missing API key: send Authorization: Bearer KEY", challenge)
-    with store.sessions() as session:
-        tenant = tenant_for_key(session, creds.credentials)
+    tenant = request.app.state.key_cache.lookup(creds.credentials, store)
     if tenant is None:
         raise ApiError(401, "unauthorized", "invalid API key", challenge)
     return tenant

@@ -45,9 +45,9 @@ class Services:
         return subprocess.Popen(PDEANIM + args, env=process_env(self.backend, **self.env_extra), stdout=log,
                                 stderr=subprocess.STDOUT, cwd=self.log_dir)
 
-    def start_server(self) -> None:
+    def start_server(self, *extra: str) -> None:
         self.port = free_port()
-        self.server = self._spawn(["serve", "--port", str(self.port)], "server")
+        self.server = self._spawn(["serve", "--port", str(self.port), *extra], "server")
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             if self.server.poll() is not None:

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 
 import pytest
 
 from .conftest import Backend
-from .harness import PDEANIM, Services, client, process_env
+from .harness import PDEANIM, Services, client, make_key, process_env, wait_job
 
 pytestmark = pytest.mark.slow
 
@@ -38,3 +39,18 @@ def test_demo_runs_end_to_end(tmp_path):
         assert (tmp_path / "out" / name).read_bytes()[:4] in (b"glTF", b"PK\x03\x04")
     for word in ("sizes:", "coefficients", "fit:", "rel. rms", "timing:", "simulate", "stopped"):
         assert word in out.stdout
+
+
+def test_serve_with_workers_runs_jobs_and_stops_them(module_backend, tmp_path, data_dir):
+    svc = Services(module_backend, tmp_path)
+    svc.start_server("--with-workers", "1")
+    try:
+        api = client(svc, make_key(module_backend, "embedded"))
+        mesh = api.post("/v1/meshes", files={"file": ("fish.obj", (data_dir / "fish_capsule.obj").read_bytes())})
+        job = api.post("/v1/jobs", json={"kind": "cyclic", "mesh_id": mesh.json()["id"], "params": {"frames": 6}})
+        assert wait_job(api, job.json()["id"])["state"] == "succeeded"
+    finally:
+        svc.server.send_signal(signal.SIGTERM)
+        assert svc.server.wait(60) == 0
+    log = (tmp_path / "server.log").read_text()
+    assert "worker" in log and "stopped after 1 jobs" in log, log

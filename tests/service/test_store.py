@@ -144,3 +144,22 @@ def test_local_blob_store_leaves_no_temp_files(tmp_path):
     blobs = LocalBlobStore(tmp_path / "b")
     blobs.put(b"abc")
     assert [p.name for p in (tmp_path / "b").rglob("*") if p.name.startswith(".tmp")] == []
+
+
+def test_fenced_out_finish_writes_no_result_rows(store, tenant):
+    from service.store.models import ClipRecord
+
+    (job_id,) = _enqueue(store, tenant)
+    store.queue.claim("w1")
+
+    def write(session):
+        session.add(ClipRecord(id="clip_x", tenant_id=tenant, mesh_id="mesh_1", job_id=job_id, kind="k",
+                               topology_key="t", coefficients_key="c", topology_id="t", report={}))
+        return {"clip_id": "clip_x"}
+
+    assert not store.queue.finish(job_id, 7, write)
+    with store.sessions() as s:
+        assert s.get(ClipRecord, "clip_x") is None and s.get(Job, job_id).state == "running"
+    assert store.queue.finish(job_id, 1, write)
+    with store.sessions() as s:
+        assert s.get(ClipRecord, "clip_x").job_id == job_id and s.get(Job, job_id).result == {"clip_id": "clip_x"}

@@ -112,8 +112,17 @@ def test_sigkilled_worker_job_completes_once_on_another(services, api, mesh_id):
     first = services.start_worker()
     job = wait_state(api, job_id, ("running", "succeeded"))
     assert job["state"] == "running", "the job finished before the worker could be killed"
+    deadline = time.monotonic() + 30
+    while not (orphans := job_processes(first.pid)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert orphans, "the job process never started"
     os.kill(first.pid, signal.SIGKILL)
     first.wait(10)
+    deadline = time.monotonic() + 10
+    while any(Path(f"/proc/{p}").exists() for p in orphans) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(Path(f"/proc/{p}/cmdline").exists() and Path(f"/proc/{p}/cmdline").read_bytes()
+                   for p in orphans), "the killed worker's job process kept running"
     services.start_worker()
     job = wait_job(api, job_id, timeout=180)
     assert job["state"] == "succeeded" and job["attempt"] == 2, (job, services.logs())

@@ -26,11 +26,12 @@ GLB_RESPONSE = {200: {"content": {GLB: {}}, "description": "a binary glTF 2.0 fi
 SUMMARY_KEYS = ("rms", "max", "rel_rms", "rel_max", "p95", "target")
 
 
-def _cached(clip_id: str, tenant: str, store: Store, cache, session) -> CachedClip:  # noqa: ANN001
+def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
     def load() -> CachedClip:
         from pdeanim.clip import load_clip
 
-        row = session.get(ClipRecord, clip_id)
+        with store.sessions() as session:
+            row = session.get(ClipRecord, clip_id)
         if row is None:
             raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
         clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
@@ -70,7 +71,7 @@ def clip_out(row: ClipRecord, info: dict) -> ClipOut:
 def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreDep, cache: ClipCacheDep) -> ClipOut:
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
-    item = _cached(clip_id, tenant, store, cache, session)
+    item = _cached(clip_id, tenant, store, cache)
     info = json.loads(json.dumps(item.clip.info(), default=_jsonable))
     info.setdefault("looping", bool(item.clip.looping))
     return clip_out(row, info)
@@ -104,11 +105,11 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
 
 @router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
-def get_frame(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
+def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
               cache: ClipCacheDep, t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")
               ) -> Response:
     """One evaluated frame at ``t`` as a GLB."""
-    item = _cached(clip_id, tenant, store, cache, session)
+    item = _cached(clip_id, tenant, store, cache)
     if not math.isfinite(t) or (not item.clip.looping and not 0.0 <= t <= 1.0):
         raise ApiError(422, "t_out_of_range", f"t must lie in [0, 1] for this clip, got {t}")
     tag = hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest()
@@ -134,11 +135,11 @@ def animation_times(clip, fps: float, max_frames: int) -> tuple[np.ndarray, np.n
 
 @router.get("/v1/clips/{clip_id}/animation", operation_id="getClipAnimation", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 413, 422)})
-def get_animation(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
+def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
                   cache: ClipCacheDep, fps: float = Query(30.0, gt=0, le=240, description="frames per second")
                   ) -> Response:
     """The whole clip sampled at ``fps`` as a GLB with one morph target per frame and a weights animation."""
-    item = _cached(clip_id, tenant, store, cache, session)
+    item = _cached(clip_id, tenant, store, cache)
     t, seconds = animation_times(item.clip, fps, store.settings.max_frames)
     tag = hashlib.sha256(f"{item.coefficients_key}:animation:{fps!r}".encode()).hexdigest()
 
