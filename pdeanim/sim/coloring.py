@@ -32,3 +32,27 @@ def color_tets(tets: np.ndarray, n_points: int) -> list[np.ndarray]:
         colors.append(color)
         remaining = np.setdiff1d(remaining, color, assume_unique=True)
     return colors
+
+
+def partitioned_colors(tets: np.ndarray, points: np.ndarray, parts: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """Colour classes in solve order and the colour bounds (P + 1,) int64 of ``parts`` independent groups.
+
+    Slabs along the longest axis with equal tet counts: the tets whose four points all lie in slab p form part
+    p (parts share no point, so they may be solved at the same time); the tets that straddle slabs come last.
+    Colours bounds[p]:bounds[p + 1] belong to part p, colours bounds[-1]: to the straddling tets. With parts
+    < 2 everything is one part. Deterministic.
+    """
+    if parts < 2:
+        colors = color_tets(tets, len(points))
+        return colors, np.array([0, len(colors)], np.int64)
+    axis = int(np.argmax(np.ptp(points, axis=0)))
+    cuts = np.quantile(points[tets, axis].mean(axis=1), np.arange(1, parts) / parts)
+    side = np.searchsorted(cuts, points[:, axis])[tets]  # (M, 4) slab of each corner
+    inner = np.all(side == side[:, :1], axis=1)
+    groups = [np.flatnonzero(inner & (side[:, 0] == p)) for p in range(parts)] + [np.flatnonzero(~inner)]
+    colors: list[np.ndarray] = []
+    bounds = [0]
+    for g in groups:
+        colors += [g[c] for c in color_tets(tets[g], len(points))]
+        bounds.append(len(colors))
+    return colors, np.asarray(bounds[:-1], np.int64)

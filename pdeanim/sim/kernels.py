@@ -28,6 +28,10 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency; this kee
 CHUNK = 128
 """Tets per chunk: a gather buffer of ROWS x STRIDE float64 (19 KiB) stays in the L1 cache."""
 
+LANES = 8
+"""Chunks are padded to a multiple of this many tets (AVX-512 float64 lanes) so no scalar remainder loop runs;
+the padding lanes hold a zero tet with zero constants (see :func:`pack_constants`)."""
+
 STRIDE = CHUNK + 8
 """Buffer row stride in float64: rows 1088 bytes apart do not pile onto the same L1 cache sets."""
 
@@ -38,32 +42,33 @@ N_CONST = 15
 """Rows of the per-tet constants (see :func:`pack_constants`): Dm^-1 (9), inverse masses (4), alpha_d, alpha_h."""
 
 
-def chunk_slots(offsets: np.ndarray) -> tuple[np.ndarray, int]:
-    """((M,) int64 slot of each tet in the chunked layout, number of chunks) for colour offsets (C + 1,).
+def chunk_slots(offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((M,) int64 slot of each tet in the chunked layout, (C + 1,) int64 first chunk of each colour).
 
-    Each colour is cut into chunks of CHUNK consecutive tets; tet k of chunk h sits in lane k - start(h).
+    Each colour (offsets (C + 1,)) is cut into chunks of CHUNK consecutive tets; tet k of a chunk starting at
+    tet s sits in lane k - s.
     """
     sizes = np.diff(offsets)
-    n_chunks = -(-sizes // CHUNK)
-    first = np.concatenate([[0], np.cumsum(n_chunks)])
+    first = np.concatenate([[0], np.cumsum(-(-sizes // CHUNK))]).astype(np.int64)
     local = np.arange(offsets[-1]) - np.repeat(offsets[:-1], sizes)
     chunk = np.repeat(first[:-1], sizes) + local // CHUNK
-    return chunk * STRIDE * N_CONST + local % CHUNK, int(first[-1])
+    return chunk * STRIDE * N_CONST + local % CHUNK, first
 
 
 def pack_constants(dm_inv: np.ndarray, w: np.ndarray, alpha_d: np.ndarray, alpha_h: np.ndarray,
-                   offsets: np.ndarray) -> np.ndarray:
-    """Per-tet constants in the kernels' chunked struct-of-arrays layout: (chunks * N_CONST * STRIDE,) float64.
+                   offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-tet constants in the kernels' chunked layout: ((chunks * N_CONST * STRIDE,) f64, (C + 1,) i64 chunks).
 
-    Rows per chunk: Dm^-1 row-major (9), corner inverse masses w0..w3 (4), alpha_d, alpha_h; tets in colour order.
+    Rows per chunk: Dm^-1 row-major (9), corner inverse masses w0..w3 (4), alpha_d, alpha_h; tets in colour
+    order (offsets (C + 1,)); the second array is each colour's first chunk (see :func:`chunk_slots`).
     """
     m = len(dm_inv)
     rows = np.concatenate([np.reshape(dm_inv, (m, 9)), np.reshape(w, (m, 4)), alpha_d[:, None], alpha_h[:, None]],
                           axis=1)
-    slots, n_chunks = chunk_slots(np.asarray(offsets, np.int64))
-    out = np.zeros(n_chunks * N_CONST * STRIDE)
+    slots, first = chunk_slots(np.asarray(offsets, np.int64))
+    out = np.zeros(int(first[-1]) * N_CONST * STRIDE)
     out[slots[:, None] + STRIDE * np.arange(N_CONST)] = rows
-    return out
+    return out, first
 
 
 def _deformation(p, m):  # pragma: no cover - compiled
@@ -195,8 +200,13 @@ def _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, b, chunk, base, n):  # pragm
             b[(12 + c) * STRIDE + j] = rot_in[k, c]
         b[16 * STRIDE + j] = lam[0, k] if keep else 0.0
         b[17 * STRIDE + j] = lam[1, k] if keep else 0.0
+    padded = -(-n // LANES) * LANES
+    for j in range(n, padded):  # idle SIMD lanes: a zero tet with no mass moves nothing and stays finite
+        for r in range(ROWS):
+            b[r * STRIDE + j] = 0.0
+        b[12 * STRIDE + j] = 1.0
     cb = chunk * (N_CONST * STRIDE)
-    _solve_chunk(b, cst[cb:cb + N_CONST * STRIDE], n, inv_dt2)  # a view: indices provably >= 0, no gathers
+    _solve_chunk(b, cst[cb:cb + N_CONST * STRIDE], padded, inv_dt2)  # a view: indices provably >= 0, no gathers
     for j in range(n):
         k = base + j
         for c in range(4):
@@ -207,27 +217,30 @@ def _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, b, chunk, base, n):  # pragm
             lam[0, k], lam[1, k] = b[16 * STRIDE + j], b[17 * STRIDE + j]
 
 
-def _colour_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, first, start, stop):  # pragma: no cover - compiled
-    """One colour's chunks (numbered from ``first``) on numba's thread pool: no shared point, serial result."""
-    for h in prange((stop - start + CHUNK - 1) // CHUNK):
-        base = start + h * CHUNK
-        buf = np.empty(ROWS * STRIDE)
-        _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, buf, first + h, base, min(CHUNK, stop - base))
+def _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, first, last, buf):  # pragma: no cover
+    """Colours first:last in order, each colour's tets in independent chunks."""
+    for c in range(first, last):
+        chunk = chunks[c]
+        for base in range(offsets[c], offsets[c + 1], CHUNK):
+            _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, buf, chunk, base, min(CHUNK, offsets[c + 1] - base))
+            chunk += 1
 
 
-def _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, parallel):  # pragma: no cover - compiled
-    """One Gauss-Seidel sweep: the colours in order, each colour's tets in independent chunks."""
+def _parts_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts):  # pragma: no cover
+    """The independent parts on numba's thread pool (they share no point: the serial result)."""
+    for p in prange(parts.shape[0] - 1):
+        _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts[p], parts[p + 1],
+                 np.empty(ROWS * STRIDE))
+
+
+def _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts, parallel):  # pragma: no cover
+    """One Gauss-Seidel sweep: the parts' colours (part after part, or parts in parallel), then the rest."""
     buf = np.empty(ROWS * STRIDE)
-    chunk = 0
-    for c in range(offsets.shape[0] - 1):
-        start, stop = offsets[c], offsets[c + 1]
-        if parallel:
-            _colour_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, chunk, start, stop)
-            chunk += (stop - start + CHUNK - 1) // CHUNK
-        else:
-            for base in range(start, stop, CHUNK):
-                _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, buf, chunk, base, min(CHUNK, stop - base))
-                chunk += 1
+    if parallel:
+        _parts_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts)
+    else:
+        _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, 0, parts[-1], buf)
+    _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts[-1], offsets.shape[0] - 1, buf)
 
 
 def _predict(x_in, v_in, inv_mass, damp, dv, dt, x):  # pragma: no cover - compiled
@@ -239,8 +252,7 @@ def _predict(x_in, v_in, inv_mass, damp, dv, dt, x):  # pragma: no cover - compi
 
 
 PARALLEL_MIN_TETS = 4096
-"""Meshes with fewer tets run serially: a parallel launch per colour costs more than it saves (and stalls on
-busy cores)."""
+"""Meshes with fewer tets are not split into independent parts (see ``xpbd.PARTS``) and always run serially."""
 
 if AVAILABLE:
     _opts = {"cache": True, "error_model": "numpy", "boundscheck": False}
@@ -248,7 +260,8 @@ if AVAILABLE:
         globals()[_name] = njit(inline="always", **_opts)(globals()[_name])
     _solve_chunk = njit(**_opts)(_solve_chunk)
     _chunk = njit(inline="always", **_opts)(_chunk)
-    _colour_parallel = njit(parallel=True, **_opts)(_colour_parallel)
+    _colours = njit(**_opts)(_colours)
+    _parts_parallel = njit(parallel=True, **_opts)(_parts_parallel)
     _solve_sweep = njit(**_opts)(_solve_sweep)
     _predict = njit(**_opts)(_predict)
 else:  # pragma: no cover
@@ -267,16 +280,17 @@ def set_threads(n: int) -> None:
 
 
 def solve_sweep(x: np.ndarray, rot_in: np.ndarray, rot: np.ndarray, tets: np.ndarray, cst: np.ndarray,
-                lam: np.ndarray, inv_dt2: float, offsets: np.ndarray) -> None:
+                lam: np.ndarray, inv_dt2: float, offsets: np.ndarray, chunks: np.ndarray, parts: np.ndarray) -> None:
     """One sweep over all colours in a single compiled call (serial or parallel: the same result).
 
     x (N, 3) f64 is updated in place; rotation guesses are read from rot_in (M, 4) f64 and written to rot (M, 4)
-    (the same array or not); tets (M, 4) int64 in colour order; cst from :func:`pack_constants` with the same
-    offsets (C + 1,) int64; lam (2, M) f64 multipliers accumulated in this step, or (2, 0) when they start at 0
-    and are not needed afterwards (a single sweep per step).
+    (the same array or not); tets (M, 4) int64 in colour order; cst and chunks from :func:`pack_constants` with
+    the same colour offsets (C + 1,) int64; parts (P + 1,) int64 colour bounds of groups sharing no point (the
+    colours after parts[-1] run serially); lam (2, M) f64 multipliers accumulated in this step, or (2, 0) when
+    they start at 0 and are not needed afterwards (a single sweep per step).
     """
-    parallel = _threads > 1 and len(tets) >= PARALLEL_MIN_TETS
-    _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, parallel)
+    parallel = _threads > 1 and len(parts) > 2
+    _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts, parallel)
 
 
 def predict(x_in: np.ndarray, v_in: np.ndarray, inv_mass: np.ndarray, damp: float, dv: np.ndarray, dt: float,

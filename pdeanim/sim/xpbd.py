@@ -16,9 +16,13 @@ import numpy as np
 
 from ..errors import ParameterError
 from . import kernels
-from .coloring import color_tets
+from .coloring import partitioned_colors
 from .constraints import deviatoric_correction, hydrostatic_correction
 from .tetmesh import TetMesh
+
+PARTS = 2
+"""Independent tet groups of a mesh with at least ``kernels.PARALLEL_MIN_TETS`` tets (one per core of the
+two-core target). Fixed, not taken from the thread count, so that results do not depend on it."""
 
 Kinematic = Callable[[float], np.ndarray]
 """``positions(t) -> (K, 3)`` prescribed positions of the model's fixed points at time t."""
@@ -58,8 +62,10 @@ class Elements:
     """Tets in colour order: colour c is rows offsets[c]:offsets[c + 1] (no shared point within a colour).
 
     tets (M, 4) int64, dm_inv (M, 3, 3) rest inverses, w (M, 4) corner inverse masses, alpha_d and alpha_h (M,)
-    compliances of the deviatoric and volume constraints, offsets (C + 1,) int64; cst the same constants
-    packed in chunks, struct-of-arrays, for the numba kernels (:func:`kernels.pack_constants`).
+    compliances of the deviatoric and volume constraints, offsets (C + 1,) int64; parts (P + 1,) int64 colour
+    bounds of P groups that share no point (solved in parallel), then the remaining colours; cst the same
+    constants packed in chunks, struct-of-arrays, and chunks (C + 1,) int64 each colour's first chunk, for the
+    numba kernels (:func:`kernels.pack_constants`).
     """
 
     tets: np.ndarray
@@ -68,7 +74,9 @@ class Elements:
     alpha_d: np.ndarray
     alpha_h: np.ndarray
     offsets: np.ndarray
+    parts: np.ndarray
     cst: np.ndarray
+    chunks: np.ndarray
 
     @property
     def n_colors(self) -> int:
@@ -127,13 +135,14 @@ def build_model(tets: TetMesh, material: Material, gravity: tuple[float, float, 
     p = tets.points[tets.tets]
     dm_inv = np.linalg.inv((p[:, 1:] - p[:, :1]).transpose(0, 2, 1))
     vol = tets.volumes()
-    colors = color_tets(tets.tets, tets.n_points)
+    colors, parts = partitioned_colors(tets.tets, tets.points, PARTS if tets.n_tets >= kernels.PARALLEL_MIN_TETS else 1)
     order = np.concatenate(colors)
     offsets = np.concatenate([[0], np.cumsum([len(c) for c in colors])]).astype(np.int64)
     t = np.ascontiguousarray(tets.tets[order])
     dm_inv, w = np.ascontiguousarray(dm_inv[order]), np.ascontiguousarray(inv_mass[t])
     alpha_d, alpha_h = 1.0 / (2.0 * mu * vol[order]), 1.0 / (lam * vol[order])
-    elements = Elements(t, dm_inv, w, alpha_d, alpha_h, offsets, kernels.pack_constants(dm_inv, w, alpha_d, alpha_h, offsets))
+    cst, chunks = kernels.pack_constants(dm_inv, w, alpha_d, alpha_h, offsets)
+    elements = Elements(t, dm_inv, w, alpha_d, alpha_h, offsets, parts, cst, chunks)
     return SimModel(tets.points.copy(), inv_mass, elements, np.asarray(gravity, np.float64),
                     material.damping, fixed, kinematic, ground, max(int(iterations), 1), backend)
 
@@ -180,7 +189,7 @@ def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray
         lam = np.zeros((2, len(e.tets) if model.iterations > 1 else 0))  # one sweep: every lambda starts at 0
         for i in range(model.iterations):
             kernels.solve_sweep(x, rot if rot_in is None or i else rot_in, rot, e.tets, e.cst, lam, inv_dt2,
-                                e.offsets)
+                                e.offsets, e.chunks, e.parts)
         return
     if rot_in is not None:
         rot[:] = rot_in

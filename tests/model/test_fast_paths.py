@@ -1,0 +1,99 @@
+"""The fast paths of the fit equal their plain definitions bit for bit (speed without changing results)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pdeanim.model import families as fam
+from pdeanim.model.fitcore import (
+    SpaceStage,
+    floor_distances,
+    items_from_curves,
+    items_to_vertices,
+    model_distances,
+    reconstruct_items,
+    space_stage,
+    time_stage,
+    vertex_slots,
+)
+from pdeanim.model.segments import Segmentation, uniform_segmentation
+from pdeanim.model.spacefit import captured_energy
+from pdeanim.model.timefit import _dot4, segment_pair
+
+MU_VALUES = [0.0, 1e-13, -1e-13, 1e-9, 0.2, 3.0, 32.0, 60.0, -0.3, -2.9, -3.0, -1e-9]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 7), st.integers(2, 40))
+def test_segment_pair_equals_time_pair(seed, n_segments, n_frames):
+    """segment_pair (per-segment denominators, trig rows apart) == elementwise time_pair, exactly."""
+    rng = np.random.default_rng(seed)
+    times = np.sort(rng.uniform(0, 5, n_frames))
+    times[-1] += 1.0
+    segm = uniform_segmentation(times, n_segments)
+    mu = rng.choice(MU_VALUES, size=(13, segm.n_segments)) * rng.uniform(0.5, 1.0, (13, segm.n_segments))
+    seg, tau = segm.frame_segment(), segm.frame_tau()
+    ref = fam.time_pair(np.broadcast_to(tau, mu[:, seg].shape), mu[:, seg])
+    p0, p1 = segment_pair(segm, mu)
+    assert np.array_equal(p0, ref[..., 0]) and np.array_equal(p1, ref[..., 1])
+
+
+def test_segment_pair_single_frame_segmentation():
+    segm = Segmentation(np.array([0, 0]), np.zeros(1))
+    p0, p1 = segment_pair(segm, np.array([[0.0], [-1.0], [2.0]]))
+    ref = fam.time_pair(np.zeros((3, 1)), np.array([[0.0], [-1.0], [2.0]]))
+    assert np.array_equal(p0, ref[..., 0]) and np.array_equal(p1, ref[..., 1])
+
+
+def test_dot4_equals_sum(rng):
+    x, y = rng.normal(size=(50, 7, 4)), rng.normal(size=(50, 7, 4))
+    assert np.array_equal(_dot4(x, y), (x * y).sum(-1))
+
+
+def _random_curves(rng, n_vertices=60, n_points=7):
+    order = rng.permutation(n_vertices)
+    cuts = np.sort(rng.choice(np.arange(1, n_vertices), size=n_vertices // n_points - 1, replace=False))
+    from pdeanim.curveset import CurveSet
+
+    return CurveSet.from_lists(np.split(order, cuts))
+
+
+def test_item_layout_round_trip_and_distances(rng):
+    """Gather/scatter between vertices and padded items, and distances computed in item space, equal the
+    plain definitions (moveaxis + boolean masks, np.linalg.norm in vertex space)."""
+    curves = _random_curves(rng)
+    idx, mask = curves.padded()
+    values = rng.normal(size=(9, 60, 3))
+    Y = items_from_curves(values, idx, mask)
+    v = values[:, idx, :] * mask[None, :, :, None]
+    assert np.array_equal(Y, np.moveaxis(v, 3, 2).reshape(9, -1, idx.shape[1]))
+    assert np.array_equal(items_to_vertices(Y, idx, mask, 60), values)
+
+    K, N = Y.shape[1:]
+    u = np.where(mask, np.cumsum(mask, axis=1) / np.maximum(mask.sum(1, keepdims=True), 1), 0.0)
+    space = space_stage(Y, np.repeat(u, 3, axis=0).reshape(K, N), np.repeat(mask, 3, axis=0))
+    assert isinstance(space, SpaceStage)
+    time = time_stage(space, uniform_segmentation(np.arange(9.0), 2))
+    slots = vertex_slots(idx, mask, 60)
+    R = items_to_vertices(reconstruct_items(space, time), idx, mask, 60)
+    assert np.array_equal(model_distances(space, time, slots), np.linalg.norm(R - values, axis=-1))
+    proj = np.moveaxis(space.b @ np.swapaxes(space.proj.U, 1, 2), 1, 0)
+    floor = np.linalg.norm(items_to_vertices(Y - proj, idx, mask, 60), axis=-1)
+    assert np.array_equal(floor_distances(space, slots), floor)
+
+
+def test_captured_energy_shared_u_equals_per_item(rng):
+    """The per-curve product (x, y, z sharing u) equals the per-item computation exactly."""
+    C, N, F = 11, 8, 15
+    u = np.sort(rng.uniform(0, 1, (C, N)), axis=1)
+    mask = np.ones((C, N), bool)
+    mask[0, 5:] = False
+    Y = rng.normal(size=(3 * C, F, N)) * np.repeat(mask, 3, axis=0)[:, None, :]
+    gram = np.swapaxes(Y, 1, 2) @ Y
+    for kind in fam.SPACE_KINDS:
+        D = rng.uniform(0, 8, C)
+        shared = captured_energy(u, mask, gram, D, kind, per_curve=3)
+        per_item = captured_energy(np.repeat(u, 3, 0), np.repeat(mask, 3, 0), gram, np.repeat(D, 3), kind)
+        assert np.array_equal(shared, per_item)
