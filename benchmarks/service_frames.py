@@ -1,5 +1,6 @@
-"""Service benchmark (loopback only): frame requests for a ~12k-vertex clip over HTTP with several
-concurrent clients (requests/s, p50, p99), and the end-to-end time of the demo's job by stage.
+"""Service benchmark (loopback only): frame requests for a 15k-vertex clip over HTTP with several
+concurrent clients (requests/s, p50, p99), the CPU time of one frame GLB (evaluate + normals + GLB) in
+process, and the end-to-end time of the demo's job by stage.
 
     .venv/bin/python benchmarks/service_frames.py [--clients 8] [--seconds 10]
 
@@ -29,18 +30,56 @@ from service.demo import FIT, SCENE, DemoServices, StageClock, _key  # noqa: E40
 SPOT = ROOT / "tests" / "data" / "spot.obj"
 
 
-def subdivided_spot() -> bytes:
-    """Spot subdivided once (11,714 vertices) as OBJ bytes."""
+def spot_15k(target: int = 15_000) -> bytes:
+    """Spot subdivided once (11,714 vertices), then its largest faces split at their centroid (1 -> 3, which
+    keeps the surface closed and manifold) up to ``target`` vertices; as OBJ bytes."""
     import trimesh
 
     from pdeanim.mesh.io import load_mesh
 
     m = load_mesh(SPOT)
     t = trimesh.Trimesh(m.vertices, m.faces, process=False).subdivide()
+    k = max(target - len(t.vertices), 0)
+    pick = np.argsort(-t.area_faces, kind="stable")[:k]
+    a, b, c = t.faces[pick].T
+    new = len(t.vertices) + np.arange(k)
+    faces = np.vstack([np.delete(t.faces, pick, axis=0), np.column_stack([a, b, new]),
+                       np.column_stack([b, c, new]), np.column_stack([c, a, new])])
     buf = io.StringIO()
-    np.savetxt(buf, t.vertices, fmt="v %.6f %.6f %.6f")
-    np.savetxt(buf, t.faces + 1, fmt="f %d %d %d")
+    np.savetxt(buf, np.vstack([t.vertices, t.triangles_center[pick]]), fmt="v %.6f %.6f %.6f")
+    np.savetxt(buf, faces + 1, fmt="f %d %d %d")
     return buf.getvalue().encode()
+
+
+def frame_cpu(data_dir: Path, clip_id: str, n: int = 300) -> dict:
+    """In-process CPU time of what the frame route computes per request: evaluate at t, normals, GLB."""
+    from pdeanim.clip import load_clip
+    from pdeanim.gltf.write import FrameGlb
+    from service.settings import Settings
+    from service.store.context import Store
+    from service.store.models import ClipRecord
+
+    store = Store.open(Settings(data_dir=data_dir))
+    try:
+        with store.sessions() as session:
+            row = session.get(ClipRecord, clip_id)
+        clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+    finally:
+        store.close()
+    writer = FrameGlb(clip.faces, clip.n_vertices)
+    ts = np.random.default_rng(0).random(n)
+    parts = {"evaluate": [], "glb": []}
+    for t in ts:
+        c0 = time.process_time_ns()
+        p = np.asarray(clip.evaluate(float(t)))
+        c1 = time.process_time_ns()
+        writer(p)
+        parts["evaluate"].append(c1 - c0)
+        parts["glb"].append(time.process_time_ns() - c1)
+    total = np.add(parts["evaluate"], parts["glb"]) / 1e6
+    out = {f"{k}_median_ms": round(float(np.median(v)) / 1e6, 3) for k, v in parts.items()}
+    return {"vertices": clip.n_vertices, "frames": n, **out, "total_median_ms": round(float(np.median(total)), 3),
+            "total_p10_ms": round(float(np.percentile(total, 10)), 3)}
 
 
 def run_job(api: httpx.Client, name: str, data: bytes, scene: dict, fit: dict) -> tuple[dict, dict, float]:
@@ -109,12 +148,14 @@ def main() -> int:
                 out["demo_job"] = {"total_s": round(total, 2), "stages_s": {k: round(v, 2) for k, v in stages.items()}}
                 print(f"demo job (spot, {SCENE['frames']} frames, fit to {FIT}): {total:.1f} s  "
                       + ", ".join(f"{k} {v:.1f} s" for k, v in stages.items()))
-                job, stages, total = run_job(api, "spot_sub.obj", subdivided_spot(), {"frames": 30, "target_tets": 1500},
+                job, stages, total = run_job(api, "spot_15k.obj", spot_15k(), {"frames": 30, "target_tets": 1500},
                                              FIT)
                 clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
                 out["frame_clip"] = {"vertices": clip["info"].get("n_vertices"), "segments": clip["segments"],
                                      "curves": clip["curves"], "job_s": round(total, 2)}
                 print(f"frame clip: {out['frame_clip']}")
+                out["frame_cpu"] = frame_cpu(Path(tmp), clip["id"])
+                print(f"frame CPU in process (evaluate + normals + GLB): {out['frame_cpu']}")
                 api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5})  # warm the clip cache
                 for clients in sorted({1, args.clients}):
                     res = hammer(url, key, clip["id"], clients, args.seconds, args.max_requests)

@@ -4,8 +4,9 @@ cantilever tip deflection at three resolutions. Prints the figures.
 Run in the benchmark venv (pypbd installed there only):
     python3 -m venv .venv-bench && .venv-bench/bin/pip install pypbd==2.2.2 numpy trimesh pytetwild==0.2.3 -e .
     .venv-bench/bin/python benchmarks/sim_compare.py [--part speed|table|deflection|all] [--quick]
-Both engines run single-threaded on the same tet mesh with pypbd's defaults: h = 0.005 s, 5 substeps,
-1 iteration (our substep is h / 5). pypbd runs FEM-based PBD (its default solid method) in a child process.
+Both engines run on the same tet mesh with pypbd's defaults: h = 0.005 s, 5 substeps, 1 iteration (our
+substep is h / 5), single-threaded (ours also on 2 threads). pypbd runs FEM-based PBD (its default solid
+method) in a child process. On a shared machine the 2-thread figure needs the second core to be free.
 """
 
 from __future__ import annotations
@@ -73,6 +74,26 @@ def run_ours(mesh: TetMesh, fixed: np.ndarray, material: Material, dt: float, n:
     return {"final": state.x, "mean": mean / average, "seconds": seconds, "colors": model.elements.n_colors}
 
 
+def two_thread_bound(mesh: TetMesh, fixed: np.ndarray, material: Material, dt: float) -> float:
+    """Sweep time on 2 free cores estimated from per-part CPU times (thread_time, robust to a busy machine):
+    the slower of the two independent parts plus the tets between them, over the serial sweep time."""
+    model = build_model(mesh, material, (0.0, -9.81, 0.0), fixed)
+    e, state = model.elements, rest_state(model)
+    args = (state.x, state.rot, state.rot, e.tets, e.cst, np.zeros((2, 0)), 1.0 / dt**2, e.offsets, e.chunks)
+    bounds = [*e.parts, e.n_colors]
+    if len(bounds) < 4:
+        return 1.0
+    buf = np.empty(kernels.ROWS * kernels.STRIDE)
+    best = [np.inf] * (len(bounds) - 1)
+    for _ in range(10):
+        for i in range(len(bounds) - 1):
+            started = time.thread_time()
+            for _ in range(5):
+                kernels._colours(*args, bounds[i], bounds[i + 1], buf)
+            best[i] = min(best[i], time.thread_time() - started)
+    return sum(best) / (max(best[:-1]) + best[-1])
+
+
 def surface_tets(name: str, target: int) -> tuple[object, TetMesh]:
     """The shipped mesh and its (cached) fTetWild tets at about ``target`` tets."""
     mesh = load_mesh(ROOT / "tests" / "data" / f"{name}.obj")
@@ -85,24 +106,34 @@ def top_pins(mesh: TetMesh) -> np.ndarray:
     return np.flatnonzero(y > y.max() - 0.1 * np.ptp(y))
 
 
-def speed(targets: list[int]) -> None:
-    """us per tet per constraint sweep, both engines, same mesh, same substeps and iterations."""
+def speed(targets: list[int], repeats: int = 5) -> None:
+    """us per tet per constraint sweep, both engines, same mesh, same substeps and iterations; medians of
+    ``repeats`` interleaved runs (pypbd, ours on 1 thread, ours on 2 threads), with the load average seen."""
     material = Material(young=1e5, poisson=0.3, density=1000.0, damping=0.0)
-    print("\n## Speed: us per tet per constraint sweep (h = 0.005, 5 substeps x 1 iteration)")
-    print("| mesh | tets | colours | pypbd 1 thread | ours 1 thread | ratio pypbd/ours | ours 2 threads |")
-    print("|---|---|---|---|---|---|---|")
+    print(f"\n## Speed: us per tet per constraint sweep (h = 0.005, 5 substeps x 1 iteration), median of {repeats}")
+    print("| mesh | tets | colours | pypbd 1 thread | ours 1 thread | ratio pypbd/ours | ours 2 threads | "
+          "2 threads speed-up | bound on 2 free cores | load avg |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in ("spot", "bob"):
         for target in targets:
             _, tets = surface_tets(name, target)
             fixed = top_pins(tets)
             steps = 40
-            ref = run_pypbd(tets, fixed, material, steps)
             sweeps = steps * SUBSTEPS
-            ours = run_ours(tets, fixed, material, H / SUBSTEPS, sweeps)
-            ours2 = run_ours(tets, fixed, material, H / SUBSTEPS, sweeps, threads=2)
-            per = [float(r["seconds"]) / sweeps / tets.n_tets * 1e6 for r in (ref, ours, ours2)]
+            runs: list[list[float]] = [[], [], []]
+            load = os.getloadavg()[0]
+            for _ in range(repeats):
+                ref = run_pypbd(tets, fixed, material, steps)
+                ours = run_ours(tets, fixed, material, H / SUBSTEPS, sweeps)
+                ours2 = run_ours(tets, fixed, material, H / SUBSTEPS, sweeps, threads=2)
+                for r, run in zip(runs, (ref, ours, ours2), strict=True):
+                    r.append(float(run["seconds"]) / sweeps / tets.n_tets * 1e6)
+            per = [float(np.median(r)) for r in runs]
+            bound = two_thread_bound(tets, fixed, material, H / SUBSTEPS)
+            load = 0.5 * (load + os.getloadavg()[0])
             print(f"| {name} | {tets.n_tets} | {ours['colors']} | {per[0]:.3f} | {per[1]:.3f} | "
-                  f"{per[0] / per[1]:.2f} | {per[2]:.3f} |", flush=True)
+                  f"{per[0] / per[1]:.2f} | {per[2]:.3f} | {per[1] / per[2]:.2f} | {bound:.2f} | {load:.1f} |",
+                  flush=True)
 
 
 def table(targets: list[int]) -> None:

@@ -36,9 +36,13 @@ class Heartbeat(threading.Thread):
                 log.warning("heartbeat of %s failed", self.job.id, exc_info=True)
 
 
+PartialWriter = Callable[[dict], "dict | None"]  # stores a partial result (fenced); its ids, or None if fenced out
+
+
 def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json: str,  # noqa: ANN001
-                should_stop: Callable[[], bool], timeout: float) -> Outcome:
-    """Run one attempt in a child process and wait for its outcome."""
+                should_stop: Callable[[], bool], timeout: float,
+                on_partial: PartialWriter | None = None) -> Outcome:
+    """Run one attempt in a child process and wait for its outcome (partial results go to ``on_partial``)."""
     import os
 
     parent, child = ctx.Pipe(duplex=False)
@@ -48,7 +52,13 @@ def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json
     beat = Heartbeat(queue, job)
     beat.start()
     try:
-        return _pump(proc, parent, queue, job, beat, should_stop, time.monotonic() + timeout)
+        stored: dict = {}
+        outcome = _pump(proc, parent, queue, job, beat, should_stop, time.monotonic() + timeout,
+                        _partial_sink(on_partial, stored, beat))
+        outcome.partial = stored or None
+        if outcome.status in ("done", "error"):
+            proc.join(5)  # the child removes its work directory and exits right after its last message
+        return outcome
     finally:
         beat.done.set()
         if proc.is_alive():
@@ -57,8 +67,24 @@ def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json
         parent.close()
 
 
+def _partial_sink(on_partial: PartialWriter | None, stored: dict, beat: Heartbeat) -> Callable[[dict], None]:
+    """Store one partial result through ``on_partial`` and remember its ids (with the stage that follows)."""
+
+    def sink(part: dict) -> None:
+        if on_partial is None:
+            return
+        ids = on_partial(part)
+        if ids is None:
+            beat.lost.set()  # fenced out: a newer attempt owns the job
+            return
+        stored.update(ids)
+        stored["next_stage"] = str(part.get("next_stage", "next stage"))
+
+    return sink
+
+
 def _pump(proc, conn, queue: JobQueue, job: Claimed, beat: Heartbeat,  # noqa: ANN001
-          should_stop: Callable[[], bool], deadline: float) -> Outcome:
+          should_stop: Callable[[], bool], deadline: float, partial: Callable[[dict], None]) -> Outcome:
     pending, last_write = None, 0.0
     while True:
         if beat.lost.is_set():
@@ -75,6 +101,8 @@ def _pump(proc, conn, queue: JobQueue, job: Claimed, beat: Heartbeat,  # noqa: A
             return Outcome("error", code="crashed", message=f"the job process died (exit code {proc.exitcode})")
         if msg is not None and msg[0] == "progress":
             pending = msg[1:]
+        elif msg is not None and msg[0] == "partial":
+            partial(msg[1])
         elif msg is not None and msg[0] == "done":
             return Outcome("done", result=msg[1])
         elif msg is not None and msg[0] == "error":

@@ -1,6 +1,7 @@
 """One job attempt in a child process: memory limit, parent watchdog, progress messages over a pipe.
 
-Messages child -> parent: ``("progress", fraction, stage)``, then exactly one of ``("done", result)`` or
+Messages child -> parent: ``("progress", fraction, stage)``, ``("partial", result_part)`` (a result to store
+at once, e.g. simulated poses before their fit), then exactly one of ``("done", result)`` or
 ``("error", code, message, retry)``. A child that dies without either (crash, kill, OOM) is a failed
 attempt that the parent retries; the worker itself keeps running.
 """
@@ -92,7 +93,8 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
         if settings.job_memory_bytes:
             _warm_blas()  # BLAS allocates its buffers now: under the limit it may hang instead of failing
             resource.setrlimit(resource.RLIMIT_AS, (settings.job_memory_bytes, resource.RLIM_INFINITY))
-        result = STAGES[job["kind"]](job, blobs, settings, progress, workdir)
+        result = STAGES[job["kind"]](job, blobs, settings, progress, workdir,
+                                     partial=lambda part: conn.send(("partial", part)))
         conn.send(("done", result))
     except InputError as exc:
         conn.send(("error", exc.code, str(exc), False))
@@ -115,3 +117,4 @@ class Outcome:
     code: str = ""
     message: str = ""
     retry: bool = True
+    partial: dict | None = None  # result ids stored mid-attempt (with "next_stage"), if any

@@ -104,7 +104,9 @@ class Worker:
         log.info("job %s (%s) attempt %d", job.id, job.kind, job.attempt)
         started = time.monotonic()
         outcome = run_attempt(self.ctx, self.store.queue, job, self._payload(job), self.settings.model_dump_json(),
-                              self._should_stop, self.settings.job_timeout_seconds)
+                              self._should_stop, self.settings.job_timeout_seconds,
+                              lambda part: self.store.queue.store_partial(job.id, job.attempt,
+                                                                          result_writer(job, part)))
         self._record(job, outcome)
         log.info("job %s attempt %d: %s %s (%.2fs)", job.id, job.attempt, outcome.status, outcome.code,
                  time.monotonic() - started)
@@ -115,6 +117,11 @@ class Worker:
         if outcome.status == "done":
             if not queue.finish(job.id, job.attempt, result_writer(job, outcome.result or {})):
                 log.warning("job %s attempt %d was fenced out; its result is discarded", job.id, job.attempt)
+        elif outcome.status == "error" and outcome.partial:
+            kept = {k: v for k, v in outcome.partial.items() if k != "next_stage"}
+            step = outcome.partial.get("next_stage", "next stage")
+            message = f"{step} failed (the results before it are kept: {sorted(kept)}): {outcome.message}"
+            queue.fail(job.id, job.attempt, message, outcome.code, outcome.retry, {**kept, "failed_stage": step})
         elif outcome.status == "error":
             queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
         elif outcome.status == "stopped":

@@ -5,26 +5,36 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from service.store.models import ClipRecord, PosesRecord
 from service.store.queue import Claimed
 
 
+def _upsert_poses(session: Session, job: Claimed, p: dict[str, Any]) -> str:
+    """The job's simulated poses row (one per job: a partial store or an earlier attempt may have made it)."""
+    row = session.execute(select(PosesRecord).where(PosesRecord.job_id == job.id)).scalar_one_or_none()
+    if row is None:
+        row = PosesRecord(tenant_id=job.tenant_id, mesh_id=job.mesh_id, job_id=job.id, source="simulate")
+        session.add(row)
+    row.blob_key, row.n_frames, row.n_vertices = p["blob_key"], p["n_frames"], p["n_vertices"]
+    row.meta = p.get("meta", {})
+    session.flush()
+    return row.id
+
+
 def result_writer(job: Claimed, result: dict[str, Any]) -> Callable[[Session], dict[str, Any]]:
-    """A ``write(session)`` for :meth:`JobQueue.finish`: adds poses/clip rows, returns their ids."""
+    """A ``write(session)`` for :meth:`JobQueue.finish` or ``store_partial``: adds poses/clip rows, returns
+    their ids (and the tet cache key of a simulation)."""
 
     def write(session: Session) -> dict[str, Any]:
         ids: dict[str, Any] = {}
         poses_id = job.poses_id
+        if "tet_cache_key" in result:
+            ids["tet_cache_key"] = str(result["tet_cache_key"])
         if "poses" in result:
-            p = result["poses"]
-            row = PosesRecord(tenant_id=job.tenant_id, mesh_id=job.mesh_id, job_id=job.id, source="simulate",
-                              blob_key=p["blob_key"], n_frames=p["n_frames"], n_vertices=p["n_vertices"],
-                              meta=p.get("meta", {}))
-            session.add(row)
-            session.flush()
-            poses_id = ids["poses_id"] = row.id
+            poses_id = ids["poses_id"] = _upsert_poses(session, job, result["poses"])
         if "clip" in result:
             c = result["clip"]
             row = ClipRecord(tenant_id=job.tenant_id, mesh_id=job.mesh_id, poses_id=poses_id, job_id=job.id,

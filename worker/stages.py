@@ -4,6 +4,7 @@ imported here, lazily, so the worker starts even before a stage exists in this b
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +13,7 @@ from pdeanim.progress import Progress, sub_progress
 from service.settings import Settings
 from service.store.blobs import BlobStore
 
+Partial = Callable[[dict], None]  # hands a part of the result to the parent before the stage goes on
 SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
 
 
@@ -58,25 +60,38 @@ def _fit(poses, options: dict, blobs: BlobStore, progress: Progress) -> dict:  #
     return _store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
 
 
-def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path) -> dict:
-    """Mesh -> poses (stored as POSES.npz), and the fit of them when ``then_fit``."""
+def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
+                 partial: Partial | None = None) -> dict:
+    """Mesh -> poses (stored as POSES.npz), and the fit of them when ``then_fit``. The tets come from the
+    blob store (shared by every worker); with ``then_fit`` the poses are handed to ``partial`` (stored by
+    the parent, fenced) before the fit starts, so a failing fit does not lose them."""
     from pdeanim.sim.scene import SceneParams
     from pdeanim.sim.simulate import simulate_mesh
+
+    from .tetcache import check_only_shared, shared_tets
 
     spec = job["params"]
     share = SIMULATE_SHARE if spec.get("then_fit") else 1.0
     mesh = _mesh(job, blobs, settings)
     scene = SceneParams.from_dict(spec["params"])
+    progress(0.0, "tetrahedralize")
+    tet_dir = workdir / "tets"
+    tet_key = shared_tets(mesh, scene.target_tets, blobs, tet_dir, workdir)
     poses = simulate_mesh(mesh, scene, progress=sub_progress(progress, 0.0, share), workdir=workdir,
-                          cache_dir=settings.cache_dir())
+                          cache_dir=tet_dir)
+    check_only_shared(tet_dir, tet_key)
     out: dict[str, Any] = {"poses": {"blob_key": blobs.put(poses_to_bytes(poses)), "n_frames": poses.n_frames,
-                                     "n_vertices": poses.n_vertices, "meta": jsonable(poses.meta)}}
+                                     "n_vertices": poses.n_vertices, "meta": jsonable(poses.meta)},
+                           "tet_cache_key": tet_key}
     if spec.get("then_fit"):
+        if partial is not None:
+            partial({**out, "next_stage": "fit"})
         out["clip"] = _fit(poses, spec["fit"], blobs, sub_progress(progress, share, 1.0))
     return out
 
 
-def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path) -> dict:
+def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
+            partial: Partial | None = None) -> dict:
     """Stored poses -> clip."""
     from pdeanim.poses import PoseLimits, load_poses_npz
 
@@ -85,7 +100,8 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
     return {"clip": _fit(poses, job["params"]["params"], blobs, progress)}
 
 
-def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path) -> dict:
+def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
+               partial: Partial | None = None) -> dict:
     """Mesh -> loopable swim-cycle clip."""
     from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
 

@@ -25,33 +25,36 @@ def segment_pair(segm: Segmentation, mu: np.ndarray) -> tuple[np.ndarray, np.nda
     """(phi0, phi1), each (K, F) float64: the signed time pair of every item at every frame, for constants
     mu (K, S) per segment; equals :func:`time_pair` at (frame_tau, mu[:, frame_segment]) bit for bit.
 
-    Faster than the elementwise form: denominators are computed per segment, the exp formula runs on all
-    elements without masking, and trig items are evaluated segment by segment on their rows only.
+    Faster than the elementwise form: the linear pair is the default, and per segment only the rows with an
+    exp or a trig constant are evaluated (same formulas, denominators computed once per row and segment).
     """
     seg, tau = segm.frame_segment(), segm.frame_tau()
-    small = mu < 1e-12  # linear (and trig) items: overwritten below; 1.0 avoids slow subnormal arithmetic
-    mm = np.where(small, 1.0, mu)
-    n2 = -2.0 * mm
-    den = np.expm1(n2)[:, seg]
-    mm_f, n2_f = mm[:, seg], n2[:, seg]
     omt = 1.0 - tau
-    phi1 = np.exp(mm_f * (tau - 1.0)) * np.expm1(n2_f * tau) / den
-    phi0 = np.exp(mm_f * (omt - 1.0)) * np.expm1(n2_f * omt) / den
-    lin = small[:, seg]
-    if np.any(lin):
-        np.copyto(phi1, np.broadcast_to(tau, phi1.shape), where=lin)
-        np.copyto(phi0, np.broadcast_to(omt, phi0.shape), where=lin)
-    trig_rows = mu < 0
-    if np.any(trig_rows):
-        mt = np.clip(-mu, 1e-150, MU_TRIG_MAX)
-        inv = 1.0 / np.sin(mt)
-        for s in range(segm.n_segments):
-            rows = np.flatnonzero(trig_rows[:, s])
-            lo, hi = np.searchsorted(seg, s, "left"), np.searchsorted(seg, s, "right")
-            if len(rows) and hi > lo:
-                m_r, i_r = mt[rows, s, None], inv[rows, s, None]
-                phi1[rows, lo:hi] = np.sin(m_r * tau[lo:hi]) * i_r
-                phi0[rows, lo:hi] = np.sin(m_r * omt[lo:hi]) * i_r
+    K = len(mu)
+    phi1 = np.empty((K, len(tau)))
+    phi0 = np.empty((K, len(tau)))
+    phi1[:] = tau
+    phi0[:] = omt
+    exp_rows, trig_rows = mu >= 1e-12, mu < 0
+    mt = np.clip(-mu, 1e-150, MU_TRIG_MAX)
+    for s in range(segm.n_segments):
+        lo, hi = np.searchsorted(seg, s, "left"), np.searchsorted(seg, s, "right")
+        if hi == lo:
+            continue
+        ts, os_ = tau[lo:hi], omt[lo:hi]
+        rows = np.flatnonzero(exp_rows[:, s])
+        if len(rows):
+            m = mu[rows, s, None]
+            n2 = -2.0 * m
+            den = np.expm1(n2)
+            phi1[rows, lo:hi] = np.exp(m * (ts - 1.0)) * np.expm1(n2 * ts) / den
+            phi0[rows, lo:hi] = np.exp(m * (os_ - 1.0)) * np.expm1(n2 * os_) / den
+        rows = np.flatnonzero(trig_rows[:, s])
+        if len(rows):
+            m = mt[rows, s, None]
+            inv = 1.0 / np.sin(m)
+            phi1[rows, lo:hi] = np.sin(m * ts) * inv
+            phi0[rows, lo:hi] = np.sin(m * os_) * inv
     return phi0, phi1
 
 
@@ -129,9 +132,17 @@ def predict(z: np.ndarray, segm: Segmentation, mu: np.ndarray) -> np.ndarray:
 
 
 def _segment_sum(values: np.ndarray, segm: Segmentation) -> np.ndarray:
-    """(K, S) sums over the frames assigned to each segment of values (K, F)."""
-    onehot = np.eye(segm.n_segments)[segm.frame_segment()]  # (F, S)
-    return values @ onehot
+    """(K, S) sums over the frames assigned to each segment of values (K, F).
+
+    np.add.reduceat over the contiguous frame runs (frame_segment is sorted); a one-hot matrix product
+    would be a large BLAS call that wakes BLAS threads, which costs more than it saves on a busy machine.
+    """
+    seg = segm.frame_segment()
+    starts = np.searchsorted(seg, np.arange(segm.n_segments), "left")
+    out = np.add.reduceat(values, np.minimum(starts, values.shape[1] - 1), axis=1)
+    empty = starts >= np.searchsorted(seg, np.arange(segm.n_segments), "right")
+    out[:, empty] = 0.0
+    return out
 
 
 def _free_fit_errors(b: np.ndarray, segm: Segmentation, grid: np.ndarray) -> np.ndarray:
@@ -145,9 +156,10 @@ def _free_fit_errors(b: np.ndarray, segm: Segmentation, grid: np.ndarray) -> np.
         tau = (segm.t[fr] - t0) / (t1 - t0) if t1 > t0 else np.zeros(len(fr))
         B = np.moveaxis(b[:, fr], 1, 0).reshape(len(fr), -1)  # (n, K*4)
         energy = (B * B).sum(0).reshape(K, -1).sum(1)
-        for g, mu in enumerate(grid[s]):
-            Q, _ = np.linalg.qr(time_pair(tau, np.full(len(fr), mu)))
-            cap = ((Q.T @ B) ** 2).sum(0).reshape(K, -1).sum(1)
+        G = len(grid[s])
+        Qs, _ = np.linalg.qr(time_pair(np.broadcast_to(tau, (G, len(fr))), np.repeat(grid[s][:, None], len(fr), 1)))
+        for g in range(G):  # one thin product per constant (a stacked one wakes BLAS threads)
+            cap = ((Qs[g].T @ B) ** 2).sum(0).reshape(K, -1).sum(1)
             out[g, :, s] = np.maximum(energy - cap, 0.0)
     return out
 

@@ -1,29 +1,32 @@
 """numba kernels for the coloured Gauss-Seidel sweep (the same math as :mod:`pdeanim.sim.constraints`).
 
 numba is optional: ``AVAILABLE`` is False when it cannot be imported and the solver then uses the numpy path.
-Tets of one colour share no point, so a colour is processed in chunks of ``CHUNK`` tets: the chunk's corners
-and rotations are gathered into a small struct-of-arrays buffer, one fused, branch-free pass does both
-constraint updates per tet (it vectorises across tets: SIMD lanes are independent tets), and the buffer is
-scattered back. This is exactly the sequential Gauss-Seidel result, bit for bit, in any chunk order or in
-parallel. 3 x 3 matrices are 9-tuples of scalars (row-major) so that they stay in registers; no fastmath, so
-the arithmetic is the scalar IEEE one in the same order as before.
+Tets of one colour share no point, so a colour is processed in chunks of ``CHUNK`` tets: the chunk's corners,
+rotations and multipliers are gathered into a small struct-of-arrays buffer, one fused, branch-free pass does
+both constraint updates per tet with the per-tet constants read from a precomputed chunked layout (it
+vectorises: SIMD lanes are independent tets), and the buffer is scattered back. That is exactly the
+sequential Gauss-Seidel result, bit for bit, in any chunk order. Large meshes are split into parts that share
+no point (``parts``), solved one after the other or at the same time on threads (the kernels release the GIL;
+see :mod:`pdeanim.sim.workers`) with the same result, followed by the tets between parts. 3 x 3 matrices are 9-tuples of scalars (row-major) that stay in registers;
+no fastmath, so the arithmetic is the scalar IEEE one in the same order as the one-tet-at-a-time loop.
 """
 
 from __future__ import annotations
 
+import os
+from functools import partial
+
 import numpy as np
 
 from .constraints import ROTATION_ITERATIONS
+from .workers import JobPool
 
 try:
-    import numba
-    from numba import njit, prange
+    from numba import njit
 
     AVAILABLE = True
 except ImportError:  # pragma: no cover - numba is a pinned dependency; this keeps the numpy path usable
     AVAILABLE = False
-    numba = None
-    prange = range
 
 CHUNK = 128
 """Tets per chunk: a gather buffer of ROWS x STRIDE float64 (19 KiB) stays in the L1 cache."""
@@ -172,12 +175,11 @@ def _solve_chunk(b, cst, n, inv_dt2):  # pragma: no cover - compiled
              b[6 * STRIDE + j], b[7 * STRIDE + j], b[8 * STRIDE + j], b[9 * STRIDE + j], b[10 * STRIDE + j],
              b[11 * STRIDE + j])
         q = (b[12 * STRIDE + j], b[13 * STRIDE + j], b[14 * STRIDE + j], b[15 * STRIDE + j])
-        o = j
-        m = (cst[o], cst[o + STRIDE], cst[o + 2 * STRIDE], cst[o + 3 * STRIDE], cst[o + 4 * STRIDE],
-             cst[o + 5 * STRIDE], cst[o + 6 * STRIDE], cst[o + 7 * STRIDE], cst[o + 8 * STRIDE])
-        wk = (cst[o + 9 * STRIDE], cst[o + 10 * STRIDE], cst[o + 11 * STRIDE], cst[o + 12 * STRIDE])
-        p, q, dlam_d = _deviatoric(p, q, m, wk, cst[o + 13 * STRIDE] * inv_dt2, b[16 * STRIDE + j])
-        p, dlam_h = _volume(p, m, wk, cst[o + 14 * STRIDE] * inv_dt2, b[17 * STRIDE + j])
+        m = (cst[j], cst[j + STRIDE], cst[j + 2 * STRIDE], cst[j + 3 * STRIDE], cst[j + 4 * STRIDE],
+             cst[j + 5 * STRIDE], cst[j + 6 * STRIDE], cst[j + 7 * STRIDE], cst[j + 8 * STRIDE])
+        wk = (cst[j + 9 * STRIDE], cst[j + 10 * STRIDE], cst[j + 11 * STRIDE], cst[j + 12 * STRIDE])
+        p, q, dlam_d = _deviatoric(p, q, m, wk, cst[j + 13 * STRIDE] * inv_dt2, b[16 * STRIDE + j])
+        p, dlam_h = _volume(p, m, wk, cst[j + 14 * STRIDE] * inv_dt2, b[17 * STRIDE + j])
         b[16 * STRIDE + j] += dlam_d
         b[17 * STRIDE + j] += dlam_h
         b[j], b[STRIDE + j], b[2 * STRIDE + j], b[3 * STRIDE + j] = p[0], p[1], p[2], p[3]
@@ -226,21 +228,10 @@ def _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, first, la
             chunk += 1
 
 
-def _parts_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts):  # pragma: no cover
-    """The independent parts on numba's thread pool (they share no point: the serial result)."""
-    for p in prange(parts.shape[0] - 1):
-        _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts[p], parts[p + 1],
-                 np.empty(ROWS * STRIDE))
-
-
-def _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts, parallel):  # pragma: no cover
-    """One Gauss-Seidel sweep: the parts' colours (part after part, or parts in parallel), then the rest."""
+def _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks):  # pragma: no cover - compiled
+    """One serial Gauss-Seidel sweep: all colours in order (the parts' colours part after part, then the rest)."""
     buf = np.empty(ROWS * STRIDE)
-    if parallel:
-        _parts_parallel(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts)
-    else:
-        _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, 0, parts[-1], buf)
-    _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts[-1], offsets.shape[0] - 1, buf)
+    _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, 0, offsets.shape[0] - 1, buf)
 
 
 def _predict(x_in, v_in, inv_mass, damp, dv, dt, x):  # pragma: no cover - compiled
@@ -249,6 +240,22 @@ def _predict(x_in, v_in, inv_mass, damp, dv, dt, x):  # pragma: no cover - compi
         free = inv_mass[i] > 0
         for c in range(3):
             x[i, c] = x_in[i, c] + dt * (v_in[i, c] * damp + (dv[c] if free else 0.0))
+
+
+def _ground(x, x_prev, point, n, friction):  # pragma: no cover - compiled
+    """Points behind the plane (point, unit normal n) onto it; friction in [0, 1] removes that part of the
+    sliding since x_prev (the same maths as ``xpbd.project_ground``'s numpy path)."""
+    for i in range(x.shape[0]):
+        depth = (x[i, 0] - point[0]) * n[0] + (x[i, 1] - point[1]) * n[1] + (x[i, 2] - point[2]) * n[2]
+        if depth < 0:
+            for c in range(3):
+                x[i, c] -= depth * n[c]
+            if friction > 0:
+                d0, d1, d2 = x[i, 0] - x_prev[i, 0], x[i, 1] - x_prev[i, 1], x[i, 2] - x_prev[i, 2]
+                dn = d0 * n[0] + d1 * n[1] + d2 * n[2]
+                x[i, 0] -= friction * (d0 - dn * n[0])
+                x[i, 1] -= friction * (d1 - dn * n[1])
+                x[i, 2] -= friction * (d2 - dn * n[2])
 
 
 PARALLEL_MIN_TETS = 4096
@@ -260,28 +267,28 @@ if AVAILABLE:
         globals()[_name] = njit(inline="always", **_opts)(globals()[_name])
     _solve_chunk = njit(**_opts)(_solve_chunk)
     _chunk = njit(inline="always", **_opts)(_chunk)
-    _colours = njit(**_opts)(_colours)
-    _parts_parallel = njit(parallel=True, **_opts)(_parts_parallel)
+    _colours = njit(nogil=True, **_opts)(_colours)
     _solve_sweep = njit(**_opts)(_solve_sweep)
     _predict = njit(**_opts)(_predict)
+    _ground = njit(**_opts)(_ground)
 else:  # pragma: no cover
-    _solve_sweep = _predict = None
+    _solve_sweep = _predict = _ground = None
 
 _threads = 1
+_pool: JobPool | None = None
 
 
 def set_threads(n: int) -> None:
-    """Use up to n worker threads on large meshes (1, the default, keeps the solver single-threaded)."""
-    global _threads
-    if AVAILABLE:
-        _threads = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
-        if _threads > 1:  # the serial path never starts numba's thread pool
-            numba.set_num_threads(_threads)
+    """Use up to n threads on meshes split into parts (1, the default, keeps the solver single-threaded)."""
+    global _threads, _pool
+    _threads = max(1, min(int(n), os.cpu_count() or 1))
+    if AVAILABLE and _threads > 1 and (_pool is None or _pool.size < _threads):
+        _pool = JobPool(_threads - 1)
 
 
 def solve_sweep(x: np.ndarray, rot_in: np.ndarray, rot: np.ndarray, tets: np.ndarray, cst: np.ndarray,
                 lam: np.ndarray, inv_dt2: float, offsets: np.ndarray, chunks: np.ndarray, parts: np.ndarray) -> None:
-    """One sweep over all colours in a single compiled call (serial or parallel: the same result).
+    """One sweep over all colours (serial, or the parts on several threads: the same result).
 
     x (N, 3) f64 is updated in place; rotation guesses are read from rot_in (M, 4) f64 and written to rot (M, 4)
     (the same array or not); tets (M, 4) int64 in colour order; cst and chunks from :func:`pack_constants` with
@@ -289,11 +296,21 @@ def solve_sweep(x: np.ndarray, rot_in: np.ndarray, rot: np.ndarray, tets: np.nda
     colours after parts[-1] run serially); lam (2, M) f64 multipliers accumulated in this step, or (2, 0) when
     they start at 0 and are not needed afterwards (a single sweep per step).
     """
-    parallel = _threads > 1 and len(parts) > 2
-    _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, parts, parallel)
+    if _threads == 1 or len(parts) < 3 or _pool is None:
+        _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks)
+        return
+    args = (x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks)
+    _pool.run([partial(_colours, *args, parts[p], parts[p + 1], np.empty(ROWS * STRIDE))
+               for p in range(len(parts) - 1)])
+    _colours(*args, parts[-1], len(offsets) - 1, np.empty(ROWS * STRIDE))
 
 
 def predict(x_in: np.ndarray, v_in: np.ndarray, inv_mass: np.ndarray, damp: float, dv: np.ndarray, dt: float,
             x: np.ndarray) -> None:
     """Explicit prediction of a substep into x (N, 3): damped velocity plus dv (3,) (gravity dt) on free points."""
     _predict(x_in, v_in, inv_mass, damp, dv, dt, x)
+
+
+def ground(x: np.ndarray, x_prev: np.ndarray, point: np.ndarray, normal: np.ndarray, friction: float) -> None:
+    """Project x (N, 3) onto the allowed side of the plane (point (3,), unit normal (3,)), friction in [0, 1]."""
+    _ground(x, x_prev, point, normal, friction)

@@ -11,12 +11,13 @@ from typing import Any
 
 @dataclass(frozen=True)
 class CachedClip:
-    """A decoded clip with the row fields the routes need (owner, blob keys)."""
+    """A decoded clip with the row fields the routes need (owner, blob keys) and its frame writer."""
 
     tenant_id: str
     coefficients_key: str
     topology_key: str
     clip: Any  # pdeanim.clip.Clip
+    frame_glb: Any  # pdeanim.gltf.write.FrameGlb of the clip's topology: positions (V, 3) -> GLB bytes
 
 
 class ClipCache:

@@ -70,10 +70,12 @@ class JobRequest(BaseModel):
 
 
 class JobResult(BaseModel):
-    """Ids of what a succeeded job made."""
+    """Ids of what a job made (a failed simulate + fit keeps its poses and names the failed stage)."""
 
     poses_id: str | None = None
     clip_id: str | None = None
+    tet_cache_key: str | None = Field(None, description="tets a simulation used (blob tets-<key>, shared)")
+    failed_stage: str | None = Field(None, description='the stage that failed after partial results, e.g. "fit"')
 
 
 class JobOut(BaseModel):

@@ -34,6 +34,10 @@ class BlobStore(Protocol):
         """Store a file's content without reading it into memory; returns the key."""
         ...
 
+    def put_if_absent(self, data: bytes, key: str) -> bool:
+        """Store ``data`` under ``key`` only if no blob is there yet (first writer wins); True if stored."""
+        ...
+
     def get(self, key: str) -> bytes:
         """The bytes under ``key``; BlobNotFound if absent."""
         ...
@@ -110,6 +114,26 @@ class LocalBlobStore:
                 shutil.copyfileobj(src, fh, _CHUNK)
         return self._write_atomic(key or file_key(path), copy)
 
+    def put_if_absent(self, data: bytes, key: str) -> bool:
+        """Store ``data`` under ``key`` unless a blob is there (hard link of a finished temp file: atomic,
+        first writer wins even between processes); True if this call stored it."""
+        target = self._path(key)
+        if target.exists():
+            return False
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.link(tmp, target)
+            return True
+        except FileExistsError:
+            return False
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+
     def get(self, key: str) -> bytes:
         """The bytes under ``key``; BlobNotFound if absent."""
         try:
@@ -155,6 +179,19 @@ class S3BlobStore:
         key = key or file_key(path)
         self.client.upload_file(str(path), self.bucket, self._name(key))
         return key
+
+    def put_if_absent(self, data: bytes, key: str) -> bool:
+        """Conditional PUT (``If-None-Match: *``): S3 stores it only if the key is free; True if stored."""
+        from botocore.exceptions import ClientError
+
+        try:
+            self.client.put_object(Bucket=self.bucket, Key=self._name(key), Body=data, IfNoneMatch="*")
+            return True
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("PreconditionFailed", "ConditionalRequestConflict",
+                                                              "412", "409"):
+                return False
+            raise
 
     def get(self, key: str) -> bytes:
         """The bytes under ``key``; BlobNotFound if absent."""

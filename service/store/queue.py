@@ -110,11 +110,26 @@ class JobQueue:
                 return False
         return True
 
-    def fail(self, job_id: str, attempt: int, message: str, code: str, retry: bool) -> str | None:
-        """Fenced failure: back to queued with backoff while attempts remain (if ``retry``), else failed.
-        Returns the new state, or None if this attempt no longer owns the job."""
+    def store_partial(self, job_id: str, attempt: int, write: Callable[[Session], dict[str, Any]]) -> dict | None:
+        """Fenced partial result while the attempt runs: ``write(session)`` adds rows and returns their ids,
+        merged into ``jobs.result``; committed only if this attempt still owns the job (else None)."""
         with self._write() as session, session.begin():
-            return self._fail_locked(session, job_id, attempt, message, code, retry, expired_only=False)
+            job = session.execute(select(Job).where(Job.id == job_id, Job.attempt == attempt,
+                                                    Job.state == "running").with_for_update()).scalar_one_or_none()
+            if job is None:
+                return None
+            ids = write(session)
+            job.result = {**(job.result or {}), **ids}
+        return ids
+
+    def fail(self, job_id: str, attempt: int, message: str, code: str, retry: bool,
+             result: dict[str, Any] | None = None) -> str | None:
+        """Fenced failure: back to queued with backoff while attempts remain (if ``retry``), else failed;
+        ``result`` replaces the job's result (e.g. poses kept from a failed fit). Returns the new state, or
+        None if this attempt no longer owns the job."""
+        with self._write() as session, session.begin():
+            return self._fail_locked(session, job_id, attempt, message, code, retry, expired_only=False,
+                                     result=result)
 
     def release(self, job_id: str, attempt: int) -> bool:
         """Give a running job back to the queue without counting a failure (worker shutting down)."""
@@ -136,7 +151,7 @@ class JobQueue:
         return done
 
     def _fail_locked(self, session: Session, job_id: str, attempt: int, message: str, code: str,
-                     retry: bool, expired_only: bool) -> str | None:
+                     retry: bool, expired_only: bool, result: dict[str, Any] | None = None) -> str | None:
         query = select(Job).where(Job.id == job_id, Job.attempt == attempt, Job.state == "running")
         if expired_only:
             query = query.where(Job.lease_expires < time.time())
@@ -144,6 +159,8 @@ class JobQueue:
         if job is None:
             return None
         job.failures += 1
+        if result is not None:
+            job.result = result
         job.error, job.error_code, job.lease_expires, job.worker_id = message[:4000], code, None, None
         if retry and job.failures < job.max_attempts:
             job.state, job.run_after = "queued", time.time() + self.policy.backoff(job.failures)

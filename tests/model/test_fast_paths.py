@@ -97,3 +97,30 @@ def test_captured_energy_shared_u_equals_per_item(rng):
         shared = captured_energy(u, mask, gram, D, kind, per_curve=3)
         per_item = captured_energy(np.repeat(u, 3, 0), np.repeat(mask, 3, 0), gram, np.repeat(D, 3), kind)
         assert np.array_equal(shared, per_item)
+
+
+def test_segment_sum_matches_one_hot_product(rng):
+    from pdeanim.model.timefit import _segment_sum
+
+    for segm in (uniform_segmentation(np.arange(23.0), 4), Segmentation(np.array([0, 0]), np.zeros(1)),
+                 Segmentation(np.array([0, 3, 4, 9]), np.linspace(0, 1, 10))):
+        values = rng.normal(size=(6, len(segm.t)))
+        onehot = np.eye(segm.n_segments)[segm.frame_segment()]
+        np.testing.assert_allclose(_segment_sum(values, segm), values @ onehot, rtol=1e-13, atol=1e-13)
+
+
+def test_pinv_sym_cholesky_path_matches_eigh(rng):
+    """Well-conditioned Gram matrices: Cholesky inverse == eigh pseudo-inverse to rounding; rank-deficient
+    or ill-conditioned ones take the eigh path itself (identical)."""
+    from pdeanim.model.spacefit import _pinv_eigh, _pinv_sym
+
+    u = np.sort(rng.uniform(0, 1, (300, 12)), axis=1)
+    mask = np.ones((300, 12))
+    mask[:50, 3:] = 0  # rank 3
+    S = fam.space_basis(u, rng.uniform(0, 10, 300), "D0") * mask[..., None]
+    M = np.swapaxes(S, 1, 2) @ S
+    M[60] = 0.0
+    M[61] = np.diag([1.0, 1.0, 1.0, 1e-9])  # cond 1e9: eigh path
+    a, b = _pinv_eigh(M), _pinv_sym(M)
+    assert np.array_equal(a[:50], b[:50]) and np.array_equal(a[60:62], b[60:62])
+    np.testing.assert_allclose(b[62:], a[62:], rtol=1e-8, atol=1e-10 * np.abs(a[62:]).max())

@@ -61,7 +61,7 @@ def test_clip_cache_is_a_bounded_lru():
     def loader(name):
         def load():
             loads.append(name)
-            return CachedClip("t", name, name, object())
+            return CachedClip("t", name, name, object(), object())
         return load
 
     for name in ("a", "b", "a", "c", "b"):

@@ -163,3 +163,24 @@ def test_fenced_out_finish_writes_no_result_rows(store, tenant):
     assert store.queue.finish(job_id, 1, write)
     with store.sessions() as s:
         assert s.get(ClipRecord, "clip_x").job_id == job_id and s.get(Job, job_id).result == {"clip_id": "clip_x"}
+
+
+def test_put_if_absent_first_writer_wins(store):
+    """Racing writers of one key: exactly one stores, every reader then sees that writer's bytes."""
+    blobs, key = store.blobs, "tets-race"
+    won: list[bytes] = []
+    lock = threading.Lock()
+
+    def write(i: int) -> None:
+        data = f"writer {i}".encode() * 1000
+        if blobs.put_if_absent(data, key):
+            with lock:
+                won.append(data)
+
+    threads = [threading.Thread(target=write, args=(i,)) for i in range(6)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(won) == 1 and blobs.get(key) == won[0]
+    assert not blobs.put_if_absent(b"late", key) and blobs.get(key) == won[0]

@@ -29,13 +29,15 @@ SUMMARY_KEYS = ("rms", "max", "rel_rms", "rel_max", "p95", "target")
 def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
     def load() -> CachedClip:
         from pdeanim.clip import load_clip
+        from pdeanim.gltf.write import FrameGlb
 
         with store.sessions() as session:
             row = session.get(ClipRecord, clip_id)
         if row is None:
             raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
         clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
-        return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip)
+        return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip,
+                          FrameGlb(clip.faces, clip.n_vertices))
 
     item = cache.get(clip_id, load)
     if item.tenant_id != tenant:
@@ -115,9 +117,7 @@ def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep
     tag = hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest()
 
     def body() -> bytes:
-        from pdeanim.gltf.write import frame_glb
-
-        return frame_glb(np.asarray(item.clip.evaluate(float(t))), item.clip.faces)
+        return item.frame_glb(np.asarray(item.clip.evaluate(float(t))))
 
     return immutable_response(request, tag, body, GLB)
 
