@@ -55,7 +55,7 @@ def shared_tets(mesh, target_tets: int, blobs: BlobStore, cache_dir: Path,  # no
     local.unlink(missing_ok=True)
     tetrahedralize(mesh, params, cache_dir=cache_dir, workdir=workdir)
     if not blobs.put_if_absent(local.read_bytes(), blob):
-        log.info("another worker published tets %s first; using those", key)
+        log.warning("another worker published tets %s first; using those", key)
         _write_atomic(local, blobs.get(blob))
     return key
 

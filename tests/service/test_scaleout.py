@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import multiprocessing
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -72,8 +73,9 @@ def _poses(store: Store, job: Job) -> np.ndarray:
 def test_two_workers_on_two_machines_give_bit_identical_poses(backend, shared, tmp_path):
     jobs = [_submit(shared), _submit(shared)]
     spawn = multiprocessing.get_context("spawn")  # sees this test's environment (S3 credentials)
-    _run_one(_machine(backend, shared.settings, tmp_path / "machine-a"), spawn)
-    _run_one(_machine(backend, shared.settings, tmp_path / "machine-b"), spawn)
+    machines = [_machine(backend, shared.settings, tmp_path / f"machine-{m}") for m in "ab"]
+    with ThreadPoolExecutor(2) as pool:  # at the same time: both may tetrahedralize, the first upload wins
+        list(pool.map(lambda settings: _run_one(settings, spawn), machines))
     with shared.sessions() as s:
         a, b = (s.get(Job, j) for j in jobs)
     assert a.state == b.state == "succeeded", (a.error, b.error)
