@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 from ..errors import ParameterError
 
@@ -27,6 +28,8 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--loop", action="store_true", help="make the clip loop (last frame flows into the first)")
     p.add_argument("--fps", type=float, default=30.0, help="sampling rate for glTF input")
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
+    p.add_argument("--pictures", metavar="DIR",
+                   help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
     p.set_defaults(func=run)
 
 
@@ -47,7 +50,23 @@ def run(args: argparse.Namespace) -> int:
     parts = fit_poses(poses, options)
     write_clip_file(args.out, parts)
     print(summary_text(parts.report, time.perf_counter() - start, args.out))
+    if args.pictures:
+        for path in write_pictures(poses, parts, args.pictures, Path(args.out).stem).values():
+            print(f"picture -> {path}")
     return 0
+
+
+def write_pictures(poses, parts, out_dir: str, name: str) -> dict:  # noqa: ANN001
+    """Evaluate the clip at every source frame and draw where the fit struggles (pdeanim.pictures)."""
+    import numpy as np
+
+    from ..clip import load_clip
+    from ..pictures import fit_error_pictures
+
+    clip = load_clip(parts.topology, parts.coefficients)
+    t = (poses.times - poses.times[0]) / max(poses.times[-1] - poses.times[0], 1e-12)
+    fitted = clip.evaluate(np.asarray(t, np.float64))
+    return fit_error_pictures(poses.vertices, fitted, poses.faces, poses.times, out_dir, name)
 
 
 def _fmt(v: float | None) -> str:

@@ -1,13 +1,18 @@
 """Evaluation of "dynamic-pde" clips: the loader registered in :data:`pdeanim.clip.LOADERS`.
 
 Everything that does not depend on t is precomputed when a clip is loaded: the per-vertex space basis
-(V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3). A frame at t is then: find the
-segment, evaluate the time pair of every curve+coordinate, gather it per vertex, and
-positions = rest + phi0 * P[s] + phi1 * P[s+1] (a few multiply-adds per vertex).
+(V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), stored in curve order (vertices of a
+curve contiguous) so that per-curve values spread to vertices with one ``np.repeat`` instead of a gather.
+A frame at t is then: find the segment (pure Python), evaluate the time pair of every curve+coordinate of
+that segment (a dozen numpy calls on C*3 items), spread it to the vertices, and
+positions = rest + phi0 * P[s] + phi1 * P[s+1] (a few multiply-adds per vertex), permuted back to the
+original vertex order (skipped when the curves already list the vertices in order).
 """
 
 from __future__ import annotations
 
+import bisect
+import math
 import threading
 from typing import Any
 
@@ -30,11 +35,11 @@ class DynamicClip:
         self.frame_times = np.asarray(coef.frame_times, np.float64)
         self.looping = bool(coef.looping)
         self.segment_t = np.asarray(coef.segment_t, np.float64)
+        self._segment_list = [float(x) for x in self.segment_t]
         self._cid, _ = topo.curves.curve_of_vertex(self.n_vertices)
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
-        self._knot_fields = self._precompute(fam[0] % 2).reshape(len(self._mu) + 1, -1)  # (S+1, V*3)
         self._local = threading.local()
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
         if coef.motion == "displacement":
@@ -43,9 +48,19 @@ class DynamicClip:
             self._base = (topo.rest - self._rigid.centre0[self._cid]).astype(np.float32)
         else:
             self._base = np.zeros((self.n_vertices, 3), np.float32)
-        self._base_flat = self._base.ravel()
-        item_of = (self._cid[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item of every value
-        self._gather = [st.position[item_of].astype(np.intp) for st in self._time]  # per segment
+        self._init_curve_layout(self._precompute(fam[0] % 2))
+
+    def _init_curve_layout(self, knot_fields: np.ndarray) -> None:
+        """Curve-order copies of the knot fields and the base, and the permutation back to vertex order."""
+        order = np.asarray(self.topo.curves.order, np.intp)  # curve-order position -> vertex
+        self._lengths = np.asarray(self.topo.curves.lengths, np.intp)  # (C,)
+        self._identity = bool(np.array_equal(order, np.arange(self.n_vertices)))
+        kf = knot_fields[:, order]  # (S+1, V, 3) in curve order
+        self._pair_fields = [np.ascontiguousarray(kf[s:s + 2]) for s in range(len(kf) - 1)]  # (2, V, 3) each
+        self._base_sorted = np.ascontiguousarray(self._base[order])
+        position = np.empty(self.n_vertices, np.intp)
+        position[order] = np.arange(self.n_vertices)  # vertex -> curve-order position
+        self._unsort = (position[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) flat gather into vertex order
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -72,25 +87,48 @@ class DynamicClip:
         tau = np.clip((t - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
         return seg, tau, t
 
-    def _frame(self, s: int, tau: float) -> np.ndarray:
-        phi0, phi1 = self._time[s].pair(tau)  # (C*3,) each
-        bufs = getattr(self._local, "bufs", None)
-        if bufs is None:  # per-thread scratch (avoids fresh large allocations on every frame)
-            bufs = self._local.bufs = (np.empty(self.n_vertices * 3, np.float32),
-                                       np.empty(self.n_vertices * 3, np.float32))
-        b0, b1 = bufs
-        np.take(phi0, self._gather[s], out=b0)
-        np.multiply(b0, self._knot_fields[s], out=b0)
-        np.take(phi1, self._gather[s], out=b1)
-        np.multiply(b1, self._knot_fields[s + 1], out=b1)
-        np.add(b0, b1, out=b0)
-        return np.add(b0, self._base_flat).reshape(self.n_vertices, 3)
+    def _locate_scalar(self, t: float) -> tuple[int, float, float]:
+        """(segment, tau, wrapped t) of one time in pure Python; equals :meth:`_locate` on a 1-element array."""
+        t = t - math.floor(t) if self.looping else min(max(t, 0.0), 1.0)
+        knots = self._segment_list
+        seg = min(max(bisect.bisect_right(knots, t) - 1, 0), len(knots) - 2)
+        t0, t1 = knots[seg], knots[seg + 1]
+        tau = min(max((t - t0) / (t1 - t0 if t1 > t0 else 1.0), 0.0), 1.0)
+        return seg, tau, t
+
+    def _scratch(self) -> np.ndarray:
+        """Per-thread (V*3,) float32 scratch (no fresh large allocation per frame, safe across threads)."""
+        buf = getattr(self._local, "buf", None)
+        if buf is None:
+            buf = self._local.buf = np.empty(self.n_vertices * 3, np.float32)
+        return buf
+
+    def _frame(self, s: int, tau: float, out: np.ndarray | None = None) -> np.ndarray:
+        """(V, 3) float32 positions (before any rigid motion) in segment s at local time tau."""
+        phi = self._time[s].pair(tau).reshape(2, -1, 3)  # (2, C, 3) float32
+        spread = np.repeat(phi, self._lengths, axis=1)  # (2, V, 3) in curve order
+        np.multiply(spread, self._pair_fields[s], out=spread)
+        if out is None:
+            out = np.empty((self.n_vertices, 3), np.float32)
+        if self._identity:
+            np.add(spread[0], spread[1], out=out)
+            return np.add(out, self._base_sorted, out=out)
+        acc = self._scratch().reshape(self.n_vertices, 3)
+        np.add(spread[0], spread[1], out=acc)
+        np.add(acc, self._base_sorted, out=acc)
+        np.take(acc.reshape(-1), self._unsort, out=out.reshape(-1), mode="wrap")  # indices are in range
+        return out
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
         """Positions in the original vertex order: (V, 3) float32 for scalar t, (K, V, 3) for an array."""
+        if np.ndim(t) == 0 and self._rigid is None and isinstance(t, (int, float, np.floating, np.integer)):
+            s, tau, _ = self._locate_scalar(float(t))  # one frame: no per-call array bookkeeping
+            return self._frame(s, tau)
         scalar = np.ndim(t) == 0
         seg, tau, tw = self._locate(np.atleast_1d(t))
-        out = np.stack([self._frame(int(s), float(x)) for s, x in zip(seg, tau, strict=True)])
+        out = np.empty((len(seg), self.n_vertices, 3), np.float32)
+        for k, (s, x) in enumerate(zip(seg, tau, strict=True)):
+            self._frame(int(s), float(x), out[k])
         if self._rigid is not None:
             R, c = self._rigid.at(tw)  # (K, C, 3, 3), (K, C, 3)
             out = (np.einsum("kvij,kvj->kvi", R[:, self._cid], out) + c[:, self._cid]).astype(np.float32)
@@ -112,27 +150,44 @@ class DynamicClip:
 
 
 class _SegmentTime:
-    """Fast evaluation of the time pair of all items of one segment (precomputed denominators).
+    """Fast evaluation of the time pair of all items of one segment (precomputed constants).
 
-    Items are grouped exp | trig | linear; ``position[item]`` is where an item's value lands in that order.
+    Items are computed grouped exp | trig | linear in one (2, N) float64 buffer with in-place ufuncs and
+    permuted back to item order (c * 3 + coordinate) by one ``take``.
     """
 
     def __init__(self, mu: np.ndarray):
         exp, trig = np.flatnonzero(mu > 1e-12), np.flatnonzero(mu < -1e-12)
         lin = np.flatnonzero(np.abs(mu) <= 1e-12)
-        self.position = np.argsort(np.concatenate([exp, trig, lin]), kind="stable")
-        self.m_exp, self.m_trig, self.n_lin = mu[exp], -mu[trig], len(lin)
-        self.inv_exp = 1.0 / np.expm1(-2.0 * self.m_exp)
-        self.inv_trig = 1.0 / np.sin(self.m_trig)
+        self.n = len(mu)
+        self.ne, self.nt = len(exp), len(trig)
+        self.position = np.argsort(np.concatenate([exp, trig, lin]), kind="stable")  # item -> grouped slot
+        me, mt = mu[exp], -mu[trig]
+        self.me2, self.mt2 = np.stack([me, me]), np.stack([mt, mt])  # (2, ne), (2, nt)
+        self.inv_exp = 1.0 / np.expm1(-2.0 * me)
+        self.inv_trig = 1.0 / np.sin(mt)
 
-    def pair(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        """(phi0, phi1) float32 in grouped order at local time tau; equals :func:`time_pair` to rounding."""
-        me, mt, lin = self.m_exp, self.m_trig, np.ones(self.n_lin)
-        p1 = np.concatenate([np.exp(me * (tau - 1.0)) * np.expm1(-2.0 * me * tau) * self.inv_exp,
-                             np.sin(mt * tau) * self.inv_trig, tau * lin])
-        p0 = np.concatenate([np.exp(-me * tau) * np.expm1(-2.0 * me * (1.0 - tau)) * self.inv_exp,
-                             np.sin(mt * (1.0 - tau)) * self.inv_trig, (1.0 - tau) * lin])
-        return p0.astype(np.float32), p1.astype(np.float32)
+    def pair(self, tau: float) -> np.ndarray:
+        """(2, N) float32 (phi0, phi1) in item order at local time tau; equals :func:`time_pair` to rounding."""
+        g = np.empty((2, self.n))
+        ne, nt = self.ne, self.nt
+        if ne:
+            # phi0 = e^{-m tau} expm1(-2m (1 - tau)) / expm1(-2m); phi1 = e^{m (tau - 1)} expm1(-2m tau) / ...
+            ge = g[:, :ne]
+            np.multiply(self.me2, np.array([[-tau], [tau - 1.0]]), out=ge)
+            np.exp(ge, out=ge)
+            b = np.multiply(self.me2, np.array([[-2.0 * (1.0 - tau)], [-2.0 * tau]]))
+            np.expm1(b, out=b)
+            np.multiply(ge, b, out=ge)
+            np.multiply(ge, self.inv_exp, out=ge)
+        if nt:
+            gt = g[:, ne:ne + nt]
+            np.multiply(self.mt2, np.array([[1.0 - tau], [tau]]), out=gt)
+            np.sin(gt, out=gt)
+            np.multiply(gt, self.inv_trig, out=gt)
+        g[0, ne + nt:], g[1, ne + nt:] = 1.0 - tau, tau
+        out = np.empty((2, self.n), np.float32)
+        return np.take(g, self.position, axis=1, out=out, mode="wrap")
 
 
 def clip_from_parts(topo_header: dict[str, Any], topo_arrays: dict[str, np.ndarray],
