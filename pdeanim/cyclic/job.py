@@ -134,7 +134,8 @@ def make_cyclic_clip(mesh: Any, options: CyclicOptions, progress: Progress | Non
     verts, faces = _mesh_arrays(mesh)
     t0 = time.perf_counter()
     progress(0.0, "cyclic: body axes")
-    frame = body_frame(verts, head=options.head, tail=options.tail, lateral=options.lateral)
+    # the axis comes from the vertices the faces use: a stray unreferenced vertex must not stretch it
+    frame = body_frame(verts[np.unique(faces)], head=options.head, tail=options.tail, lateral=options.lateral)
     n_curves = valid_curve_count(options.n_curves)
     progress(0.1, f"cyclic: cut {n_curves} cross-sections")
     body = cut_body(verts, faces, frame, n_curves, options.points)

@@ -1,12 +1,11 @@
 """Evaluation of "dynamic-pde" clips: the loader registered in :data:`pdeanim.clip.LOADERS`.
 
 Everything that does not depend on t is precomputed when a clip is loaded: the per-vertex space basis
-(V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), stored in curve order (vertices of a
-curve contiguous) so that per-curve values spread to vertices with one ``np.repeat`` instead of a gather.
-A frame at t is then: find the segment (pure Python), evaluate the time pair of every curve+coordinate of
-that segment (a dozen numpy calls on C*3 items), spread it to the vertices, and
-positions = rest + phi0 * P[s] + phi1 * P[s+1] (a few multiply-adds per vertex), permuted back to the
-original vertex order (skipped when the curves already list the vertices in order).
+(V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), stored per segment as one flat array
+[P[s], P[s+1]], plus one gather index from (curve, coordinate) items to values. A frame at t is then: find
+the segment (pure Python), evaluate the time pair of every item of that segment (a dozen numpy calls on C*3
+items), gather it to the values with one ``np.take`` and compute
+positions = rest + phi0 * P[s] + phi1 * P[s+1] (a few multiply-adds per vertex, into preallocated buffers).
 """
 
 from __future__ import annotations
@@ -19,8 +18,11 @@ from typing import Any
 import numpy as np
 
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
-from .families import SPACE_KINDS, space_basis
+from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
+from .timefit import SIN_COEF
+
+_ODD = 2.0 * np.arange(len(SIN_COEF)) + 1.0  # (P,) odd powers of the sine series
 
 
 class DynamicClip:
@@ -48,19 +50,16 @@ class DynamicClip:
             self._base = (topo.rest - self._rigid.centre0[self._cid]).astype(np.float32)
         else:
             self._base = np.zeros((self.n_vertices, 3), np.float32)
-        self._init_curve_layout(self._precompute(fam[0] % 2))
+        self._base_flat = self._base.ravel()
+        self._init_gather(self._precompute(fam[0] % 2))
 
-    def _init_curve_layout(self, knot_fields: np.ndarray) -> None:
-        """Curve-order copies of the knot fields and the base, and the permutation back to vertex order."""
-        order = np.asarray(self.topo.curves.order, np.intp)  # curve-order position -> vertex
-        self._lengths = np.asarray(self.topo.curves.lengths, np.intp)  # (C,)
-        self._identity = bool(np.array_equal(order, np.arange(self.n_vertices)))
-        kf = knot_fields[:, order]  # (S+1, V, 3) in curve order
-        self._pair_fields = [np.ascontiguousarray(kf[s:s + 2]) for s in range(len(kf) - 1)]  # (2, V, 3) each
-        self._base_sorted = np.ascontiguousarray(self._base[order])
-        position = np.empty(self.n_vertices, np.intp)
-        position[order] = np.arange(self.n_vertices)  # vertex -> curve-order position
-        self._unsort = (position[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) flat gather into vertex order
+    def _init_gather(self, knot_fields: np.ndarray) -> None:
+        """Per segment the flat (2 * V * 3,) fields [P[s], P[s+1]] and the one gather index into (phi0, phi1)."""
+        flat = knot_fields.reshape(len(knot_fields), -1)  # (S+1, V*3)
+        self._pair_fields = [np.concatenate([flat[s], flat[s + 1]]) for s in range(len(flat) - 1)]
+        n_items = 3 * self.topo.curves.n_curves
+        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item of a value
+        self._gather = np.concatenate([item_of, item_of + n_items])  # (2 * V * 3,) into phi (2, C*3) flattened
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -97,31 +96,29 @@ class DynamicClip:
         return seg, tau, t
 
     def _scratch(self) -> np.ndarray:
-        """Per-thread (V*3,) float32 scratch (no fresh large allocation per frame, safe across threads)."""
+        """Per-thread (2 * V * 3,) float32 scratch (no fresh large allocation per frame, safe across threads)."""
         buf = getattr(self._local, "buf", None)
         if buf is None:
-            buf = self._local.buf = np.empty(self.n_vertices * 3, np.float32)
+            buf = self._local.buf = np.empty(2 * self.n_vertices * 3, np.float32)
         return buf
 
     def _frame(self, s: int, tau: float, out: np.ndarray | None = None) -> np.ndarray:
         """(V, 3) float32 positions (before any rigid motion) in segment s at local time tau."""
-        phi = self._time[s].pair(tau).reshape(2, -1, 3)  # (2, C, 3) float32
-        spread = np.repeat(phi, self._lengths, axis=1)  # (2, V, 3) in curve order
-        np.multiply(spread, self._pair_fields[s], out=spread)
+        phi = self._time[s].pair(tau)  # (2, C*3) float32, item order
+        both = np.take(phi.reshape(-1), self._gather, out=self._scratch(), mode="wrap")  # indices in range
+        np.multiply(both, self._pair_fields[s], out=both)  # [phi0 * P[s], phi1 * P[s+1]] per value
+        n = len(self._base_flat)
         if out is None:
             out = np.empty((self.n_vertices, 3), np.float32)
-        if self._identity:
-            np.add(spread[0], spread[1], out=out)
-            return np.add(out, self._base_sorted, out=out)
-        acc = self._scratch().reshape(self.n_vertices, 3)
-        np.add(spread[0], spread[1], out=acc)
-        np.add(acc, self._base_sorted, out=acc)
-        np.take(acc.reshape(-1), self._unsort, out=out.reshape(-1), mode="wrap")  # indices are in range
+        flat = out.reshape(-1)
+        np.add(both[:n], both[n:], out=flat)
+        np.add(flat, self._base_flat, out=flat)
         return out
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
         """Positions in the original vertex order: (V, 3) float32 for scalar t, (K, V, 3) for an array."""
-        if np.ndim(t) == 0 and self._rigid is None and isinstance(t, (int, float, np.floating, np.integer)):
+        if (self._rigid is None and isinstance(t, (int, float, np.floating, np.integer))
+                and math.isfinite(t)):
             s, tau, _ = self._locate_scalar(float(t))  # one frame: no per-call array bookkeeping
             return self._frame(s, tau)
         scalar = np.ndim(t) == 0
@@ -152,8 +149,9 @@ class DynamicClip:
 class _SegmentTime:
     """Fast evaluation of the time pair of all items of one segment (precomputed constants).
 
-    Items are computed grouped exp | trig | linear in one (2, N) float64 buffer with in-place ufuncs and
-    permuted back to item order (c * 3 + coordinate) by one ``take``.
+    Items are computed grouped exp | trig | linear in one (2, N) float64 buffer (exp: in-place ufuncs; trig:
+    one (2, P) @ (P, nt) product with the sine series of :data:`timefit.SIN_COEF`, as float64 np.sin is
+    slow) and permuted back to item order (c * 3 + coordinate) by one ``take``.
     """
 
     def __init__(self, mu: np.ndarray):
@@ -162,10 +160,12 @@ class _SegmentTime:
         self.n = len(mu)
         self.ne, self.nt = len(exp), len(trig)
         self.position = np.argsort(np.concatenate([exp, trig, lin]), kind="stable")  # item -> grouped slot
-        me, mt = mu[exp], -mu[trig]
-        self.me2, self.mt2 = np.stack([me, me]), np.stack([mt, mt])  # (2, ne), (2, nt)
+        me, mt = mu[exp], np.minimum(-mu[trig], MU_TRIG_MAX)  # the clip of time_pair
+        self.me2 = np.stack([me, me])  # (2, ne)
         self.inv_exp = 1.0 / np.expm1(-2.0 * me)
-        self.inv_trig = 1.0 / np.sin(mt)
+        # sin(m t) = sum_k (c_k m^(2k+1)) t^(2k+1) (timefit.sin_table): the m side, over sin m, precomputed
+        powers = mt[None, :] ** _ODD[:, None] * SIN_COEF[:, None]  # (P, nt)
+        self.trig_table = np.ascontiguousarray(powers / np.sin(mt))
 
     def pair(self, tau: float) -> np.ndarray:
         """(2, N) float32 (phi0, phi1) in item order at local time tau; equals :func:`time_pair` to rounding."""
@@ -180,14 +180,10 @@ class _SegmentTime:
             np.expm1(b, out=b)
             np.multiply(ge, b, out=ge)
             np.multiply(ge, self.inv_exp, out=ge)
-        if nt:
-            gt = g[:, ne:ne + nt]
-            np.multiply(self.mt2, np.array([[1.0 - tau], [tau]]), out=gt)
-            np.sin(gt, out=gt)
-            np.multiply(gt, self.inv_trig, out=gt)
+        if nt:  # (phi0, phi1) = ((1 - tau)^(2k+1), tau^(2k+1)) @ table: one small product, no float64 sine
+            g[:, ne:ne + nt] = np.power(np.array([[1.0 - tau], [tau]]), _ODD) @ self.trig_table
         g[0, ne + nt:], g[1, ne + nt:] = 1.0 - tau, tau
-        out = np.empty((2, self.n), np.float32)
-        return np.take(g, self.position, axis=1, out=out, mode="wrap")
+        return np.take(g.astype(np.float32), self.position, axis=1, mode="wrap")  # same dtype: no buffering
 
 
 def clip_from_parts(topo_header: dict[str, Any], topo_arrays: dict[str, np.ndarray],

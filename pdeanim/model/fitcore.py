@@ -99,7 +99,7 @@ def space_stage(Y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> SpaceStage:
     return SpaceStage(proj, b, floor, Yk)
 
 
-def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine_iters: int = 8) -> TimeStage:
+def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine_iters: int = 5) -> TimeStage:
     """Fit C0 knot tracks for one segmentation; errors per item and frame include the spatial floor."""
     z, mu = fit_tracks(space.b, segm, loop, refine_iters=refine_iters)
     pred = predict(z, segm, mu)

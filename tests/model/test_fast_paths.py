@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pdeanim.clip import load_clip
 from pdeanim.model import families as fam
+from pdeanim.model.clipmodel import _SegmentTime
+from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.model.fitcore import (
     SpaceStage,
     floor_distances,
@@ -20,7 +26,8 @@ from pdeanim.model.fitcore import (
 )
 from pdeanim.model.segments import Segmentation, uniform_segmentation
 from pdeanim.model.spacefit import captured_energy
-from pdeanim.model.timefit import _dot4, segment_pair
+from pdeanim.model.timefit import _dot4, segment_pair, sin_table
+from pdeanim.poses import make_poses
 
 MU_VALUES = [0.0, 1e-13, -1e-13, 1e-9, 0.2, 3.0, 32.0, 60.0, -0.3, -2.9, -3.0, -1e-9]
 
@@ -28,7 +35,8 @@ MU_VALUES = [0.0, 1e-13, -1e-13, 1e-9, 0.2, 3.0, 32.0, 60.0, -0.3, -2.9, -3.0, -
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.integers(1, 7), st.integers(2, 40))
 def test_segment_pair_equals_time_pair(seed, n_segments, n_frames):
-    """segment_pair (per-segment denominators, trig rows apart) == elementwise time_pair, exactly."""
+    """segment_pair (per-segment denominators, trig rows by a Taylor product) == elementwise time_pair:
+    bit for bit on linear and exp rows, to 1e-14 on trig rows (sin_table instead of np.sin)."""
     rng = np.random.default_rng(seed)
     times = np.sort(rng.uniform(0, 5, n_frames))
     times[-1] += 1.0
@@ -37,7 +45,20 @@ def test_segment_pair_equals_time_pair(seed, n_segments, n_frames):
     seg, tau = segm.frame_segment(), segm.frame_tau()
     ref = fam.time_pair(np.broadcast_to(tau, mu[:, seg].shape), mu[:, seg])
     p0, p1 = segment_pair(segm, mu)
-    assert np.array_equal(p0, ref[..., 0]) and np.array_equal(p1, ref[..., 1])
+    trig = mu[:, seg] < 0
+    assert np.array_equal(p0[~trig], ref[..., 0][~trig]) and np.array_equal(p1[~trig], ref[..., 1][~trig])
+    np.testing.assert_allclose(p0[trig], ref[..., 0][trig], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(p1[trig], ref[..., 1][trig], rtol=0, atol=1e-14)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 700), st.integers(1, 60))
+def test_sin_table_equals_sin(seed, rows, cols):
+    """The separable Taylor product (chunked matrix products) == np.sin of the outer product to 2e-15."""
+    rng = np.random.default_rng(seed)
+    m = np.concatenate([rng.uniform(0, fam.MU_TRIG_MAX, rows), [0.0, 1e-150, fam.MU_TRIG_MAX, np.pi]])
+    t = np.concatenate([rng.uniform(0, 1, cols), [0.0, 1.0]])
+    np.testing.assert_allclose(sin_table(m, t), np.sin(m[:, None] * t[None, :]), rtol=0, atol=2e-15)
 
 
 def test_segment_pair_single_frame_segmentation():
@@ -124,3 +145,78 @@ def test_pinv_sym_cholesky_path_matches_eigh(rng):
     a, b = _pinv_eigh(M), _pinv_sym(M)
     assert np.array_equal(a[:50], b[:50]) and np.array_equal(a[60:62], b[60:62])
     np.testing.assert_allclose(b[62:], a[62:], rtol=1e-8, atol=1e-10 * np.abs(a[62:]).max())
+
+
+@pytest.fixture(scope="module")
+def small_clip(morph_small, short_curves):
+    """A 3-segment clip of the first 15 frames of the morph sphere (loaded for evaluation)."""
+    poses = make_poses(morph_small.vertices[:15], morph_small.faces, morph_small.times[:15])
+    parts = fit_poses(poses, FitOptions(segments=3), curves=short_curves)
+    return load_clip(parts.topology, parts.coefficients)
+
+
+def _plain_frame(clip, t: float) -> np.ndarray:
+    """A frame from the definitions: per value, time_pair of its item times (space basis . knots)."""
+    coef, topo = clip.coef, clip.topo
+    tw = min(max(t, 0.0), 1.0) if not clip.looping else t - np.floor(t)
+    st = np.asarray(coef.segment_t, np.float64)
+    s = int(np.clip(np.searchsorted(st, tw, side="right") - 1, 0, len(st) - 2))
+    tau = np.clip((tw - st[s]) / (st[s + 1] - st[s]), 0.0, 1.0)
+    cid, _ = topo.curves.curve_of_vertex(clip.n_vertices)
+    code = coef.family[s][cid].astype(np.int64)  # (V, 3)
+    mu = np.where(code >= 2, -1.0, 1.0) * coef.m[s][cid].astype(np.float64)
+    u, D = np.broadcast_to(topo.u.astype(np.float64), (clip.n_vertices, 3)), coef.D[cid].astype(np.float64)
+    B = np.zeros((clip.n_vertices, 3, 4))
+    for kind in (0, 1):
+        sel = code % 2 == kind
+        B[sel] = fam.space_basis(u[sel][:, None], D[sel], fam.SPACE_KINDS[kind])[:, 0, :]
+    p0 = (B * coef.knots[s][cid].astype(np.float64)).sum(-1)
+    p1 = (B * coef.knots[s + 1][cid].astype(np.float64)).sum(-1)
+    phi = fam.time_pair(np.full(mu.shape, tau), mu)
+    return topo.rest.astype(np.float64) + phi[..., 0] * p0 + phi[..., 1] * p1
+
+
+@pytest.mark.parametrize("t", [0.0, 0.13, 1 / 3, 0.5, 0.77, 1.0, -0.2, 1.4])
+def test_clip_frame_equals_plain_definition(small_clip, t):
+    """The precomputed single-frame path (Python locate, grouped time pair, one gather) == the definition."""
+    fast = small_clip.evaluate(t)
+    ref = _plain_frame(small_clip, t)
+    scale = np.abs(ref).max()
+    assert fast.dtype == np.float32 and fast.shape == ref.shape
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=2e-6 * scale)
+    np.testing.assert_array_equal(fast, small_clip.evaluate(np.array([t]))[0])  # scalar path == batch path
+    np.testing.assert_array_equal(fast, small_clip.evaluate(np.float64(t)))
+
+
+def test_looping_clip_frame_equals_plain_definition(morph_small, short_curves):
+    """Looping clips wrap t in the single-frame path exactly as the definition does."""
+    poses = make_poses(morph_small.vertices[:15], morph_small.faces, morph_small.times[:15])
+    parts = fit_poses(poses, FitOptions(segments=3, loop=True), curves=short_curves)
+    clip = load_clip(parts.topology, parts.coefficients)
+    for t in (-0.3, 0.41, 1.0, 1.7):
+        ref = _plain_frame(clip, t)
+        np.testing.assert_allclose(clip.evaluate(t), ref, rtol=0, atol=2e-6 * np.abs(ref).max())
+
+
+def test_segment_time_pair_equals_time_pair():
+    """_SegmentTime.pair (grouped exp | trig | linear, precomputed denominators) == time_pair to float32."""
+    rng = np.random.default_rng(7)
+    mu = rng.choice(MU_VALUES, size=97) * rng.uniform(0.5, 1.0, 97)
+    seg = _SegmentTime(mu)
+    for tau in (0.0, 1e-7, 0.25, 0.5, 0.9, 1.0):
+        got = seg.pair(tau)
+        ref = fam.time_pair(np.full(mu.shape, tau), mu)
+        assert got.shape == (2, 97) and got.dtype == np.float32
+        np.testing.assert_allclose(got, ref.T.astype(np.float32), rtol=0, atol=4e-7)
+    np.testing.assert_array_equal(seg.pair(0.0), np.stack([np.ones(97), np.zeros(97)]))
+    np.testing.assert_array_equal(seg.pair(1.0), np.stack([np.zeros(97), np.ones(97)]))
+
+
+def test_clip_evaluation_is_thread_safe(small_clip):
+    """Per-thread scratch: frames evaluated concurrently equal the same frames evaluated serially."""
+    ts = np.linspace(0, 1, 24)
+    serial = [small_clip.evaluate(float(t)) for t in ts]
+    with ThreadPoolExecutor(4) as pool:
+        parallel = list(pool.map(lambda t: small_clip.evaluate(float(t)), ts))
+    for a, b in zip(serial, parallel, strict=True):
+        np.testing.assert_array_equal(a, b)
