@@ -126,9 +126,10 @@ def simplify_for_picture(vertices: np.ndarray, faces: np.ndarray, error: np.ndar
 
 
 def error_png(vertices: np.ndarray, faces: np.ndarray | None, per_vertex_error: np.ndarray, path: str | Path,
-              title: str, units: str = "mesh units") -> Path:
+              title: str, units: str = "mesh units", diagonal: float | None = None) -> Path:
     """Render the mesh (V, 3) with faces (T, 3) coloured by per-vertex error (V,) (face colour = mean of its
-    vertices), seen along its 3rd and 2nd principal axes, with a colour bar in ``units``; writes a PNG."""
+    vertices), seen along its 3rd and 2nd principal axes, with a colour bar in ``units``; writes a PNG.
+    Relative errors use ``diagonal`` (the rest pose's bbox diagonal) or else this mesh's own."""
     v, f, e = _check(vertices, faces, per_vertex_error)
     if not len(f):
         raise ParameterError("error_png needs faces (point data cannot be rendered as a surface)")
@@ -145,7 +146,7 @@ def error_png(vertices: np.ndarray, faces: np.ndarray | None, per_vertex_error: 
     sm = matplotlib.cm.ScalarMappable(norm=norm, cmap="inferno")
     bar = fig.colorbar(sm, cax=fig.add_axes([0.91, 0.12, 0.018, 0.64]))
     bar.set_label(f"error ({units})")
-    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    diag = float(np.linalg.norm(np.ptp(v, axis=0))) if diagonal is None else float(diagonal)
     rel = f" ({e.max() / diag:.2%} of the bbox diagonal)" if diag > 0 else ""
     note = f"max {e.max():.3g}{rel}, mean {e.mean():.3g} {units}; {len(v)} vertices, {len(f)} faces"
     if len(sf) < len(f):
@@ -208,7 +209,9 @@ def fit_error_pictures(reference: np.ndarray, fitted: np.ndarray, faces: np.ndar
     worst = int(mx.argmax())
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    diagonal = float(np.linalg.norm(np.ptp(ref[0], axis=0)))  # the first frame's, as in the fit report
     return {"worst_frame": error_png(ref[worst], faces, err[worst], out / f"{name}_worst_frame.png",
-                                     f"{name}: per-vertex error at frame {worst} (t = {times[worst]:.3f} s)"),
+                                     f"{name}: per-vertex error at frame {worst} (t = {times[worst]:.3f} s)",
+                                     diagonal=diagonal),
             "error_curve": error_curve_png(rms, mx, times, out / f"{name}_error_curve.png", f"{name} error",
-                                           diagonal=float(np.linalg.norm(np.ptp(ref[0], axis=0))))}
+                                           diagonal=diagonal)}
