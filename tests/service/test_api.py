@@ -239,6 +239,22 @@ def test_fit_job_on_uploaded_poses(api, sphere, services):
                                             "params": {"frames": 10 ** 6}}), 422)
 
 
+def test_job_parameters_may_be_flat_and_fit_may_name_only_the_mesh(api, sphere, fish):
+    """DESIGN's form {"kind", "mesh_id", ...parameters}: flat parameters join params; a fit job naming only the
+    mesh fits its latest poses; a key given twice, or a mesh without poses, is a 422 with a reason."""
+    r = api.post("/v1/jobs", json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "segments": 2})
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert job["poses_id"] == sphere["poses"]["id"] and job["params"]["params"]["segments"] == 2
+    assert wait_job(api, job["id"])["state"] == "succeeded"
+    err = assert_error(api.post("/v1/jobs", json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "segments": 2,
+                                                  "params": {"segments": 3}}), 422, "invalid_parameter")
+    assert "segments" in err["message"]
+    assert_error(api.post("/v1/jobs", json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "bogus": 1}), 422)
+    err = assert_error(api.post("/v1/jobs", json={"kind": "fit", "mesh_id": fish["id"]}), 422, "invalid_parameter")
+    assert "no poses" in err["message"]
+
+
 def test_poses_upload_from_an_animated_glb(api, sphere):
     from pdeanim.gltf.write import animation_glb
 

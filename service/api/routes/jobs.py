@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from fastapi import APIRouter
+from sqlalchemy import select
 
 from ...jobspec import StageUnavailable, normalize_request
 from ...store.models import Job, Mesh, PosesRecord
@@ -25,9 +26,12 @@ def job_out(job: Job) -> JobOut:
 
 def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  # noqa: ANN001
     if req.kind == "fit":
+        if not req.poses_id and not req.mesh_id:
+            raise ApiError(422, "invalid_parameter", "a fit job needs poses_id (or mesh_id to fit its latest poses)")
         if not req.poses_id:
-            raise ApiError(422, "invalid_parameter", "a fit job needs poses_id")
-        poses = owned(session, PosesRecord, req.poses_id, tenant, "poses")
+            poses = _latest_poses(session, owned(session, Mesh, req.mesh_id, tenant, "mesh"), tenant)
+        else:
+            poses = owned(session, PosesRecord, req.poses_id, tenant, "poses")
         if req.mesh_id and req.mesh_id != poses.mesh_id:
             raise ApiError(422, "invalid_parameter", f"poses {poses.id} belong to mesh {poses.mesh_id}")
         return poses.mesh_id, poses.id
@@ -38,13 +42,32 @@ def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  #
     return owned(session, Mesh, req.mesh_id, tenant, "mesh").id, None
 
 
+def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN001
+    """The newest poses of ``mesh`` (uploaded or simulated) for a fit job that names only the mesh."""
+    poses = session.scalars(select(PosesRecord).where(PosesRecord.mesh_id == mesh.id, PosesRecord.tenant_id == tenant)
+                            .order_by(PosesRecord.created_at.desc(), PosesRecord.id.desc()).limit(1)).first()
+    if poses is None:
+        raise ApiError(422, "invalid_parameter",
+                       f"mesh {mesh.id} has no poses yet: upload poses or run a simulate job first")
+    return poses
+
+
+def _merged_params(req: JobRequest) -> dict:
+    """``params`` plus parameters given flat next to ``kind``; a key given both ways is a 422."""
+    flat = dict(req.model_extra or {})
+    both = sorted(set(flat) & set(req.params))
+    if both:
+        raise ApiError(422, "invalid_parameter", f"parameters given both flat and in params: {', '.join(both)}")
+    return {**req.params, **flat}
+
+
 @router.post("/v1/jobs", status_code=202, operation_id="createJob", response_model=JobOut,
              responses=responses(401, 404, 413, 422, 501))
 def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: StoreDep) -> JobOut:
     """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""
     mesh_id, poses_id = _inputs(req, tenant, session)
     try:
-        spec = normalize_request(req.kind, req.params, req.then_fit, req.fit)
+        spec = normalize_request(req.kind, _merged_params(req), req.then_fit, req.fit)
     except StageUnavailable as exc:
         raise ApiError(501, "not_implemented", str(exc)) from exc
     frames = spec["params"].get("frames")
@@ -52,6 +75,9 @@ def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: S
         from pdeanim.errors import LimitError
 
         raise LimitError("frames", frames, store.settings.max_frames, "PDEANIM_MAX_FRAMES")
+    # end the read transaction first: on SQLite (WAL) a read transaction that later writes fails at once with
+    # "database is locked" when a worker committed in between; a transaction that starts by writing waits
+    session.commit()
     job = store.queue.enqueue(session, tenant_id=tenant, kind=req.kind, params=spec, mesh_id=mesh_id,
                               poses_id=poses_id)
     session.commit()
