@@ -35,6 +35,9 @@ class MeshOut(BaseModel):
     filename: str
     vertices: int
     faces: int
+    watertight: bool | None = Field(None, description="every edge shared by exactly two faces")
+    components: int | None = Field(None, description="connected components")
+    bbox: dict[str, list[float]] | None = Field(None, description='{"min": [x, y, z], "max": [x, y, z]}')
     stats: dict[str, Any] = Field(description="vertices, faces, components, watertight, bbox, diagonal")
     created_at: float
 

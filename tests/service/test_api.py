@@ -73,6 +73,9 @@ def test_health(services):
 
 def test_mesh_upload_stats(api, fish):
     assert fish["vertices"] > 100 and fish["faces"] > 100 and fish["stats"]["watertight"] in (True, False)
+    assert fish["watertight"] == fish["stats"]["watertight"] and fish["components"] == 1
+    lo, hi = np.array(fish["bbox"]["min"]), np.array(fish["bbox"]["max"])
+    assert lo.shape == (3,) and np.all(hi > lo)
     assert api.get(f"/v1/meshes/{fish['id']}").json() == fish
 
 

@@ -20,8 +20,10 @@ router = APIRouter(tags=["meshes"])
 
 def mesh_out(row: Mesh) -> MeshOut:
     """Wire form of a mesh row."""
-    return MeshOut(id=row.id, filename=row.filename, vertices=row.n_vertices, faces=row.n_faces, stats=row.stats,
-                   created_at=row.created_at)
+    stats = row.stats or {}
+    return MeshOut(id=row.id, filename=row.filename, vertices=row.n_vertices, faces=row.n_faces,
+                   watertight=stats.get("watertight"), components=stats.get("components"), bbox=stats.get("bbox"),
+                   stats=stats, created_at=row.created_at)
 
 
 def _ingest(upload: Upload, settings: Settings) -> dict:
