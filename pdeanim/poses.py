@@ -119,7 +119,9 @@ def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None)
             times = data["times"] if "times" in data.files else None
     except PosesInputError:
         raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+    except (ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise PosesInputError(f"not a valid .npz file of poses ({type(exc).__name__}: {exc})") from exc
+    except OSError as exc:
         raise PosesInputError(f"cannot read poses .npz: {exc}") from exc
     return make_poses(vertices, faces, times, {"source": "npz"}, limits)
 

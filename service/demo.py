@@ -95,13 +95,15 @@ class DemoServices:
 
 
 def _key(data_dir: Path) -> str:
+    from sqlalchemy.orm import Session
+
     from .settings import Settings
     from .store.context import Store
     from .store.tenants import create_key
 
     store = Store.open(Settings(data_dir=data_dir), run_migrations=True)
-    try:
-        with store.sessions() as session:
+    try:  # one write transaction from the start: SQLite fails a read that upgrades after another commit
+        with Session(store.engine.execution_options(immediate=True)) as session:
             key, _ = create_key(session, "demo")
             session.commit()
         return key

@@ -41,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
     ft = clip.frame_times
     frame_t = (ft - ft[0]) / (ft[-1] - ft[0]) if len(ft) > 1 and ft[-1] > ft[0] else np.zeros(len(ft))
     times, scalar = parse_times(args.t, frame_t)
+    if not clip.looping and ((times < 0.0) | (times > 1.0)).any():  # as the HTTP API: 422 t_out_of_range
+        bad = times[(times < 0.0) | (times > 1.0)][0]
+        raise ParameterError(f"--t must lie in [0, 1] for this clip (it does not loop), got {bad:g}")
     out = Path(args.out)
     suffix = out.suffix.lower()
     if suffix not in (".npz", ".glb"):

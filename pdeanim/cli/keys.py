@@ -16,13 +16,17 @@ def register(subparsers) -> None:  # noqa: ANN001
 
 def run(args: argparse.Namespace) -> int:
     """Create the key (migrating the database first) and print it on stdout."""
+    from sqlalchemy.orm import Session
+
     from service.settings import Settings
     from service.store.context import Store
     from service.store.tenants import create_key
 
     store = Store.open(Settings(), run_migrations=True)
     try:
-        with store.sessions() as session:
+        # one write transaction from the start (BEGIN IMMEDIATE on SQLite): a read that later writes would fail
+        # with "database is locked" when the running service committed in between
+        with Session(store.engine.execution_options(immediate=True)) as session:
             key, _ = create_key(session, args.tenant)
             session.commit()
     finally:

@@ -89,8 +89,8 @@ class SwimParams:
         nums = [self.omega0, self.omega1, self.alpha, self.phi, self.frequency, self.amplitude]
         if not np.isfinite(nums).all():
             raise ParameterError("swim parameters must be finite numbers")
-        if self.frequency <= 0:
-            raise ParameterError(f"frequency must be > 0, got {self.frequency}")
+        if not 1e-3 <= self.frequency <= 1e3:
+            raise ParameterError(f"frequency must lie in [0.001, 1000] cycles per second, got {self.frequency}")
         if not 0 <= self.amplitude <= 1:
             raise ParameterError(f"amplitude is a fraction of the body length in [0, 1], got {self.amplitude}")
         if self.wave not in WAVES or self.radial not in RADIAL or self.direction not in DIRECTIONS:

@@ -46,7 +46,8 @@ def sample_times(start: float, end: float, fps: float, max_frames: int | None = 
         raise ParameterError(f"fps must be a positive number, got {fps}")
     span = (end - start) * fps
     if not np.isfinite(span) or (max_frames is not None and span + 1 > max_frames):
-        raise LimitError("frame count", float(span) + 1, max_frames or 0, "PDEANIM_MAX_FRAMES")
+        count = int(np.ceil(span)) + 1 if np.isfinite(span) else float(span)
+        raise LimitError("frame count", count, max_frames or 0, "PDEANIM_MAX_FRAMES")
     n = int(np.floor(span + 1e-6)) + 1
     t = start + np.arange(n) / fps
     if end - t[-1] > 1e-6 * max(1.0, abs(end)):

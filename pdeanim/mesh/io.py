@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import io
 import logging
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -151,6 +152,7 @@ def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = Non
         kwargs["resolver"] = trimesh.resolvers.FilePathResolver(str(folder))
     if file_type == "obj":
         kwargs["maintain_order"] = True
+        check_obj_indices(data, name)
     logger = logging.getLogger("trimesh")
     level = logger.level
     logger.setLevel(logging.CRITICAL)  # trimesh logs parse failures before raising; the error says enough
@@ -166,6 +168,18 @@ def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = Non
     finally:
         logger.setLevel(level)
     return geometry_arrays(loaded, name)
+
+
+OBJ_ZERO_INDEX = re.compile(rb"^[ \t]*f(?=[ \t])[^\n]*?(?<=[ \t])0(?:/\S*)?(?=\s|$)", re.MULTILINE)
+"""A face line of an OBJ file with a vertex index 0 (OBJ indices start at 1; trimesh would wrap 0 to -1)."""
+
+
+def check_obj_indices(data: bytes, name: str) -> None:
+    """MeshInputError for an OBJ face using vertex index 0, which trimesh silently maps to the last vertex."""
+    match = OBJ_ZERO_INDEX.search(data)
+    if match is not None:
+        line = data.count(b"\n", 0, match.start()) + 1
+        raise MeshInputError(f"{name!r} line {line}: face vertex index 0 (OBJ indices start at 1, or -1 from the end)")
 
 
 def geometry_arrays(loaded: object, name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -74,8 +74,9 @@ def tetrahedralize(mesh: SurfaceMesh, params: TetParams | None = None, cache_dir
         with np.load(cached, allow_pickle=False) as data:
             return TetMesh(data["points"], data["tets"])
     vertices, faces = decimate(mesh.vertices, mesh.faces, params.max_surface_faces)
-    diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    if float(np.ptp(vertices, axis=0).min()) <= 1e-6 * diagonal:
+    used = vertices[np.unique(faces)]  # vertices no face uses must not make a flat surface look solid
+    diagonal = float(np.linalg.norm(np.ptp(used, axis=0)))
+    if float(np.ptp(used, axis=0).min()) <= 1e-6 * diagonal:
         raise TetrahedralizationError("the surface is flat (no thickness along one axis): it encloses no volume")
     length = edge_length_for(enclosed_volume(vertices, faces), params.target_tets)
     result = None
