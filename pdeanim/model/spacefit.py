@@ -41,10 +41,12 @@ class SpaceProjection:
     D: np.ndarray
 
 
-def orthonormal_basis(u: np.ndarray, mask: np.ndarray, D: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+def orthonormal_basis(u: np.ndarray, mask: np.ndarray, D: np.ndarray, kind: str,
+                      with_cond: bool = False) -> tuple[np.ndarray, ...]:
     """(U (K, N, 4), to_coef (K, 4, 4)) for items with parameters u (K, N), mask (K, N), D (K,).
 
-    Directions the curve's points cannot determine (N < 4, coincident points) get zero columns.
+    Directions the curve's points cannot determine (N < 4, coincident points) get zero columns. With
+    ``with_cond`` also the condition numbers (K,) of the bases on the curves' points (same SVD).
     """
     S = space_basis(u, D, kind) * mask[..., None]
     K, N = S.shape[:2]
@@ -55,7 +57,15 @@ def orthonormal_basis(u: np.ndarray, mask: np.ndarray, D: np.ndarray, kind: str)
     U = (U * keep[:, None, :])[:, :N]
     inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
     to_coef = np.swapaxes(Vt, -1, -2) * inv[:, None, :]
+    if with_cond:
+        return U, to_coef, _condition(s, mask)
     return U, to_coef
+
+
+def _condition(s: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(K,) condition numbers of bases with singular values s (K, >=1) on curves with point masks (K, N)."""
+    k = np.minimum(np.minimum(mask.sum(axis=1), 4), s.shape[1]) - 1
+    return s[:, 0] / np.maximum(s[np.arange(len(s)), k], 1e-300)
 
 
 CHOL_COND_MAX = 1e6
@@ -133,9 +143,10 @@ def _shared_u(u: np.ndarray) -> bool:
 
 
 def search_D(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, kinds: tuple[str, ...] = SPACE_KINDS,
-             refine_iters: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             refine_iters: int = 3, check_cond: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Best (kind index (K,), D (K,), floor energy (K,)) per item: coarse grid over D, one parabolic step,
-    then (refine_iters > 0) golden-section refinement."""
+    then (refine_iters > 0) golden-section refinement. check_cond=False leaves the fall-back to D = 0 of
+    ill-conditioned bases to :func:`project_items` (``fallback=True``), which reuses its SVD for it."""
     energy = np.trace(gram, axis1=1, axis2=2)
     K = len(u)
     share = 3 if _shared_u(u) else 1
@@ -152,11 +163,14 @@ def search_D(u: np.ndarray, mask: np.ndarray, gram: np.ndarray, kinds: tuple[str
     hi = D_GRID[np.minimum(grid_i + 1, len(D_GRID) - 1)]
     ar = np.arange(K)
     f = [cap[kind_i, np.clip(grid_i + k, 0, len(D_GRID) - 1), ar] for k in (-1, 0, 1)]
-    D, capD = _parabolic(u, mask, gram, kind_i, lo, D_GRID[grid_i], hi, f, kinds)
+    groups = _groups(u, mask, gram, kind_i, kinds)
+    gain_tol = GAIN_TOL * energy
+    D, capD = _parabolic(groups, lo, D_GRID[grid_i], hi, f, gain_tol)
     if refine_iters > 0:
-        D, capD = _golden(u, mask, gram, kind_i, lo, hi, D, capD, kinds, refine_iters)
+        D, capD = _golden(groups, lo, hi, D, capD, gain_tol, refine_iters)
     D = D.astype(np.float32).astype(np.float64)
-    D, kind_i, capD = _well_conditioned(u, mask, gram, kind_i, D, capD, cap[0, 0], kinds)
+    if check_cond:
+        D, kind_i, capD = _well_conditioned(u, mask, gram, kind_i, D, capD, cap[0, 0], kinds)
     return kind_i, D, np.maximum(energy - capD, 0.0)
 
 
@@ -167,23 +181,30 @@ def _well_conditioned(u, mask, gram, kind_i, D, capD, cap0, kinds):
         sel = kind_i == i
         if np.any(sel):
             s = np.linalg.svd(space_basis(u[sel], D[sel], kind) * mask[sel][..., None], compute_uv=False)
-            n_pts = mask[sel].sum(axis=1)
-            k = np.minimum(np.minimum(n_pts, 4), s.shape[1]) - 1
-            cond[sel] = s[:, 0] / np.maximum(s[np.arange(len(s)), k], 1e-300)
+            cond[sel] = _condition(s, mask[sel])
     bad = cond > COND_MAX
     return np.where(bad, 0.0, D), np.where(bad, 0, kind_i), np.where(bad, cap0, capD)
 
 
-def _captured_mixed(u, mask, gram, kind_i, D, kinds) -> np.ndarray:
-    out = np.empty(len(u))
+def _groups(u, mask, gram, kind_i, kinds):
+    """Per space kind (selection, u, mask, gram of its items, kind): split once for all refinement calls."""
+    out = []
     for i, kind in enumerate(kinds):
-        sel = kind_i == i
-        if np.any(sel):
-            out[sel] = captured_energy(u[sel], mask[sel], gram[sel], D[sel], kind)
+        sel = np.flatnonzero(kind_i == i)
+        if len(sel):
+            out.append((sel, u[sel], mask[sel], gram[sel], kind))
     return out
 
 
-def _parabolic(u, mask, gram, kind_i, x0, x1, x2, f, kinds):
+def _captured_mixed(groups, D) -> np.ndarray:
+    """(K,) captured energy of every item at its own D (K,), each with its space kind (see _groups)."""
+    out = np.empty(len(D))
+    for sel, u, mask, gram, kind in groups:
+        out[sel] = captured_energy(u, mask, gram, D[sel], kind)
+    return out
+
+
+def _parabolic(groups, x0, x1, x2, f, gain_tol):
     """One parabolic step through the best grid value and its neighbours; kept where it captures more."""
     f0, f1, f2 = f
     a, b = (x1 - x0) * (f1 - f2), (x1 - x2) * (f1 - f0)
@@ -191,37 +212,47 @@ def _parabolic(u, mask, gram, kind_i, x0, x1, x2, f, kinds):
     ok = (np.abs(den) > 1e-300) & (x0 < x1) & (x1 < x2)
     vertex = x1 - 0.5 * ((x1 - x0) * a - (x1 - x2) * b) / np.where(ok, den, 1.0)
     vertex = np.where(ok, np.clip(vertex, x0, x2), x1)
-    fv = _captured_mixed(u, mask, gram, kind_i, vertex, kinds)
-    better = fv > f1 + GAIN_TOL * np.trace(gram, axis1=1, axis2=2)
+    fv = _captured_mixed(groups, vertex)
+    better = fv > f1 + gain_tol
     return np.where(better, vertex, x1), np.where(better, fv, f1)
 
 
-def _golden(u, mask, gram, kind_i, lo, hi, best_D, best_cap, kinds, iters):
+def _golden(groups, lo, hi, best_D, best_cap, gain_tol, iters):
     """Vectorised golden-section maximisation of captured energy over D in [lo, hi] per item."""
     r = (np.sqrt(5.0) - 1.0) / 2.0
     a, b = lo.copy(), hi.copy()
     c, d = b - r * (b - a), a + r * (b - a)
-    fc, fd = _captured_mixed(u, mask, gram, kind_i, c, kinds), _captured_mixed(u, mask, gram, kind_i, d, kinds)
+    fc, fd = _captured_mixed(groups, c), _captured_mixed(groups, d)
     for _ in range(iters):
         left = fc > fd
         a, b = np.where(left, a, c), np.where(left, d, b)
         c, d = np.where(left, b - r * (b - a), d), np.where(left, c, a + r * (b - a))
-        f_new = _captured_mixed(u, mask, gram, kind_i, np.where(left, c, d), kinds)
+        f_new = _captured_mixed(groups, np.where(left, c, d))
         fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
     x = np.where(fc > fd, c, d)
     fx = np.maximum(fc, fd)
-    better = fx > best_cap + GAIN_TOL * np.trace(gram, axis1=1, axis2=2)
+    better = fx > best_cap + gain_tol
     return np.where(better, x, best_D), np.where(better, fx, best_cap)
 
 
 def project_items(u: np.ndarray, mask: np.ndarray, kind_i: np.ndarray, D: np.ndarray,
-                  kinds: tuple[str, ...] = SPACE_KINDS) -> SpaceProjection:
-    """Orthonormal bases and coefficient maps at the chosen (kind, D) of every item."""
+                  kinds: tuple[str, ...] = SPACE_KINDS, fallback: bool = False) -> SpaceProjection:
+    """Orthonormal bases and coefficient maps at the chosen (kind, D) of every item.
+
+    fallback=True: items whose basis is ill-conditioned (cond > COND_MAX, from the same SVD) fall back to
+    D = 0 (kind 0), as :func:`search_D` does with ``check_cond=True``.
+    """
     K, N = u.shape
     U = np.zeros((K, N, 4))
     to_coef = np.zeros((K, 4, 4))
+    cond = np.ones(K)
     for i, kind in enumerate(kinds):
         sel = kind_i == i
         if np.any(sel):
-            U[sel], to_coef[sel] = orthonormal_basis(u[sel], mask[sel], D[sel], kind)
-    return SpaceProjection(U, to_coef, kind_i.astype(np.int64), D)
+            U[sel], to_coef[sel], cond[sel] = orthonormal_basis(u[sel], mask[sel], D[sel], kind, with_cond=True)
+    kind_i = kind_i.astype(np.int64)
+    bad = cond > COND_MAX
+    if fallback and np.any(bad):
+        kind_i, D = np.where(bad, 0, kind_i), np.where(bad, 0.0, D)
+        U[bad], to_coef[bad] = orthonormal_basis(u[bad], mask[bad], D[bad], kinds[0])
+    return SpaceProjection(U, to_coef, kind_i, D)

@@ -220,3 +220,37 @@ def test_clip_evaluation_is_thread_safe(small_clip):
         parallel = list(pool.map(lambda t: small_clip.evaluate(float(t)), ts))
     for a, b in zip(serial, parallel, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_projection_fallback_equals_separate_condition_check(rng):
+    """project_items(fallback=True) (condition numbers from the projection SVD) == the separate check of
+    search_D (_well_conditioned, its own SVD) followed by a plain projection: same kinds, D and bases."""
+    from pdeanim.model.spacefit import _well_conditioned, project_items
+
+    K, N = 60, 9
+    u = np.sort(rng.uniform(0, 1, (K, N)), axis=1)
+    u[::4] = 0.5 + 1e-3 * u[::4]  # clustered points: ill-conditioned unless D = 0 is also
+    mask = np.ones((K, N), bool)
+    mask[1, 3:] = False  # a short curve (3 points)
+    kind_i = rng.integers(0, 2, K)
+    D = rng.uniform(0, 48, K).astype(np.float32).astype(np.float64)
+    D[::5] = 0.0
+    zeros = np.zeros(K)
+    D2, kind2, _ = _well_conditioned(u, mask, None, kind_i, D, zeros, zeros, fam.SPACE_KINDS)
+    assert np.any(D2 != D)  # the fall-back is exercised
+    plain = project_items(u, mask, kind2, D2)
+    fast = project_items(u, mask, kind_i, D, fallback=True)
+    assert np.array_equal(fast.kind, plain.kind) and np.array_equal(fast.D, plain.D)
+    assert np.array_equal(fast.U, plain.U) and np.array_equal(fast.to_coef, plain.to_coef)
+
+
+def test_predict_equals_broadcast_form(rng):
+    """predict (np.take gathers, in-place products) == the one-line broadcast definition, bit for bit."""
+    from pdeanim.model.timefit import predict
+
+    segm = Segmentation(np.array([0, 3, 4, 9]), np.linspace(0, 1, 10))
+    z = rng.normal(size=(7, 4, 4))
+    mu = rng.choice(np.array(MU_VALUES), size=(7, 3))
+    seg = segm.frame_segment()
+    p0, p1 = segment_pair(segm, mu)
+    assert np.array_equal(predict(z, segm, mu), p0[..., None] * z[:, seg] + p1[..., None] * z[:, seg + 1])
