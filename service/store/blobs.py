@@ -86,10 +86,8 @@ class LocalBlobStore:
         key = _check_key(key)
         return self.root / key[:2] / key
 
-    def _write_atomic(self, key: str, fill) -> str:  # noqa: ANN001 - fill(fileobj) writes the content
-        target = self._path(key)
-        if target.exists():
-            return key
+    def _temp_file(self, target: Path, fill) -> str:  # noqa: ANN001 - fill(fileobj) writes the content
+        """A finished, fsynced temporary file beside ``target`` (same filesystem, so rename/link is atomic)."""
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
         try:
@@ -97,6 +95,17 @@ class LocalBlobStore:
                 fill(fh)
                 fh.flush()
                 os.fsync(fh.fileno())
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return tmp
+
+    def _write_atomic(self, key: str, fill) -> str:  # noqa: ANN001 - fill(fileobj) writes the content
+        target = self._path(key)
+        if target.exists():
+            return key
+        tmp = self._temp_file(target, fill)
+        try:
             os.replace(tmp, target)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -120,13 +129,8 @@ class LocalBlobStore:
         target = self._path(key)
         if target.exists():
             return False
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
+        tmp = self._temp_file(target, lambda fh: fh.write(data))
         try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-                fh.flush()
-                os.fsync(fh.fileno())
             os.link(tmp, target)
             return True
         except FileExistsError:
