@@ -16,8 +16,10 @@ from pathlib import Path
 
 import httpx
 
+from service.cli import CONSOLE
+
 SAMPLE_MESH = Path(__file__).resolve().parents[1] / "tests" / "data" / "spot.obj"
-CLI = [sys.executable, "-c", "import sys; from pdeanim.cli import main; sys.exit(main())"]
+CLI = CONSOLE
 SCENE = {"frames": 60, "target_tets": 1500}
 FIT = {"target_rel_rms": 0.002}
 

@@ -1,35 +1,35 @@
-"""The ``pdeanim`` console script. Each sub-command lives in its own module of this package and
-exposes ``register(subparsers)``, which adds its parser and sets ``func`` (args -> exit code)."""
+"""The library's commands of the ``pdeanim`` console script. Each sub-command lives in its own module and
+exposes ``register(subparsers)``, which adds its parser and sets ``func`` (args -> exit code). The
+service-side commands (serve, worker, keys, demo) live with the service and are added by
+:func:`service.cli.main`, the installed console script; this package never imports them."""
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import sys
+from collections.abc import Sequence
 
 from ..errors import InputError, PdeanimError
 
-COMMANDS = ["simulate", "fit", "frame", "export", "cyclic", "serve", "worker", "keys", "demo"]
+COMMANDS = [f"{__name__}.{name}" for name in ("simulate", "fit", "frame", "export", "cyclic")]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every sub-command that is installed."""
+def build_parser(extra_commands: Sequence[str] = ()) -> argparse.ArgumentParser:
+    """The argument parser with the library's sub-commands plus the modules named in ``extra_commands``."""
     from .. import __version__
 
     parser = argparse.ArgumentParser(prog="pdeanim", description="Deforming 3D meshes to compact dynamic-PDE coefficient clips, and back to frames.")
     parser.add_argument("--version", action="version", version=f"pdeanim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMANDS:
-        module = f"{__name__}.{name}"
-        if importlib.util.find_spec(module) is not None:
-            importlib.import_module(module).register(sub)
+    for module in [*COMMANDS, *extra_commands]:
+        importlib.import_module(module).register(sub)
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> int:
     """Entry point: parse, run the sub-command, and turn library errors into a message and exit code 2."""
-    parser = build_parser()
+    parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -7,7 +7,7 @@ import sqlite3
 from sqlalchemy import text
 
 import service.store.tenants as tenants
-from pdeanim.cli import main
+from service.cli import main
 from service.settings import Settings
 from service.store.context import Store
 

@@ -15,7 +15,7 @@ import httpx
 from .conftest import Backend, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
-PDEANIM = [sys.executable, "-c", "import sys; from pdeanim.cli import main; sys.exit(main())"]
+PDEANIM = [sys.executable, "-m", "service.cli"]
 
 
 def process_env(backend: Backend, **extra: str) -> dict[str, str]:

@@ -6,9 +6,10 @@ from __future__ import annotations
 import argparse
 import signal
 import subprocess
-import sys
 
-WORKER_CMD = [sys.executable, "-c", "import sys; from pdeanim.cli import main; sys.exit(main(['worker']))"]
+from service.cli import CONSOLE
+
+WORKER_CMD = [*CONSOLE, "worker"]
 
 
 def register(subparsers) -> None:  # noqa: ANN001
