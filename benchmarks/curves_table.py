@@ -146,7 +146,8 @@ def speed_row() -> None:
     v, f = trimesh.remesh.subdivide(np.asarray(m.vertices), np.asarray(m.faces))
     t0 = time.perf_counter()
     cs = extract_curves(v, f)
-    print(f"\n## Speed: extract_curves on {len(v)} vertices: {time.perf_counter() - t0:.2f} s, {cs.n_curves} curves")
+    print(f"\n## Speed: extract_curves on {len(v)} vertices: {time.perf_counter() - t0:.2f} s, {cs.n_curves} "
+          f"curves")
 
 
 def main() -> None:

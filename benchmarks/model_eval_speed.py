@@ -29,7 +29,8 @@ def main() -> None:
         clip.evaluate(float(t))
         samples.append(time.perf_counter() - t0)
     s = np.array(samples) * 1e3
-    print(f"vertices {clip.n_vertices}, curves {clip.info()['n_curves']}, segments {clip.info()['n_segments']}")
+    print(f"vertices {clip.n_vertices}, curves {clip.info()['n_curves']}, segments "
+          f"{clip.info()['n_segments']}")
     print(f"evaluate one frame: median {np.median(s):.4f} ms, p10 {np.percentile(s, 10):.4f} ms, "
           f"p90 {np.percentile(s, 90):.4f} ms (target < 0.2 ms; shared 2-core machine)")
     t0 = time.perf_counter()

@@ -45,7 +45,8 @@ def main(repeats: int = 5) -> None:
     fit = np.array(spaces) + np.array(times)
     print(f"{curves.n_curves} curves x {poses.n_frames} frames ({poses.n_vertices} vertices), 4 segments; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    print(f"space stage {ms(spaces)} + time stage {ms(times)} = {ms(fit)} (median of {repeats}; target 200 ms)")
+    print(f"space stage {ms(spaces)} + time stage {ms(times)} = {ms(fit)} (median of {repeats}; target 200 "
+          f"ms)")
     print(f"whole fit_poses incl. encode + decode + evaluating all frames: {total * 1e3:.0f} ms; "
           f"rel rms {r['rel_rms']:.2e}, coefficients {len(parts.coefficients)} bytes")
     t0 = time.perf_counter()

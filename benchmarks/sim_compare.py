@@ -2,7 +2,8 @@
 cantilever tip deflection at three resolutions. Prints the figures.
 
 Run in the benchmark venv (pypbd installed there only):
-    python3 -m venv .venv-bench && .venv-bench/bin/pip install pypbd==2.2.2 numpy trimesh pytetwild==0.2.3 -e .
+    python3 -m venv .venv-bench
+    .venv-bench/bin/pip install pypbd==2.2.2 numpy trimesh pytetwild==0.2.3 -e .
     .venv-bench/bin/python benchmarks/sim_compare.py [--part speed|table|deflection|all] [--quick]
 Both engines run on the same tet mesh with pypbd's defaults: h = 0.005 s, 5 substeps, 1 iteration (our
 substep is h / 5), single-threaded (ours also on 2 threads). pypbd runs FEM-based PBD (its default solid
@@ -44,8 +45,19 @@ def run_pypbd(mesh: TetMesh, fixed: np.ndarray, material: Material, steps: int, 
     masses[fixed] = 0.0
     with tempfile.TemporaryDirectory() as tmp:
         src, dst = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
-        np.savez(src, points=mesh.points, tets=mesh.tets, masses=masses, steps=steps, average=average,
-                 substeps=substeps, iterations=ITERATIONS, h=H, young=material.young, poisson=material.poisson)
+        np.savez(
+            src,
+            points=mesh.points,
+            tets=mesh.tets,
+            masses=masses,
+            steps=steps,
+            average=average,
+            substeps=substeps,
+            iterations=ITERATIONS,
+            h=H,
+            young=material.young,
+            poisson=material.poisson,
+        )
         env = dict(os.environ, OMP_NUM_THREADS="1")
         subprocess.run([sys.executable, str(Path(__file__).with_name("sim_pypbd.py")), str(src), str(dst)],
                        check=True, env=env, cwd=tmp)
@@ -110,7 +122,8 @@ def speed(targets: list[int], repeats: int = 5) -> None:
     """us per tet per constraint sweep, both engines, same mesh, same substeps and iterations; medians of
     ``repeats`` interleaved runs (pypbd, ours on 1 thread, ours on 2 threads), with the load average seen."""
     material = Material(young=1e5, poisson=0.3, density=1000.0, damping=0.0)
-    print(f"\n## Speed: us per tet per constraint sweep (h = 0.005, 5 substeps x 1 iteration), median of {repeats}")
+    print(f"\n## Speed: us per tet per constraint sweep (h = 0.005, 5 substeps x 1 iteration), median of "
+          f"{repeats}")
     print("| mesh | tets | colours | pypbd 1 thread | ours 1 thread | ratio pypbd/ours | ours 2 threads | "
           "2 threads speed-up | bound on 2 free cores | load avg |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -131,9 +144,11 @@ def speed(targets: list[int], repeats: int = 5) -> None:
             per = [float(np.median(r)) for r in runs]
             bound = two_thread_bound(tets, fixed, material, H / SUBSTEPS)
             load = 0.5 * (load + os.getloadavg()[0])
-            print(f"| {name} | {tets.n_tets} | {ours['colors']} | {per[0]:.3f} | {per[1]:.3f} | "
-                  f"{per[0] / per[1]:.2f} | {per[2]:.3f} | {per[1] / per[2]:.2f} | {bound:.2f} | {load:.1f} |",
-                  flush=True)
+            print(
+                f"| {name} | {tets.n_tets} | {ours['colors']} | {per[0]:.3f} | {per[1]:.3f} | "
+                f"{per[0] / per[1]:.2f} | {per[2]:.3f} | {per[1] / per[2]:.2f} | {bound:.2f} | {load:.1f} |",
+                flush=True,
+            )
 
 
 def table(targets: list[int]) -> None:
@@ -141,8 +156,11 @@ def table(targets: list[int]) -> None:
     material = Material(young=1e5, poisson=0.3, density=1000.0, damping=1.0)
     steps_per_frame = (1 / 30) / H
     print("\n## Table 1 analogue: 100 frames at 30 fps (h = 0.005 x 5 substeps unless 'auto')")
-    print("| mesh | surface faces | tets | fTetWild s | pypbd s | ours s (same steps) | ours auto substeps/frame | "
-          "ours s (auto) |")
+    print(
+        "| mesh | surface faces | tets | fTetWild s | pypbd s | ours s (same steps) | ours auto "
+        "substeps/frame | "
+        "ours s (auto) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for name in ("spot", "bob"):
         for target in targets:
@@ -156,8 +174,12 @@ def table(targets: list[int]) -> None:
             ours = run_ours(tets, fixed, material, H / SUBSTEPS, steps * SUBSTEPS)
             auto, _ = auto_substeps(tets, material, 1 / 30, 10_000)
             ours_auto = run_ours(tets, fixed, material, (1 / 30) / auto, 100 * auto)
-            print(f"| {name} | {len(surface.faces)} | {tets.n_tets} | {tet_seconds:.1f} | {float(ref['seconds']):.2f} "
-                  f"| {ours['seconds']:.2f} | {auto} | {ours_auto['seconds']:.2f} |", flush=True)
+            print(
+                f"| {name} | {len(surface.faces)} | {tets.n_tets} | {tet_seconds:.1f} | "
+                f"{float(ref['seconds']):.2f} "
+                f"| {ours['seconds']:.2f} | {auto} | {ours_auto['seconds']:.2f} |",
+                flush=True,
+            )
 
 
 def deflection(resolutions: list[int]) -> None:
@@ -167,7 +189,8 @@ def deflection(resolutions: list[int]) -> None:
     length, side, young, density = 0.5, 0.1, 2e7, 1000.0
     beam = density * 9.81 * side**2 * length**4 / (8 * young * side**4 / 12)
     material = Material(young=young, poisson=0.3, density=density, damping=100.0)
-    print(f"\n## Cantilever 0.5 x 0.1 x 0.1 m, E = 20 MPa, nu = 0.3: tip deflection / Euler-Bernoulli ({beam:.5f} m)")
+    print(f"\n## Cantilever 0.5 x 0.1 x 0.1 m, E = 20 MPa, nu = 0.3: tip deflection / Euler-Bernoulli "
+          f"({beam:.5f} m)")
     print("| cells through thickness | tets | static linear FEM | pypbd (h=0.005, 5x1) | ours (same steps) | "
           "ours (auto substeps) | pypbd (our substeps) |")
     print("|---|---|---|---|---|---|---|")
@@ -185,9 +208,14 @@ def deflection(resolutions: list[int]) -> None:
         auto, _ = auto_substeps(mesh, material, 0.15, 100_000)
         ours = run_ours(mesh, fixed, material, 0.15 / auto, auto)
         # pypbd has no damping: 0.6 s at our substep, deflection averaged over the last ~3 bending periods
-        small = run_pypbd(mesh, fixed, material, steps=120, average=66, substeps=int(np.ceil(H * auto / 0.15)))
-        print(f"| {n} | {mesh.n_tets} | {-fem[tip, 1].mean() / beam:.3f} | {sag(ref['mean']):.3f} | "
-              f"{sag(same['mean']):.3f} | {sag(ours['final']):.3f} | {sag(small['mean']):.3f} |", flush=True)
+        small = run_pypbd(
+            mesh, fixed, material, steps=120, average=66, substeps=int(np.ceil(H * auto / 0.15))
+        )
+        print(
+            f"| {n} | {mesh.n_tets} | {-fem[tip, 1].mean() / beam:.3f} | {sag(ref['mean']):.3f} | "
+            f"{sag(same['mean']):.3f} | {sag(ours['final']):.3f} | {sag(small['mean']):.3f} |",
+            flush=True,
+        )
 
 
 def main() -> None:

@@ -1,9 +1,11 @@
-"""Run one pypbd (PositionBasedDynamics 2.2.2) simulation in this process: the reference engine of the benchmarks.
+"""Run one pypbd (PositionBasedDynamics 2.2.2) simulation in this process: the reference engine of the
+benchmarks.
 
 pypbd is a process-wide singleton, so every case runs in its own child process:
 ``python benchmarks/sim_pypbd.py IN.npz OUT.npz`` with points, tets, masses (0 = pinned), steps, substeps,
 iterations, h and young/poisson in IN. Gravity is pypbd's fixed -9.81 y. Writes final positions, the mean
-positions over the last ``average`` steps, and the seconds spent stepping. Needs .venv-bench (pypbd installed).
+positions over the last ``average`` steps, and the seconds spent stepping. Needs .venv-bench (pypbd
+installed).
 """
 
 from __future__ import annotations

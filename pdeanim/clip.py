@@ -67,9 +67,13 @@ class ClipParts:
         """Honest size accounting: bytes of each part against raw float32 positions of all frames."""
         raw = int(n_frames) * int(n_vertices) * 3 * 4
         total = len(self.topology) + len(self.coefficients)
-        return {"topology_bytes": len(self.topology), "coefficients_bytes": len(self.coefficients),
-                "raw_float32_bytes": raw, "ratio_coefficients_to_raw": len(self.coefficients) / raw if raw else 0.0,
-                "ratio_total_to_raw": total / raw if raw else 0.0}
+        return {
+            "topology_bytes": len(self.topology),
+            "coefficients_bytes": len(self.coefficients),
+            "raw_float32_bytes": raw,
+            "ratio_coefficients_to_raw": len(self.coefficients) / raw if raw else 0.0,
+            "ratio_total_to_raw": total / raw if raw else 0.0,
+        }
 
 
 def topology_id(topology: bytes) -> str:

@@ -65,6 +65,10 @@ class CurveSet:
     def from_lists(curves: list[list[int]] | list[np.ndarray]) -> CurveSet:
         """Build from a list of vertex-index sequences (convenience for tests and small inputs)."""
         lengths = np.array([len(c) for c in curves], dtype=np.int64)
-        order = np.concatenate([np.asarray(c, dtype=np.int32) for c in curves]) if curves else np.zeros(0, np.int32)
+        order = (
+            np.concatenate([np.asarray(c, dtype=np.int32) for c in curves])
+            if curves
+            else np.zeros(0, np.int32)
+        )
         offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32)
         return CurveSet(order.astype(np.int32), offsets)

@@ -5,7 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 Progress = Callable[[float, str], None]
-"""A callback ``progress(fraction, stage)``: fraction in [0, 1] of the whole call, stage e.g. "simulate 40/100"."""
+"""A callback ``progress(fraction, stage)``: fraction in [0, 1] of the whole call, stage e.g. "simulate
+40/100"."""
 
 
 def no_progress(fraction: float, stage: str) -> None:

@@ -1,1 +1,2 @@
-"""The pdeanim web service: FastAPI API (``service.api``), storage shared with the worker (``service.store``)."""
+"""The pdeanim web service: FastAPI API (``service.api``), storage shared with the worker
+(``service.store``)."""

@@ -36,7 +36,8 @@ class Heartbeat(threading.Thread):
                 log.warning("heartbeat of %s failed", self.job.id, exc_info=True)
 
 
-PartialWriter = Callable[[dict], "dict | None"]  # stores a partial result (fenced); its ids, or None if fenced out
+# stores a partial result (fenced); its ids, or None if fenced out
+PartialWriter = Callable[[dict], "dict | None"]
 
 
 def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json: str,  # noqa: ANN001
@@ -92,13 +93,16 @@ def _pump(proc, conn, queue: JobQueue, job: Claimed, beat: Heartbeat,  # noqa: A
         if should_stop():
             return Outcome("stopped")
         if time.monotonic() > deadline:
-            return Outcome("error", code="timeout", message="the attempt ran past PDEANIM_JOB_TIMEOUT_SECONDS")
+            return Outcome(
+                "error", code="timeout", message="the attempt ran past PDEANIM_JOB_TIMEOUT_SECONDS"
+            )
         try:
             ready = conn.poll(0.1)
             msg = conn.recv() if ready else None
         except (EOFError, OSError):
             proc.join(5)
-            return Outcome("error", code="crashed", message=f"the job process died (exit code {proc.exitcode})")
+            return Outcome("error", code="crashed", message=f"the job process died (exit code "
+                                                            f"{proc.exitcode})")
         if msg is not None and msg[0] == "progress":
             pending = msg[1:]
         elif msg is not None and msg[0] == "partial":

@@ -7,7 +7,8 @@ import argparse
 
 def register(subparsers) -> None:  # noqa: ANN001
     """Add the ``worker`` sub-command."""
-    p = subparsers.add_parser("worker", help="run a job worker (settings from PDEANIM_* environment variables)")
+    p = subparsers.add_parser("worker", help="run a job worker (settings from PDEANIM_* environment "
+                                             "variables)")
     p.add_argument("--log-level", default="INFO", help="logging level (default INFO)")
     p.set_defaults(func=run)
 

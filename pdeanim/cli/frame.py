@@ -12,8 +12,11 @@ from ..errors import ParameterError
 
 def register(subparsers) -> None:  # noqa: ANN001
     """Add the ``frame`` sub-command."""
-    p = subparsers.add_parser("frame", help="evaluate a clip at times t in [0, 1]",
-                              description="t in [0, 1] maps linearly onto the clip's first..last frame times.")
+    p = subparsers.add_parser(
+        "frame",
+        help="evaluate a clip at times t in [0, 1]",
+        description="t in [0, 1] maps linearly onto the clip's first..last frame times.",
+    )
     p.add_argument("clip", help="CLIP file")
     p.add_argument("--t", required=True, help="a time, a comma-separated list, or 'all' (every source frame)")
     p.add_argument("--out", required=True, help="FILE.npz (vertices, faces, t) or FILE.glb (single t)")

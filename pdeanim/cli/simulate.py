@@ -50,10 +50,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--drive-indices", action="append", default=[], metavar="I,J,...")
     p.add_argument("--drive-rotate", metavar="AXIS,DEGREES", help="rotate the driven region (or the pins) "
                    "about AXIS (x, y, z or AX,AY,AZ) through its centroid, from 0 to DEGREES over the clip")
-    p.add_argument("--drive-translate", metavar="X,Y,Z", help="translate the driven region by X,Y,Z over the clip")
+    p.add_argument("--drive-translate", metavar="X,Y,Z", help="translate the driven region by X,Y,Z over the "
+                                                              "clip")
     p.add_argument("--drive-center", metavar="X,Y,Z", help="rotation center (default: region centroid)")
     p.add_argument("--relative", action="store_true", help="region points are fractions of the bounding box")
-    p.add_argument("--ground", metavar="Y|PX,PY,PZ,NX,NY,NZ", help="ground plane y = Y, or a point and normal")
+    p.add_argument(
+        "--ground", metavar="Y|PX,PY,PZ,NX,NY,NZ", help="ground plane y = Y, or a point and normal"
+    )
     p.add_argument("--friction", type=float, default=0.0, help="ground friction in [0, 1]")
     p.add_argument("--tets", type=int, help="target tet count (default 3000)")
     p.add_argument("--substeps", type=int, help="substeps per frame (default: automatic from the material)")
@@ -106,9 +109,17 @@ def scene_from_args(args: argparse.Namespace):
 
     d = json.loads(Path(args.scene).read_text()) if args.scene else {}
     d.update(frames=args.frames, fps=args.fps)
-    optional = {"duration": args.duration, "damping": args.damping, "young": args.young, "poisson": args.poisson,
-                "density": args.density, "target_tets": args.tets, "substeps": args.substeps,
-                "iterations": args.iterations, "threads": args.threads}
+    optional = {
+        "duration": args.duration,
+        "damping": args.damping,
+        "young": args.young,
+        "poisson": args.poisson,
+        "density": args.density,
+        "target_tets": args.tets,
+        "substeps": args.substeps,
+        "iterations": args.iterations,
+        "threads": args.threads,
+    }
     d.update({k: v for k, v in optional.items() if v is not None})
     if args.gravity:
         d["gravity"] = floats(args.gravity, 3, "--gravity")

@@ -26,7 +26,8 @@ Measure = Callable[[CurveSet, np.ndarray], np.ndarray]
 
 
 def floor_errors(frames: np.ndarray, motion: str) -> Measure:
-    """Per-curve relative RMS floor (relative to the first frame's bbox diagonal); measures only the given curves."""
+    """Per-curve relative RMS floor (relative to the first frame's bbox diagonal); measures only the given
+    curves."""
     diag = bbox_diagonal(frames[0])
 
     def errors(curves: CurveSet, which: np.ndarray) -> np.ndarray:
@@ -132,7 +133,8 @@ def refine_curves(poses: Poses | np.ndarray, curves: CurveSet, target: float, *,
 
 
 def _remeasure(new: CurveSet, old: CurveSet, old_err: np.ndarray, errors: Measure) -> np.ndarray:
-    """Errors of new curves (same order array as old): reuse old values of unchanged curves, measure the rest."""
+    """Errors of new curves (same order array as old): reuse old values of unchanged curves, measure the
+    rest."""
     start, end = new.offsets[:-1], new.offsets[1:]
     pos = np.minimum(np.searchsorted(old.offsets, start), old.n_curves - 1)
     same = (old.offsets[pos] == start) & (old.offsets[pos + 1] == end)
@@ -176,7 +178,8 @@ def bounded_curves(poses: Poses | np.ndarray, faces: np.ndarray | None, target: 
     """Extract curves on the first frame, then refine them to the error bound; returns (curves, report).
 
     Starting long and splitting where needed gives fewer curves (fewer coefficients) at loose targets than
-    starting at 10 points: about 30% (spot) and 58% (bob) fewer coefficient bytes at rel RMS 1e-2 (bend+twist).
+    starting at 10 points: about 30% (spot) and 58% (bob) fewer coefficient bytes at rel RMS 1e-2
+    (bend+twist).
     """
     frames = np.asarray(poses.vertices if isinstance(poses, Poses) else poses)
     curves = extract_curves(frames[0], faces, target_points=target_points)

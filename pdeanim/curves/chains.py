@@ -19,7 +19,8 @@ LINK_THRESHOLD = 0.5  # minimum direction score (cosine) for a first-round link
 
 
 def vertex_directions(g: WeldedGraph, f: np.ndarray, along: str = "ring") -> np.ndarray:
-    """(P, 3) unit iso-line ("ring") or gradient ("meridian") direction of field f (P,); zero where undefined."""
+    """(P, 3) unit iso-line ("ring") or gradient ("meridian") direction of field f (P,); zero where
+    undefined."""
     p, tri = g.points, g.faces
     n = g.n_points
     if len(tri) == 0:

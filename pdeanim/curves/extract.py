@@ -4,7 +4,8 @@ Method (chosen by measuring the spatial floor and turning angles against greedy 
 iso-lines, see the README section "Curve extraction"): weld seams by position (connectivity only), compute a
 smooth scalar field per connected component (:mod:`pdeanim.curves.fields`), link mesh edges into chains that
 follow the field's gradient ("meridians") or its iso-lines ("rings") (:mod:`pdeanim.curves.chains`), and cut
-every chain into near-equal runs of about ``target_points`` welded points. Copies of a welded point follow each
+every chain into near-equal runs of about ``target_points`` welded points. Copies of a welded point follow
+each
 other on one curve, so a curve's distinct positions never repeat.
 """
 
@@ -36,7 +37,11 @@ def extract_curves(vertices: np.ndarray, faces: np.ndarray | None, *, target_poi
         raise ParameterError(f"field must be one of auto, {', '.join(FIELDS)}; got {field!r}")
     if method not in METHODS:
         raise ParameterError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
-    if isinstance(target_points, bool) or not isinstance(target_points, int | np.integer) or target_points < 1:
+    if (
+        isinstance(target_points, bool)
+        or not isinstance(target_points, int | np.integer)
+        or target_points < 1
+    ):
         raise ParameterError(f"target_points must be an integer >= 1, got {target_points!r}")
     g = weld_graph(vertices, faces)
     if g.n_points == 0:

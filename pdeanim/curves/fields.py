@@ -26,7 +26,8 @@ COT_CAP = 1e3
 
 
 def group_pca(x: np.ndarray, labels: np.ndarray, n_groups: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-group mean (G, 3) and principal axes (G, 3, 3) (columns by decreasing variance) of points (N, 3)."""
+    """Per-group mean (G, 3) and principal axes (G, 3, 3) (columns by decreasing variance) of points (N,
+    3)."""
     cnt = np.maximum(np.bincount(labels, minlength=n_groups), 1).astype(np.float64)
     mean = np.stack([np.bincount(labels, x[:, i], n_groups) for i in range(3)], axis=1) / cnt[:, None]
     d = x - mean[labels]
@@ -50,7 +51,8 @@ def axis_field(g: WeldedGraph) -> np.ndarray:
 
 
 def cotangent_laplacian(g: WeldedGraph) -> tuple[sp.csr_matrix, np.ndarray]:
-    """(P, P) cotangent stiffness (weights clamped to [0, cap], plus a small uniform term) and (P,) lumped mass."""
+    """(P, P) cotangent stiffness (weights clamped to [0, cap], plus a small uniform term) and (P,) lumped
+    mass."""
     p, f = g.points, g.faces
     n = g.n_points
     rows, cols, vals = [], [], []
@@ -67,10 +69,19 @@ def cotangent_laplacian(g: WeldedGraph) -> tuple[sp.csr_matrix, np.ndarray]:
             vals += [np.clip(0.5 * cot, 0.0, COT_CAP)] * 2
             np.add.at(area, f[:, k], a2 / 6.0)
     e = g.edges
-    w = sp.csr_matrix((np.concatenate(vals) if vals else np.zeros(0),
-                       (np.concatenate(rows) if rows else np.zeros(0, int),
-                        np.concatenate(cols) if cols else np.zeros(0, int))), shape=(n, n))
-    uni = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    w = sp.csr_matrix(
+        (
+            np.concatenate(vals) if vals else np.zeros(0),
+            (
+                np.concatenate(rows) if rows else np.zeros(0, int),
+                np.concatenate(cols) if cols else np.zeros(0, int),
+            ),
+        ),
+        shape=(n, n),
+    )
+    uni = sp.csr_matrix(
+        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)
+    )
     mean_w = float(w.data.mean()) if w.nnz else 1.0
     w = w + 1e-2 * mean_w * uni
     lap = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w
@@ -79,7 +90,8 @@ def cotangent_laplacian(g: WeldedGraph) -> tuple[sp.csr_matrix, np.ndarray]:
 
 
 def _fiedler(lap: sp.csr_matrix, mass: np.ndarray, start: np.ndarray) -> np.ndarray | None:
-    """Second generalised eigenvector of (lap, diag(mass)) by shifted inverse iteration (one LU); None on failure.
+    """Second generalised eigenvector of (lap, diag(mass)) by shifted inverse iteration (one LU); None on
+    failure.
 
     The constant null vector is projected out every step; the accuracy needed for banding and directions is
     reached in ``INVERSE_ITERATIONS`` steps from a start near the answer (the principal-axis coordinate).

@@ -14,7 +14,9 @@ from .extract import expand_to_vertices
 from .weld import weld_graph
 
 
-def greedy_edge_curves(vertices: np.ndarray, faces: np.ndarray | None, *, target_points: int = 10) -> CurveSet:
+def greedy_edge_curves(
+    vertices: np.ndarray, faces: np.ndarray | None, *, target_points: int = 10
+) -> CurveSet:
     """Curves (CurveSet over all V vertices) made of greedy straightest edge paths of up to target_points."""
     g = weld_graph(vertices, faces)
     adj = g.adjacency().tocsr()

@@ -52,6 +52,12 @@ def quality_summary(points: np.ndarray, faces: np.ndarray, curves: CurveSet) -> 
     def pct(x: np.ndarray, q: float) -> float:
         return float(np.percentile(x, q)) if len(x) else 0.0
 
-    return {"curves": curves.n_curves, "mean_points": float(curves.lengths.mean()) if curves.n_curves else 0.0,
-            "turn_median_deg": pct(ang, 50), "turn_p90_deg": pct(ang, 90),
-            "step_median": pct(st, 50), "step_p90": pct(st, 90), "step_max": pct(st, 100)}
+    return {
+        "curves": curves.n_curves,
+        "mean_points": float(curves.lengths.mean()) if curves.n_curves else 0.0,
+        "turn_median_deg": pct(ang, 50),
+        "turn_p90_deg": pct(ang, 90),
+        "step_median": pct(st, 50),
+        "step_p90": pct(st, 90),
+        "step_max": pct(st, 100),
+    }

@@ -104,8 +104,10 @@ def body_frame(vertices: np.ndarray, *, head: object = None, tail: object = None
     perp = rel - np.outer(x, axis)
     ext_perp = np.ptp(perp @ np.linalg.svd(perp, full_matrices=False)[2][:2].T, axis=0).max()
     if np.ptp(x) < min_elongation * ext_perp:
-        raise InputError(f"the mesh is not elongated enough to be cut into cross-sections (length {np.ptp(x):.4g}"
-                         f" vs width {ext_perp:.4g}); set head and tail points to choose the body axis")
+        raise InputError(
+            f"the mesh is not elongated enough to be cut into cross-sections (length {np.ptp(x):.4g}"
+            f" vs width {ext_perp:.4g}); set head and tail points to choose the body axis"
+        )
     if lateral is not None:
         lat = _unit(lateral, "lateral")
         lat = lat - axis * (lat @ axis)
@@ -208,7 +210,9 @@ def resample_loop(loop: np.ndarray, frame: BodyFrame, n_points: int) -> np.ndarr
     return np.stack([np.interp(target, arc, ring[:, k]) for k in range(3)], axis=1)
 
 
-def _slice_outer_loop(mesh: trimesh.Trimesh, frame: BodyFrame, x: float, tol: float) -> tuple[np.ndarray | None, int]:
+def _slice_outer_loop(
+    mesh: trimesh.Trimesh, frame: BodyFrame, x: float, tol: float
+) -> tuple[np.ndarray | None, int]:
     """The outer loop of the mesh cut by the plane at axial coordinate x, and how many loops the cut has."""
     segs = intersections.mesh_plane(mesh, frame.axis, frame.origin + x * frame.axis)
     loops, chains = chain_segments(np.asarray(segs, dtype=np.float64), tol)
@@ -253,8 +257,10 @@ def cut_body(vertices: np.ndarray, faces: np.ndarray, frame: BodyFrame, n_curves
         if loop is None:  # the plane may run along an edge: try once slightly off
             loop, count = _slice_outer_loop(mesh, frame, x + 1e-6 * frame.length, tol)
         if loop is None:
-            raise InputError(f"cross-section {k} at {(x - frame.x_min) / frame.length:.0%} of the body length is "
-                             "empty: the mesh cannot be cut into closed cross-sections along its axis")
+            raise InputError(
+                f"cross-section {k} at {(x - frame.x_min) / frame.length:.0%} of the body length is "
+                "empty: the mesh cannot be cut into closed cross-sections along its axis"
+            )
         curves.append(resample_loop(loop, frame, n_points))
         loops.append(count)
     loops_arr = np.asarray(loops)

@@ -96,8 +96,10 @@ class CyclicOptions:
         if self.modes > (self.points - 1) // 2:
             raise ParameterError(f"modes must be at most (points - 1) // 2 = {(self.points - 1) // 2}")
         if not (np.isfinite(self.a) and MIN_A <= self.a and self.a * (self.modes + 1) <= MAX_EXPONENT):
-            raise ParameterError(f"a must be >= {MIN_A} with a * (modes + 1) <= {MAX_EXPONENT:g}, got a = {self.a}, "
-                                 f"modes = {self.modes}")
+            raise ParameterError(
+                f"a must be >= {MIN_A} with a * (modes + 1) <= {MAX_EXPONENT:g}, got a = {self.a}, "
+                f"modes = {self.modes}"
+            )
         for k in ("head", "tail", "lateral"):
             val = getattr(self, k)
             if val is not None and (len(val) != 3 or not np.isfinite(val).all()):
@@ -150,13 +152,29 @@ def make_cyclic_clip(mesh: Any, options: CyclicOptions, progress: Progress | Non
     settings = {"n_curves": n_curves, "points": options.points, "modes": options.modes, "a": options.a,
                 "order": 2}
     report: dict[str, Any] = {
-        "kind": "cyclic-spine", "curves": n_curves, "patches": surface.n_patches, "points": options.points,
-        "modes": options.modes, "multi_loop_slices": int((body.loops > 1).sum()), "swim": params.to_dict(),
-        "period": params.period, "frames": options.frames, "body_length": frame.length, "diagonal": diag,
-        "rest_distance": {"mean": float(dist.mean()), "max": float(dist.max()),
-                          "rel_mean": float(dist.mean() / diag), "rel_max": float(dist.max() / diag)},
-        "timings": {"surface_s": t1 - t0, "map_s": t2 - t1}, "options": options.to_dict()}
-    parts = make_parts(faces, verts, vmap, surface.spine, body.curves, frame, params, options.frames, settings)
+        "kind": "cyclic-spine",
+        "curves": n_curves,
+        "patches": surface.n_patches,
+        "points": options.points,
+        "modes": options.modes,
+        "multi_loop_slices": int((body.loops > 1).sum()),
+        "swim": params.to_dict(),
+        "period": params.period,
+        "frames": options.frames,
+        "body_length": frame.length,
+        "diagonal": diag,
+        "rest_distance": {
+            "mean": float(dist.mean()),
+            "max": float(dist.max()),
+            "rel_mean": float(dist.mean() / diag),
+            "rel_max": float(dist.max() / diag),
+        },
+        "timings": {"surface_s": t1 - t0, "map_s": t2 - t1},
+        "options": options.to_dict(),
+    }
+    parts = make_parts(
+        faces, verts, vmap, surface.spine, body.curves, frame, params, options.frames, settings
+    )
     report["sizes"] = parts.sizes(options.frames + 1, len(verts))
     report["mesh_bytes"] = int(verts.astype(np.float32).nbytes + faces.astype(np.int32).nbytes)
     parts.report = report

@@ -74,7 +74,9 @@ def exp_basis(u: np.ndarray, sigma: np.ndarray, n_order: int, deriv: int = 0) ->
         for p in range(n_order):
             acc = np.zeros(np.broadcast_shapes(u.shape, s.shape))
             for j in range(min(deriv, p) + 1):
-                acc = acc + comb(deriv, j) * factorial(p) / factorial(p - j) * u ** (p - j) * lam ** (deriv - j)
+                acc = acc + comb(deriv, j) * factorial(p) / factorial(p - j) * u ** (p - j) * lam ** (
+                    deriv - j
+                )
             cols.append(acc * e)
     return np.stack(cols, axis=-1)
 
@@ -134,7 +136,9 @@ class PdePatches:
         """B, the number of patches."""
         return int(self.coef0.shape[0])
 
-    def evaluate(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, du: int = 0, dv: int = 0) -> np.ndarray:
+    def evaluate(
+        self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, du: int = 0, dv: int = 0
+    ) -> np.ndarray:
         """Surface points (or their du-th u and dv-th v derivative) at scattered parameters.
 
         patch : (Q,) int, u : (Q,) float in [0, 1], v : (Q,) float radians -> (Q, 3) float64
@@ -162,7 +166,9 @@ class PdePatches:
     def stacked(self) -> np.ndarray:
         """All coefficients of each patch as one (B, 2N + 2 H 2N, 3) matrix, in the order evaluate uses."""
         b = self.n_patches
-        return np.concatenate([self.coef0, self.coefc.reshape(b, -1, 3), self.coefs.reshape(b, -1, 3)], axis=1)
+        return np.concatenate(
+            [self.coef0, self.coefc.reshape(b, -1, 3), self.coefs.reshape(b, -1, 3)], axis=1
+        )
 
     def spine(self, patch: np.ndarray, u: np.ndarray, du: int = 0) -> np.ndarray:
         """The spine A0(u) (or its du-th derivative) of the given patches: (Q, 3) float64."""
@@ -222,7 +228,8 @@ def solve_patches(curves: np.ndarray, cond: PatchConditions | None = None, *, mo
     h = c.shape[2] // 2
     sigma = a * np.minimum(np.arange(1, h + 1), modes + 1).astype(np.float64)
     if h and sigma.max() > MAX_EXPONENT:
-        raise ParameterError(f"a * (modes + 1) = {sigma.max():g} is over {MAX_EXPONENT:g}: lower the modes or a")
+        raise ParameterError(f"a * (modes + 1) = {sigma.max():g} is over {MAX_EXPONENT:g}: lower the modes "
+                             f"or a")
     g0, gn = condition_matrices(cond, sigma)
     c0, cc, cs = fourier_modes(c)  # (B, 2N, 3), (B, 2N, H, 3)
     coef0 = _balanced_solve(g0, c0)

@@ -21,7 +21,9 @@ VIEWS = {"top": (0, 1), "side": (0, 2)}
 """Which two body coordinates (axial 0, lateral 1, up 2) each view shows."""
 
 
-def _draw_mesh(ax: plt.Axes, local: np.ndarray, faces: np.ndarray, view: str, color: str, shift: float = 0.0) -> None:
+def _draw_mesh(
+    ax: plt.Axes, local: np.ndarray, faces: np.ndarray, view: str, color: str, shift: float = 0.0
+) -> None:
     """Fill the projected triangles of a mesh (local (V, 3) body coordinates), shaded by facing."""
     i, j = VIEWS[view]
     tri = local[faces]  # (T, 3, 3)

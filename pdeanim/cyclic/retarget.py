@@ -38,7 +38,8 @@ class VertexMap:
 
 def _gauss_newton_step(surface: BodySurface, p: np.ndarray, s: np.ndarray, v: np.ndarray,
                        x: np.ndarray) -> np.ndarray:
-    """Least-squares step (Q, 2) in (s, v) towards p (Q, 3) from X(s, v) = x, by batched QR of the Jacobian."""
+    """Least-squares step (Q, 2) in (s, v) towards p (Q, 3) from X(s, v) = x, by batched QR of the
+    Jacobian."""
     jac = np.stack([surface.evaluate(s, v, ds=1), surface.evaluate(s, v, dv=1)], axis=2)  # (Q, 3, 2)
     q, r = np.linalg.qr(jac)
     rhs = np.einsum("qij,qi->qj", q, p - x)
@@ -101,4 +102,6 @@ def move_with_surface(rest: np.ndarray, displacement: np.ndarray) -> np.ndarray:
 
     rest (V, 3); displacement (V, 3) or (K, V, 3) of the mapped surface points -> same shape, float32.
     """
-    return (np.asarray(rest, dtype=np.float32) + np.asarray(displacement, dtype=np.float32)).astype(np.float32)
+    return (np.asarray(rest, dtype=np.float32) + np.asarray(displacement, dtype=np.float32)).astype(
+        np.float32
+    )

@@ -40,7 +40,9 @@ def revolve(profile: Profile, length: float, n_rings: int = 48, n_around: int = 
     return mesh
 
 
-def capsule(length: float = 4.0, radius: float = 0.5, n_rings: int = 40, n_around: int = 24) -> trimesh.Trimesh:
+def capsule(
+    length: float = 4.0, radius: float = 0.5, n_rings: int = 40, n_around: int = 24
+) -> trimesh.Trimesh:
     """A capsule along x: a cylinder of the given radius with hemispherical ends."""
     def profile(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         x = s * length
@@ -71,7 +73,11 @@ def eel(length: float = 1.0, n_rings: int = 72, n_around: int = 20) -> trimesh.T
     return revolve(profile, length, n_rings, n_around)
 
 
-SHAPES: dict[str, Callable[[], trimesh.Trimesh]] = {"fish_capsule": capsule, "fish_trout": trout, "fish_eel": eel}
+SHAPES: dict[str, Callable[[], trimesh.Trimesh]] = {
+    "fish_capsule": capsule,
+    "fish_trout": trout,
+    "fish_eel": eel,
+}
 """The generated test meshes by file stem (tests/data/<stem>.obj)."""
 
 

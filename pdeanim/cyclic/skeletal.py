@@ -8,7 +8,8 @@ forward (T_y is replaced by max(T_y, 0) for the right foot and max(-T_y, 0) for 
 stays on the ground. The hip bobs by bob sin^2(2 pi f t), sways sideways by sway sin(2 pi f t) and is lowered
 where a straight leg could not reach its foot target (a long stride needs bent knees). Each leg
 reaches its foot target with analytic two-bone IK (or an aim for one-bone legs) applied to world matrices,
-and the feet keep their rest orientation; the mesh follows by linear blend skinning. Every cycle repeats with period 1 / f.
+and the feet keep their rest orientation; the mesh follows by linear blend skinning. Every cycle repeats with
+period 1 / f.
 """
 
 from __future__ import annotations
@@ -59,7 +60,9 @@ class StepParams:
         if unknown:
             raise ParameterError(f"unknown step parameter(s): {', '.join(sorted(unknown))}")
         try:
-            vals = {k: (bool(v) if k == "literal" else float(v)) for k, v in {**GAITS[gait], **overrides}.items()}
+            vals = {
+                k: (bool(v) if k == "literal" else float(v)) for k, v in {**GAITS[gait], **overrides}.items()
+            }
         except (TypeError, ValueError) as exc:
             raise ParameterError(f"bad step parameter value: {exc}") from exc
         p = replace(StepParams(), gait=gait, **vals)
@@ -73,8 +76,11 @@ class StepParams:
         return asdict(self)
 
 
-def foot_and_hip_offsets(p: StepParams, t: np.ndarray, leg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World offsets (K, 3) from the rest pose of the right foot, left foot and hip at times t (K,) seconds."""
+def foot_and_hip_offsets(
+    p: StepParams, t: np.ndarray, leg: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World offsets (K, 3) from the rest pose of the right foot, left foot and hip at times t (K,)
+    seconds."""
     w = 2 * np.pi * p.frequency * np.asarray(t, dtype=np.float64).reshape(-1)
     ty, tz = np.sin(w), np.cos(w)
     lift_r, lift_l = (ty, ty) if p.literal else (np.maximum(ty, 0.0), np.maximum(-ty, 0.0))
@@ -120,7 +126,9 @@ def reach(world: np.ndarray, subtree: np.ndarray, chain: list[int], foot: int, t
         return
     if len(chain) == 1:
         j = chain[0]
-        _turn_subtree(world, subtree[j], _rotation_between(_unit(pos(foot) - pos(j)), _unit(target - pos(j))), pos(j))
+        _turn_subtree(
+            world, subtree[j], _rotation_between(_unit(pos(foot) - pos(j)), _unit(target - pos(j))), pos(j)
+        )
         return
     upper, knee = chain[-2], chain[-1]
     u, k, f = pos(upper).copy(), pos(knee).copy(), pos(foot).copy()
@@ -136,8 +144,9 @@ def reach(world: np.ndarray, subtree: np.ndarray, chain: list[int], foot: int, t
     knee_new = u + a[:, None] * (cos_a[:, None] * axis + np.sqrt(1 - cos_a**2)[:, None] * pole)
     _turn_subtree(world, subtree[upper], _rotation_between(_unit(k - u), _unit(knee_new - u)), u)
     goal = u + d[:, None] * axis
-    _turn_subtree(world, subtree[knee], _rotation_between(_unit(pos(foot) - knee_new), _unit(goal - knee_new)),
-                  knee_new)
+    _turn_subtree(
+        world, subtree[knee], _rotation_between(_unit(pos(foot) - knee_new), _unit(goal - knee_new)), knee_new
+    )
 
 
 def subtree_masks(parents: np.ndarray) -> np.ndarray:
@@ -172,26 +181,51 @@ def leg_chain(parents: np.ndarray, hip: int, foot: int) -> list[int]:
     return chain[::-1]
 
 
-def cycle_world_matrices(skinned: Any, params: StepParams, times: np.ndarray, hip: int | str | None = None,
-                         right_foot: int | str | None = None, left_foot: int | str | None = None) -> np.ndarray:
-    """Joint world matrices (K, J, 4, 4) of the cycle at times (K,) seconds (joints by index, name or auto)."""
+def cycle_world_matrices(
+    skinned: Any,
+    params: StepParams,
+    times: np.ndarray,
+    hip: int | str | None = None,
+    right_foot: int | str | None = None,
+    left_foot: int | str | None = None,
+) -> np.ndarray:
+    """Joint world matrices (K, J, 4, 4) of the cycle at times (K,) seconds (joints by index, name or
+    auto)."""
     from ..gltf.skin import joint_world_matrices
 
     names = list(skinned.joint_names)
-    pick = lambda key, pats, what: skinned.joint_index(key) if key is not None else find_joint(names, pats, what)  # noqa: E731
+
+    def pick(key: int | str | None, pats: list[str], what: str) -> int:
+        return skinned.joint_index(key) if key is not None else find_joint(names, pats, what)
+
     h = pick(hip, [r"hip|pelvis", r"root"], "hip")
-    fr = pick(right_foot, [r"(right|\br|_r\b|\.r\b|r_).*(foot|ankle)", r"(foot|ankle).*(right|_r\b|\.r\b)"], "right foot")
-    fl = pick(left_foot, [r"(left|\bl|_l\b|\.l\b|l_).*(foot|ankle)", r"(foot|ankle).*(left|_l\b|\.l\b)"], "left foot")
+    fr = pick(
+        right_foot,
+        [r"(right|\br|_r\b|\.r\b|r_).*(foot|ankle)", r"(foot|ankle).*(right|_r\b|\.r\b)"],
+        "right foot",
+    )
+    fl = pick(
+        left_foot,
+        [r"(left|\bl|_l\b|\.l\b|l_).*(foot|ankle)", r"(foot|ankle).*(left|_l\b|\.l\b)"],
+        "left foot",
+    )
     parents = np.asarray(skinned.joint_parents)
     rest = joint_world_matrices(skinned)
-    leg = 0.5 * (np.linalg.norm(rest[h, :3, 3] - rest[fr, :3, 3]) + np.linalg.norm(rest[h, :3, 3] - rest[fl, :3, 3]))
+    leg = 0.5 * (
+        np.linalg.norm(rest[h, :3, 3] - rest[fr, :3, 3]) + np.linalg.norm(rest[h, :3, 3] - rest[fl, :3, 3])
+    )
     if leg <= 0:
         raise InputError("the feet sit at the hip: cannot measure the leg length")
     off_r, off_l, off_h = foot_and_hip_offsets(params, times, leg)
     subtree = subtree_masks(parents)
     world = np.broadcast_to(rest, (len(off_r), *rest.shape)).copy()
-    legs = [(foot, leg_chain(parents, h, foot), rest[foot, :3, 3] + off) for foot, off in ((fr, off_r), (fl, off_l))]
-    off_h[:, 1] -= np.max([_crouch(rest, h, chain, foot, target, off_h) for foot, chain, target in legs], axis=0)
+    legs = [
+        (foot, leg_chain(parents, h, foot), rest[foot, :3, 3] + off)
+        for foot, off in ((fr, off_r), (fl, off_l))
+    ]
+    off_h[:, 1] -= np.max(
+        [_crouch(rest, h, chain, foot, target, off_h) for foot, chain, target in legs], axis=0
+    )
     trans = world[..., :3, 3]  # (K, J, 3) view
     trans[:, subtree[h]] += off_h[:, None]
     for foot, chain, target in legs:
@@ -207,8 +241,10 @@ def _crouch(rest: np.ndarray, hip: int, chain: list[int], foot: int, target: np.
     if len(chain) < 2:
         return np.zeros(len(target))
     top = chain[-2]
-    bones = [top, *chain[chain.index(top) + 1:], foot]
-    reach_len = 0.995 * sum(np.linalg.norm(rest[b, :3, 3] - rest[a, :3, 3]) for a, b in zip(bones[:-1], bones[1:], strict=True))
+    bones = [top, *chain[chain.index(top) + 1 :], foot]
+    reach_len = 0.995 * sum(
+        np.linalg.norm(rest[b, :3, 3] - rest[a, :3, 3]) for a, b in zip(bones[:-1], bones[1:], strict=True)
+    )
     d = target - (rest[top, :3, 3] + off_h)  # the top joint moves with the hip
     flat = np.maximum(reach_len**2 - d[:, 0] ** 2 - d[:, 2] ** 2, 0.0)
     return np.maximum(-d[:, 1] - np.sqrt(flat), 0.0)

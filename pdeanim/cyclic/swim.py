@@ -2,13 +2,17 @@
 
 The spine is displaced sideways by
     Delta(s, t) = A L W(s) cos(alpha U + phi) sin(2 pi omega t),   U = 2 pi s,  W(s) = Omega(U) / peak,
-with Omega(U) = omega0 + omega1 U / (2 pi) (the amplitude law of the swim-mode table), s in [0, 1] from head to
+with Omega(U) = omega0 + omega1 U / (2 pi) (the amplitude law of the swim-mode table), s in [0, 1] from head
+to
 tail, L the body length, A the peak displacement as a fraction of L (the table's Omega is in the units of the
 authors' models, so its shape is kept and its peak normalised), t in seconds. With wave = "travelling" the
-factor cos(alpha U + phi) sin(2 pi omega t) becomes sin(2 pi omega t - alpha U - phi), a wave running from head
+factor cos(alpha U + phi) sin(2 pi omega t) becomes sin(2 pi omega t - alpha U - phi), a wave running from
+head
 to tail. The wave moves the spine along the body's lateral axis, or along its up axis with
-direction = "vertical" (the dorso-ventral beat of dolphins and whales). Every point keeps its offset from the spine ("translate", as in the paper) or has it turned with the
-local bend of the spine ("rotate", so cross-sections stay square to the spine). Both repeat with period 1/omega.
+direction = "vertical" (the dorso-ventral beat of dolphins and whales). Every point keeps its offset from the
+spine ("translate", as in the paper) or has it turned with the
+local bend of the spine ("rotate", so cross-sections stay square to the spine). Both repeat with period
+1/omega.
 """
 
 from __future__ import annotations
@@ -73,7 +77,10 @@ class SwimParams:
         if unknown:
             raise ParameterError(f"unknown swim parameter(s): {', '.join(sorted(unknown))}")
         try:
-            vals = {k: (str(v) if k in ("mode", "wave", "radial", "direction") else float(v)) for k, v in d.items()}
+            vals = {
+                k: (str(v) if k in ("mode", "wave", "radial", "direction") else float(v))
+                for k, v in d.items()
+            }
         except (TypeError, ValueError) as exc:
             raise ParameterError(f"bad swim parameter value: {exc}") from exc
         params = replace(SwimParams(), **vals)
@@ -90,11 +97,15 @@ class SwimParams:
         if not np.isfinite(nums).all():
             raise ParameterError("swim parameters must be finite numbers")
         if not 1e-3 <= self.frequency <= 1e3:
-            raise ParameterError(f"frequency must lie in [0.001, 1000] cycles per second, got {self.frequency}")
+            raise ParameterError(f"frequency must lie in [0.001, 1000] cycles per second, got "
+                                 f"{self.frequency}")
         if not 0 <= self.amplitude <= 1:
-            raise ParameterError(f"amplitude is a fraction of the body length in [0, 1], got {self.amplitude}")
+            raise ParameterError(
+                f"amplitude is a fraction of the body length in [0, 1], got {self.amplitude}"
+            )
         if self.wave not in WAVES or self.radial not in RADIAL or self.direction not in DIRECTIONS:
-            raise ParameterError(f"wave must be one of {WAVES}, radial one of {RADIAL}, direction one of {DIRECTIONS}")
+            raise ParameterError(f"wave must be one of {WAVES}, radial one of {RADIAL}, direction one of "
+                                 f"{DIRECTIONS}")
 
     @property
     def period(self) -> float:
@@ -109,7 +120,9 @@ class SwimParams:
         return float(np.abs(shape).max())
 
 
-def lateral_wave(params: SwimParams, s: np.ndarray, t: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
+def lateral_wave(
+    params: SwimParams, s: np.ndarray, t: np.ndarray, length: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Spine displacement Delta (K, V) and its slope dDelta/ds (K, V) at s (V,) for times t (K,) seconds."""
     s = np.asarray(s, dtype=np.float64)[None, :]
     t = np.asarray(t, dtype=np.float64).reshape(-1)[:, None]
@@ -135,7 +148,8 @@ def body_displacement(params: SwimParams, s: np.ndarray, rel: np.ndarray, dxds: 
 
     rel (V, 3): each point minus its spine point at rest; dxds (V,): rate of the spine's axial coordinate
     along s; axis, lateral (3,): body axes. The spine moves by Delta along lateral; with radial = "rotate"
-    rel also turns in the axis-lateral plane by atan(dDelta/dx) (dx/ds floored at 0.1 L where the spine folds).
+    rel also turns in the axis-lateral plane by atan(dDelta/dx) (dx/ds floored at 0.1 L where the spine
+    folds).
     """
     delta, slope = lateral_wave(params, s, t, length)
     disp = delta[..., None] * lateral
@@ -144,5 +158,9 @@ def body_displacement(params: SwimParams, s: np.ndarray, rel: np.ndarray, dxds: 
         c = 1.0 / np.sqrt(1.0 + g * g)
         sn = g * c
         ra, rl = rel @ axis, rel @ lateral
-        disp = disp + ((c - 1.0) * ra - sn * rl)[..., None] * axis + (sn * ra + (c - 1.0) * rl)[..., None] * lateral
+        disp = (
+            disp
+            + ((c - 1.0) * ra - sn * rl)[..., None] * axis
+            + (sn * ra + (c - 1.0) * rl)[..., None] * lateral
+        )
     return disp

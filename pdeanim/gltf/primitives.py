@@ -31,7 +31,9 @@ def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
     i = np.arange(n - 2)
     if mode == 5:  # strip: every other triangle flips to keep the winding
         even = i % 2 == 0
-        return np.stack([np.where(even, idx[i], idx[i + 1]), np.where(even, idx[i + 1], idx[i]), idx[i + 2]], 1)
+        return np.stack(
+            [np.where(even, idx[i], idx[i + 1]), np.where(even, idx[i + 1], idx[i]), idx[i + 2]], 1
+        )
     return np.stack([np.full(n - 2, idx[0]), idx[i + 1], idx[i + 2]], 1)  # fan
 
 

@@ -96,8 +96,13 @@ def _assemble(instances: list[Instance]) -> tuple[np.ndarray, list[dict]]:
     return np.concatenate(faces).astype(np.int32), layout
 
 
-def read_animated_poses(source: str | Path | bytes, fps: float = DEFAULT_FPS, limits: PoseLimits | None = None,
-                        *, animation: int | str | None = None) -> Poses:
+def read_animated_poses(
+    source: str | Path | bytes,
+    fps: float = DEFAULT_FPS,
+    limits: PoseLimits | None = None,
+    *,
+    animation: int | str | None = None,
+) -> Poses:
     """Poses (F, V, 3) of a glTF/GLB animation sampled at ``fps`` from its first to its last key time.
 
     Raises PosesInputError when the file has no animation, no mesh, or is malformed; skin weights that do
@@ -114,10 +119,14 @@ def read_animated_poses(source: str | Path | bytes, fps: float = DEFAULT_FPS, li
         n_vertices = sum(len(i.primitive.positions) for i in instances)
         _check_limits(len(times), n_vertices, limits)
         if len(times) * len(gd.list("nodes")) * 16 > limits.max_values:  # node matrices held per frame
-            raise LimitError("frames x nodes x 16", len(times) * len(gd.list("nodes")) * 16, limits.max_values)
+            raise LimitError(
+                "frames x nodes x 16", len(times) * len(gd.list("nodes")) * 16, limits.max_values
+            )
         world = world_matrices(gd, tracks, times)
         reports: list[dict] = []
-        frames = np.concatenate([_instance_frames(gd, i, tracks, times, world, reports) for i in instances], axis=1)
+        frames = np.concatenate(
+            [_instance_frames(gd, i, tracks, times, world, reports) for i in instances], axis=1
+        )
         faces, layout = _assemble(instances)
         kinds = sorted({path for _, path in tracks})
         meta = {"source": "gltf", "animation": {"index": index, "name": anim.get("name"), "channels": kinds},

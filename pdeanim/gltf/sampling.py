@@ -92,7 +92,8 @@ def quaternion_matrices(q: np.ndarray) -> np.ndarray:
 
 
 def trs_matrices(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Local matrices T * R * S (..., 4, 4) from translation (..., 3), rotation xyzw (..., 4), scale (..., 3)."""
+    """Local matrices T * R * S (..., 4, 4) from translation (..., 3), rotation xyzw (..., 4), scale (...,
+    3)."""
     shape = np.broadcast_shapes(np.shape(translation)[:-1], np.shape(rotation)[:-1], np.shape(scale)[:-1])
     m = np.zeros((*shape, 4, 4))
     rot = quaternion_matrices(np.broadcast_to(np.asarray(rotation, np.float64), (*shape, 4)))

@@ -86,8 +86,9 @@ def animation_tracks(gd: GltfDocument, anim: dict) -> dict[tuple[int, str], Trac
         node = gd.item("nodes", target["node"])
         if "matrix" in node and target["path"] != "weights":
             raise gd.error(f"node {target['node']} is animated but has a matrix (the spec forbids it)")
-        tracks[(target["node"], target["path"])] = Track(gd.accessor(s["input"])[:, 0], gd.accessor(s["output"]),
-                                                         s.get("interpolation", "LINEAR"))
+        tracks[(target["node"], target["path"])] = Track(
+            gd.accessor(s["input"])[:, 0], gd.accessor(s["output"]), s.get("interpolation", "LINEAR")
+        )
     if not tracks:
         raise gd.error("the glTF animation has no channel that moves a node or morph weights")
     return tracks
@@ -95,7 +96,10 @@ def animation_tracks(gd: GltfDocument, anim: dict) -> dict[tuple[int, str], Trac
 
 def time_range(tracks: dict[tuple[int, str], Track]) -> tuple[float, float]:
     """First and last key time over all tracks."""
-    return (float(min(t.keys.min() for t in tracks.values())), float(max(t.keys.max() for t in tracks.values())))
+    return (
+        float(min(t.keys.min() for t in tracks.values())),
+        float(max(t.keys.max() for t in tracks.values())),
+    )
 
 
 def _local(gd: GltfDocument, n: int, tracks: dict, times: np.ndarray) -> np.ndarray:
@@ -103,17 +107,23 @@ def _local(gd: GltfDocument, n: int, tracks: dict, times: np.ndarray) -> np.ndar
     if "matrix" in node:
         m = np.asarray(node["matrix"], np.float64).reshape(4, 4).T
         return np.broadcast_to(m, (len(times), 4, 4))
-    rest = {"translation": node.get("translation", [0.0, 0.0, 0.0]), "rotation": node.get("rotation", [0, 0, 0, 1]),
-            "scale": node.get("scale", [1.0, 1.0, 1.0])}
+    rest = {
+        "translation": node.get("translation", [0.0, 0.0, 0.0]),
+        "rotation": node.get("rotation", [0, 0, 0, 1]),
+        "scale": node.get("scale", [1.0, 1.0, 1.0]),
+    }
     trs = {}
     for path, default in rest.items():
         tr = tracks.get((n, path))
         if tr is None:
             trs[path] = np.asarray(default, np.float64)
         else:
-            trs[path] = sample(tr.keys, tr.values, tr.interpolation, times, rotation=path == "rotation",
-                               error=gd.error)
-    return np.broadcast_to(trs_matrices(trs["translation"], trs["rotation"], trs["scale"]), (len(times), 4, 4))
+            trs[path] = sample(
+                tr.keys, tr.values, tr.interpolation, times, rotation=path == "rotation", error=gd.error
+            )
+    return np.broadcast_to(
+        trs_matrices(trs["translation"], trs["rotation"], trs["scale"]), (len(times), 4, 4)
+    )
 
 
 def world_matrices(gd: GltfDocument, tracks: dict, times: np.ndarray) -> np.ndarray:
@@ -126,7 +136,9 @@ def world_matrices(gd: GltfDocument, tracks: dict, times: np.ndarray) -> np.ndar
     return world
 
 
-def morph_weights(gd: GltfDocument, tracks: dict, node_index: int, n_targets: int, times: np.ndarray) -> np.ndarray:
+def morph_weights(
+    gd: GltfDocument, tracks: dict, node_index: int, n_targets: int, times: np.ndarray
+) -> np.ndarray:
     """(K, n_targets) morph weights of a mesh node: animated, else the node's or mesh's default, else 0."""
     if n_targets == 0:
         return np.zeros((len(times), 0))

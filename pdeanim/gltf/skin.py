@@ -188,7 +188,9 @@ def _load_skinned(gd: GltfDocument, node: int | None) -> SkinnedMesh:
         mesh_matrix=rest_world[n], weight_report=report)
 
 
-def _local_trs(skinned: SkinnedMesh, overrides: Mapping[int | str, Mapping[str, Any]]) -> tuple[np.ndarray, ...]:
+def _local_trs(
+    skinned: SkinnedMesh, overrides: Mapping[int | str, Mapping[str, Any]]
+) -> tuple[np.ndarray, ...]:
     """Per-joint translation, rotation, scale with overrides applied; batched (K, J, .) when any is (K, .)."""
     parts = {"translation": skinned.rest_translations, "rotation": skinned.rest_rotations,
              "scale": skinned.rest_scales}
@@ -208,8 +210,9 @@ def _local_trs(skinned: SkinnedMesh, overrides: Mapping[int | str, Mapping[str, 
     return out["translation"], out["rotation"], out["scale"], batched
 
 
-def joint_world_matrices(skinned: SkinnedMesh,
-                         local_trs_overrides: Mapping[int | str, Mapping[str, Any]] | None = None) -> np.ndarray:
+def joint_world_matrices(
+    skinned: SkinnedMesh, local_trs_overrides: Mapping[int | str, Mapping[str, Any]] | None = None
+) -> np.ndarray:
     """World matrices of every joint, (J, 4, 4), or (K, J, 4, 4) when an override value is batched.
 
     ``local_trs_overrides`` maps a joint name or index to replacement local ``translation`` (3,) or (K, 3),
@@ -231,7 +234,9 @@ def joint_world_matrices(skinned: SkinnedMesh,
     return world if batched else world[0]
 
 
-def skin_vertices(skinned: SkinnedMesh, world_matrices: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+def skin_vertices(
+    skinned: SkinnedMesh, world_matrices: np.ndarray, points: np.ndarray | None = None
+) -> np.ndarray:
     """Skinned positions (V, 3) for joint world matrices (J, 4, 4), or (K, V, 3) for (K, J, 4, 4); ``points``
     replaces the bind-space rest vertices (e.g. after morphing)."""
     wm = np.asarray(world_matrices, np.float64)

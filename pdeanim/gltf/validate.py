@@ -89,7 +89,8 @@ def issue_lines(report: dict, severities: Sequence[int] = (0, 1, 2, 3)) -> list[
     for m in report.get("issues", {}).get("messages", []):
         if m.get("severity") in severities:
             where = m.get("pointer") or (f"offset {m['offset']}" if "offset" in m else "")
-            lines.append(f"{SEVERITIES.get(m.get('severity'), '?')} {m.get('code')}: {m.get('message')} {where}")
+            lines.append(f"{SEVERITIES.get(m.get('severity'), '?')} {m.get('code')}: {m.get('message')} "
+                         f"{where}")
     return lines
 
 
@@ -100,8 +101,10 @@ def assert_clean(report: dict, label: str = "GLB") -> dict:
     if soft:
         print(f"{label}: validator infos/hints:\n  " + "\n  ".join(soft))
     if issues.get("numErrors", 1) or issues.get("numWarnings", 1):
-        raise AssertionError(f"{label} is not validator-clean ({issues.get('numErrors')} errors, "
-                             f"{issues.get('numWarnings')} warnings):\n  " + "\n  ".join(issue_lines(report, (0, 1))))
+        raise AssertionError(
+            f"{label} is not validator-clean ({issues.get('numErrors')} errors, "
+            f"{issues.get('numWarnings')} warnings):\n  " + "\n  ".join(issue_lines(report, (0, 1)))
+        )
     return report
 
 

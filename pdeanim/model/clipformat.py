@@ -1,4 +1,5 @@
-"""The "dynamic-pde" clip format (version 1): a topology part and a coefficients part, both pdeanim containers.
+"""The "dynamic-pde" clip format (version 1): a topology part and a coefficients part, both pdeanim
+containers.
 
 Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + curve layout + rest pose)::
 
@@ -96,7 +97,12 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
     header = {"part": "topology", "model": "dynamic-pde", "format_version": FORMAT_VERSION,
               "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
     u = np.asarray(u, np.float32)
-    if u.ndim == 2 and u.shape[1] == 3 and np.array_equal(u[:, :1], u[:, 1:2]) and np.array_equal(u[:, :1], u[:, 2:]):
+    if (
+        u.ndim == 2
+        and u.shape[1] == 3
+        and np.array_equal(u[:, :1], u[:, 1:2])
+        and np.array_equal(u[:, :1], u[:, 2:])
+    ):
         u = u[:, :1]
     return container.pack(header, {
         "order": np.asarray(curves.order, np.int32), "offsets": np.asarray(curves.offsets, np.int32),
@@ -110,17 +116,27 @@ def encode_coefficients(topology: bytes, data: CoefficientData) -> bytes:
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": FORMAT_VERSION,
               "topology_id": topology_id(topology), "motion": data.motion, "looping": bool(data.looping),
               "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
-    return container.pack(header, {
-        "segment_t": np.asarray(data.segment_t, np.float64), "frame_times": np.asarray(data.frame_times, np.float64),
-        "family": np.asarray(data.family, np.uint8), "m": np.asarray(data.m, np.float32),
-        "D": np.asarray(data.D, np.float32), "knots": np.asarray(data.knots, np.float32), **data.extra})
+    return container.pack(
+        header,
+        {
+            "segment_t": np.asarray(data.segment_t, np.float64),
+            "frame_times": np.asarray(data.frame_times, np.float64),
+            "family": np.asarray(data.family, np.uint8),
+            "m": np.asarray(data.m, np.float32),
+            "D": np.asarray(data.D, np.float32),
+            "knots": np.asarray(data.knots, np.float32),
+            **data.extra,
+        },
+    )
 
 
 def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str) -> np.ndarray:
     if name not in arrays:
         raise ClipFormatError(f"{part} part has no {name!r} array")
     a = arrays[name]
-    if a.ndim != len(shape) or any(want is not None and have != want for have, want in zip(a.shape, shape, strict=True)):
+    if a.ndim != len(shape) or any(
+        want is not None and have != want for have, want in zip(a.shape, shape, strict=True)
+    ):
         raise ClipFormatError(f"{part} array {name!r} has shape {a.shape}, expected {shape}")
     if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
         raise ClipFormatError(f"{part} array {name!r} has non-finite values")
@@ -149,10 +165,14 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
                         _need(arrays, "rest", (V, 3), "topology"), str(header.get("param_mode", "chord")))
 
 
-def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n_curves: int) -> CoefficientData:
+def decode_coefficients(
+    header: dict[str, Any], arrays: dict[str, np.ndarray], n_curves: int
+) -> CoefficientData:
     """Validated coefficient data from a decoded container; raises ClipFormatError."""
     if header.get("format_version") != FORMAT_VERSION:
-        raise ClipFormatError(f"unsupported dynamic-pde coefficients version {header.get('format_version')!r}")
+        raise ClipFormatError(
+            f"unsupported dynamic-pde coefficients version {header.get('format_version')!r}"
+        )
     S, C = int(header.get("n_segments", -1)), int(n_curves)
     seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients")
     if S < 1 or np.any(np.diff(seg_t) < 0):

@@ -54,12 +54,15 @@ class DynamicClip:
         self._init_gather(self._precompute(fam[0] % 2))
 
     def _init_gather(self, knot_fields: np.ndarray) -> None:
-        """Per segment the flat (2 * V * 3,) fields [P[s], P[s+1]] and the one gather index into (phi0, phi1)."""
+        """Per segment the flat (2 * V * 3,) fields [P[s], P[s+1]] and the one gather index into (phi0,
+        phi1)."""
         flat = knot_fields.reshape(len(knot_fields), -1)  # (S+1, V*3)
         self._pair_fields = [np.concatenate([flat[s], flat[s + 1]]) for s in range(len(flat) - 1)]
         n_items = 3 * self.topo.curves.n_curves
-        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item of a value
-        self._gather = np.concatenate([item_of, item_of + n_items])  # (2 * V * 3,) into phi (2, C*3) flattened
+        # (V*3,) item of a value
+        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()
+        # (2 * V * 3,) into phi (2, C*3) flattened
+        self._gather = np.concatenate([item_of, item_of + n_items])
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -87,7 +90,8 @@ class DynamicClip:
         return seg, tau, t
 
     def _locate_scalar(self, t: float) -> tuple[int, float, float]:
-        """(segment, tau, wrapped t) of one time in pure Python; equals :meth:`_locate` on a 1-element array."""
+        """(segment, tau, wrapped t) of one time in pure Python; equals :meth:`_locate` on a 1-element
+        array."""
         t = t - math.floor(t) if self.looping else min(max(t, 0.0), 1.0)
         knots = self._segment_list
         seg = min(max(bisect.bisect_right(knots, t) - 1, 0), len(knots) - 2)
@@ -96,7 +100,8 @@ class DynamicClip:
         return seg, tau, t
 
     def _scratch(self) -> np.ndarray:
-        """Per-thread (2 * V * 3,) float32 scratch (no fresh large allocation per frame, safe across threads)."""
+        """Per-thread (2 * V * 3,) float32 scratch (no fresh large allocation per frame, safe across
+        threads)."""
         buf = getattr(self._local, "buf", None)
         if buf is None:
             buf = self._local.buf = np.empty(2 * self.n_vertices * 3, np.float32)
@@ -140,10 +145,18 @@ class DynamicClip:
     def info(self) -> dict[str, Any]:
         """JSON-able metadata: frames, segments, curves, motion, errors achieved."""
         h = self.coef.header
-        return {"kind": self.kind, "n_vertices": self.n_vertices, "n_frames": int(len(self.frame_times)),
-                "n_segments": int(len(self.segment_t) - 1), "n_curves": self.topo.curves.n_curves,
-                "motion": self.coef.motion, "looping": self.looping, "param_mode": self.topo.param_mode,
-                "duration_s": float(self.frame_times[-1] - self.frame_times[0]), "errors": h.get("errors", {})}
+        return {
+            "kind": self.kind,
+            "n_vertices": self.n_vertices,
+            "n_frames": int(len(self.frame_times)),
+            "n_segments": int(len(self.segment_t) - 1),
+            "n_curves": self.topo.curves.n_curves,
+            "motion": self.coef.motion,
+            "looping": self.looping,
+            "param_mode": self.topo.param_mode,
+            "duration_s": float(self.frame_times[-1] - self.frame_times[0]),
+            "errors": h.get("errors", {}),
+        }
 
 
 class _SegmentTime:
@@ -168,7 +181,8 @@ class _SegmentTime:
         self.trig_table = np.ascontiguousarray(powers / np.sin(mt))
 
     def pair(self, tau: float) -> np.ndarray:
-        """(2, N) float32 (phi0, phi1) in item order at local time tau; equals :func:`time_pair` to rounding."""
+        """(2, N) float32 (phi0, phi1) in item order at local time tau; equals :func:`time_pair` to
+        rounding."""
         g = np.empty((2, self.n))
         ne, nt = self.ne, self.nt
         if ne:

@@ -18,7 +18,8 @@ from .timefit import fit_tracks, predict
 @dataclass
 class SpaceStage:
     """Per-item space fit: projection, projected tracks b (K, F, 4), floor energy per item and frame (K, F),
-    and the item data Yk (K, F, N) float64 it was fitted to (for per-point residuals; may be a strided view)."""
+    and the item data Yk (K, F, N) float64 it was fitted to (for per-point residuals; may be a strided
+    view)."""
 
     proj: SpaceProjection
     b: np.ndarray
@@ -69,7 +70,8 @@ def vertex_slots(idx: np.ndarray, mask: np.ndarray, n_vertices: int) -> np.ndarr
 
 
 def point_distances(resid: np.ndarray, slots: np.ndarray) -> np.ndarray:
-    """(F, V) Euclidean lengths of item residuals resid (K, F, N) at the vertices' slots (see vertex_slots)."""
+    """(F, V) Euclidean lengths of item residuals resid (K, F, N) at the vertices' slots (see
+    vertex_slots)."""
     K, F, N = resid.shape
     r = resid.reshape(K // 3, 3, F, N)
     sq = r[:, 0] * r[:, 0]

@@ -37,11 +37,14 @@ class RigidTracks:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays stored in the coefficients part (float32 except the boundaries)."""
-        return {"rigid_segment_t": self.segment_t.astype(np.float64),
-                "rigid_centre": self.centre0.astype(np.float32), "rigid_rot_knots": self.rot_knots.astype(np.float32),
-                "rigid_rot_mu": self.rot_mu.astype(np.float32),
-                "rigid_trans_knots": self.trans_knots.astype(np.float32),
-                "rigid_trans_mu": self.trans_mu.astype(np.float32)}
+        return {
+            "rigid_segment_t": self.segment_t.astype(np.float64),
+            "rigid_centre": self.centre0.astype(np.float32),
+            "rigid_rot_knots": self.rot_knots.astype(np.float32),
+            "rigid_rot_mu": self.rot_mu.astype(np.float32),
+            "rigid_trans_knots": self.trans_knots.astype(np.float32),
+            "rigid_trans_mu": self.trans_mu.astype(np.float32),
+        }
 
     @staticmethod
     def from_arrays(a: dict[str, np.ndarray]) -> RigidTracks:
@@ -58,7 +61,9 @@ class RigidTracks:
         return rodrigues(r), c
 
 
-def kabsch(rest: np.ndarray, frames: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def kabsch(
+    rest: np.ndarray, frames: np.ndarray, mask: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Best rotation per frame and curve: (R (F, C, 3, 3), centroids (F, C, 3), centre0 (C, 3)).
 
     rest : (C, N, 3); frames : (F, C, N, 3); mask : (C, N) bool. x_f ~ R_f (p - centre0) + centroid_f.

@@ -39,7 +39,8 @@ class Segmentation:
         return self.t[self.bounds]
 
     def frame_segment(self) -> np.ndarray:
-        """(F,) segment of every frame (boundary frames go to the later segment, the last frame to the last)."""
+        """(F,) segment of every frame (boundary frames go to the later segment, the last frame to the
+        last)."""
         f = np.arange(len(self.t))
         return np.clip(np.searchsorted(self.bounds, f, side="right") - 1, 0, self.n_segments - 1)
 

@@ -18,7 +18,8 @@ from .families import SPACE_KINDS, space_basis
 
 D_GRID = np.concatenate([[0.0], np.geomspace(0.5, 48.0, 10)])
 """Coarse grid of D values searched for every item and space kind (10 ratios of 1.66: the parabolic step
-and the golden section recover what a finer grid would find; 15 values cost ~25 % more time for < 0.01 % rms)."""
+and the golden section recover what a finer grid would find; 15 values cost ~25 % more time for < 0.01 %
+rms)."""
 RANK_TOL = 1e-6
 GAIN_TOL = 1e-9
 """Relative energy gain needed to move away from D = 0 or from the grid value (ties keep the simpler D)."""
@@ -249,7 +250,9 @@ def project_items(u: np.ndarray, mask: np.ndarray, kind_i: np.ndarray, D: np.nda
     for i, kind in enumerate(kinds):
         sel = kind_i == i
         if np.any(sel):
-            U[sel], to_coef[sel], cond[sel] = orthonormal_basis(u[sel], mask[sel], D[sel], kind, with_cond=True)
+            U[sel], to_coef[sel], cond[sel] = orthonormal_basis(
+                u[sel], mask[sel], D[sel], kind, with_cond=True
+            )
     kind_i = kind_i.astype(np.int64)
     bad = cond > COND_MAX
     if fallback and np.any(bad):

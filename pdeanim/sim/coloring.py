@@ -34,7 +34,9 @@ def color_tets(tets: np.ndarray, n_points: int) -> list[np.ndarray]:
     return colors
 
 
-def partitioned_colors(tets: np.ndarray, points: np.ndarray, parts: int) -> tuple[list[np.ndarray], np.ndarray]:
+def partitioned_colors(
+    tets: np.ndarray, points: np.ndarray, parts: int
+) -> tuple[list[np.ndarray], np.ndarray]:
     """Colour classes in solve order and the colour bounds (P + 1,) int64 of ``parts`` independent groups.
 
     Slabs along the longest axis with equal tet counts: the tets whose four points all lie in slab p form part

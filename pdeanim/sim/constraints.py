@@ -41,7 +41,8 @@ def extract_rotation(f: np.ndarray, q: np.ndarray, iterations: int = ROTATION_IT
         num = np.cross(r, f, axis=1).sum(axis=2)  # sum over columns of r_i x a_i
         den = np.abs(np.einsum("kij,kij->k", r, f)) + 1e-9
         omega = num / den[:, None]
-        dq = np.concatenate([np.ones((len(q), 1)), 0.5 * omega], axis=1)  # (1, omega/2): no trig, same fixpoint
+        # (1, omega/2): no trig, same fixpoint
+        dq = np.concatenate([np.ones((len(q), 1)), 0.5 * omega], axis=1)
         q = quat_multiply(dq, q)
         q /= np.linalg.norm(q, axis=1, keepdims=True)
     return q

@@ -22,7 +22,8 @@ INSIDE_TOL = -1e-9
 
 @dataclass(frozen=True)
 class Embedding:
-    """tet : (V,) int64 tet of each vertex; bary : (V, 4) float64 barycentric coordinates; corners : (V, 4)."""
+    """tet : (V,) int64 tet of each vertex; bary : (V, 4) float64 barycentric coordinates; corners : (V,
+    4)."""
 
     tet: np.ndarray
     bary: np.ndarray

@@ -7,7 +7,8 @@ both constraint updates per tet with the per-tet constants read from a precomput
 vectorises: SIMD lanes are independent tets), and the buffer is scattered back. That is exactly the
 sequential Gauss-Seidel result, bit for bit, in any chunk order. Large meshes are split into parts that share
 no point (``parts``), solved one after the other or at the same time on threads (the kernels release the GIL;
-see :mod:`pdeanim.sim.workers`) with the same result, followed by the tets between parts. 3 x 3 matrices are 9-tuples of scalars (row-major) that stay in registers;
+see :mod:`pdeanim.sim.workers`) with the same result, followed by the tets between parts. 3 x 3 matrices are
+9-tuples of scalars (row-major) that stay in registers;
 no fastmath, so the arithmetic is the scalar IEEE one in the same order as the one-tet-at-a-time loop.
 """
 
@@ -42,7 +43,8 @@ ROWS = 18
 """Gather-buffer rows per tet: corners (12), quaternion (4), lambda_d and lambda_h."""
 
 N_CONST = 15
-"""Rows of the per-tet constants (see :func:`pack_constants`): Dm^-1 (9), inverse masses (4), alpha_d, alpha_h."""
+"""Rows of the per-tet constants (see :func:`pack_constants`): Dm^-1 (9), inverse masses (4), alpha_d,
+alpha_h."""
 
 
 def chunk_slots(offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,14 +62,16 @@ def chunk_slots(offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def pack_constants(dm_inv: np.ndarray, w: np.ndarray, alpha_d: np.ndarray, alpha_h: np.ndarray,
                    offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-tet constants in the kernels' chunked layout: ((chunks * N_CONST * STRIDE,) f64, (C + 1,) i64 chunks).
+    """Per-tet constants in the kernels' chunked layout: ((chunks * N_CONST * STRIDE,) f64, (C + 1,) i64
+    chunks).
 
     Rows per chunk: Dm^-1 row-major (9), corner inverse masses w0..w3 (4), alpha_d, alpha_h; tets in colour
     order (offsets (C + 1,)); the second array is each colour's first chunk (see :func:`chunk_slots`).
     """
     m = len(dm_inv)
-    rows = np.concatenate([np.reshape(dm_inv, (m, 9)), np.reshape(w, (m, 4)), alpha_d[:, None], alpha_h[:, None]],
-                          axis=1)
+    rows = np.concatenate(
+        [np.reshape(dm_inv, (m, 9)), np.reshape(w, (m, 4)), alpha_d[:, None], alpha_h[:, None]], axis=1
+    )
     slots, first = chunk_slots(np.asarray(offsets, np.int64))
     out = np.zeros(int(first[-1]) * N_CONST * STRIDE)
     out[slots[:, None] + STRIDE * np.arange(N_CONST)] = rows
@@ -107,7 +111,8 @@ def _rotation(f, w, a, b, c):  # pragma: no cover - compiled
             oz += r0 * f1 - r1 * f0
             dot += r0 * f0 + r1 * f1 + r2 * f2
         inv = 0.5 / (abs(dot) + 1e-9)
-        dx, dy, dz = ox * inv, oy * inv, oz * inv  # (1, omega / 2) times q, as in constraints.extract_rotation
+        # (1, omega / 2) times q, as in constraints.extract_rotation
+        dx, dy, dz = ox * inv, oy * inv, oz * inv
         nw = w - (dx * a + dy * b + dz * c)
         na = a + w * dx + (dy * c - dz * b)
         nb = b + w * dy + (dz * a - dx * c)
@@ -134,9 +139,20 @@ def _project(p, m, wk, cval, d, alpha, lam):  # pragma: no cover - compiled
         + w2 * (g2x * g2x + g2y * g2y + g2z * g2z) + w3 * (g3x * g3x + g3y * g3y + g3z * g3z)
     dlam = (-cval - alpha * lam) / denom if denom > 0.0 else 0.0  # a select, not a branch
     s0, s1, s2, s3 = w0 * dlam, w1 * dlam, w2 * dlam, w3 * dlam
-    return (p[0] + s0 * g0x, p[1] + s0 * g0y, p[2] + s0 * g0z, p[3] + s1 * g1x, p[4] + s1 * g1y, p[5] + s1 * g1z,
-            p[6] + s2 * g2x, p[7] + s2 * g2y, p[8] + s2 * g2z, p[9] + s3 * g3x, p[10] + s3 * g3y,
-            p[11] + s3 * g3z), dlam
+    return (
+        p[0] + s0 * g0x,
+        p[1] + s0 * g0y,
+        p[2] + s0 * g0z,
+        p[3] + s1 * g1x,
+        p[4] + s1 * g1y,
+        p[5] + s1 * g1z,
+        p[6] + s2 * g2x,
+        p[7] + s2 * g2y,
+        p[8] + s2 * g2z,
+        p[9] + s3 * g3x,
+        p[10] + s3 * g3y,
+        p[11] + s3 * g3z,
+    ), dlam
 
 
 def _deviatoric(p, q, m, wk, alpha, lam):  # pragma: no cover - compiled
@@ -184,8 +200,18 @@ def _solve_chunk(b, cst, n, inv_dt2):  # pragma: no cover - compiled
         b[17 * STRIDE + j] += dlam_h
         b[j], b[STRIDE + j], b[2 * STRIDE + j], b[3 * STRIDE + j] = p[0], p[1], p[2], p[3]
         b[4 * STRIDE + j], b[5 * STRIDE + j], b[6 * STRIDE + j], b[7 * STRIDE + j] = p[4], p[5], p[6], p[7]
-        b[8 * STRIDE + j], b[9 * STRIDE + j], b[10 * STRIDE + j], b[11 * STRIDE + j] = p[8], p[9], p[10], p[11]
-        b[12 * STRIDE + j], b[13 * STRIDE + j], b[14 * STRIDE + j], b[15 * STRIDE + j] = q[0], q[1], q[2], q[3]
+        b[8 * STRIDE + j], b[9 * STRIDE + j], b[10 * STRIDE + j], b[11 * STRIDE + j] = (
+            p[8],
+            p[9],
+            p[10],
+            p[11],
+        )
+        b[12 * STRIDE + j], b[13 * STRIDE + j], b[14 * STRIDE + j], b[15 * STRIDE + j] = (
+            q[0],
+            q[1],
+            q[2],
+            q[3],
+        )
 
 
 def _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, b, chunk, base, n):  # pragma: no cover - compiled
@@ -198,7 +224,11 @@ def _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, b, chunk, base, n):  # pragm
         k = base + j
         for c in range(4):
             i = tets[k, c]
-            b[3 * c * STRIDE + j], b[(3 * c + 1) * STRIDE + j], b[(3 * c + 2) * STRIDE + j] = x[i, 0], x[i, 1], x[i, 2]
+            b[3 * c * STRIDE + j], b[(3 * c + 1) * STRIDE + j], b[(3 * c + 2) * STRIDE + j] = (
+                x[i, 0],
+                x[i, 1],
+                x[i, 2],
+            )
             b[(12 + c) * STRIDE + j] = rot_in[k, c]
         b[16 * STRIDE + j] = lam[0, k] if keep else 0.0
         b[17 * STRIDE + j] = lam[1, k] if keep else 0.0
@@ -208,12 +238,17 @@ def _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, b, chunk, base, n):  # pragm
             b[r * STRIDE + j] = 0.0
         b[12 * STRIDE + j] = 1.0
     cb = chunk * (N_CONST * STRIDE)
-    _solve_chunk(b, cst[cb:cb + N_CONST * STRIDE], padded, inv_dt2)  # a view: indices provably >= 0, no gathers
+    # a view: indices provably >= 0, no gathers
+    _solve_chunk(b, cst[cb:cb + N_CONST * STRIDE], padded, inv_dt2)
     for j in range(n):
         k = base + j
         for c in range(4):
             i = tets[k, c]
-            x[i, 0], x[i, 1], x[i, 2] = b[3 * c * STRIDE + j], b[(3 * c + 1) * STRIDE + j], b[(3 * c + 2) * STRIDE + j]
+            x[i, 0], x[i, 1], x[i, 2] = (
+                b[3 * c * STRIDE + j],
+                b[(3 * c + 1) * STRIDE + j],
+                b[(3 * c + 2) * STRIDE + j],
+            )
             rot[k, c] = b[(12 + c) * STRIDE + j]
         if keep:
             lam[0, k], lam[1, k] = b[16 * STRIDE + j], b[17 * STRIDE + j]
@@ -224,18 +259,22 @@ def _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, first, la
     for c in range(first, last):
         chunk = chunks[c]
         for base in range(offsets[c], offsets[c + 1], CHUNK):
-            _chunk(x, rot_in, rot, tets, cst, lam, inv_dt2, buf, chunk, base, min(CHUNK, offsets[c + 1] - base))
+            _chunk(
+                x, rot_in, rot, tets, cst, lam, inv_dt2, buf, chunk, base, min(CHUNK, offsets[c + 1] - base)
+            )
             chunk += 1
 
 
 def _solve_sweep(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks):  # pragma: no cover - compiled
-    """One serial Gauss-Seidel sweep: all colours in order (the parts' colours part after part, then the rest)."""
+    """One serial Gauss-Seidel sweep: all colours in order (the parts' colours part after part, then the
+    rest)."""
     buf = np.empty(ROWS * STRIDE)
     _colours(x, rot_in, rot, tets, cst, lam, inv_dt2, offsets, chunks, 0, offsets.shape[0] - 1, buf)
 
 
 def _predict(x_in, v_in, inv_mass, damp, dv, dt, x):  # pragma: no cover - compiled
-    """x = x_in + dt (damp v_in + dv) for free points (inverse mass > 0), x_in + dt damp v_in for pinned ones."""
+    """x = x_in + dt (damp v_in + dv) for free points (inverse mass > 0), x_in + dt damp v_in for pinned
+    ones."""
     for i in range(x.shape[0]):
         free = inv_mass[i] > 0
         for c in range(3):
@@ -259,7 +298,8 @@ def _ground(x, x_prev, point, n, friction):  # pragma: no cover - compiled
 
 
 PARALLEL_MIN_TETS = 4096
-"""Meshes with fewer tets are not split into independent parts (see ``xpbd.PARTS``) and always run serially."""
+"""Meshes with fewer tets are not split into independent parts (see ``xpbd.PARTS``) and always run
+serially."""
 
 if AVAILABLE:
     _opts = {"cache": True, "error_model": "numpy", "boundscheck": False}
@@ -286,12 +326,24 @@ def set_threads(n: int) -> None:
         _pool = JobPool(_threads - 1)
 
 
-def solve_sweep(x: np.ndarray, rot_in: np.ndarray, rot: np.ndarray, tets: np.ndarray, cst: np.ndarray,
-                lam: np.ndarray, inv_dt2: float, offsets: np.ndarray, chunks: np.ndarray, parts: np.ndarray) -> None:
+def solve_sweep(
+    x: np.ndarray,
+    rot_in: np.ndarray,
+    rot: np.ndarray,
+    tets: np.ndarray,
+    cst: np.ndarray,
+    lam: np.ndarray,
+    inv_dt2: float,
+    offsets: np.ndarray,
+    chunks: np.ndarray,
+    parts: np.ndarray,
+) -> None:
     """One sweep over all colours (serial, or the parts on several threads: the same result).
 
-    x (N, 3) f64 is updated in place; rotation guesses are read from rot_in (M, 4) f64 and written to rot (M, 4)
-    (the same array or not); tets (M, 4) int64 in colour order; cst and chunks from :func:`pack_constants` with
+    x (N, 3) f64 is updated in place; rotation guesses are read from rot_in (M, 4) f64 and written to rot (M,
+    4)
+    (the same array or not); tets (M, 4) int64 in colour order; cst and chunks from :func:`pack_constants`
+    with
     the same colour offsets (C + 1,) int64; parts (P + 1,) int64 colour bounds of groups sharing no point (the
     colours after parts[-1] run serially); lam (2, M) f64 multipliers accumulated in this step, or (2, 0) when
     they start at 0 and are not needed afterwards (a single sweep per step).
@@ -307,10 +359,12 @@ def solve_sweep(x: np.ndarray, rot_in: np.ndarray, rot: np.ndarray, tets: np.nda
 
 def predict(x_in: np.ndarray, v_in: np.ndarray, inv_mass: np.ndarray, damp: float, dv: np.ndarray, dt: float,
             x: np.ndarray) -> None:
-    """Explicit prediction of a substep into x (N, 3): damped velocity plus dv (3,) (gravity dt) on free points."""
+    """Explicit prediction of a substep into x (N, 3): damped velocity plus dv (3,) (gravity dt) on free
+    points."""
     _predict(x_in, v_in, inv_mass, damp, dv, dt, x)
 
 
 def ground(x: np.ndarray, x_prev: np.ndarray, point: np.ndarray, normal: np.ndarray, friction: float) -> None:
-    """Project x (N, 3) onto the allowed side of the plane (point (3,), unit normal (3,)), friction in [0, 1]."""
+    """Project x (N, 3) onto the allowed side of the plane (point (3,), unit normal (3,)), friction in [0,
+    1]."""
     _ground(x, x_prev, point, normal, friction)

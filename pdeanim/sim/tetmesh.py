@@ -52,7 +52,8 @@ def tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 
 def clean_tet_mesh(points: np.ndarray, tets: np.ndarray) -> TetMesh:
-    """Flip negatively oriented tets, drop degenerate ones and unused points; TetrahedralizationError if empty."""
+    """Flip negatively oriented tets, drop degenerate ones and unused points; TetrahedralizationError if
+    empty."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     tets = np.asarray(tets, dtype=np.int64).reshape(-1, 4)
     if len(tets) == 0 or len(points) < 4:

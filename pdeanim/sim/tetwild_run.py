@@ -1,4 +1,5 @@
-"""Run pytetwild (fTetWild) on an .npz surface and write the tets: ``python -m pdeanim.sim.tetwild_run IN OUT``.
+"""Run pytetwild (fTetWild) on an .npz surface and write the tets: ``python -m pdeanim.sim.tetwild_run IN
+OUT``.
 
 Executed in a child process whose working directory is a private temporary directory, because fTetWild writes
 ``__tracked_surface.stl`` into the current directory and may abort the whole process on pathological input.

@@ -13,7 +13,8 @@ from collections.abc import Callable, Sequence
 
 
 class JobPool:
-    """``n_helpers`` daemon threads; :meth:`run` executes jobs on them and on the caller, returns when all ended."""
+    """``n_helpers`` daemon threads; :meth:`run` executes jobs on them and on the caller, returns when all
+    ended."""
 
     def __init__(self, n_helpers: int) -> None:
         self._lock = threading.Lock()

@@ -2,9 +2,11 @@
 
 An immutable rest model (:class:`SimModel`) holds everything derived from the tet mesh and the material; a
 :class:`SimState` holds positions, velocities and time; ``step(model, state_in, state_out, dt)`` advances one
-substep. Compliances come from Lame parameters times rest volume, so the stiffness the solver converges to does
+substep. Compliances come from Lame parameters times rest volume, so the stiffness the solver converges to
+does
 not depend on iteration count or resolution; steps too long for the material's waves make any XPBD softer
-than it should be (``simulate.auto_substeps`` picks them short enough). Inverse masses are lumped from density.
+than it should be (``simulate.auto_substeps`` picks them short enough). Inverse masses are lumped from
+density.
 """
 
 from __future__ import annotations
@@ -61,7 +63,8 @@ class Ground:
 class Elements:
     """Tets in colour order: colour c is rows offsets[c]:offsets[c + 1] (no shared point within a colour).
 
-    tets (M, 4) int64, dm_inv (M, 3, 3) rest inverses, w (M, 4) corner inverse masses, alpha_d and alpha_h (M,)
+    tets (M, 4) int64, dm_inv (M, 3, 3) rest inverses, w (M, 4) corner inverse masses, alpha_d and alpha_h
+    (M,)
     compliances of the deviatoric and volume constraints, offsets (C + 1,) int64; parts (P + 1,) int64 colour
     bounds of P groups that share no point (solved in parallel), then the remaining colours; cst the same
     constants packed in chunks, struct-of-arrays, and chunks (C + 1,) int64 each colour's first chunk, for the
@@ -85,7 +88,8 @@ class Elements:
 
 @dataclass(frozen=True)
 class SimModel:
-    """The immutable rest model: points (N, 3), inverse masses (N,), coloured elements, forces, constraints."""
+    """The immutable rest model: points (N, 3), inverse masses (N,), coloured elements, forces,
+    constraints."""
 
     rest: np.ndarray
     inv_mass: np.ndarray
@@ -101,7 +105,8 @@ class SimModel:
 
 @dataclass
 class SimState:
-    """Positions x (N, 3), velocities v (N, 3), rotation guesses rot (M, 4) (w, x, y, z) per element, time t."""
+    """Positions x (N, 3), velocities v (N, 3), rotation guesses rot (M, 4) (w, x, y, z) per element, time
+    t."""
 
     x: np.ndarray
     v: np.ndarray
@@ -123,7 +128,8 @@ def build_model(tets: TetMesh, material: Material, gravity: tuple[float, float, 
                 fixed: np.ndarray | None = None,
                 kinematic: Kinematic | None = None, ground: Ground | None = None, iterations: int = 1,
                 backend: str | None = None) -> SimModel:
-    """Precompute rest shapes, masses, compliances and the colouring; ``fixed`` points get zero inverse mass."""
+    """Precompute rest shapes, masses, compliances and the colouring; ``fixed`` points get zero inverse
+    mass."""
     backend = backend or ("numba" if kernels.AVAILABLE else "numpy")
     if backend not in ("numba", "numpy") or (backend == "numba" and not kernels.AVAILABLE):
         raise ParameterError(f"solver backend {backend!r} is not available")
@@ -135,7 +141,9 @@ def build_model(tets: TetMesh, material: Material, gravity: tuple[float, float, 
     p = tets.points[tets.tets]
     dm_inv = np.linalg.inv((p[:, 1:] - p[:, :1]).transpose(0, 2, 1))
     vol = tets.volumes()
-    colors, parts = partitioned_colors(tets.tets, tets.points, PARTS if tets.n_tets >= kernels.PARALLEL_MIN_TETS else 1)
+    colors, parts = partitioned_colors(
+        tets.tets, tets.points, PARTS if tets.n_tets >= kernels.PARALLEL_MIN_TETS else 1
+    )
     order = np.concatenate(colors)
     offsets = np.concatenate([[0], np.cumsum([len(c) for c in colors])]).astype(np.int64)
     t = np.ascontiguousarray(tets.tets[order])
@@ -198,8 +206,9 @@ def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray
         for c in range(e.n_colors):
             s = slice(e.offsets[c], e.offsets[c + 1])
             t = e.tets[s]
-            dx, dlam, rot[s] = deviatoric_correction(x[t], e.w[s], e.dm_inv[s], e.alpha_d[s] * inv_dt2, lam_d[s],
-                                                     rot[s])
+            dx, dlam, rot[s] = deviatoric_correction(
+                x[t], e.w[s], e.dm_inv[s], e.alpha_d[s] * inv_dt2, lam_d[s], rot[s]
+            )
             x[t] += dx
             lam_d[s] += dlam
             dx, dlam = hydrostatic_correction(x[t], e.w[s], e.dm_inv[s], e.alpha_h[s] * inv_dt2, lam_h[s])
@@ -207,12 +216,16 @@ def solve_constraints(model: SimModel, x: np.ndarray, dt: float, rot: np.ndarray
             lam_h[s] += dlam
 
 
-def project_ground(ground: Ground, x: np.ndarray, x_prev: np.ndarray, compiled: bool = kernels.AVAILABLE) -> None:
+def project_ground(
+    ground: Ground, x: np.ndarray, x_prev: np.ndarray, compiled: bool = kernels.AVAILABLE
+) -> None:
     """Move points behind the ground plane onto it; friction removes part of their sliding this substep."""
     n = np.asarray(ground.normal, np.float64)
     n = n / np.linalg.norm(n)
     if compiled:  # one compiled pass instead of ~10 numpy calls per substep
-        kernels.ground(x, x_prev, np.asarray(ground.point, np.float64), n, min(max(ground.friction, 0.0), 1.0))
+        kernels.ground(
+            x, x_prev, np.asarray(ground.point, np.float64), n, min(max(ground.friction, 0.0), 1.0)
+        )
         return
     depth = (x - np.asarray(ground.point, np.float64)) @ n
     hit = depth < 0

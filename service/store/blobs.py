@@ -87,7 +87,8 @@ class LocalBlobStore:
         return self.root / key[:2] / key
 
     def _temp_file(self, target: Path, fill) -> str:  # noqa: ANN001 - fill(fileobj) writes the content
-        """A finished, fsynced temporary file beside ``target`` (same filesystem, so rename/link is atomic)."""
+        """A finished, fsynced temporary file beside ``target`` (same filesystem, so rename/link is
+        atomic)."""
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
         try:
@@ -162,7 +163,9 @@ class LocalBlobStore:
 class S3BlobStore:
     """Blobs as objects in an S3 bucket under a prefix (boto3; endpoint configurable for MinIO/moto)."""
 
-    def __init__(self, bucket: str, prefix: str = "", endpoint_url: str | None = None, region: str = "us-east-1"):
+    def __init__(
+        self, bucket: str, prefix: str = "", endpoint_url: str | None = None, region: str = "us-east-1"
+    ):
         import boto3  # only the S3 store needs it
 
         self.bucket, self.prefix = bucket, prefix.strip("/")
@@ -192,8 +195,12 @@ class S3BlobStore:
             self.client.put_object(Bucket=self.bucket, Key=self._name(key), Body=data, IfNoneMatch="*")
             return True
         except ClientError as exc:
-            if exc.response.get("Error", {}).get("Code") in ("PreconditionFailed", "ConditionalRequestConflict",
-                                                              "412", "409"):
+            if exc.response.get("Error", {}).get("Code") in (
+                "PreconditionFailed",
+                "ConditionalRequestConflict",
+                "412",
+                "409",
+            ):
                 return False
             raise
 

@@ -14,8 +14,10 @@ from pdeanim.errors import ClipFormatError, LimitError, PosesInputError
 from pdeanim.poses import PoseLimits, load_poses_npz, make_poses, poses_to_bytes
 
 
-@given(hnp.arrays(np.float32, hnp.array_shapes(max_dims=3, max_side=7), elements=st.floats(-1e6, 1e6, width=32)),
-       hnp.arrays(np.int32, hnp.array_shapes(max_dims=2, max_side=5)))
+@given(
+    hnp.arrays(np.float32, hnp.array_shapes(max_dims=3, max_side=7), elements=st.floats(-1e6, 1e6, width=32)),
+    hnp.arrays(np.int32, hnp.array_shapes(max_dims=2, max_side=5)),
+)
 def test_pack_unpack_round_trip(a, b):
     blob = container.pack({"part": "test", "n": 3}, {"a": a, "b": b})
     header, arrays = container.unpack(blob)

@@ -30,7 +30,8 @@ def morph(morph_sphere_path):
 
 @pytest.fixture(scope="session")
 def messy() -> tuple[np.ndarray, np.ndarray]:
-    """A grid split by a seam (duplicated vertices), a far triangle, a degenerate triangle, isolated points."""
+    """A grid split by a seam (duplicated vertices), a far triangle, a degenerate triangle, isolated
+    points."""
     n = 8
     x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float), indexing="ij")
     grid = np.stack([x.ravel(), y.ravel(), 0.1 * np.sin(x.ravel())], axis=1)

@@ -7,9 +7,15 @@ import numpy as np
 from pdeanim.gltf.glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GlbBuilder
 
 # joint name, parent index, local translation (y up, z forward)
-JOINTS = [("hip", -1, (0.0, 1.0, 0.0)),
-          ("upper_leg.L", 0, (0.15, -0.05, 0.0)), ("knee.L", 1, (0.0, -0.45, 0.04)), ("foot.L", 2, (0.0, -0.45, -0.04)),
-          ("upper_leg.R", 0, (-0.15, -0.05, 0.0)), ("knee.R", 4, (0.0, -0.45, 0.04)), ("foot.R", 5, (0.0, -0.45, -0.04))]
+JOINTS = [
+    ("hip", -1, (0.0, 1.0, 0.0)),
+    ("upper_leg.L", 0, (0.15, -0.05, 0.0)),
+    ("knee.L", 1, (0.0, -0.45, 0.04)),
+    ("foot.L", 2, (0.0, -0.45, -0.04)),
+    ("upper_leg.R", 0, (-0.15, -0.05, 0.0)),
+    ("knee.R", 4, (0.0, -0.45, 0.04)),
+    ("foot.R", 5, (0.0, -0.45, -0.04)),
+]
 
 
 def rest_positions() -> np.ndarray:

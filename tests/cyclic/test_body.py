@@ -88,8 +88,12 @@ def test_no_faces_is_an_input_error(capsule_mesh):
 
 
 def test_two_separate_bodies_are_an_input_error(capsule_mesh):
-    twin = trimesh.util.concatenate([trimesh.Trimesh(capsule_mesh.vertices, capsule_mesh.faces),
-                                     trimesh.Trimesh(capsule_mesh.vertices + [0, 0, 2.0], capsule_mesh.faces)])
+    twin = trimesh.util.concatenate(
+        [
+            trimesh.Trimesh(capsule_mesh.vertices, capsule_mesh.faces),
+            trimesh.Trimesh(capsule_mesh.vertices + [0, 0, 2.0], capsule_mesh.faces),
+        ]
+    )
     frame = body_frame(twin.vertices)
     with pytest.raises(InputError, match="several separate loops"):
         cut_body(twin.vertices, twin.faces, frame, 10, 16)

@@ -40,8 +40,22 @@ def test_cli_walk_cycle_of_a_skinned_rig(tmp_path, capsys):
     assert rc == 0 and "walk cycle: 13 frames" in capsys.readouterr().out
     poses = load_poses_npz(tmp_path / "walk.npz")
     assert np.abs(poses.vertices[-1] - poses.vertices[0]).max() < 1e-5
-    rc = main(["cyclic", str(rig), "--mode", "run", "--out", str(tmp_path / "run.glb"), "--set", "step_height=0.2",
-               "--set", "literal=true", "--right-foot", "foot.R"])
+    rc = main(
+        [
+            "cyclic",
+            str(rig),
+            "--mode",
+            "run",
+            "--out",
+            str(tmp_path / "run.glb"),
+            "--set",
+            "step_height=0.2",
+            "--set",
+            "literal=true",
+            "--right-foot",
+            "foot.R",
+        ]
+    )
     assert rc == 0 and (tmp_path / "run.glb").read_bytes()[:4] == b"glTF"
     rc = main(["cyclic", str(rig), "--mode", "walk", "--out", str(tmp_path / "walk.clip")])
     assert rc == 2

@@ -25,10 +25,24 @@ def test_options_round_trip_and_flat_overrides():
     assert (swim.mode, swim.frequency, swim.amplitude, swim.wave) == ("dolphin", 1.3, 0.05, "travelling")
 
 
-@pytest.mark.parametrize("bad", [{"colour": 1}, {"n_curves": 2}, {"points": 4}, {"modes": 20},
-                                 {"mode": "cod"}, {"frequency": 0}, {"frequency": 1e9}, {"a": 0.0}, {"a": 9.0},
-                                 {"head": [1, 2]}, {"frames": "many"},
-                                 {"overrides": [1]}, {"overrides": {"speed": 2}}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"colour": 1},
+        {"n_curves": 2},
+        {"points": 4},
+        {"modes": 20},
+        {"mode": "cod"},
+        {"frequency": 0},
+        {"frequency": 1e9},
+        {"a": 0.0},
+        {"a": 9.0},
+        {"head": [1, 2]},
+        {"frames": "many"},
+        {"overrides": [1]},
+        {"overrides": {"speed": 2}},
+    ],
+)
 def test_bad_options_raise(bad):
     with pytest.raises(ParameterError):
         CyclicOptions.from_dict(bad)

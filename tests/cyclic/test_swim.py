@@ -80,7 +80,9 @@ def test_rotation_keeps_distance_to_the_spine():
     delta, _ = lateral_wave(p, s, t, 1.0)
     moved_rel = rel + disp - delta[0][:, None] * lat
     assert np.allclose(np.linalg.norm(moved_rel, axis=1), np.linalg.norm(rel, axis=1), atol=1e-12)
-    trans = body_displacement(SwimParams.preset("eel", radial="translate"), s, rel, np.ones(40), axis, lat, t, 1.0)
+    trans = body_displacement(
+        SwimParams.preset("eel", radial="translate"), s, rel, np.ones(40), axis, lat, t, 1.0
+    )
     assert np.allclose(trans[0], delta[0][:, None] * lat)
 
 

@@ -74,7 +74,8 @@ def test_normals_match_area_weighted_reference(spot, morph):
     np.testing.assert_allclose(vertex_normals(v, f), reference_normals(v, f), atol=1e-6)
     frames, mf, _ = morph
     both = vertex_normals_frames(frames[:3], mf)
-    np.testing.assert_array_equal(vertex_normals_frames(frames[:3], mf, chunk_values=10), both)  # 1 frame/chunk
+    # 1 frame/chunk
+    np.testing.assert_array_equal(vertex_normals_frames(frames[:3], mf, chunk_values=10), both)
     for k in range(3):
         np.testing.assert_allclose(both[k], vertex_normals(frames[k], mf), atol=1e-6)
 

@@ -89,7 +89,9 @@ def test_tracks_are_c0_and_recover_exact_model(rng):
     z_fit, mu_fit = fit_tracks(b, segm)
     assert np.abs(predict(z_fit, segm, mu_fit) - b).max() < 5e-2 * np.abs(b).max()
     lin = solve_knots(b, segm, np.zeros_like(mu))
-    assert ((predict(z_fit, segm, mu_fit) - b) ** 2).sum() < 0.2 * ((predict(lin, segm, 0 * mu) - b) ** 2).sum()
+    assert ((predict(z_fit, segm, mu_fit) - b) ** 2).sum() < 0.2 * (
+        (predict(lin, segm, 0 * mu) - b) ** 2
+    ).sum()
 
 
 def test_loop_knots_are_periodic(rng):

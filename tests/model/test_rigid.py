@@ -44,7 +44,9 @@ def test_rigidly_moving_curves_fit_exactly(rng):
         sel = cid == c
         centre = base[sel].mean(0)
         R = rodrigues(np.outer(t, [0.3 * c % 1.0, 1.2, 0.2]))
-        frames[:, sel] = np.einsum("fij,nj->fni", R, base[sel] - centre) + centre + np.outer(t, [0.5, 0, 0])[:, None]
+        frames[:, sel] = (
+            np.einsum("fij,nj->fni", R, base[sel] - centre) + centre + np.outer(t, [0.5, 0, 0])[:, None]
+        )
     poses = make_poses(frames.astype(np.float32), None)
     rigid = fit_poses(poses, FitOptions(segments=2, motion="rigid"), curves=curves)
     disp = fit_poses(poses, FitOptions(segments=2, motion="displacement"), curves=curves)

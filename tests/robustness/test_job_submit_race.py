@@ -1,4 +1,5 @@
-"""Submitting a job while another process writes to the SQLite database must not answer 500 ("database is locked")."""
+"""Submitting a job while another process writes to the SQLite database must not answer 500 ("database is
+locked")."""
 
 from __future__ import annotations
 

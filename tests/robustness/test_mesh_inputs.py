@@ -1,4 +1,5 @@
-"""Odd mesh files: each gives a clear MeshInputError/TetrahedralizationError, never a crash or silent damage."""
+"""Odd mesh files: each gives a clear MeshInputError/TetrahedralizationError, never a crash or silent
+damage."""
 
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ def test_obj_negative_and_texture_indices_still_load() -> None:
 
 
 def test_flat_surface_with_stray_vertex_is_refused_before_tetwild() -> None:
-    """A single triangle plus an unreferenced off-plane vertex encloses no volume: clear error, no fTetWild run."""
+    """A single triangle plus an unreferenced off-plane vertex encloses no volume: clear error, no fTetWild
+    run."""
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64)
     mesh = SurfaceMesh(vertices, np.array([[0, 1, 2]], np.int64))
     with pytest.raises(TetrahedralizationError, match="flat"):

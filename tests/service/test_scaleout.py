@@ -26,8 +26,14 @@ SCENE = {"frames": 4, "target_tets": 300}
 
 def _machine(backend, shared: Settings, data_dir: Path, **overrides) -> Settings:
     """Settings of one machine: its own data directory, the shared database and blob store."""
-    return backend.settings(data_dir=data_dir, database_url=shared.resolved_database_url(),
-                            blob_url=shared.resolved_blob_url(), lease_seconds=10, backoff_seconds=0.0, **overrides)
+    return backend.settings(
+        data_dir=data_dir,
+        database_url=shared.resolved_database_url(),
+        blob_url=shared.resolved_blob_url(),
+        lease_seconds=10,
+        backoff_seconds=0.0,
+        **overrides,
+    )
 
 
 @pytest.fixture
@@ -49,7 +55,9 @@ def shared(backend, tmp_path):
 def _submit(store: Store, then_fit: bool = False) -> str:
     spec = normalize_request("simulate", SCENE, then_fit, {"segments": 1} if then_fit else None)
     with store.sessions() as s:
-        job = store.queue.enqueue(s, tenant_id=store.tenant_id, kind="simulate", params=spec, mesh_id="mesh_fish")
+        job = store.queue.enqueue(
+            s, tenant_id=store.tenant_id, kind="simulate", params=spec, mesh_id="mesh_fish"
+        )
         s.commit()
         return job.id
 

@@ -1,4 +1,5 @@
-"""Static linear-elastic FEM on linear tets (assembled with numpy, solved with scipy): the test's reference."""
+"""Static linear-elastic FEM on linear tets (assembled with numpy, solved with scipy): the test's
+reference."""
 
 from __future__ import annotations
 
@@ -33,7 +34,9 @@ def element_stiffness(points: np.ndarray, tets: np.ndarray, young: float, poisso
     return np.einsum("mia,ij,mjb,m->mab", b, d, b, vol)
 
 
-def static_displacement(mesh: TetMesh, young: float, poisson: float, density: float, gravity, fixed) -> np.ndarray:
+def static_displacement(
+    mesh: TetMesh, young: float, poisson: float, density: float, gravity, fixed
+) -> np.ndarray:
     """(N, 3) small-strain static displacement under gravity with ``fixed`` points clamped."""
     ke = element_stiffness(mesh.points, mesh.tets, young, poisson)
     dofs = (3 * mesh.tets[:, :, None] + np.arange(3)).reshape(-1, 12)

@@ -1,9 +1,13 @@
 """Physical behaviour of the XPBD solver on structured bars and blocks.
 
-Cantilever: a 0.5 x 0.1 x 0.1 m bar (E = 20 MPa, nu = 0.3, rho = 1000) clamped at x = 0 sags under gravity; the
-Euler-Bernoulli tip deflection q L^4 / (8 E I) is 0.92 % of L (a small load). Linear tets lock in bending, so the
-resolutions are 4, 5 and 6 cells through the thickness, where the discretisation itself (static linear FEM on the
-same tets, tests/sim/fem_reference.py) is within 10 % of beam theory. Stated tolerances: settled XPBD deflection
+Cantilever: a 0.5 x 0.1 x 0.1 m bar (E = 20 MPa, nu = 0.3, rho = 1000) clamped at x = 0 sags under gravity;
+the
+Euler-Bernoulli tip deflection q L^4 / (8 E I) is 0.92 % of L (a small load). Linear tets lock in bending, so
+the
+resolutions are 4, 5 and 6 cells through the thickness, where the discretisation itself (static linear FEM on
+the
+same tets, tests/sim/fem_reference.py) is within 10 % of beam theory. Stated tolerances: settled XPBD
+deflection
 within 5 % of that FEM solution and within 10 % of Euler-Bernoulli at every resolution, spread < 10 %.
 """
 
@@ -69,9 +73,20 @@ def test_cantilever_agrees_with_euler_bernoulli_and_across_resolutions(cantileve
 def twist_volume_change(poisson: float) -> float:
     """Largest relative volume change over a bar sagging and twisted 90 degrees at its free end."""
     mesh = box_tet_mesh((1.0, 0.2, 0.2), (10, 2, 2), split=5)
-    scene = SceneParams(frames=21, fps=20, young=5e4, poisson=poisson, pins=[{"plane": [0.05, 0, 0, 1, 0, 0]}],
-                        drivers=[{"region": {"box": [0.95, -1, -1, 2, 1, 1]}, "center": [1, 0.1, 0.1],
-                                  "keyframes": [{"t": 1.0, "rotate": [1, 0, 0, 90]}]}])
+    scene = SceneParams(
+        frames=21,
+        fps=20,
+        young=5e4,
+        poisson=poisson,
+        pins=[{"plane": [0.05, 0, 0, 1, 0, 0]}],
+        drivers=[
+            {
+                "region": {"box": [0.95, -1, -1, 2, 1, 1]},
+                "center": [1, 0.1, 0.1],
+                "keyframes": [{"t": 1.0, "rotate": [1, 0, 0, 90]}],
+            }
+        ],
+    )
     poses = simulate_tets(mesh, mesh.points, mesh.surface_faces(), scene)
     volumes = [tet_volumes(f.astype(np.float64), mesh.tets).sum() for f in poses.vertices]
     assert np.abs(poses.vertices[-1] - poses.vertices[0]).max() > 0.2  # it did deform a lot
@@ -145,8 +160,14 @@ def test_simulation_is_deterministic():
 
 def test_an_unconstrained_body_lands_on_a_default_ground_and_settles():
     mesh = box_tet_mesh((0.4, 0.4, 0.4), (3, 3, 3), split=5, origin=(0.0, 1.0, 0.0))
-    poses = simulate_tets(mesh, mesh.points, mesh.surface_faces(), SceneParams(frames=31, young=2e4, damping=5.0))
-    assert poses.meta["ground"]["point"][1] == pytest.approx(1.0) and poses.meta["ground"]["normal"] == [0, 1, 0]
+    poses = simulate_tets(
+        mesh, mesh.points, mesh.surface_faces(), SceneParams(frames=31, young=2e4, damping=5.0)
+    )
+    assert poses.meta["ground"]["point"][1] == pytest.approx(1.0) and poses.meta["ground"]["normal"] == [
+        0,
+        1,
+        0,
+    ]
     assert poses.vertices[:, :, 1].min() >= 1.0 - 1e-6  # rests on the plane under its lowest point
     top = mesh.points[:, 1] > 1.39
     sag = 1.4 - poses.vertices[-1, top, 1].mean()
