@@ -6,8 +6,8 @@ from collections.abc import Callable
 
 from fastapi import Request, Response
 
-IMMUTABLE = "public, max-age=31536000, immutable"
-REVALIDATE = "no-cache"  # for URLs whose content may change (e.g. "the latest clip's topology")
+# private: every such response is tenant data behind an API key, which no shared cache or CDN may keep
+IMMUTABLE = "private, max-age=31536000, immutable"
 
 
 def etag_matches(request: Request, etag: str) -> bool:

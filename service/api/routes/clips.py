@@ -105,6 +105,18 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
                               "application/octet-stream", {"Vary": "Accept"})
 
 
+@router.get("/v1/clips/{clip_id}/topology", operation_id="getClipTopology", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}},
+                             "description": "the topology part (pdeanim container)"},
+                       **responses(304, 401, 404, 422)})
+def get_clip_topology(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep,
+                      store: StoreDep) -> Response:
+    """The static part this clip's coefficients evaluate on (shared by clips with the same ``topology_id``)."""
+    row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    return immutable_response(request, row.topology_key, lambda: store.blobs.get(row.topology_key),
+                              "application/octet-stream")
+
+
 @router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
 def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
