@@ -1,0 +1,273 @@
+// The GPU path without a browser: a line-by-line JS emulation of the vertex shader (src/gpu.js), fed the
+// same textures, attributes and uniforms, agrees with the CPU evaluator on every fixture; normals follow
+// the surface; the three.js integration patches every built-in material and its CPU fallback works.
+
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { join } from 'node:path';
+import * as THREE from 'three';
+import { computeNormals, createEvaluator, decodeClipFile } from '../src/index.js';
+import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from '../src/gpu.js';
+import { attachClip } from '../src/three.js';
+import { FIXTURES, manifest, readBytes } from './helpers.mjs';
+
+const man = manifest();
+const MU_TRIG_MAX = 0.95 * Math.PI;
+
+function fetch(tex, i) {
+  const w = tex.width;
+  const x = i % w;
+  const y = Math.floor(i / w);
+  const o = (y * w + x) * 4;
+  return [...tex.data.subarray(o, o + 4)];
+}
+
+function sinhRatio(x, m) {
+  if (m < 0.5) {
+    const a = m * x * m * x;
+    const b = m * m;
+    const sa = 1 + a * (1 / 6 + a * (1 / 120 + a * (1 / 5040 + a / 362880)));
+    const sb = 1 + b * (1 / 6 + b * (1 / 120 + b * (1 / 5040 + b / 362880)));
+    return x * sa / sb;
+  }
+  return Math.exp(m * (x - 1)) * (1 - Math.exp(-2 * m * x)) / (1 - Math.exp(-2 * m));
+}
+
+function sinRatio(x, m) {
+  if (m < 0.5) {
+    const a = m * x * m * x;
+    const b = m * m;
+    const sa = 1 - a * (1 / 6 - a * (1 / 120 - a * (1 / 5040 - a / 362880)));
+    const sb = 1 - b * (1 / 6 - b * (1 / 120 - b * (1 / 5040 - b / 362880)));
+    return x * sa / sb;
+  }
+  return Math.sin(m * x) / Math.sin(m);
+}
+
+function timePair(tau, mu) {
+  if (mu > 1e-12) return [sinhRatio(1 - tau, mu), sinhRatio(tau, mu)];
+  if (mu < -1e-12) {
+    const m = Math.min(-mu, MU_TRIG_MAX);
+    return [sinRatio(1 - tau, m), sinRatio(tau, m)];
+  }
+  return [1 - tau, tau];
+}
+
+function rigidPair(tau, mu) {
+  if (mu < 0) {
+    const m = Math.min(-mu, MU_TRIG_MAX);
+    return [sinRatio(1 - tau, m), sinRatio(tau, m)];
+  }
+  if (mu < 1e-12) return [1 - tau, tau];
+  return [sinhRatio(1 - tau, mu), sinhRatio(tau, mu)];
+}
+
+function rodrigues(r) { // rows of I + a K + b K^2
+  const t2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+  const th = Math.sqrt(t2);
+  const a = th < 0.05 ? 1 - t2 / 6 + t2 * t2 / 120 : Math.sin(th) / th;
+  const b = th < 0.05 ? 0.5 - t2 / 24 + t2 * t2 / 720 : (1 - Math.cos(th)) / t2;
+  const K = [[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]];
+  return [0, 1, 2].map((i) => [0, 1, 2].map((j) => (i === j ? 1 : 0) + a * K[i][j]
+    + b * (K[i][0] * K[0][j] + K[i][1] * K[1][j] + K[i][2] * K[2][j])));
+}
+
+/** The shader's pdeEval(v) in JS. */
+function emulate(layout, u, v) {
+  const T = layout.textures;
+  const C = layout.nCurves;
+  if (layout.kind === 'cyclic-spine') {
+    const a = fetch(T.vertex, v * 3);
+    const w = fetch(T.vertex, v * 3 + 1);
+    const rl = fetch(T.vertex, v * 3 + 2)[0];
+    let ca = 0;
+    let cl = w[0] * u.sw + w[1] * u.cw;
+    if (layout.rotate) {
+      const g = w[2] * u.sw + w[3] * u.cw;
+      const c = 1 / Math.sqrt(1 + g * g);
+      ca = (c - 1) * a[3] - g * c * rl;
+      cl += g * c * a[3] + (c - 1) * rl;
+    }
+    return [0, 1, 2].map((k) => a[k] + ca * layout.axis[k] + cl * layout.bend[k]);
+  }
+  const head = fetch(T.vertex, v * 4);
+  const c = Math.round(head[0]);
+  let p = [0, 1, 2].map((w) => {
+    const mu = fetch(T.mu, u.seg * C + c)[w];
+    const [f0, f1] = timePair(u.tau, mu);
+    const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
+    const k1 = fetch(T.knot, ((u.seg + 1) * C + c) * 3 + w);
+    const b = fetch(T.vertex, v * 4 + 1 + w);
+    return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + (f0 * k0[k] + f1 * k1[k]) * b[k], 0);
+  });
+  if (layout.rigid) {
+    const r0 = fetch(T.rigid, (u.rseg * C + c) * 2);
+    const c0 = fetch(T.rigid, (u.rseg * C + c) * 2 + 1);
+    const r1 = fetch(T.rigid, ((u.rseg + 1) * C + c) * 2);
+    const c1 = fetch(T.rigid, ((u.rseg + 1) * C + c) * 2 + 1);
+    const pr = rigidPair(u.rtau, r0[3]);
+    const pt = rigidPair(u.rtau, c0[3]);
+    const R = rodrigues([0, 1, 2].map((k) => pr[0] * r0[k] + pr[1] * r1[k]));
+    p = [0, 1, 2].map((i) => R[i][0] * p[0] + R[i][1] * p[1] + R[i][2] * p[2] + pt[0] * c0[i] + pt[1] * c1[i]);
+  }
+  return p;
+}
+
+/** Sum over the 8 terms of |phi * knot * basis| per coordinate (the scale of float32 rounding on the GPU). */
+function termMagnitude(layout, u, v) {
+  if (layout.kind === 'cyclic-spine') return [0, 0, 0];
+  const T = layout.textures;
+  const C = layout.nCurves;
+  const c = Math.round(fetch(T.vertex, v * 4)[0]);
+  return [0, 1, 2].map((w) => {
+    const [f0, f1] = timePair(u.tau, fetch(T.mu, u.seg * C + c)[w]);
+    const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
+    const k1 = fetch(T.knot, ((u.seg + 1) * C + c) * 3 + w);
+    const b = fetch(T.vertex, v * 4 + 1 + w);
+    return [0, 1, 2, 3].reduce((s, k) => s + Math.abs(f0 * k0[k] * b[k]) + Math.abs(f1 * k1[k] * b[k]), 0);
+  });
+}
+
+function loadCase(c) {
+  return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
+}
+
+for (const c of man.cases) {
+  test(`emulated shader matches the CPU evaluator: ${c.name}`, () => {
+    const clip = loadCase(c);
+    const layout = gpuLayout(clip, { width: 64 }); // a narrow texture exercises the 2D texel addressing
+    const ev = createEvaluator(clip);
+    // The texture holds the space basis in float32 (the CPU path multiplies it with the knots in float64):
+    // each of the 8 terms knot * basis carries a relative rounding of 2^-24, so the bound per value is
+    // 1e-6 of the diagonal plus 4 * 2^-24 times the sum of the terms' magnitudes (the fits' basis sums
+    // cancel: terms reach ~100x the result). Cyclic clips have no such sum.
+    for (const t of c.t) {
+      const cpu = ev.evaluate(t);
+      const u = timeUniforms(layout, t);
+      for (let v = 0; v < clip.nVertices; v++) {
+        const g = emulate(layout, u, v);
+        let mag = termMagnitude(layout, u, v);
+        if (layout.rigid) mag = mag.map(() => Math.max(...mag)); // the rotation mixes the coordinates
+        for (let w = 0; w < 3; w++) {
+          const tol = 1e-6 * c.diagonal + 4 * 2 ** -24 * mag[w];
+          assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= tol, `t = ${t}, v = ${v}: ${g[w]} vs ${cpu[v * 3 + w]}`);
+        }
+      }
+    }
+  });
+}
+
+test('frame-rotated normals follow the deformed surface', () => {
+  // fitted and cyclic clips (real surfaces); not fit-absolute-paper, whose fit folds the 42-vertex sphere
+  // (recomputed normals flip there), nor the synthetic clips (random coefficients, no coherent surface)
+  const real = man.cases.filter((x) => (x.name.startsWith('fit-') && x.name !== 'fit-absolute-paper')
+    || x.kind === 'cyclic-spine');
+  for (const c of real) {
+    const clip = loadCase(c);
+    const ev = createEvaluator(clip);
+    const rest = ev.evaluate(0);
+    const restNormals = computeNormals(rest, clip.faces);
+    const map = Int32Array.from({ length: clip.nVertices }, (_, i) => i);
+    const attrs = meshAttributes({ vertexMap: map, positions: rest, normals: restNormals, index: clip.faces });
+    for (const t of [0.3, 0.8]) {
+      const pos = ev.evaluate(t);
+      const got = frameNormals(pos, attrs, restNormals, new Float32Array(pos.length));
+      const want = computeNormals(pos, clip.faces);
+      let sum = 0;
+      for (let i = 0; i < pos.length; i += 3) sum += got[i] * want[i] + got[i + 1] * want[i + 1] + got[i + 2] * want[i + 2];
+      // coarse test meshes (42 / ~200 vertices): one triangle's frame vs the area-weighted mean of the ring
+      assert.ok(sum / clip.nVertices > 0.97, `${c.name} t=${t}: mean cos ${sum / clip.nVertices}`);
+    }
+  }
+});
+
+const MATERIALS = [THREE.MeshStandardMaterial, THREE.MeshPhysicalMaterial, THREE.MeshLambertMaterial,
+  THREE.MeshPhongMaterial, THREE.MeshBasicMaterial, THREE.MeshToonMaterial, THREE.MeshNormalMaterial,
+  THREE.MeshMatcapMaterial];
+const SHADERS = { MeshStandardMaterial: 'standard', MeshPhysicalMaterial: 'physical', MeshLambertMaterial: 'lambert',
+  MeshPhongMaterial: 'phong', MeshBasicMaterial: 'basic', MeshToonMaterial: 'toon', MeshNormalMaterial: 'normal',
+  MeshMatcapMaterial: 'matcap', MeshDepthMaterial: 'depth', MeshDistanceMaterial: THREE.ShaderLib.distanceRGBA ? 'distanceRGBA' : 'distance' };
+
+function meshOf(clip, Material) {
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(Float32Array.from(clip.rest), 3));
+  g.setIndex(new THREE.BufferAttribute(Uint32Array.from(clip.faces), 1));
+  return new THREE.Mesh(g, new Material({ color: 0x336699 }));
+}
+
+test('attachClip patches every built-in material (and the shadow materials) and keeps their settings', () => {
+  const c = man.cases.find((x) => x.motion === 'rigid');
+  const clip = loadCase(c);
+  for (const Material of MATERIALS) {
+    const mesh = meshOf(clip, Material);
+    const original = mesh.material;
+    const player = attachClip(mesh, clip);
+    assert.notEqual(mesh.material, original);
+    assert.equal(mesh.material.type, original.type);
+    for (const m of [mesh.material, mesh.customDepthMaterial, mesh.customDistanceMaterial]) {
+      const shader = { vertexShader: THREE.ShaderLib[SHADERS[m.type]].vertexShader, fragmentShader: '', uniforms: {} };
+      m.onBeforeCompile(shader, null);
+      assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
+      assert.match(shader.vertexShader, /transformed = pdePosition;/);
+      assert.ok(shader.uniforms.pdeKnotTex.value instanceof THREE.DataTexture);
+      assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:true/);
+    }
+    assert.equal(player.gpu, true);
+    assert.equal(player.uniforms.pdeEnabled.value, true);
+    player.detach();
+    assert.equal(mesh.material, original);
+    assert.equal(mesh.geometry.getAttribute('pdeVertex'), undefined);
+  }
+});
+
+test('setTime drives the uniforms; the CPU fallback writes the evaluated positions and normals', () => {
+  for (const c of [man.cases.find((x) => x.motion === 'rigid' && x.looping),
+    man.cases.find((x) => x.kind === 'cyclic-spine')]) {
+    const clip = loadCase(c);
+    const mesh = meshOf(clip, THREE.MeshStandardMaterial);
+    const player = attachClip(mesh, clip);
+    player.setTime(0.4);
+    const u = timeUniforms(player.layout, 0.4);
+    assert.equal(player.uniforms.pdeSeg.value, u.seg);
+    assert.equal(player.uniforms.pdeTau.value, u.tau);
+    assert.equal(player.useGPU(false), false);
+    player.setTime(0.4);
+    const cpu = createEvaluator(clip).evaluate(0.4);
+    assert.deepEqual(Array.from(mesh.geometry.getAttribute('position').array), Array.from(cpu));
+    const n = mesh.geometry.getAttribute('normal').array;
+    for (let i = 0; i < n.length; i += 3) assert.ok(Math.abs(Math.hypot(n[i], n[i + 1], n[i + 2]) - 1) < 1e-5);
+    player.useGPU(true);
+    assert.deepEqual(Array.from(mesh.geometry.getAttribute('position').array), Array.from(clip.rest));
+    player.detach();
+  }
+});
+
+test('a mesh with split vertices plays through a vertex map', () => {
+  const c = man.cases.find((x) => x.name === 'fit-displacement-chord');
+  const clip = loadCase(c);
+  // non-indexed geometry: every triangle corner is its own vertex, like a glTF primitive with hard edges
+  const corners = Int32Array.from(clip.faces);
+  const g = new THREE.BufferGeometry();
+  const split = new Float32Array(corners.length * 3).map((_, k) => clip.rest[corners[Math.floor(k / 3)] * 3 + (k % 3)]);
+  g.setAttribute('position', new THREE.BufferAttribute(split, 3));
+  assert.throws(() => attachClip(new THREE.Mesh(g, new THREE.MeshBasicMaterial()), clip), /vertexMap/);
+  g.setAttribute('_pdeanim_vertex', new THREE.BufferAttribute(Float32Array.from(corners), 1));
+  const mesh = new THREE.Mesh(g, new THREE.MeshBasicMaterial());
+  const player = attachClip(mesh, clip, { gpu: false });
+  player.setTime(0.7);
+  const cpu = createEvaluator(clip).evaluate(0.7);
+  const pos = g.getAttribute('position').array;
+  for (let k = 0; k < corners.length; k++) {
+    for (let w = 0; w < 3; w++) assert.equal(pos[k * 3 + w], cpu[corners[k] * 3 + w]);
+  }
+  assert.deepEqual(Array.from(player.attributes.pdeVertex.filter((_, i) => i % 3 === 0)), Array.from(corners));
+});
+
+test('the GLSL header declares what the patched chunks use', () => {
+  const clip = loadCase(man.cases.find((x) => x.kind === 'cyclic-spine'));
+  const header = glslHeader(gpuLayout(clip));
+  assert.match(header, /#define PDEANIM_CYCLIC/);
+  for (const name of ['pdeVertex', 'pdeNormalFrame', 'pdeVertexTex', 'pdeSinWt', 'pdeCompute']) {
+    assert.ok(header.includes(name), name);
+  }
+});
