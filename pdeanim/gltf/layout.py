@@ -301,7 +301,10 @@ def source_layout(data: bytes | None, filename: str, faces: np.ndarray | None, n
             layout = gltf_layout(data)
         elif suffix == ".obj":
             uv = obj_uv(data)
-            layout = plain_layout(faces, n_vertices, uv) if uv is not None and len(uv) == n_vertices else plain
+            if uv is None:
+                return plain
+            layout = plain_layout(faces, n_vertices, uv) if len(uv) == n_vertices else Layout(
+                plain.doc, plain.views, plain.parts, len(uv), plain.faces)
         else:
             return plain
     except InputError as exc:

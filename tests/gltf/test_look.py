@@ -1,0 +1,133 @@
+"""GLBs that keep a glTF source's look (materials, textures, UVs, primitives, node names; skins baked) and
+small animation GLBs (KHR_mesh_quantization + EXT_meshopt_compression): structure, round trips through the
+reader (which decodes meshopt), and 0 errors / 0 warnings from the Khronos validator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pdeanim.errors import ParameterError
+from pdeanim.gltf.compact import PackOptions, layout_animation_glb, layout_frame_glb
+from pdeanim.gltf.document import load_document
+from pdeanim.gltf.glb import unpack_glb
+from pdeanim.gltf.layout import gltf_layout, plain_layout, source_layout
+from pdeanim.gltf.meshopt import EXT
+from pdeanim.gltf.read import read_animated_poses, read_static_mesh
+from pdeanim.gltf.validate import assert_clean, validate_many
+from pdeanim.mesh.io import load_mesh
+
+from .builders import skinned_bar_glb, textured_scene_glb
+
+LOOK_KEYS = ("materials", "textures", "samplers")
+
+
+def moving_frames(rest: np.ndarray, k: int) -> np.ndarray:
+    """K frames of a wave over the rest positions (frame 0 = rest)."""
+    phase = np.arange(k)[:, None, None]
+    return rest[None] + 0.05 * phase * np.sin(rest[None, :, :1] * 3 + phase)
+
+
+def uv_of(glb: bytes, mesh: int, prim: int) -> np.ndarray:
+    gd = load_document(glb)
+    return gd.accessor(gd.doc["meshes"][mesh]["primitives"][prim]["attributes"]["TEXCOORD_0"])
+
+
+def test_mesh_loader_and_layout_share_the_file_order():
+    src = textured_scene_glb()
+    rest, faces = read_static_mesh(src)
+    mesh = load_mesh(src, filename="scene.glb")
+    np.testing.assert_array_equal(mesh.vertices, rest)  # every primitive's vertices, depth-first, in order
+    layout = gltf_layout(src)
+    assert layout.n_vertices == len(rest) and len(layout.slots) == 4
+    assert [(s.start, s.stop) for s in layout.slots] == [(0, 16), (16, 25), (25, 34), (34, 43)]
+    np.testing.assert_array_equal(layout.faces, mesh.faces)
+
+
+def test_frame_keeps_the_look_and_the_positions():
+    src = textured_scene_glb()
+    rest, _ = read_static_mesh(src)
+    moved = moving_frames(rest, 3)[2]
+    glb = layout_frame_glb(gltf_layout(src), moved)
+    doc, _ = unpack_glb(glb)
+    sdoc, _ = unpack_glb(src)
+    for key in LOOK_KEYS:
+        assert doc[key] == sdoc[key]
+    assert doc["images"][0]["mimeType"] == "image/png" and doc["images"][0]["name"] == "checker"
+    assert load_document(glb).view_bytes(doc["images"][0]["bufferView"]) == \
+        load_document(src).view_bytes(sdoc["images"][0]["bufferView"])
+    assert [n["name"] for n in doc["nodes"]] == ["body", "hat", "wing"]
+    assert [len(m["primitives"]) for m in doc["meshes"]] == [2, 1, 1]  # the instanced mesh got its own copy
+    assert [p["material"] for m in doc["meshes"] for p in m["primitives"]] == [0, 1, 1, 1]
+    assert "TANGENT" not in doc["meshes"][0]["primitives"][0]["attributes"]  # stale after deformation
+    np.testing.assert_array_equal(uv_of(glb, 0, 0), uv_of(src, 0, 0))
+    np.testing.assert_array_equal(uv_of(glb, 2, 0), uv_of(src, 1, 0))
+    back, _ = read_static_mesh(glb)
+    np.testing.assert_allclose(back, moved, atol=1e-5)  # float32 local positions through node transforms
+    assert_clean(validate_many([glb])[0], "frame with the source's look")
+
+
+def test_animation_keeps_the_look_quantised_and_compressed():
+    src = textured_scene_glb()
+    rest, _ = read_static_mesh(src)
+    k = 6
+    frames = moving_frames(rest, k)
+    times = np.arange(k, dtype=np.float32) / 10
+    glb = layout_animation_glb(gltf_layout(src), frames, times, np.arange(k), k, names=[f"f{i}" for i in range(k)])
+    doc, _ = unpack_glb(glb)
+    assert doc["extensionsRequired"] == ["KHR_mesh_quantization", EXT] == doc["extensionsUsed"]
+    assert doc["buffers"][1]["extensions"][EXT] == {"fallback": True} and "uri" not in doc["buffers"][1]
+    assert "skins" not in doc and [n.get("name") for n in doc["nodes"][:3]] == ["body", "hat", "wing"]
+    assert doc["nodes"][0]["children"][0] == 3 and doc["nodes"][3]["name"] == "body_mesh"  # dequantising child
+    assert len(doc["animations"][0]["channels"]) == 3
+    assert doc["meshes"][0]["extras"]["targetNames"] == [f"f{i}" for i in range(k)]
+    sdoc, _ = unpack_glb(src)
+    assert all(doc[key] == sdoc[key] for key in LOOK_KEYS)
+    np.testing.assert_array_equal(uv_of(glb, 1, 0), uv_of(src, 1, 0))
+    back = read_animated_poses(glb, fps=10)
+    # the body node scales by 2: world error <= 2 x half a 14-bit step of its local extent; 2x margin
+    step = 2 * float(np.ptp(frames.reshape(-1, 3), axis=0).max()) / (2**14 - 1)
+    np.testing.assert_allclose(back.vertices, frames, atol=step)
+    plain = layout_animation_glb(gltf_layout(src), frames, times, np.arange(k), k,
+                                 options=PackOptions(quantize=False, compress=False))
+    np.testing.assert_allclose(read_animated_poses(plain, fps=10).vertices, frames, atol=1e-5)
+    reports = validate_many([glb, plain])
+    for label, report in zip(["compact look animation", "float look animation"], reports, strict=True):
+        assert_clean(report, label)
+
+
+def test_skinned_source_is_baked_and_its_skin_dropped():
+    src = skinned_bar_glb()
+    rest, _ = read_static_mesh(src)
+    layout = gltf_layout(src)
+    frames = moving_frames(rest, 4)
+    frame = layout_frame_glb(layout, frames[1])
+    anim = layout_animation_glb(layout, frames, np.arange(4, dtype=np.float32), np.arange(4), 4)
+    for glb in (frame, anim):
+        doc, _ = unpack_glb(glb)
+        assert "skins" not in doc and all("skin" not in n for n in doc["nodes"])
+        attrs = doc["meshes"][0]["primitives"][0]["attributes"]
+        assert not any(a.startswith(("JOINTS_", "WEIGHTS_")) for a in attrs)
+        assert [n.get("name") for n in doc["nodes"][:3]] == ["root", "tip", "bar"]
+    np.testing.assert_allclose(read_static_mesh(frame)[0], frames[1], atol=1e-5)
+    np.testing.assert_allclose(read_animated_poses(anim, fps=1).vertices, frames, atol=1e-3)
+    for report in validate_many([frame, anim]):
+        assert_clean(report, "baked skin")
+
+
+def test_plain_and_obj_layouts(spot_path):
+    data = spot_path.read_bytes()
+    mesh = load_mesh(spot_path)
+    layout = source_layout(data, "spot.obj", mesh.faces, len(mesh.vertices))
+    assert layout.source == "obj"  # UVs kept
+    frames = moving_frames(mesh.vertices, 3)
+    glb = layout_animation_glb(layout, frames, np.arange(3, dtype=np.float32), np.arange(3), 3)
+    assert uv_of(glb, 0, 0).shape == (len(mesh.vertices), 2)
+    mismatch = source_layout(data, "spot.obj", mesh.faces[:10], 7)
+    assert mismatch.source == "plain" and "vertices" in mismatch.notes[0]
+    assert source_layout(b"not a glb", "x.glb", mesh.faces, len(mesh.vertices)).source == "plain"
+    assert_clean(validate_many([glb])[0], "obj animation with UVs")
+    with pytest.raises(ParameterError):
+        layout_frame_glb(plain_layout(mesh.faces, len(mesh.vertices)), frames[0, :5])
+    with pytest.raises(ParameterError):
+        PackOptions(position_bits=16)
