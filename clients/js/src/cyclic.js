@@ -32,6 +32,12 @@ function swimParams(d) {
 
 /** Validate and decode the topology and coefficients containers of a cyclic-spine clip. */
 export function decodeCyclic(topo, coef) {
+  for (const [part, h] of [['topology', topo.header], ['coefficients', coef.header]]) {
+    if (h.format_version !== undefined && h.format_version !== 1) {
+      throw new ClipFormatError(`unsupported cyclic-spine ${part} version ${JSON.stringify(h.format_version)}`
+        + ' (this build reads 1)');
+    }
+  }
   const ta = topo.arrays;
   const ca = coef.arrays;
   const missing = ['faces', 'rest', 'vertex_patch', 'vertex_uv'].filter((n) => !ta[n]);

@@ -88,6 +88,8 @@ test('cyclic clips with a bad swim header are rejected', () => {
   const p = splitClipFile(readBytes(join(FIXTURES, c.clip)));
   const bad = edited(p.coefficients, ({ header }) => { header.swim.frequency = 0; });
   assert.throws(() => decodeClip(p.topology, bad), /invalid swim parameters/);
+  const future = edited(p.coefficients, ({ header }) => { header.format_version = 2; });
+  assert.throws(() => decodeClip(p.topology, future), /unsupported cyclic-spine coefficients version 2/);
   const noSpine = edited(p.coefficients, ({ arrays }) => { delete arrays.spine; });
   assert.throws(() => decodeClip(p.topology, noSpine), /lacks arrays: spine/);
 });
