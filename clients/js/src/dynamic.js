@@ -196,6 +196,7 @@ export class DynamicEvaluator {
     this.phi0 = new Float64Array(C * 3);
     this.phi1 = new Float64Array(C * 3);
     this.pair = new Float64Array(2);
+    this.pair2 = new Float64Array(2);
     if (clip.rigid) {
       this.rot = new Float64Array(C * 9);
       this.trans = new Float64Array(C * 3);
@@ -248,8 +249,8 @@ export class DynamicEvaluator {
     const rg = this.clip.rigid;
     const C = this.clip.nCurves;
     const [s, tau] = locate(rg.segmentT, tw, false);
-    const pr = new Float64Array(2);
-    const pt = new Float64Array(2);
+    const pr = this.pair;
+    const pt = this.pair2;
     for (let c = 0; c < C; c++) {
       rigidTimePair(tau, rg.rotMu[s * C + c], pr);
       rigidTimePair(tau, rg.transMu[s * C + c], pt);
