@@ -248,11 +248,11 @@ class Viewer {
     this.renderStats();
     try {
       const res = await fetch(url, { headers: { Authorization: `Bearer ${this.key}` } });
-      if (res.status === 202) {
-        this.sizes.glbNote = 'built by an export job (not measured)';
-      } else if (!res.ok) {
+      if (!res.ok) {
         const body = await res.json().catch(() => null);
-        this.sizes.glbNote = `not available (${res.status}${body?.error ? `: ${body.error.message}` : ''})`;
+        this.sizes.glbNote = body?.error?.code === 'export_too_large'
+          ? 'larger than a request builds (an export job makes it)'
+          : `not available (${res.status}${body?.error ? `: ${body.error.message}` : ''})`;
       } else {
         const decoded = (await res.arrayBuffer()).byteLength;
         this.sizes.glbDecoded = decoded;
