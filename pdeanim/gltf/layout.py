@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, MeshInputError
+from ..errors import InputError, MeshInputError, ParameterError
 from .document import MESHOPT, GltfDocument, load_document, malformed_as
 from .glb import ARRAY_BUFFER, COMPONENT_TYPES, ELEMENT_ARRAY_BUFFER
 from .read import mesh_instances, read_static_mesh
@@ -75,19 +75,33 @@ def plain_layout(faces: np.ndarray | None, n_vertices: int, uv: np.ndarray | Non
     """One node, mesh and primitive holding every clip vertex; triangles when there are faces, else points;
     ``uv`` (V, 2) in glTF convention (origin top-left) becomes TEXCOORD_0."""
     f = np.zeros((0, 3), np.int64) if faces is None else np.asarray(faces, np.int64).reshape(-1, 3)
+    if len(f) and (f.min() < 0 or f.max() >= n_vertices):
+        raise ParameterError(f"face indices must lie in [0, {n_vertices}), found {f.min()}..{f.max()}")
     views: list[bytes] = []
     doc: dict[str, Any] = {"asset": _asset(), "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
                            "bufferViews": [], "accessors": []}
     prim: dict[str, Any] = {"attributes": {}, "mode": 4 if len(f) else 0}
     if len(f):
         dtype = np.uint16 if n_vertices <= 65535 else np.uint32
-        prim["indices"] = add_accessor(doc, views, f.reshape(-1).astype(dtype), "SCALAR", ELEMENT_ARRAY_BUFFER)
+        prim["indices"] = add_accessor(doc, views, cache_order(f, n_vertices).reshape(-1).astype(dtype), "SCALAR",
+                                       ELEMENT_ARRAY_BUFFER)
     if uv is not None and len(uv) == n_vertices:
         prim["attributes"]["TEXCOORD_0"] = add_accessor(doc, views, np.asarray(uv, np.float32), "VEC2", ARRAY_BUFFER)
     doc["meshes"] = [{"primitives": [prim]}]
     slot = Slot(0, 0, 0, int(n_vertices), bool(len(f)))
     return Layout(doc, views, [Part(0, 0, np.eye(4), [slot])], int(n_vertices), f, None,
                   "obj" if "TEXCOORD_0" in prim["attributes"] else "plain")
+
+
+def cache_order(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """The triangles reordered for the GPU's vertex cache (meshoptimizer), which also makes the index stream
+    compress about 2x better; each triangle and the vertex order stay as they were."""
+    import meshoptimizer
+
+    src = np.ascontiguousarray(faces.reshape(-1), np.uint32)
+    out = np.zeros_like(src)
+    meshoptimizer.optimize_vertex_cache(out, src, len(src), int(n_vertices))
+    return out.reshape(-1, 3).astype(np.int64)
 
 
 def add_view(doc: dict, views: list[bytes], raw: bytes, target: int | None = None,
