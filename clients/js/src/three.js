@@ -54,10 +54,11 @@ function patchShader(shader, header) {
  * Play a decoded clip on mesh (a THREE.Mesh whose vertices are the clip's, or mapped to them by
  * options.vertexMap / a _pdeanim_vertex attribute). Returns a player: setTime(t), useGPU(bool), detach().
  * options: {gpu = true, vertexMap, textureWidth = 4096, maxTextureSize = 4096, shadows = true,
- * frustumCulled = false}.
+ * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout)}.
  */
 export function attachClip(mesh, clip, options = {}) {
-  const { gpu = true, textureWidth = 4096, maxTextureSize = 4096, shadows = true, frustumCulled = false } = options;
+  const { gpu = true, textureWidth = 4096, maxTextureSize = 4096, shadows = true, frustumCulled = false,
+    gpuMode = 'auto' } = options;
   const geometry = mesh.geometry;
   const vertexMap = resolveVertexMap(geometry, clip, options.vertexMap);
   if (!geometry.getAttribute('normal')) geometry.computeVertexNormals();
@@ -70,20 +71,21 @@ export function attachClip(mesh, clip, options = {}) {
   geometry.setAttribute('pdeVertex', new BufferAttribute(attrs.pdeVertex, 3));
   geometry.setAttribute('pdeNormalFrame', new BufferAttribute(attrs.pdeNormalFrame, 3));
 
-  const layout = gpuLayout(clip, { width: textureWidth });
+  const layout = gpuLayout(clip, { width: textureWidth, mode: gpuMode });
   const gpuReason = layout.maxHeight > maxTextureSize
     ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})` : null;
   const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
   const uniforms = {
     pdeEnabled: { value: false }, pdeSeg: { value: 0 }, pdeTau: { value: 0 }, pdeCurves: { value: layout.nCurves },
     pdeRSeg: { value: 0 }, pdeRTau: { value: 0 }, pdeSinWt: { value: 0 }, pdeCosWt: { value: 1 },
+    pdeVertices: { value: layout.nVertices }, pdeFieldTex: { value: textures.field ?? null },
     pdeVertexTex: { value: textures.vertex }, pdeKnotTex: { value: textures.knot ?? null },
     pdeMuTex: { value: textures.mu ?? null }, pdeRigidTex: { value: textures.rigid ?? null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
     pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] }, pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout);
-  const key = `pdeanim:${layout.kind}:${layout.rigid}`;
+  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;

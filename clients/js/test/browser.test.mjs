@@ -76,6 +76,9 @@ test('the vertex shader renders what the CPU path renders, in headless Chromium'
         assert.ok(c[k].covered > 0.05, `${c.name}: the mesh covers ${c[k].covered} of the image`);
         assert.ok(c[k].differ < 0.02, `${c.name} ${k}: ${c[k].differ} of the pixels differ`);
       }
+      // float32 on the GPU, and software WebGL's exp/sin are less exact than float32 rounding: the worst seen
+      // is 5.8e-5 of the diagonal (rigid clips: rotations); the CPU path is the reference
+      assert.ok(c.gpuError < 1.5e-4, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
       assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
     }
   } finally {

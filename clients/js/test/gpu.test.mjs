@@ -90,9 +90,15 @@ function emulate(layout, u, v) {
     }
     return [0, 1, 2].map((k) => a[k] + ca * layout.axis[k] + cl * layout.bend[k]);
   }
-  const head = fetch(T.vertex, v * 4);
+  const fields = layout.mode === 'fields';
+  const head = fetch(T.vertex, fields ? v : v * 4);
   const c = Math.round(head[0]);
   let p = [0, 1, 2].map((w) => {
+    if (fields) {
+      const [f0, f1] = timePair(u.tau, fetch(T.mu, u.seg * C + c)[w]);
+      const V = layout.nVertices;
+      return head[1 + w] + f0 * fetch(T.field, u.seg * V + v)[w] + f1 * fetch(T.field, (u.seg + 1) * V + v)[w];
+    }
     const mu = fetch(T.mu, u.seg * C + c)[w];
     const [f0, f1] = timePair(u.tau, mu);
     const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
@@ -115,7 +121,7 @@ function emulate(layout, u, v) {
 
 /** Sum over the 8 terms of |phi * knot * basis| per coordinate (the scale of float32 rounding on the GPU). */
 function termMagnitude(layout, u, v) {
-  if (layout.kind === 'cyclic-spine') return [0, 0, 0];
+  if (layout.mode !== 'coefficients') return [0, 0, 0];
   const T = layout.textures;
   const C = layout.nCurves;
   const c = Math.round(fetch(T.vertex, v * 4)[0]);
@@ -132,15 +138,17 @@ function loadCase(c) {
   return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
 }
 
-for (const c of man.cases) {
-  test(`emulated shader matches the CPU evaluator: ${c.name}`, () => {
+for (const [c, mode] of man.cases.flatMap((x) => (x.kind === 'dynamic-pde' ? [[x, 'fields'], [x, 'coefficients']]
+  : [[x, 'auto']]))) {
+  test(`emulated shader (${mode}) matches the CPU evaluator: ${c.name}`, () => {
     const clip = loadCase(c);
-    const layout = gpuLayout(clip, { width: 64 }); // a narrow texture exercises the 2D texel addressing
+    const layout = gpuLayout(clip, { width: 64, mode }); // a narrow texture exercises the 2D texel addressing
     const ev = createEvaluator(clip);
-    // The texture holds the space basis in float32 (the CPU path multiplies it with the knots in float64):
-    // each of the 8 terms knot * basis carries a relative rounding of 2^-24, so the bound per value is
-    // 1e-6 of the diagonal plus 4 * 2^-24 times the sum of the terms' magnitudes (the fits' basis sums
-    // cancel: terms reach ~100x the result). Cyclic clips have no such sum.
+    // Mode "fields" holds the CPU path's float32 P_k: 1e-6 of the diagonal. Mode "coefficients" holds the
+    // space basis in float32 (the CPU path multiplies it with the knots in float64): each of the 8 terms
+    // knot * basis carries a relative rounding of 2^-24, so the bound per value is 1e-6 of the diagonal plus
+    // 4 * 2^-24 times the sum of the terms' magnitudes (fitted clips' basis sums cancel: terms reach ~1e3
+    // times the result).
     for (const t of c.t) {
       const cpu = ev.evaluate(t);
       const u = timeUniforms(layout, t);
@@ -209,8 +217,9 @@ test('attachClip patches every built-in material (and the shadow materials) and 
       m.onBeforeCompile(shader, null);
       assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
       assert.match(shader.vertexShader, /transformed = pdePosition;/);
-      assert.ok(shader.uniforms.pdeKnotTex.value instanceof THREE.DataTexture);
-      assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:true/);
+      assert.ok(shader.uniforms.pdeFieldTex.value instanceof THREE.DataTexture);
+      assert.ok(shader.uniforms.pdeMuTex.value instanceof THREE.DataTexture);
+      assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:fields:true/);
     }
     assert.equal(player.gpu, true);
     assert.equal(player.uniforms.pdeEnabled.value, true);
@@ -261,6 +270,17 @@ test('a mesh with split vertices plays through a vertex map', () => {
     for (let w = 0; w < 3; w++) assert.equal(pos[k * 3 + w], cpu[corners[k] * 3 + w]);
   }
   assert.deepEqual(Array.from(player.attributes.pdeVertex.filter((_, i) => i % 3 === 0)), Array.from(corners));
+});
+
+test('mode auto picks fields within the budget and coefficients above it', () => {
+  const clip = loadCase(man.cases.find((x) => x.name === 'fit-displacement-chord'));
+  assert.equal(gpuLayout(clip).mode, 'fields');
+  assert.ok(gpuLayout(clip).textures.field);
+  const small = gpuLayout(clip, { fieldsBudget: 100 });
+  assert.equal(small.mode, 'coefficients');
+  assert.ok(small.textures.knot && !small.textures.field);
+  assert.match(glslHeader(gpuLayout(clip)), /#define PDEANIM_FIELDS/);
+  assert.doesNotMatch(glslHeader(small), /#define PDEANIM_FIELDS/);
 });
 
 test('the GLSL header declares what the patched chunks use', () => {
