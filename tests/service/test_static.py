@@ -27,7 +27,7 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
     assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
                    "getJob", "getClip", "getClipCoefficients", "getClipTopology", "getClipFrame",
-                   "getClipAnimation"}
+                   "getClipAnimation", "getExport"}
     assert "HTTPValidationError" not in doc["components"]["schemas"]
 
 
