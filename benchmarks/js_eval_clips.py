@@ -12,9 +12,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from model_common import ring_curves, torus_poses  # noqa: E402
-
 import trimesh  # noqa: E402
+from model_common import ring_curves, torus_poses  # noqa: E402
 
 from pdeanim.clip import write_clip_file  # noqa: E402
 from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip  # noqa: E402

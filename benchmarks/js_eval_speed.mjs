@@ -19,8 +19,9 @@ const NAMES = ['torus15k-displacement', 'torus15k-rigid', 'torus15k-loop', 'eel2
 
 if (!NAMES.every((n) => existsSync(join(dir, `${n}.clip`)))) {
   console.log(`making the clips in ${dir} ...`);
-  execFileSync(join(ROOT, '.venv', 'bin', 'python'), [join(ROOT, 'benchmarks', 'js_eval_clips.py'), dir],
-    { stdio: 'inherit' });
+  execFileSync(join(ROOT, '.venv', 'bin', 'python'), [join(ROOT, 'benchmarks', 'js_eval_clips.py'), dir], {
+    stdio: 'inherit',
+  });
 }
 
 function stats(samples) {
@@ -31,10 +32,13 @@ function stats(samples) {
 
 // deterministic pseudo-random times (a small LCG) so runs are comparable
 let seed = 12345;
-const rand = () => ((seed = (seed * 1103515245 + 12345) % 2147483648) / 2147483648);
+const rand = () => (seed = (seed * 1103515245 + 12345) % 2147483648) / 2147483648;
 
-console.log(`node ${process.version}, ${cpus().length} CPUs, load average ${loadavg().map((x) => x.toFixed(2)).join(' ')}`
-  + ' (shared machine)');
+console.log(
+  `node ${process.version}, ${cpus().length} CPUs, load average ${loadavg()
+    .map((x) => x.toFixed(2))
+    .join(' ')}` + ' (shared machine)',
+);
 for (const name of NAMES) {
   const bytes = readFileSync(join(dir, `${name}.clip`));
   const t0 = performance.now();
@@ -59,12 +63,24 @@ for (const name of NAMES) {
     timeUniforms(layout, t);
     return performance.now() - a;
   });
-  const extra = clip.kind === 'dynamic-pde' ? `, ${clip.nCurves} curves, ${clip.nSegments} segments, ${clip.motion}`
-    + `${clip.looping ? ', looping' : ''}` : ', cyclic-spine';
+  const extra =
+    clip.kind === 'dynamic-pde'
+      ? `, ${clip.nCurves} curves, ${clip.nSegments} segments, ${clip.motion}` +
+        `${clip.looping ? ', looping' : ''}`
+      : ', cyclic-spine';
   console.log(`${name}: ${clip.nVertices} vertices${extra}`);
-  console.log(`  CPU evaluate one frame: median ${s.median.toFixed(3)} ms, p10 ${s.p10.toFixed(3)} ms, `
-    + `p90 ${s.p90.toFixed(3)} ms (goal < 2 ms)`);
-  console.log(`  decode ${(t1 - t0).toFixed(1)} ms, precompute ${(t2 - t1).toFixed(1)} ms, GPU textures `
-    + `${(t4 - t3).toFixed(1)} ms; GPU-path JS per frame (uniforms): median ${(stats(uni).median * 1e3).toFixed(2)} us`);
+  console.log(
+    `  CPU evaluate one frame: median ${s.median.toFixed(3)} ms, p10 ${s.p10.toFixed(3)} ms, ` +
+      `p90 ${s.p90.toFixed(3)} ms (goal < 2 ms)`,
+  );
+  console.log(
+    `  decode ${(t1 - t0).toFixed(1)} ms, precompute ${(t2 - t1).toFixed(1)} ms, GPU textures ` +
+      `${(t4 - t3).toFixed(1)} ms; GPU-path JS per frame (uniforms): ` +
+      `median ${(stats(uni).median * 1e3).toFixed(2)} us`,
+  );
 }
-console.log(`load average after: ${loadavg().map((x) => x.toFixed(2)).join(' ')}`);
+console.log(
+  `load average after: ${loadavg()
+    .map((x) => x.toFixed(2))
+    .join(' ')}`,
+);

@@ -101,7 +101,8 @@ def _synthetic_dynamic(motion: str, param_mode: str, loop: bool) -> Callable[[],
         family = (2 * trig + space[None]).astype(np.uint8)
         m = rng.choice([0.0, 1e-13, 1e-3, 0.4, 2.0, 9.0, 32.0], (S, C, 3))
         m = np.where(trig == 1, rng.choice([0.0, 1e-3, 1.0, MU_TRIG_MAX * 0.9999], (S, C, 3)), m)
-        D = np.array([[0.0, 1e-5, 0.5], [2.0, 3.99, 4.0], [4.01, 8.0, 20.0], [1.0, 6.0, 0.05], [3.0, 3.0, 12.0]])
+        D = np.array([[0.0, 1e-5, 0.5], [2.0, 3.99, 4.0], [4.01, 8.0, 20.0], [1.0, 6.0, 0.05],
+                      [3.0, 3.0, 12.0]])
         knots = rng.normal(0, 0.05, (S + 1, C, 3, 4))
         if loop:
             knots[-1] = knots[0]
@@ -138,7 +139,8 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "synthetic-rigid-chord-loop": (_synthetic_dynamic("rigid", "chord", True), {}),
     "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
-    "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"), {}),
+    "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
+                                                {}),
 }
 
 

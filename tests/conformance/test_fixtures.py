@@ -1,4 +1,5 @@
-"""Drift test: the committed JS conformance fixtures are what the current Python library writes and evaluates."""
+"""Drift test: the committed JS conformance fixtures are what the current Python library writes and evaluates
+(regenerated and compared here: a format or evaluator change cannot leave the JS tests on stale data)."""
 
 from __future__ import annotations
 
@@ -44,8 +45,9 @@ def test_committed_cases_are_the_generated_set(fresh):
     committed, now = _manifest(FIXTURES), _manifest(fresh)
     assert [c["name"] for c in committed["cases"]] == list(CASES), f"fixtures are stale: run {REGEN}"
     strip = ("diagonal",)
-    assert [{k: v for k, v in c.items() if k not in strip} for c in committed["cases"]] == \
-        [{k: v for k, v in c.items() if k not in strip} for c in now["cases"]], f"fixtures are stale: run {REGEN}"
+    old = [{k: v for k, v in c.items() if k not in strip} for c in committed["cases"]]
+    new = [{k: v for k, v in c.items() if k not in strip} for c in now["cases"]]
+    assert old == new, f"fixtures are stale: run {REGEN}"
     assert committed["fixture_version"] == now["fixture_version"]
 
 
@@ -62,7 +64,8 @@ def test_committed_expected_positions_match_python_evaluator(name):
     clip = load_clip_file(FIXTURES / case["clip"])
     got = np.asarray(clip.evaluate(np.asarray(case["t"])), np.float64)
     want = _expected(FIXTURES, case)
-    # the evaluator works in float32: 1e-7 of the diagonal is a few float32 ulps (a re-run gives the same bits)
+    # the evaluator works in float32: 1e-7 of the diagonal is a few float32 ulps (a re-run gives the same
+    # bits)
     assert np.abs(got - want).max() <= 1e-7 * case["diagonal"], f"the Python evaluator drifted: run {REGEN}"
 
 

@@ -22,16 +22,22 @@ function read(path, what) {
   try {
     return readFileSync(path);
   } catch (err) {
-    throw new UsageError(`cannot read ${what} ${path}: ${err.code === 'ENOENT' ? 'no such file' : err.message}`);
+    throw new UsageError(
+      `cannot read ${what} ${path}: ${err.code === 'ENOENT' ? 'no such file' : err.message}`,
+    );
   }
 }
 
 function parseTimes(text) {
-  const parts = String(text).split(',').map((s) => s.trim());
-  if (!parts.length || parts.some((s) => s === '')) throw new UsageError(`--t must be a comma-separated list of numbers, got ${JSON.stringify(text)}`);
+  const parts = String(text)
+    .split(',')
+    .map((s) => s.trim());
+  if (!parts.length || parts.some((s) => s === ''))
+    throw new UsageError(`--t must be a comma-separated list of numbers, got ${JSON.stringify(text)}`);
   return parts.map((s) => {
     const t = Number(s);
-    if (!Number.isFinite(t)) throw new UsageError(`--t values must be finite numbers, got ${JSON.stringify(s)}`);
+    if (!Number.isFinite(t))
+      throw new UsageError(`--t values must be finite numbers, got ${JSON.stringify(s)}`);
     return t;
   });
 }
@@ -51,9 +57,17 @@ function joinValues(argv) {
 async function main(argv) {
   let parsed;
   try {
-    parsed = parseArgs({ args: joinValues(argv), allowPositionals: true, options: {
-      t: { type: 'string' }, out: { type: 'string' }, coefficients: { type: 'string' },
-      topology: { type: 'string' }, help: { type: 'boolean', short: 'h' } } });
+    parsed = parseArgs({
+      args: joinValues(argv),
+      allowPositionals: true,
+      options: {
+        t: { type: 'string' },
+        out: { type: 'string' },
+        coefficients: { type: 'string' },
+        topology: { type: 'string' },
+        help: { type: 'boolean', short: 'h' },
+      },
+    });
   } catch (err) {
     throw new UsageError(err.message);
   }
@@ -62,7 +76,8 @@ async function main(argv) {
     process.stdout.write(`${USAGE}\n`);
     return;
   }
-  if (positionals.length > 1) throw new UsageError(`expected at most one CLIP file, got ${positionals.length} paths`);
+  if (positionals.length > 1)
+    throw new UsageError(`expected at most one CLIP file, got ${positionals.length} paths`);
   if (o.t === undefined) throw new UsageError('--t is required');
   if (o.out === undefined) throw new UsageError('--out is required');
   const times = parseTimes(o.t);
@@ -86,7 +101,8 @@ async function main(argv) {
   const out = new Float32Array(times.length * N);
   times.forEach((t, k) => ev.evaluate(t, out.subarray(k * N, (k + 1) * N)));
   const bytes = new Uint8Array(out.buffer);
-  if (new Uint8Array(new Uint16Array([1]).buffer)[0] !== 1) { // big-endian host: swap to little-endian
+  if (new Uint8Array(new Uint16Array([1]).buffer)[0] !== 1) {
+    // big-endian host: swap to little-endian
     const view = new DataView(out.buffer);
     for (let i = 0; i < out.length; i++) view.setFloat32(i * 4, out[i], true);
   }

@@ -21,11 +21,14 @@ function texture(nTexels, width = TEXTURE_WIDTH) {
  *
  * mode "fields" (dynamic clips; the default while (S+1) x V texels fit fieldsBudget bytes) stores every
  * knot's per-vertex contribution P_k = knots_k . S(u), computed in float64 like the CPU path, so the shader
- * only forms base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the knots and the per-vertex space basis
+ * only forms base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the knots and the per-vertex basis
  * (far smaller, but the shader then sums knot x basis terms in float32, and fitted clips' terms can be ~1e3
  * times the result: ~1e-4 of the diagonal instead of ~1e-7).
  */
-export function gpuLayout(clip, { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES } = {}) {
+export function gpuLayout(
+  clip,
+  { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES } = {},
+) {
   if (clip.kind === 'cyclic-spine') return cyclicLayout(clip, width);
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, family, m, rigid } = clip;
   if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
@@ -51,8 +54,8 @@ export function gpuLayout(clip, { width = TEXTURE_WIDTH, mode = 'auto', fieldsBu
         for (let w = 0; w < 3; w++) {
           const b = v * 12 + w * 4;
           const k = kc + w * 4;
-          field.data[o + w] = B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2]
-            + B[b + 3] * knots[k + 3];
+          field.data[o + w] =
+            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
         }
       }
     }
@@ -74,7 +77,7 @@ export function gpuLayout(clip, { width = TEXTURE_WIDTH, mode = 'auto', fieldsBu
     const rt = texture((Sr + 1) * C * 2, width); // per (knot, curve): (rotvec, rot mu), (centroid, trans mu)
     for (let s = 0; s <= Sr; s++) {
       for (let c = 0; c < C; c++) {
-        const o = ((s * C + c) * 2) * 4;
+        const o = (s * C + c) * 2 * 4;
         const k = (s * C + c) * 3;
         rt.data.set(rigid.rotKnots.subarray(k, k + 3), o);
         rt.data.set(rigid.transKnots.subarray(k, k + 3), o + 4);
@@ -84,8 +87,16 @@ export function gpuLayout(clip, { width = TEXTURE_WIDTH, mode = 'auto', fieldsBu
     }
     textures.rigid = rt;
   }
-  return { kind: clip.kind, mode: useFields ? 'fields' : 'coefficients', rigid: Boolean(rigid), nCurves: C,
-    nVertices: V, textures, clip, maxHeight: Math.max(...Object.values(textures).map((x) => x.height)) };
+  return {
+    kind: clip.kind,
+    mode: useFields ? 'fields' : 'coefficients',
+    rigid: Boolean(rigid),
+    nCurves: C,
+    nVertices: V,
+    textures,
+    clip,
+    maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
+  };
 }
 
 function cyclicLayout(clip, width) {
@@ -102,9 +113,19 @@ function cyclicLayout(clip, width) {
     vertex.data[o + 7] = ev.gC[v];
     vertex.data[o + 8] = ev.rl[v];
   }
-  return { kind: clip.kind, mode: 'cyclic', rigid: false, nCurves: 0, nVertices: V, textures: { vertex }, clip,
+  return {
+    kind: clip.kind,
+    mode: 'cyclic',
+    rigid: false,
+    nCurves: 0,
+    nVertices: V,
+    textures: { vertex },
+    clip,
     maxHeight: vertex.height,
-    axis: ev.axis, bend: ev.bend, rotate: ev.rotate };
+    axis: ev.axis,
+    bend: ev.bend,
+    rotate: ev.rotate,
+  };
 }
 
 /** The uniforms that depend on t: segment and local time (and the rigid ones), or the wave phase. */
@@ -159,8 +180,11 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
   for (let i = 0; i < n; i++) {
     const a = nb[i * 2];
     const b = nb[i * 2 + 1];
-    const ok = best[i] > 1e-6 && vertexMap[a] !== vertexMap[i] && vertexMap[b] !== vertexMap[i]
-      && vertexMap[a] !== vertexMap[b];
+    const ok =
+      best[i] > 1e-6 &&
+      vertexMap[a] !== vertexMap[i] &&
+      vertexMap[b] !== vertexMap[i] &&
+      vertexMap[a] !== vertexMap[b];
     pdeVertex[i * 3] = vertexMap[i];
     pdeVertex[i * 3 + 1] = ok ? vertexMap[a] : vertexMap[i];
     pdeVertex[i * 3 + 2] = ok ? vertexMap[b] : vertexMap[i];
@@ -189,7 +213,8 @@ function triangleQuality(pos, p, a, b, e) {
 
 /**
  * Orthonormal frame (rows t1, t2, n) of triangle (p, a, b) of positions (any vertex indexing) into out (9):
- * t1 along p->a, n the triangle normal, t2 = n x t1. The shader builds the same frame from evaluated positions.
+ * t1 along p->a, n the triangle normal, t2 = n x t1. The shader builds the same frame from evaluated
+ * positions.
  */
 export function triangleFrame(pos, p, a, b, out) {
   const e1 = [0, 1, 2].map((w) => pos[a * 3 + w] - pos[p * 3 + w]);

@@ -1,8 +1,15 @@
 // three.js integration: play a pdeanim clip on an existing mesh, evaluated in the vertex shader (data
 // textures + per-vertex attributes + per-frame uniforms), keeping the mesh's materials; CPU fallback.
 
-import { DataTexture, FloatType, MeshDepthMaterial, MeshDistanceMaterial, NearestFilter, RGBAFormat,
-  BufferAttribute } from 'three';
+import {
+  DataTexture,
+  FloatType,
+  MeshDepthMaterial,
+  MeshDistanceMaterial,
+  NearestFilter,
+  RGBAFormat,
+  BufferAttribute,
+} from 'three';
 import { createEvaluator } from './clip.js';
 import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from './gpu.js';
 
@@ -27,8 +34,10 @@ function resolveVertexMap(geometry, clip, vertexMap) {
   }
   if (!map) {
     if (count !== clip.nVertices) {
-      throw new Error(`the mesh has ${count} vertices and the clip ${clip.nVertices}: pass options.vertexMap `
-        + '(the clip vertex of each mesh vertex) or a _pdeanim_vertex attribute');
+      throw new Error(
+        `the mesh has ${count} vertices and the clip ${clip.nVertices}: pass options.vertexMap ` +
+          '(the clip vertex of each mesh vertex) or a _pdeanim_vertex attribute',
+      );
     }
     map = Int32Array.from({ length: count }, (_, i) => i);
   }
@@ -41,13 +50,19 @@ function resolveVertexMap(geometry, clip, vertexMap) {
 function patchShader(shader, header) {
   const vs = shader.vertexShader;
   if (!vs.includes('#include <begin_vertex>') || !vs.includes('void main() {')) {
-    throw new Error('pdeanim: the material\'s vertex shader has no <begin_vertex> chunk to patch');
+    throw new Error("pdeanim: the material's vertex shader has no <begin_vertex> chunk to patch");
   }
   shader.vertexShader = vs
     .replace('#include <common>', `#include <common>\n${header}`)
     .replace('void main() {', 'void main() {\n\tif (pdeEnabled) pdeCompute();')
-    .replace('#include <beginnormal_vertex>', '#include <beginnormal_vertex>\n\tif (pdeEnabled) objectNormal = pdeNormal;')
-    .replace('#include <begin_vertex>', '#include <begin_vertex>\n\tif (pdeEnabled) transformed = pdePosition;');
+    .replace(
+      '#include <beginnormal_vertex>',
+      '#include <beginnormal_vertex>\n\tif (pdeEnabled) objectNormal = pdeNormal;',
+    )
+    .replace(
+      '#include <begin_vertex>',
+      '#include <begin_vertex>\n\tif (pdeEnabled) transformed = pdePosition;',
+    );
 }
 
 /**
@@ -57,8 +72,14 @@ function patchShader(shader, header) {
  * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout)}.
  */
 export function attachClip(mesh, clip, options = {}) {
-  const { gpu = true, textureWidth = 4096, maxTextureSize = 4096, shadows = true, frustumCulled = false,
-    gpuMode = 'auto' } = options;
+  const {
+    gpu = true,
+    textureWidth = 4096,
+    maxTextureSize = 4096,
+    shadows = true,
+    frustumCulled = false,
+    gpuMode = 'auto',
+  } = options;
   const geometry = mesh.geometry;
   const vertexMap = resolveVertexMap(geometry, clip, options.vertexMap);
   if (!geometry.getAttribute('normal')) geometry.computeVertexNormals();
@@ -66,23 +87,39 @@ export function attachClip(mesh, clip, options = {}) {
   const nrmAttr = geometry.getAttribute('normal');
   const restPositions = Float32Array.from(posAttr.array);
   const restNormals = Float32Array.from(nrmAttr.array);
-  const attrs = meshAttributes({ vertexMap, positions: restPositions, normals: restNormals,
-    index: geometry.index ? geometry.index.array : null });
+  const attrs = meshAttributes({
+    vertexMap,
+    positions: restPositions,
+    normals: restNormals,
+    index: geometry.index ? geometry.index.array : null,
+  });
   geometry.setAttribute('pdeVertex', new BufferAttribute(attrs.pdeVertex, 3));
   geometry.setAttribute('pdeNormalFrame', new BufferAttribute(attrs.pdeNormalFrame, 3));
 
   const layout = gpuLayout(clip, { width: textureWidth, mode: gpuMode });
-  const gpuReason = layout.maxHeight > maxTextureSize
-    ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})` : null;
+  const gpuReason =
+    layout.maxHeight > maxTextureSize
+      ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})`
+      : null;
   const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
   const uniforms = {
-    pdeEnabled: { value: false }, pdeSeg: { value: 0 }, pdeTau: { value: 0 }, pdeCurves: { value: layout.nCurves },
-    pdeRSeg: { value: 0 }, pdeRTau: { value: 0 }, pdeSinWt: { value: 0 }, pdeCosWt: { value: 1 },
-    pdeVertices: { value: layout.nVertices }, pdeFieldTex: { value: textures.field ?? null },
-    pdeVertexTex: { value: textures.vertex }, pdeKnotTex: { value: textures.knot ?? null },
-    pdeMuTex: { value: textures.mu ?? null }, pdeRigidTex: { value: textures.rigid ?? null },
+    pdeEnabled: { value: false },
+    pdeSeg: { value: 0 },
+    pdeTau: { value: 0 },
+    pdeCurves: { value: layout.nCurves },
+    pdeRSeg: { value: 0 },
+    pdeRTau: { value: 0 },
+    pdeSinWt: { value: 0 },
+    pdeCosWt: { value: 1 },
+    pdeVertices: { value: layout.nVertices },
+    pdeFieldTex: { value: textures.field ?? null },
+    pdeVertexTex: { value: textures.vertex },
+    pdeKnotTex: { value: textures.knot ?? null },
+    pdeMuTex: { value: textures.mu ?? null },
+    pdeRigidTex: { value: textures.rigid ?? null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
-    pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] }, pdeRotate: { value: Boolean(layout.rotate) },
+    pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
+    pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout);
   const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}`;
@@ -90,7 +127,8 @@ export function attachClip(mesh, clip, options = {}) {
     const m = material.clone();
     const previous = material.onBeforeCompile;
     m.onBeforeCompile = (shader, renderer) => {
-      if (previous && previous !== material.constructor.prototype.onBeforeCompile) previous.call(m, shader, renderer);
+      if (previous && previous !== material.constructor.prototype.onBeforeCompile)
+        previous.call(m, shader, renderer);
       Object.assign(shader.uniforms, uniforms);
       patchShader(shader, header);
     };
@@ -129,11 +167,21 @@ export function attachClip(mesh, clip, options = {}) {
   }
 
   const player = {
-    clip, layout, uniforms, textures, evaluator, vertexMap, attributes: attrs,
+    clip,
+    layout,
+    uniforms,
+    textures,
+    evaluator,
+    vertexMap,
+    attributes: attrs,
     /** Why the GPU path is unavailable (null when it is available). */
     gpuUnavailableReason: gpuReason,
-    get gpu() { return onGPU; },
-    get time() { return time; },
+    get gpu() {
+      return onGPU;
+    },
+    get time() {
+      return time;
+    },
     /** Show the clip at normalised time t (GPU: a few uniforms; CPU: positions and normals rewritten). */
     setTime(t) {
       const u = timeUniforms(layout, t);

@@ -12,12 +12,18 @@ import { dirname, extname, join, normalize } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..');
-const CASES = ['fit-rigid-paper-loop', 'fit-displacement-chord', 'synthetic-rigid-paper',
-  'cyclic-trout-travelling-rotate-vertical'];
+const CASES = [
+  'fit-rigid-paper-loop',
+  'fit-displacement-chord',
+  'synthetic-rigid-paper',
+  'cyclic-trout-travelling-rotate-vertical',
+];
 const TYPES = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.html': 'text/html' };
 
 function findChromium() {
-  const names = [process.env.PDEANIM_CHROMIUM, 'chromium', 'chromium-browser', 'google-chrome'].filter(Boolean);
+  const names = [process.env.PDEANIM_CHROMIUM, 'chromium', 'chromium-browser', 'google-chrome'].filter(
+    Boolean,
+  );
   for (const name of names) {
     const r = spawnSync(name, ['--version'], { encoding: 'utf8', timeout: 60_000 });
     if (r.status === 0) return name;
@@ -28,11 +34,15 @@ function findChromium() {
 /** Serve clients/js read-only on 127.0.0.1 and resolve with the page's POSTed result. */
 function serve() {
   let deliver;
-  const result = new Promise((resolve) => { deliver = resolve; });
+  const result = new Promise((resolve) => {
+    deliver = resolve;
+  });
   const server = createServer((req, res) => {
     if (req.method === 'POST' && req.url === '/result') {
       let body = '';
-      req.on('data', (c) => { body += c; });
+      req.on('data', (c) => {
+        body += c;
+      });
       req.on('end', () => {
         res.end('ok');
         const r = JSON.parse(body);
@@ -54,39 +64,59 @@ function serve() {
 
 const chromium = findChromium();
 
-test('the vertex shader renders what the CPU path renders, in headless Chromium', { skip: chromium ? false
-  : 'no Chromium found (set PDEANIM_CHROMIUM or install chromium)', timeout: 300_000 }, async () => {
-  const { server, result } = await serve();
-  const profile = mkdtempSync(join(tmpdir(), 'pdeanim-chromium-'));
-  const url = `http://127.0.0.1:${server.address().port}/test/browser/gpu.html?cases=${CASES.join(',')}`;
-  const browser = spawn(chromium, ['--headless=new', '--no-sandbox', '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader', '--disable-gpu-sandbox', '--no-first-run', `--user-data-dir=${profile}`, url],
-  { stdio: 'ignore' });
-  let timer;
-  try {
-    const r = await Promise.race([result, new Promise((_, reject) => {
-      timer = setTimeout(() => reject(new Error('no result from the page within 240 s')), 240_000);
-    })]);
-    assert.deepEqual(r.errors, []);
-    assert.equal(r.cases.length, CASES.length);
-    for (const c of r.cases) {
-      // same mesh, same lighting: only rasterisation at silhouettes may differ (positions agree to ~1e-5
-      // of the diagonal, float32 on the GPU); 2% of the pixels is several times what the runs show
-      for (const k of ['gpuVsCpu02', 'gpuVsCpu07']) {
-        assert.ok(c[k].covered > 0.05, `${c.name}: the mesh covers ${c[k].covered} of the image`);
-        assert.ok(c[k].differ < 0.02, `${c.name} ${k}: ${c[k].differ} of the pixels differ`);
+test(
+  'the vertex shader renders what the CPU path renders, in headless Chromium',
+  {
+    skip: chromium ? false : 'no Chromium found (set PDEANIM_CHROMIUM or install chromium)',
+    timeout: 300_000,
+  },
+  async () => {
+    const { server, result } = await serve();
+    const profile = mkdtempSync(join(tmpdir(), 'pdeanim-chromium-'));
+    const url = `http://127.0.0.1:${server.address().port}/test/browser/gpu.html?cases=${CASES.join(',')}`;
+    const browser = spawn(
+      chromium,
+      [
+        '--headless=new',
+        '--no-sandbox',
+        '--use-angle=swiftshader',
+        '--enable-unsafe-swiftshader',
+        '--disable-gpu-sandbox',
+        '--no-first-run',
+        `--user-data-dir=${profile}`,
+        url,
+      ],
+      { stdio: 'ignore' },
+    );
+    let timer;
+    try {
+      const r = await Promise.race([
+        result,
+        new Promise((_, reject) => {
+          timer = setTimeout(() => reject(new Error('no result from the page within 240 s')), 240_000);
+        }),
+      ]);
+      assert.deepEqual(r.errors, []);
+      assert.equal(r.cases.length, CASES.length);
+      for (const c of r.cases) {
+        // same mesh, same lighting: only rasterisation at silhouettes may differ (positions agree to ~1e-5
+        // of the diagonal, float32 on the GPU); 2% of the pixels is several times what the runs show
+        for (const k of ['gpuVsCpu02', 'gpuVsCpu07']) {
+          assert.ok(c[k].covered > 0.05, `${c.name}: the mesh covers ${c[k].covered} of the image`);
+          assert.ok(c[k].differ < 0.02, `${c.name} ${k}: ${c[k].differ} of the pixels differ`);
+        }
+        // float32 on the GPU, and software WebGL's exp/sin are less exact than float32 rounding: worst seen
+        // is 5.8e-5 of the diagonal (rigid clips: rotations); the CPU path is the reference
+        assert.ok(c.gpuError < 1.5e-4, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
+        assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
       }
-      // float32 on the GPU, and software WebGL's exp/sin are less exact than float32 rounding: the worst seen
-      // is 5.8e-5 of the diagonal (rigid clips: rotations); the CPU path is the reference
-      assert.ok(c.gpuError < 1.5e-4, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
-      assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
+    } finally {
+      clearTimeout(timer);
+      const exited = new Promise((resolve) => browser.once('exit', resolve));
+      if (browser.exitCode === null) browser.kill('SIGKILL');
+      await exited;
+      server.close();
+      rmSync(profile, { recursive: true, force: true, maxRetries: 5, retryDelay: 200 });
     }
-  } finally {
-    clearTimeout(timer);
-    const exited = new Promise((resolve) => browser.once('exit', resolve));
-    if (browser.exitCode === null) browser.kill('SIGKILL');
-    await exited;
-    server.close();
-    rmSync(profile, { recursive: true, force: true, maxRetries: 5, retryDelay: 200 });
-  }
-});
+  },
+);

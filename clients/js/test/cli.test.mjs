@@ -24,8 +24,10 @@ function readF32LE(path) {
   return Float32Array.from({ length: b.byteLength / 4 }, (_, i) => view.getFloat32(i * 4, true));
 }
 
-for (const c of [man.cases.find((x) => x.motion === 'rigid' && x.looping),
-  man.cases.find((x) => x.kind === 'cyclic-spine')]) {
+for (const c of [
+  man.cases.find((x) => x.motion === 'rigid' && x.looping),
+  man.cases.find((x) => x.kind === 'cyclic-spine'),
+]) {
   test(`pdeanim-eval writes the expected frames of ${c.name}`, () => {
     const out = join(tmp, `${c.name}.bin`);
     const r = run([join(FIXTURES, c.clip), '--t', c.t.join(','), '--out', out]);
@@ -44,8 +46,16 @@ test('pdeanim-eval reads the two parts from separate files', () => {
   writeFileSync(join(tmp, 'topo.bin'), p.topology);
   writeFileSync(join(tmp, 'coef.bin'), p.coefficients);
   const out = join(tmp, 'parts.bin');
-  const r = run(['--coefficients', join(tmp, 'coef.bin'), '--topology', join(tmp, 'topo.bin'), '--t', '0.25,-0.5',
-    '--out', out]);
+  const r = run([
+    '--coefficients',
+    join(tmp, 'coef.bin'),
+    '--topology',
+    join(tmp, 'topo.bin'),
+    '--t',
+    '0.25,-0.5',
+    '--out',
+    out,
+  ]);
   assert.equal(r.status, 0, r.stderr);
   assert.equal(readFileSync(out).byteLength, 2 * c.n_vertices * 3 * 4);
 });

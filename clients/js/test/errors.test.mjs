@@ -4,7 +4,13 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import {
-  ClipFormatError, createEvaluator, decodeClip, decodeClipFile, decodeContainer, loadClip, splitClipFile,
+  ClipFormatError,
+  createEvaluator,
+  decodeClip,
+  decodeClipFile,
+  decodeContainer,
+  loadClip,
+  splitClipFile,
 } from '../src/index.js';
 import { FIXTURES, encodeContainer, manifest, readBytes } from './helpers.mjs';
 
@@ -25,16 +31,24 @@ test('truncated, foreign and future containers are rejected with a reason', () =
   const future = parts.coefficients.slice();
   new DataView(future.buffer).setUint32(8, 2, true);
   assert.throws(() => decodeContainer(future), /unsupported container version 2/);
-  assert.throws(() => decodeContainer(parts.coefficients.slice(0, parts.coefficients.length - 64)),
-    /outside the container/);
+  assert.throws(
+    () => decodeContainer(parts.coefficients.slice(0, parts.coefficients.length - 64)),
+    /outside the container/,
+  );
 });
 
 test('unknown format versions, kinds and motions are rejected', () => {
-  const v2 = edited(parts.coefficients, ({ header }) => { header.format_version = 2; });
+  const v2 = edited(parts.coefficients, ({ header }) => {
+    header.format_version = 2;
+  });
   assert.throws(() => decodeClip(parts.topology, v2), /unsupported dynamic-pde coefficients version 2/);
-  const kind = edited(parts.coefficients, ({ header }) => { header.kind = 'spline'; });
+  const kind = edited(parts.coefficients, ({ header }) => {
+    header.kind = 'spline';
+  });
   assert.throws(() => decodeClip(parts.topology, kind), /unknown clip kind "spline"/);
-  const motion = edited(parts.coefficients, ({ header }) => { header.motion = 'wobble'; });
+  const motion = edited(parts.coefficients, ({ header }) => {
+    header.motion = 'wobble';
+  });
   assert.throws(() => decodeClip(parts.topology, motion), /unknown motion mode/);
   assert.throws(() => decodeClip(parts.coefficients, parts.topology), /expected a topology part/);
 });
@@ -65,7 +79,9 @@ test('inconsistent arrays are rejected', () => {
 });
 
 test('coefficients made for another topology are refused by loadClip', async () => {
-  const other = edited(parts.topology, ({ header }) => { header.param_mode = 'paper'; });
+  const other = edited(parts.topology, ({ header }) => {
+    header.param_mode = 'paper';
+  });
   await assert.rejects(loadClip(other, parts.coefficients), ClipFormatError);
   await assert.rejects(loadClip(other, parts.coefficients), /topology_id mismatch/);
 });
@@ -86,10 +102,16 @@ test('non-finite times and short buffers are refused', () => {
 test('cyclic clips with a bad swim header are rejected', () => {
   const c = man.cases.find((x) => x.kind === 'cyclic-spine');
   const p = splitClipFile(readBytes(join(FIXTURES, c.clip)));
-  const bad = edited(p.coefficients, ({ header }) => { header.swim.frequency = 0; });
+  const bad = edited(p.coefficients, ({ header }) => {
+    header.swim.frequency = 0;
+  });
   assert.throws(() => decodeClip(p.topology, bad), /invalid swim parameters/);
-  const future = edited(p.coefficients, ({ header }) => { header.format_version = 2; });
+  const future = edited(p.coefficients, ({ header }) => {
+    header.format_version = 2;
+  });
   assert.throws(() => decodeClip(p.topology, future), /unsupported cyclic-spine coefficients version 2/);
-  const noSpine = edited(p.coefficients, ({ arrays }) => { delete arrays.spine; });
+  const noSpine = edited(p.coefficients, ({ arrays }) => {
+    delete arrays.spine;
+  });
   assert.throws(() => decodeClip(p.topology, noSpine), /lacks arrays: spine/);
 });

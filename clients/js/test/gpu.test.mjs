@@ -28,9 +28,9 @@ function sinhRatio(x, m) {
     const b = m * m;
     const sa = 1 + a * (1 / 6 + a * (1 / 120 + a * (1 / 5040 + a / 362880)));
     const sb = 1 + b * (1 / 6 + b * (1 / 120 + b * (1 / 5040 + b / 362880)));
-    return x * sa / sb;
+    return (x * sa) / sb;
   }
-  return Math.exp(m * (x - 1)) * (1 - Math.exp(-2 * m * x)) / (1 - Math.exp(-2 * m));
+  return (Math.exp(m * (x - 1)) * (1 - Math.exp(-2 * m * x))) / (1 - Math.exp(-2 * m));
 }
 
 function sinRatio(x, m) {
@@ -39,7 +39,7 @@ function sinRatio(x, m) {
     const b = m * m;
     const sa = 1 - a * (1 / 6 - a * (1 / 120 - a * (1 / 5040 - a / 362880)));
     const sb = 1 - b * (1 / 6 - b * (1 / 120 - b * (1 / 5040 - b / 362880)));
-    return x * sa / sb;
+    return (x * sa) / sb;
   }
   return Math.sin(m * x) / Math.sin(m);
 }
@@ -62,14 +62,23 @@ function rigidPair(tau, mu) {
   return [sinhRatio(1 - tau, mu), sinhRatio(tau, mu)];
 }
 
-function rodrigues(r) { // rows of I + a K + b K^2
+function rodrigues(r) {
+  // rows of I + a K + b K^2
   const t2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
   const th = Math.sqrt(t2);
-  const a = th < 0.05 ? 1 - t2 / 6 + t2 * t2 / 120 : Math.sin(th) / th;
-  const b = th < 0.05 ? 0.5 - t2 / 24 + t2 * t2 / 720 : (1 - Math.cos(th)) / t2;
-  const K = [[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]];
-  return [0, 1, 2].map((i) => [0, 1, 2].map((j) => (i === j ? 1 : 0) + a * K[i][j]
-    + b * (K[i][0] * K[0][j] + K[i][1] * K[1][j] + K[i][2] * K[2][j])));
+  const a = th < 0.05 ? 1 - t2 / 6 + (t2 * t2) / 120 : Math.sin(th) / th;
+  const b = th < 0.05 ? 0.5 - t2 / 24 + (t2 * t2) / 720 : (1 - Math.cos(th)) / t2;
+  const K = [
+    [0, -r[2], r[1]],
+    [r[2], 0, -r[0]],
+    [-r[1], r[0], 0],
+  ];
+  return [0, 1, 2].map((i) =>
+    [0, 1, 2].map(
+      (j) =>
+        (i === j ? 1 : 0) + a * K[i][j] + b * (K[i][0] * K[0][j] + K[i][1] * K[1][j] + K[i][2] * K[2][j]),
+    ),
+  );
 }
 
 /** The shader's pdeEval(v) in JS. */
@@ -97,7 +106,9 @@ function emulate(layout, u, v) {
     if (fields) {
       const [f0, f1] = timePair(u.tau, fetch(T.mu, u.seg * C + c)[w]);
       const V = layout.nVertices;
-      return head[1 + w] + f0 * fetch(T.field, u.seg * V + v)[w] + f1 * fetch(T.field, (u.seg + 1) * V + v)[w];
+      return (
+        head[1 + w] + f0 * fetch(T.field, u.seg * V + v)[w] + f1 * fetch(T.field, (u.seg + 1) * V + v)[w]
+      );
     }
     const mu = fetch(T.mu, u.seg * C + c)[w];
     const [f0, f1] = timePair(u.tau, mu);
@@ -114,7 +125,9 @@ function emulate(layout, u, v) {
     const pr = rigidPair(u.rtau, r0[3]);
     const pt = rigidPair(u.rtau, c0[3]);
     const R = rodrigues([0, 1, 2].map((k) => pr[0] * r0[k] + pr[1] * r1[k]));
-    p = [0, 1, 2].map((i) => R[i][0] * p[0] + R[i][1] * p[1] + R[i][2] * p[2] + pt[0] * c0[i] + pt[1] * c1[i]);
+    p = [0, 1, 2].map(
+      (i) => R[i][0] * p[0] + R[i][1] * p[1] + R[i][2] * p[2] + pt[0] * c0[i] + pt[1] * c1[i],
+    );
   }
   return p;
 }
@@ -138,8 +151,14 @@ function loadCase(c) {
   return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
 }
 
-for (const [c, mode] of man.cases.flatMap((x) => (x.kind === 'dynamic-pde' ? [[x, 'fields'], [x, 'coefficients']]
-  : [[x, 'auto']]))) {
+for (const [c, mode] of man.cases.flatMap((x) =>
+  x.kind === 'dynamic-pde'
+    ? [
+        [x, 'fields'],
+        [x, 'coefficients'],
+      ]
+    : [[x, 'auto']],
+)) {
   test(`emulated shader (${mode}) matches the CPU evaluator: ${c.name}`, () => {
     const clip = loadCase(c);
     const layout = gpuLayout(clip, { width: 64, mode }); // a narrow texture exercises the 2D texel addressing
@@ -158,7 +177,10 @@ for (const [c, mode] of man.cases.flatMap((x) => (x.kind === 'dynamic-pde' ? [[x
         if (layout.rigid) mag = mag.map(() => Math.max(...mag)); // the rotation mixes the coordinates
         for (let w = 0; w < 3; w++) {
           const tol = 1e-6 * c.diagonal + 4 * 2 ** -24 * mag[w];
-          assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= tol, `t = ${t}, v = ${v}: ${g[w]} vs ${cpu[v * 3 + w]}`);
+          assert.ok(
+            Math.abs(g[w] - cpu[v * 3 + w]) <= tol,
+            `t = ${t}, v = ${v}: ${g[w]} vs ${cpu[v * 3 + w]}`,
+          );
         }
       }
     }
@@ -168,33 +190,56 @@ for (const [c, mode] of man.cases.flatMap((x) => (x.kind === 'dynamic-pde' ? [[x
 test('frame-rotated normals follow the deformed surface', () => {
   // fitted and cyclic clips (real surfaces); not fit-absolute-paper, whose fit folds the 42-vertex sphere
   // (recomputed normals flip there), nor the synthetic clips (random coefficients, no coherent surface)
-  const real = man.cases.filter((x) => (x.name.startsWith('fit-') && x.name !== 'fit-absolute-paper')
-    || x.kind === 'cyclic-spine');
+  const real = man.cases.filter(
+    (x) => (x.name.startsWith('fit-') && x.name !== 'fit-absolute-paper') || x.kind === 'cyclic-spine',
+  );
   for (const c of real) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
     const rest = ev.evaluate(0);
     const restNormals = computeNormals(rest, clip.faces);
     const map = Int32Array.from({ length: clip.nVertices }, (_, i) => i);
-    const attrs = meshAttributes({ vertexMap: map, positions: rest, normals: restNormals, index: clip.faces });
+    const attrs = meshAttributes({
+      vertexMap: map,
+      positions: rest,
+      normals: restNormals,
+      index: clip.faces,
+    });
     for (const t of [0.3, 0.8]) {
       const pos = ev.evaluate(t);
       const got = frameNormals(pos, attrs, restNormals, new Float32Array(pos.length));
       const want = computeNormals(pos, clip.faces);
       let sum = 0;
-      for (let i = 0; i < pos.length; i += 3) sum += got[i] * want[i] + got[i + 1] * want[i + 1] + got[i + 2] * want[i + 2];
+      for (let i = 0; i < pos.length; i += 3)
+        sum += got[i] * want[i] + got[i + 1] * want[i + 1] + got[i + 2] * want[i + 2];
       // coarse test meshes (42 / ~200 vertices): one triangle's frame vs the area-weighted mean of the ring
       assert.ok(sum / clip.nVertices > 0.97, `${c.name} t=${t}: mean cos ${sum / clip.nVertices}`);
     }
   }
 });
 
-const MATERIALS = [THREE.MeshStandardMaterial, THREE.MeshPhysicalMaterial, THREE.MeshLambertMaterial,
-  THREE.MeshPhongMaterial, THREE.MeshBasicMaterial, THREE.MeshToonMaterial, THREE.MeshNormalMaterial,
-  THREE.MeshMatcapMaterial];
-const SHADERS = { MeshStandardMaterial: 'standard', MeshPhysicalMaterial: 'physical', MeshLambertMaterial: 'lambert',
-  MeshPhongMaterial: 'phong', MeshBasicMaterial: 'basic', MeshToonMaterial: 'toon', MeshNormalMaterial: 'normal',
-  MeshMatcapMaterial: 'matcap', MeshDepthMaterial: 'depth', MeshDistanceMaterial: THREE.ShaderLib.distanceRGBA ? 'distanceRGBA' : 'distance' };
+const MATERIALS = [
+  THREE.MeshStandardMaterial,
+  THREE.MeshPhysicalMaterial,
+  THREE.MeshLambertMaterial,
+  THREE.MeshPhongMaterial,
+  THREE.MeshBasicMaterial,
+  THREE.MeshToonMaterial,
+  THREE.MeshNormalMaterial,
+  THREE.MeshMatcapMaterial,
+];
+const SHADERS = {
+  MeshStandardMaterial: 'standard',
+  MeshPhysicalMaterial: 'physical',
+  MeshLambertMaterial: 'lambert',
+  MeshPhongMaterial: 'phong',
+  MeshBasicMaterial: 'basic',
+  MeshToonMaterial: 'toon',
+  MeshNormalMaterial: 'normal',
+  MeshMatcapMaterial: 'matcap',
+  MeshDepthMaterial: 'depth',
+  MeshDistanceMaterial: THREE.ShaderLib.distanceRGBA ? 'distanceRGBA' : 'distance',
+};
 
 function meshOf(clip, Material) {
   const g = new THREE.BufferGeometry();
@@ -213,7 +258,11 @@ test('attachClip patches every built-in material (and the shadow materials) and 
     assert.notEqual(mesh.material, original);
     assert.equal(mesh.material.type, original.type);
     for (const m of [mesh.material, mesh.customDepthMaterial, mesh.customDistanceMaterial]) {
-      const shader = { vertexShader: THREE.ShaderLib[SHADERS[m.type]].vertexShader, fragmentShader: '', uniforms: {} };
+      const shader = {
+        vertexShader: THREE.ShaderLib[SHADERS[m.type]].vertexShader,
+        fragmentShader: '',
+        uniforms: {},
+      };
       m.onBeforeCompile(shader, null);
       assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
       assert.match(shader.vertexShader, /transformed = pdePosition;/);
@@ -230,8 +279,10 @@ test('attachClip patches every built-in material (and the shadow materials) and 
 });
 
 test('setTime drives the uniforms; the CPU fallback writes the evaluated positions and normals', () => {
-  for (const c of [man.cases.find((x) => x.motion === 'rigid' && x.looping),
-    man.cases.find((x) => x.kind === 'cyclic-spine')]) {
+  for (const c of [
+    man.cases.find((x) => x.motion === 'rigid' && x.looping),
+    man.cases.find((x) => x.kind === 'cyclic-spine'),
+  ]) {
     const clip = loadCase(c);
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
     const player = attachClip(mesh, clip);
@@ -244,7 +295,8 @@ test('setTime drives the uniforms; the CPU fallback writes the evaluated positio
     const cpu = createEvaluator(clip).evaluate(0.4);
     assert.deepEqual(Array.from(mesh.geometry.getAttribute('position').array), Array.from(cpu));
     const n = mesh.geometry.getAttribute('normal').array;
-    for (let i = 0; i < n.length; i += 3) assert.ok(Math.abs(Math.hypot(n[i], n[i + 1], n[i + 2]) - 1) < 1e-5);
+    for (let i = 0; i < n.length; i += 3)
+      assert.ok(Math.abs(Math.hypot(n[i], n[i + 1], n[i + 2]) - 1) < 1e-5);
     player.useGPU(true);
     assert.deepEqual(Array.from(mesh.geometry.getAttribute('position').array), Array.from(clip.rest));
     player.detach();
@@ -257,7 +309,9 @@ test('a mesh with split vertices plays through a vertex map', () => {
   // non-indexed geometry: every triangle corner is its own vertex, like a glTF primitive with hard edges
   const corners = Int32Array.from(clip.faces);
   const g = new THREE.BufferGeometry();
-  const split = new Float32Array(corners.length * 3).map((_, k) => clip.rest[corners[Math.floor(k / 3)] * 3 + (k % 3)]);
+  const split = new Float32Array(corners.length * 3).map(
+    (_, k) => clip.rest[corners[Math.floor(k / 3)] * 3 + (k % 3)],
+  );
   g.setAttribute('position', new THREE.BufferAttribute(split, 3));
   assert.throws(() => attachClip(new THREE.Mesh(g, new THREE.MeshBasicMaterial()), clip), /vertexMap/);
   g.setAttribute('_pdeanim_vertex', new THREE.BufferAttribute(Float32Array.from(corners), 1));
@@ -269,7 +323,10 @@ test('a mesh with split vertices plays through a vertex map', () => {
   for (let k = 0; k < corners.length; k++) {
     for (let w = 0; w < 3; w++) assert.equal(pos[k * 3 + w], cpu[corners[k] * 3 + w]);
   }
-  assert.deepEqual(Array.from(player.attributes.pdeVertex.filter((_, i) => i % 3 === 0)), Array.from(corners));
+  assert.deepEqual(
+    Array.from(player.attributes.pdeVertex.filter((_, i) => i % 3 === 0)),
+    Array.from(corners),
+  );
 });
 
 test('mode auto picks fields within the budget and coefficients above it', () => {

@@ -19,7 +19,7 @@ export function expected(c) {
   return new Float32Array(readBytes(join(FIXTURES, c.expected)).buffer);
 }
 
-/** Container bytes from a header object and arrays {name: {dtype, shape, data}} (inverse of decodeContainer). */
+/** Container bytes from a header and arrays {name: {dtype, shape, data}} (inverse of decodeContainer). */
 export function encodeContainer(header, arrays) {
   const table = {};
   const chunks = [];

@@ -43,12 +43,23 @@ export interface MeshAttributes {
 export declare function gpuLayout(clip: Clip, options?: { width?: number }): GpuLayout;
 export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
 export declare function meshAttributes(mesh: {
-  vertexMap: ArrayLike<number>; positions: ArrayLike<number>; normals?: ArrayLike<number> | null;
+  vertexMap: ArrayLike<number>;
+  positions: ArrayLike<number>;
+  normals?: ArrayLike<number> | null;
   index?: ArrayLike<number> | null;
 }): MeshAttributes;
-export declare function triangleFrame(positions: ArrayLike<number>, p: number, a: number, b: number,
-  out: Float64Array): Float64Array;
-export declare function frameNormals(clipPositions: ArrayLike<number>, attributes: MeshAttributes,
-  restNormals: ArrayLike<number> | null, out: Float32Array): Float32Array;
+export declare function triangleFrame(
+  positions: ArrayLike<number>,
+  p: number,
+  a: number,
+  b: number,
+  out: Float64Array,
+): Float64Array;
+export declare function frameNormals(
+  clipPositions: ArrayLike<number>,
+  attributes: MeshAttributes,
+  restNormals: ArrayLike<number> | null,
+  out: Float32Array,
+): Float32Array;
 /** GLSL ES 3.00 declarations and functions (pdeCompute() sets pdePosition and pdeNormal). */
 export declare function glslHeader(layout: GpuLayout): string;

@@ -1,8 +1,8 @@
 // Type declarations of the pdeanim package (hand-written; the sources are plain ES modules).
 
 export type BytesLike = ArrayBuffer | ArrayBufferView;
-export type TypedArray = Float32Array | Float64Array | Int32Array | Uint32Array | Int16Array | Uint16Array
-  | Uint8Array | Int8Array;
+export type TypedArray =
+  Float32Array | Float64Array | Int32Array | Uint32Array | Int16Array | Uint16Array | Uint8Array | Int8Array;
 
 export declare const CONTAINER_VERSION: 1;
 export declare const DYNAMIC_FORMAT_VERSION: 1;
@@ -125,7 +125,9 @@ export declare class CyclicEvaluator implements Evaluator {
 export declare function decodeClip(topology: BytesLike, coefficients: BytesLike): Clip;
 /** The two parts of a CLIP file. */
 export declare function splitClipFile(data: BytesLike): {
-  topology: Uint8Array; coefficients: Uint8Array; header: Record<string, any>;
+  topology: Uint8Array;
+  coefficients: Uint8Array;
+  header: Record<string, any>;
 };
 /** Decode a CLIP file (synchronous; no topology_id check). */
 export declare function decodeClipFile(data: BytesLike): Clip;
@@ -144,7 +146,9 @@ export interface FetchOptions {
 
 export declare function fetchBuffer(url: string, options?: Omit<FetchOptions, 'key'>): Promise<ArrayBuffer>;
 /** Fetch both parts (in parallel) and decode them; the result has .bytes. */
-export declare function fetchClip(options: FetchOptions & { topology: string; coefficients: string }): Promise<Clip>;
+export declare function fetchClip(
+  options: FetchOptions & { topology: string; coefficients: string },
+): Promise<Clip>;
 export declare function fetchClipFile(url: string, options?: FetchOptions): Promise<Clip>;
 
 /** The CPU evaluator of a decoded clip (precomputes everything independent of t). */
@@ -157,13 +161,37 @@ export declare function vertexBasis(clip: DynamicClip): Float64Array;
 /** Positions before the motion: rest, zeros, or rest - centre (V * 3). */
 export declare function vertexBase(clip: DynamicClip): Float32Array;
 /** The four balanced space functions (space kind 0 = D0, 1 = D1) into out[o..o+3]. */
-export declare function spaceBasis(u: number, D: number, kind: 0 | 1, out: Float64Array | number[], o?: number): typeof out;
+export declare function spaceBasis(
+  u: number,
+  D: number,
+  kind: 0 | 1,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
 /** The time pair (phi0, phi1) of a signed constant into out[o], out[o+1]. */
-export declare function timePair(tau: number, mu: number, out: Float64Array | number[], o?: number): typeof out;
-export declare function rigidTimePair(tau: number, mu: number, out: Float64Array | number[], o?: number): typeof out;
+export declare function timePair(
+  tau: number,
+  mu: number,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
+export declare function rigidTimePair(
+  tau: number,
+  mu: number,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
 /** [segment, tau, wrapped t] of t on the boundaries. */
-export declare function locate(bounds: ArrayLike<number>, t: number, looping: boolean): [number, number, number];
+export declare function locate(
+  bounds: ArrayLike<number>,
+  t: number,
+  looping: boolean,
+): [number, number, number];
 
 /** Area-weighted vertex normals. */
-export declare function computeNormals(positions: ArrayLike<number>, faces: ArrayLike<number>, out?: Float32Array): Float32Array;
+export declare function computeNormals(
+  positions: ArrayLike<number>,
+  faces: ArrayLike<number>,
+  out?: Float32Array,
+): Float32Array;
 export declare function boundingBoxDiagonal(positions: ArrayLike<number>): number;

@@ -7,7 +7,8 @@ import type { GpuLayout, MeshAttributes } from './gpu.js';
 export interface AttachOptions {
   /** Evaluate on the GPU (default true); false starts with the CPU fallback. */
   gpu?: boolean;
-  /** Clip vertex of every mesh vertex (default: a _pdeanim_vertex / _PDEANIM_VERTEX attribute, else identity). */
+  /** Clip vertex of every mesh vertex (default: a _pdeanim_vertex / _PDEANIM_VERTEX attribute, else
+   * the identity). */
   vertexMap?: Int32Array | number[];
   /** Data texture width in texels (default 4096). */
   textureWidth?: number;
