@@ -2,7 +2,9 @@
 ``gltfpack -cc`` of the same frames and against the raw float32 frames, for the demo clip (spot simulated
 and fitted as ``pdeanim demo`` does) and sequences of ../shared/data/sequences (read from there, never
 copied). Each case is measured with and without per-frame normal deltas; gltfpack gets a plain float32
-morph-target GLB of exactly the same frames (with or without NORMAL targets) as input.
+morph-target GLB of exactly the same frames (with or without NORMAL targets) as input. Precision: each
+row prints the position grid step of both (relative to the frames' largest extent); besides our default
+14 bits, a second row uses the fewest bits whose step is no coarser than gltfpack's.
 
     .venv/bin/python benchmarks/gltf_sizes.py [--sequences pcow horse-collapse] [--no-demo] [--validate]
 
@@ -94,7 +96,8 @@ def main() -> int:
     ap.add_argument("--no-demo", action="store_true", help="skip the demo clip (it simulates spot first)")
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--bits", type=int, nargs="*", default=[14, 13], help="position bits of ours to measure")
+    ap.add_argument("--bits", type=int, default=14, help="position bits of ours (default 14, the writer's "
+                    "default); a second row uses the fewest bits whose step is no coarser than gltfpack's")
     ap.add_argument("--validate", action="store_true", help="also run the Khronos validator on our GLBs")
     args = ap.parse_args()
     if not GLTFPACK.exists():
@@ -114,7 +117,8 @@ def main() -> int:
         for normals in (True, False):
             with tempfile.TemporaryDirectory() as tmp:
                 gp = gltfpack_cc(frames, faces, times, normals, Path(tmp))
-            for bits in args.bits:
+            matched = int(np.clip(np.ceil(np.log2(extent / grid_step(gp) + 1)), 8, 15))  # step <= gltfpack's
+            for bits in sorted({args.bits, matched}, reverse=True):
                 builds, glb = [], b""
                 for _ in range(args.repeats):
                     start = time.perf_counter()

@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "export", help="write a clip as an animated GLB (morph targets + weights animation)",
         description="Sample a clip at --fps over its duration (last frame included; looping clips loop "
                     "seamlessly) and write a glTF 2.0 binary file. By default positions are quantised to a "
-                    "13-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, and every stream is compressed "
+                    "14-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, and every stream is compressed "
                     "with EXT_meshopt_compression (three.js GLTFLoader with MeshoptDecoder, Blender 3.x+, "
                     "gltfpack and Babylon.js read it); --no-compress --no-quantize writes plain float32.")
     p.add_argument("clip", metavar="CLIP", help="clip file written by `pdeanim fit` or `pdeanim cyclic`")
@@ -31,8 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="store float32 positions and normals instead of the integer grid and bytes")
     p.add_argument("--no-compress", dest="compress", action="store_false",
                    help="do not use EXT_meshopt_compression (for viewers without a meshopt decoder)")
-    p.add_argument("--position-bits", type=int, default=13, metavar="N",
-                   help="bits per axis of the position grid, 8..15 (default 13: a step of 1.2e-4 of the extent)")
+    p.add_argument("--position-bits", type=int, default=14, metavar="N",
+                   help="bits per axis of the position grid, 8..15 (default 14: a step of 6.1e-5 of the extent)")
     p.add_argument("--no-normal-targets", dest="normals", action="store_false",
                    help="leave out per-frame normal deltas (smaller; every frame lit with the first frame's normals)")
     p.add_argument("--quantize", dest="quantize", action="store_true", help=argparse.SUPPRESS)  # the old default

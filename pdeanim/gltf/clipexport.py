@@ -63,7 +63,7 @@ class ExportOptions:
     fps: float = 30.0
     quantize: bool = True
     compress: bool = True
-    position_bits: int = 13
+    position_bits: int = 14
     normals: bool = True
 
     @staticmethod

@@ -1,8 +1,8 @@
 """GLB of evaluated positions in a :class:`~.layout.Layout` (so a glTF source keeps its look): one frame
 (float32 positions and unit normals), or an animation as morph targets with a one-hot ``weights`` track,
 small by default: positions on an integer grid (KHR_mesh_quantization, ``position_bits`` per axis over the
-animation's extent: 13 gives a step of 1.2e-4 of it, as fine as gltfpack -cc's default grid measured
-1.1-1.4e-4 in benchmarks/gltf_sizes.py), triangles in vertex-cache order, normals and their per-frame deltas as normalized bytes, and every stream compressed
+animation's extent: 14 gives a step of 6.1e-5 of it, at least as fine as gltfpack -cc's default grid, which
+measured 6.9e-5 to 1.4e-4 in benchmarks/gltf_sizes.py), triangles in vertex-cache order, normals and their per-frame deltas as normalized bytes, and every stream compressed
 with EXT_meshopt_compression.
 
 Each mesh node's positions are quantised in its own local frame; the dequantising translation and uniform
@@ -31,14 +31,14 @@ TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one mesho
 
 @dataclass(frozen=True)
 class PackOptions:
-    """How an animation GLB is stored: ``quantize`` positions to ``position_bits`` (8..15, default 13) per axis over
+    """How an animation GLB is stored: ``quantize`` positions to ``position_bits`` (8..15, default 14) per axis over
     the frames' extent (max error half a step) and normals
     to bytes, ``compress`` with EXT_meshopt_compression, ``normals`` as per-frame morph deltas (else every
     frame is lit with the first frame's normals)."""
 
     quantize: bool = True
     compress: bool = True
-    position_bits: int = 13
+    position_bits: int = 14
     normals: bool = True
 
     def __post_init__(self) -> None:

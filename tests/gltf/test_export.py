@@ -55,7 +55,7 @@ def test_export_samples_with_last_frame_and_loops_seamlessly(wave):
     np.testing.assert_allclose(export_times(1.25, 10), [*np.arange(13) / 10, 1.25])  # off-grid end appended
     assert poses.n_frames == len(seconds)
     want = wave.evaluate(seconds / 1.3)
-    step = float(np.ptp(want.reshape(-1, 3), axis=0).max()) / (2**13 - 1)  # the default 13-bit grid
+    step = float(np.ptp(want.reshape(-1, 3), axis=0).max()) / (2**14 - 1)  # the default 14-bit grid
     np.testing.assert_allclose(poses.vertices[:-1], want[:-1], atol=step)  # rounding: half a step, 2x margin
     np.testing.assert_array_equal(poses.vertices[-1], poses.vertices[0])  # seamless wrap
     once = WaveClip(wave.rest, wave.faces, looping=False)

@@ -85,8 +85,8 @@ def test_animation_keeps_the_look_quantised_and_compressed():
     assert all(doc[key] == sdoc[key] for key in LOOK_KEYS)
     np.testing.assert_array_equal(uv_of(glb, 1, 0), uv_of(src, 1, 0))
     back = read_animated_poses(glb, fps=10)
-    # the body node scales by 2: world error <= 2 x half a 13-bit step of its local extent; 2x margin
-    step = 2 * float(np.ptp(frames.reshape(-1, 3), axis=0).max()) / (2**13 - 1)
+    # the body node scales by 2: world error <= 2 x half a 14-bit step of its local extent; 2x margin
+    step = 2 * float(np.ptp(frames.reshape(-1, 3), axis=0).max()) / (2**14 - 1)
     np.testing.assert_allclose(back.vertices, frames, atol=step)
     plain = layout_animation_glb(gltf_layout(src), frames, times, np.arange(k), k,
                                  options=PackOptions(quantize=False, compress=False))
