@@ -19,8 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Sample a clip at --fps over its duration (last frame included; looping clips loop "
                     "seamlessly) and write a glTF 2.0 binary file. By default positions are quantised to a "
                     "14-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, and every stream is compressed "
-                    "with EXT_meshopt_compression (three.js GLTFLoader with MeshoptDecoder, Blender 3.x+, "
-                    "gltfpack and Babylon.js read it); --no-compress --no-quantize writes plain float32.")
+                    "with EXT_meshopt_compression (three.js GLTFLoader with MeshoptDecoder, Babylon.js and "
+                    "gltfpack read it); --no-compress --no-quantize writes plain float32.")
     p.add_argument("clip", metavar="CLIP", help="clip file written by `pdeanim fit` or `pdeanim cyclic`")
     p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation (default 30)")
     p.add_argument("--out", required=True, metavar="FILE.glb", help="output GLB path")
