@@ -47,18 +47,23 @@ class PackOptions:
 
 
 def _check_frames(frames: np.ndarray, layout: Layout) -> np.ndarray:
-    f = np.asarray(frames, np.float64)
+    """Frames (K, V, 3) as float32 (no copy when they are already): the clip's evaluation precision."""
+    f = np.asarray(frames)
     if f.ndim != 3 or f.shape[1:] != (layout.n_vertices, 3):
         raise ParameterError(f"frames must have shape (K, {layout.n_vertices}, 3), got {f.shape}")
+    f = f.astype(np.float32, copy=False)
     if not np.all(np.isfinite(f)) or (f.size and float(np.abs(f).max()) > 1e37):
         raise ParameterError("frames contain NaN, infinite or float32-overflowing values")
     return f
 
 
 def _local(part: Part, world: np.ndarray) -> np.ndarray:
-    """Positions (K, n, 3) of the part's vertices in its node's local frame."""
+    """Positions (K, n, 3) of the part's vertices in its node's local frame (the input itself for an identity
+    node, which keeps a large export at one float32 copy of its frames)."""
     m = part.to_local
-    return world @ m[:3, :3].T + m[:3, 3]
+    if np.array_equal(m, np.eye(4)):
+        return world
+    return (world.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
 
 
 def _normals(layout: Layout, frames: np.ndarray) -> np.ndarray:
@@ -123,7 +128,8 @@ class _Grid:
         self.origin = flat.min(axis=0)
         extent = float((flat.max(axis=0) - self.origin).max())
         self.step = extent / (2**bits - 1) if extent > 0 else 1.0
-        self.q = np.rint((local - self.origin) / self.step).astype(np.int32)  # (K, n, 3)
+        # float32 arithmetic: its rounding is ~1e-3 of a step at 14 bits; int16 holds 0..2**15 - 1
+        self.q = np.rint((local - self.origin.astype(np.float32)) / np.float32(self.step)).astype(np.int16)
 
     def node(self) -> dict[str, Any]:
         """Translation and uniform scale that map grid values back to local coordinates."""
