@@ -267,6 +267,8 @@ uniform int pdeSeg;
 uniform float pdeTau;
 uniform int pdeCurves;
 uniform int pdeVertices;
+uniform mat4 pdeClipToLocal;
+uniform mat3 pdeNormalToLocal;
 #ifdef PDEANIM_DYNAMIC
 uniform highp sampler2D pdeMuTex;
 #ifdef PDEANIM_FIELDS
@@ -401,14 +403,16 @@ void pdeCompute() {
   int v = int(pdeVertex.x + 0.5);
   int va = int(pdeVertex.y + 0.5);
   int vb = int(pdeVertex.z + 0.5);
-  pdePosition = pdeEval(v);
+  vec3 p = pdeEval(v);
+  pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
   if (va != v) {
-    vec3 e1 = pdeEval(va) - pdePosition;
-    vec3 e2 = pdeEval(vb) - pdePosition;
+    vec3 e1 = pdeEval(va) - p;
+    vec3 e2 = pdeEval(vb) - p;
     vec3 t1 = normalize(e1);
     vec3 n = normalize(cross(e1, e2));
-    pdeNormal = pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1) + pdeNormalFrame.z * n;
+    pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
+      + pdeNormalFrame.z * n));
   }
 }
 `;

@@ -8,7 +8,7 @@ import { join } from 'node:path';
 import * as THREE from 'three';
 import { computeNormals, createEvaluator, decodeClipFile } from '../src/index.js';
 import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from '../src/gpu.js';
-import { attachClip } from '../src/three.js';
+import { attachClip, attachClipToScene } from '../src/three.js';
 import { FIXTURES, manifest, readBytes } from './helpers.mjs';
 
 const man = manifest();
@@ -347,4 +347,108 @@ test('the GLSL header declares what the patched chunks use', () => {
   for (const name of ['pdeVertex', 'pdeNormalFrame', 'pdeVertexTex', 'pdeSinWt', 'pdeCompute']) {
     assert.ok(header.includes(name), name);
   }
+});
+
+/** Split a clip's mesh into meshes over consecutive vertex ranges (faces inside each range), under root. */
+function splitScene(clip, cuts) {
+  const root = new THREE.Group();
+  root.position.set(0.5, -1, 2);
+  root.rotation.set(0.3, -0.7, 0.2);
+  const parent = new THREE.Group();
+  parent.scale.set(2, 2, 2);
+  parent.rotation.set(0, 1.1, 0);
+  root.add(parent);
+  root.updateMatrixWorld(true);
+  const meshes = [];
+  const bounds = [0, ...cuts, clip.nVertices];
+  for (let k = 0; k + 1 < bounds.length; k++) {
+    const [lo, hi] = [bounds[k], bounds[k + 1]];
+    const mesh = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshStandardMaterial());
+    mesh.position.set(k, 0.25 * k, -k);
+    mesh.scale.set(1 + k, 0.5, 1);
+    (k < 2 ? parent : root).add(mesh); // depth-first order = creation order
+    root.updateMatrixWorld(true);
+    // local positions = (root^-1 mesh.matrixWorld)^-1 clip positions, stored quantised for the first mesh
+    const rel = root.matrixWorld.clone().invert().multiply(mesh.matrixWorld);
+    const inv = rel.clone().invert();
+    const local = new Float32Array((hi - lo) * 3);
+    for (let v = lo; v < hi; v++) {
+      const p = new THREE.Vector3().fromArray(clip.rest, v * 3).applyMatrix4(inv);
+      p.toArray(local, (v - lo) * 3);
+    }
+    if (k === 0) {
+      const scale = Math.max(...local.map(Math.abs));
+      const q = Int16Array.from(local, (x) => Math.round((x / scale) * 32767));
+      mesh.geometry.setAttribute('position', new THREE.BufferAttribute(q, 3, true));
+      const s = new THREE.Matrix4().makeScale(scale, scale, scale);
+      mesh.geometry.applyMatrix4(new THREE.Matrix4()); // keeps the quantised attribute
+      mesh.matrixAutoUpdate = false;
+      mesh.matrix.copy(mesh.matrix.clone().multiply(s));
+    } else {
+      mesh.geometry.setAttribute('position', new THREE.BufferAttribute(local, 3));
+    }
+    const faces = [];
+    for (let f = 0; f < clip.faces.length; f += 3) {
+      const tri = [clip.faces[f], clip.faces[f + 1], clip.faces[f + 2]];
+      if (tri.every((v) => v >= lo && v < hi)) faces.push(...tri.map((v) => v - lo));
+    }
+    mesh.geometry.setIndex(faces);
+    meshes.push(mesh);
+  }
+  root.updateMatrixWorld(true);
+  return { root, meshes, bounds };
+}
+
+test('attachClipToScene places every mesh with its transform (quantised positions too)', () => {
+  const c = man.cases.find((x) => x.name === 'fit-rigid-chord');
+  const clip = loadCase(c);
+  const { root, meshes, bounds } = splitScene(clip, [18, 30]);
+  assert.ok(meshes[0].geometry.getAttribute('position').normalized);
+  const player = attachClipToScene(root, clip, { gpu: false });
+  assert.equal(player.players.length, 3);
+  player.setTime(0.4);
+  const cpu = createEvaluator(clip).evaluate(0.4);
+  const rootInverse = root.matrixWorld.clone().invert();
+  meshes.forEach((mesh, k) => {
+    const rel = rootInverse.clone().multiply(mesh.matrixWorld);
+    const pos = mesh.geometry.getAttribute('position');
+    assert.equal(pos.normalized, false);
+    for (let i = 0; i < pos.count; i++) {
+      const p = new THREE.Vector3(pos.getX(i), pos.getY(i), pos.getZ(i)).applyMatrix4(rel);
+      const v = bounds[k] + i;
+      // float32 local coordinates through two affine maps: 1e-6 of the diagonal is ~10x the rounding
+      assert.ok(
+        p.distanceTo(new THREE.Vector3().fromArray(cpu, v * 3)) < 1e-6 * c.diagonal,
+        `mesh ${k} v ${v}`,
+      );
+    }
+    // the GPU uniforms carry the same map
+    const e = player.players[k].uniforms.pdeClipToLocal.value.clone().multiply(rel).elements;
+    new THREE.Matrix4().elements.forEach((x, i) => assert.ok(Math.abs(e[i] - x) < 1e-9));
+  });
+  player.useGPU(true);
+  assert.equal(player.gpu, true);
+  player.detach();
+  assert.ok(meshes[0].geometry.getAttribute('position').normalized); // the quantised attribute is back
+});
+
+test('normals of a transformed mesh are the clip-space normals turned into its frame', () => {
+  const c = man.cases.find((x) => x.name === 'fit-displacement-chord');
+  const clip = loadCase(c);
+  const { root, meshes } = splitScene(clip, []);
+  const mesh = meshes[0];
+  mesh.geometry.computeVertexNormals();
+  const player = attachClipToScene(root, clip, { gpu: false });
+  player.setTime(0.55);
+  const rel = root.matrixWorld.clone().invert().multiply(mesh.matrixWorld);
+  const nm = new THREE.Matrix3().getNormalMatrix(rel);
+  const nrm = mesh.geometry.getAttribute('normal');
+  const want = computeNormals(createEvaluator(clip).evaluate(0.55), clip.faces);
+  let sum = 0;
+  for (let i = 0; i < nrm.count; i++) {
+    const n = new THREE.Vector3(nrm.getX(i), nrm.getY(i), nrm.getZ(i)).applyMatrix3(nm).normalize();
+    sum += n.dot(new THREE.Vector3().fromArray(want, i * 3));
+  }
+  // as in the clip-space test above: one triangle's frame against the ring average on a 42-vertex sphere
+  assert.ok(sum / nrm.count > 0.97, `mean cos ${sum / nrm.count}`);
 });
