@@ -103,11 +103,11 @@ def _assemble(doc: dict[str, Any], views: list[bytes], compress: bool) -> bytes:
     return compress_glb(doc, binary) if compress and offset else pack_glb(doc, binary)
 
 
-def layout_frame_glb(layout: Layout, positions: np.ndarray) -> bytes:
+def layout_frame_glb(layout: Layout, positions: np.ndarray, *, normals: np.ndarray | None = None) -> bytes:
     """One frame (V, 3) world positions as GLB in the layout: float32 POSITION (exact bounds) and unit NORMAL
-    per primitive, in each node's local frame."""
+    per primitive, in each node's local frame (``normals`` (1, V, 3) world normals, else computed)."""
     world = _check_frames(np.asarray(positions)[None], layout)
-    normals = _normals(layout, world)
+    normals = _normals(layout, world) if normals is None else normals
     doc, views = copy.deepcopy(layout.doc), list(layout.views)
     for part in layout.parts:
         for slot in part.slots:
@@ -118,6 +118,60 @@ def layout_frame_glb(layout: Layout, positions: np.ndarray) -> bytes:
                 n = _local_normals(part, normals[:, slot.start: slot.stop].astype(np.float64))[0]
                 attrs["NORMAL"] = add_accessor(doc, views, n.astype(np.float32), "VEC3", ARRAY_BUFFER)
     return _assemble(doc, views, compress=False)
+
+
+class LayoutFrames:
+    """:func:`layout_frame_glb` for one layout, fast for many frames (the service's frame route): the JSON
+    around the data, the kept source bytes (UVs, indices, images) and the normals' incidence are made once;
+    each call computes normals and local positions, fills one preallocated GLB and updates the bounds."""
+
+    def __init__(self, layout: Layout) -> None:
+        from .glb import unpack_glb
+        from .normals import FaceNormals
+
+        self.layout = layout
+        zero = np.zeros((1, layout.n_vertices, 3), np.float32)
+        zero[0, :, 2] = 1.0  # placeholder normals must be unit for the template's sake only
+        doc, binary = unpack_glb(layout_frame_glb(layout, zero[0], normals=zero))
+        self._doc, self._binary = doc, binary or b""
+        self._slots = []
+        for part in layout.parts:
+            for slot in part.slots:
+                attrs = doc["meshes"][slot.mesh]["primitives"][slot.prim]["attributes"]
+                offsets = {name: doc["bufferViews"][doc["accessors"][attrs[name]]["bufferView"]]["byteOffset"]
+                           for name in ("POSITION", "NORMAL") if name in attrs}
+                self._slots.append((part, slot, attrs["POSITION"], offsets))
+        weld = layout.weld
+        if weld is None:
+            self._first, faces = None, layout.faces
+        else:
+            self._first = np.zeros(int(weld.max()) + 1, np.int64)
+            self._first[weld[::-1]] = np.arange(len(weld))[::-1]
+            faces = weld[layout.faces]
+        n = layout.n_vertices if weld is None else len(self._first)
+        self._normals = FaceNormals(faces, n) if len(faces) else None
+
+    def __call__(self, positions: np.ndarray) -> bytes:
+        """GLB bytes of one frame: world positions (V, 3) of the layout's vertices."""
+        world = _check_frames(np.asarray(positions)[None], self.layout)[0]
+        normals = None
+        if self._normals is not None:
+            normals = self._normals(world if self._first is None else world[self._first])
+            if self._first is not None:
+                normals = normals[self.layout.weld]
+        accessors = list(self._doc["accessors"])
+        out = bytearray(self._binary)
+        for part, slot, pos_acc, offsets in self._slots:
+            local = _local(part, world[None, slot.start: slot.stop])[0]
+            n = slot.stop - slot.start
+            np.frombuffer(out, np.float32, 3 * n, offsets["POSITION"]).reshape(-1, 3)[:] = local
+            accessors[pos_acc] = {**accessors[pos_acc], **minmax_of(local)}
+            if "NORMAL" in offsets and normals is not None:
+                nrm = normals[slot.start: slot.stop]
+                if not np.array_equal(part.to_local, np.eye(4)):
+                    nrm = _local_normals(part, nrm[None].astype(np.float64))[0]
+                np.frombuffer(out, np.float32, 3 * n, offsets["NORMAL"]).reshape(-1, 3)[:] = nrm
+        return pack_glb({**self._doc, "accessors": accessors}, bytes(out))
 
 
 class _Grid:

@@ -32,15 +32,18 @@ class FrameWriter:
 
     def __init__(self, fast: Callable[[np.ndarray], bytes], layout: LazyLayout) -> None:
         self.fast, self.layout = fast, layout
+        self._look: Callable[[np.ndarray], bytes] | None = None
 
     def __call__(self, positions: np.ndarray) -> bytes:
         """GLB bytes of one frame."""
-        from pdeanim.gltf.compact import layout_frame_glb
-
         layout = self.layout.get()
         if layout.source == "plain":
             return self.fast(positions)
-        return layout_frame_glb(layout, positions)
+        if self._look is None:  # a duplicate build by a concurrent request is harmless
+            from pdeanim.gltf.compact import LayoutFrames
+
+            self._look = LayoutFrames(layout)
+        return self._look(positions)
 
 
 def source_layout_loader(store: Any, mesh_id: str, clip: Any) -> LazyLayout:
