@@ -94,7 +94,7 @@ export async function loadClipFile(data) {
 
 /**
  * Fetch a URL as an ArrayBuffer with optional headers (e.g. {Authorization: 'Bearer KEY'}); throws an Error
- * with the server's error message on a non-2xx answer. onBytes(n) is called with the body size.
+ * with the server's error message on a non-2xx answer.
  */
 export async function fetchBuffer(url, { headers = {}, fetch: fetchFn = globalThis.fetch, signal } = {}) {
   const res = await fetchFn(url, { headers: { Accept: 'application/octet-stream', ...headers }, signal });
