@@ -127,6 +127,22 @@ export async function fetchClip({ topology, coefficients, key, headers = {}, fet
   return clip;
 }
 
+/**
+ * Fetch and decode clip clipId from a pdeanim service at baseUrl (GET /v1/clips/{id}/topology and
+ * /coefficients, Authorization: Bearer key).
+ */
+export async function fetchServiceClip(baseUrl, clipId, { key, headers = {}, fetch: fetchFn, signal } = {}) {
+  const base = `${String(baseUrl).replace(/\/+$/, '')}/v1/clips/${encodeURIComponent(clipId)}`;
+  return fetchClip({
+    topology: `${base}/topology`,
+    coefficients: `${base}/coefficients`,
+    key,
+    headers,
+    fetch: fetchFn,
+    signal,
+  });
+}
+
 /** Fetch and decode a CLIP file from a URL. */
 export async function fetchClipFile(url, { key, headers = {}, fetch: fetchFn, signal } = {}) {
   const h = key ? { Authorization: `Bearer ${key}`, ...headers } : headers;

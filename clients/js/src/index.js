@@ -10,6 +10,7 @@ export {
   fetchBuffer,
   fetchClip,
   fetchClipFile,
+  fetchServiceClip,
   createEvaluator,
   sha256Hex,
 } from './clip.js';

@@ -149,6 +149,12 @@ export declare function fetchBuffer(url: string, options?: Omit<FetchOptions, 'k
 export declare function fetchClip(
   options: FetchOptions & { topology: string; coefficients: string },
 ): Promise<Clip>;
+/** Fetch clip clipId from a pdeanim service (GET /v1/clips/{id}/topology and /coefficients). */
+export declare function fetchServiceClip(
+  baseUrl: string,
+  clipId: string,
+  options?: FetchOptions,
+): Promise<Clip>;
 export declare function fetchClipFile(url: string, options?: FetchOptions): Promise<Clip>;
 
 /** The CPU evaluator of a decoded clip (precomputes everything independent of t). */
