@@ -114,3 +114,33 @@ def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
     assert rms / diag < 2e-2  # the fit's target, plus quantisation
     paths = fit_error_pictures(poses.vertices, back.vertices, faces, poses.times, tmp_path, "sphere")
     assert all(p.stat().st_size > 10_000 for p in paths.values())
+
+
+def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
+    """A clip fitted on poses of a textured glTF, exported with ``--mesh``: the GLB has the source's materials,
+    texture and node names; options are checked (exit 2 with a message)."""
+    fitclip = pytest.importorskip("pdeanim.model.fitclip")
+    from pdeanim.gltf.glb import unpack_glb
+    from pdeanim.gltf.read import read_static_mesh
+    from pdeanim.poses import make_poses
+
+    from .builders import textured_scene_glb
+
+    src = textured_scene_glb()
+    rest, faces = read_static_mesh(src)
+    frames = rest[None] + 0.1 * np.sin(np.arange(10)[:, None, None] / 3 + rest[None, :, :1])
+    parts = fitclip.fit_poses(make_poses(frames, faces, np.arange(10) / 30.0, {}),
+                              fitclip.FitOptions.from_dict({"segments": 1}))
+    clip_path, mesh_path, out = tmp_path / "scene.clip", tmp_path / "scene.glb", tmp_path / "anim.glb"
+    write_clip_file(clip_path, parts)
+    mesh_path.write_bytes(src)
+    assert main(["export", str(clip_path), "--mesh", str(mesh_path), "--out", str(out), "--fps", "30"]) == 0
+    assert "look of gltf source" in capsys.readouterr().out
+    doc, _ = unpack_glb(out.read_bytes())
+    assert [m["name"] for m in doc["materials"]] == ["skin", "cloth"] and doc["images"][0]["name"] == "checker"
+    assert [n.get("name") for n in doc["nodes"][:3]] == ["body", "hat", "wing"]
+    assert_clean(validate_many([out.read_bytes()])[0], "CLI export with --mesh")
+    assert read_animated_poses(out.read_bytes(), fps=30).n_frames == 10
+    assert main(["export", str(clip_path), "--mesh", str(tmp_path / "missing.glb"), "--out", str(out)]) == 2
+    assert main(["export", str(clip_path), "--position-bits", "20", "--out", str(out)]) == 2
+    assert "position_bits" in capsys.readouterr().err
