@@ -8,7 +8,7 @@ import { createEvaluator, fetchClip } from 'pdeanim';
 
 const ROOT = document.querySelector('meta[name="pdeanim-root"]')?.content ?? '';
 const GLB_AUTO_LIMIT = 64 * 1024 * 1024; // measure the animation GLB at once only below this raw size
-const FRAME_WINDOW = 240; // frames kept for the per-frame JavaScript time statistics
+const FRAME_WINDOW = 1200; // frames kept for the per-frame JavaScript time statistics
 
 const $ = (id) => document.getElementById(id);
 const fmtBytes = (n) => (n == null ? '—' : n < 1024 ? `${n} B` : n < 1048576 ? `${(n / 1024).toFixed(1)} KiB`
@@ -219,11 +219,11 @@ class Viewer {
       }
       this.last = now;
     }
-    if (this.dirty) {
+    if (this.dirty || this.renderAlways) {
       this.renderer.render(this.scene, this.camera);
       this.dirty = false;
     }
-    if (this.clip && this.playing) {
+    if (this.clip && (this.playing || this.renderAlways)) {
       this.frameJs.push(performance.now() - start);
       this.frameTimes.push(now);
       if (this.frameJs.length > FRAME_WINDOW) { this.frameJs.shift(); this.frameTimes.shift(); }
@@ -350,4 +350,6 @@ window.pdeanimViewer = {
   measureGlb: () => viewer.measureGlb(),
   frameStats: () => viewer.frameStats(),
   resetFrameStats: () => viewer.resetFrameStats(),
+  /** Render (and count) every frame even when nothing changed: the drawing cost alone, for benchmarks. */
+  set renderAlways(on) { viewer.renderAlways = Boolean(on); },
 };

@@ -32,12 +32,14 @@ function polymulTrunc(a, b) {
   return out;
 }
 
-const SMS = (() => { // series of (sinh x - sin x) / x^3
+const SMS = (() => {
+  // series of (sinh x - sin x) / x^3
   const a = taylor('sinh');
   const b = taylor('sin');
   return a.map((v, i) => v - b[i]).slice(3);
 })();
-const CSC = (() => { // series of (cosh x sin x - sinh x cos x) / x^3
+const CSC = (() => {
+  // series of (cosh x sin x - sinh x cos x) / x^3
   const a = polymulTrunc(taylor('cosh'), taylor('sin'));
   const b = polymulTrunc(taylor('sinh'), taylor('cos'));
   return a.map((v, i) => v - b[i]).slice(3);
@@ -51,12 +53,12 @@ function polyval(c, x) {
 
 /** sinh(y) / y, 1 at 0 (series below |y| < 1e-4). */
 function shc(y) {
-  return Math.abs(y) < 1e-4 ? 1 + y * y / 6 : Math.sinh(y) / y;
+  return Math.abs(y) < 1e-4 ? 1 + (y * y) / 6 : Math.sinh(y) / y;
 }
 
 /** sin(y) / y, 1 at 0 (series below |y| < 1e-4). */
 function sc(y) {
-  return Math.abs(y) < 1e-4 ? 1 - y * y / 6 : Math.sin(y) / y;
+  return Math.abs(y) < 1e-4 ? 1 - (y * y) / 6 : Math.sin(y) / y;
 }
 
 function ratio3(x, coeffs, fx) {
@@ -82,7 +84,7 @@ export function spaceBasis(u, Din, kind, out, o = 0) {
       out[o + 2] = 0.5 * s * s * (h * h + hs * hs) * SMALL_SCALE[2];
       out[o + 3] = s * s * s * ratio3(x, SMS, sh - sn) * SMALL_SCALE[3];
     } else {
-      const x = D / SQRT2 * s;
+      const x = (D / SQRT2) * s;
       const ch = Math.cosh(x);
       const c = Math.cos(x);
       const sh = Math.sinh(x);

@@ -30,7 +30,9 @@ export function decodeClip(topology, coefficients) {
   }
   const kind = coef.header.kind;
   if (!(kind in KINDS)) {
-    throw new ClipFormatError(`unknown clip kind ${JSON.stringify(kind)} (known: ${Object.keys(KINDS).join(', ')})`);
+    throw new ClipFormatError(
+      `unknown clip kind ${JSON.stringify(kind)} (known: ${Object.keys(KINDS).join(', ')})`,
+    );
   }
   const clip = KINDS[kind][0](topo, coef);
   clip.topologyId = coef.header.topology_id ?? null;
@@ -40,14 +42,19 @@ export function decodeClip(topology, coefficients) {
 /** The two parts {topology, coefficients, header} (Uint8Array views) of a CLIP file's bytes. */
 export function splitClipFile(data) {
   const { header, arrays } = decodeContainer(data);
-  if (header.part !== 'clip-file' || !arrays.topology || !arrays.coefficients
-      || arrays.topology.dtype !== '<u1' || arrays.coefficients.dtype !== '<u1') {
+  if (
+    header.part !== 'clip-file' ||
+    !arrays.topology ||
+    !arrays.coefficients ||
+    arrays.topology.dtype !== '<u1' ||
+    arrays.coefficients.dtype !== '<u1'
+  ) {
     throw new ClipFormatError('not a pdeanim CLIP file');
   }
   return { topology: arrays.topology.data, coefficients: arrays.coefficients.data, header };
 }
 
-/** Decode a CLIP file (one container holding both parts). Synchronous; see loadClipFile for the hash check. */
+/** Decode a CLIP file (one container holding both parts). Synchronous; loadClipFile checks the hash. */
 export function decodeClipFile(data) {
   const parts = splitClipFile(data);
   return decodeClip(parts.topology, parts.coefficients);
@@ -71,7 +78,9 @@ export async function loadClip(topology, coefficients) {
   if (clip.topologyId) {
     const have = await sha256Hex(topology);
     if (have !== null && have !== clip.topologyId) {
-      throw new ClipFormatError('the coefficients were made for another topology part (topology_id mismatch)');
+      throw new ClipFormatError(
+        'the coefficients were made for another topology part (topology_id mismatch)',
+      );
     }
   }
   return clip;
@@ -85,7 +94,7 @@ export async function loadClipFile(data) {
 
 /**
  * Fetch a URL as an ArrayBuffer with optional headers (e.g. {Authorization: 'Bearer KEY'}); throws an Error
- * with the server's error message on a non-2xx answer. onBytes(n) is called with the body size.
+ * with the server's error message on a non-2xx answer.
  */
 export async function fetchBuffer(url, { headers = {}, fetch: fetchFn = globalThis.fetch, signal } = {}) {
   const res = await fetchFn(url, { headers: { Accept: 'application/octet-stream', ...headers }, signal });
@@ -94,7 +103,9 @@ export async function fetchBuffer(url, { headers = {}, fetch: fetchFn = globalTh
     try {
       const body = await res.json();
       detail = body?.error?.message ? `: ${body.error.message}` : '';
-    } catch { /* not JSON */ }
+    } catch {
+      /* not JSON */
+    }
     throw new Error(`GET ${url} answered ${res.status}${detail}`);
   }
   return res.arrayBuffer();
@@ -107,11 +118,29 @@ export async function fetchBuffer(url, { headers = {}, fetch: fetchFn = globalTh
  */
 export async function fetchClip({ topology, coefficients, key, headers = {}, fetch: fetchFn, signal }) {
   const h = key ? { Authorization: `Bearer ${key}`, ...headers } : headers;
-  const [tb, cb] = await Promise.all([fetchBuffer(topology, { headers: h, fetch: fetchFn, signal }),
-    fetchBuffer(coefficients, { headers: h, fetch: fetchFn, signal })]);
+  const [tb, cb] = await Promise.all([
+    fetchBuffer(topology, { headers: h, fetch: fetchFn, signal }),
+    fetchBuffer(coefficients, { headers: h, fetch: fetchFn, signal }),
+  ]);
   const clip = await loadClip(tb, cb);
   clip.bytes = { topology: tb.byteLength, coefficients: cb.byteLength };
   return clip;
+}
+
+/**
+ * Fetch and decode clip clipId from a pdeanim service at baseUrl (GET /v1/clips/{id}/topology and
+ * /coefficients, Authorization: Bearer key).
+ */
+export async function fetchServiceClip(baseUrl, clipId, { key, headers = {}, fetch: fetchFn, signal } = {}) {
+  const base = `${String(baseUrl).replace(/\/+$/, '')}/v1/clips/${encodeURIComponent(clipId)}`;
+  return fetchClip({
+    topology: `${base}/topology`,
+    coefficients: `${base}/coefficients`,
+    key,
+    headers,
+    fetch: fetchFn,
+    signal,
+  });
 }
 
 /** Fetch and decode a CLIP file from a URL. */

@@ -1,4 +1,4 @@
-// Decode the pdeanim binary container: magic, version, a JSON header and little-endian arrays (docs/format.md §1).
+// Decode the pdeanim binary container: magic, version, JSON header, little-endian arrays (docs/format.md §1).
 
 export const MAGIC = 'PDEANIM\0';
 export const CONTAINER_VERSION = 1;
@@ -12,8 +12,14 @@ export class ClipFormatError extends Error {
 }
 
 const DTYPES = {
-  '<f4': [Float32Array, 4], '<f8': [Float64Array, 8], '<i4': [Int32Array, 4], '<u4': [Uint32Array, 4],
-  '<i2': [Int16Array, 2], '<u2': [Uint16Array, 2], '<u1': [Uint8Array, 1], '<i1': [Int8Array, 1],
+  '<f4': [Float32Array, 4],
+  '<f8': [Float64Array, 8],
+  '<i4': [Int32Array, 4],
+  '<u4': [Uint32Array, 4],
+  '<i2': [Int16Array, 2],
+  '<u2': [Uint16Array, 2],
+  '<u1': [Uint8Array, 1],
+  '<i1': [Int8Array, 1],
 };
 
 const LITTLE_ENDIAN = new Uint8Array(new Uint16Array([1]).buffer)[0] === 1;
@@ -33,8 +39,14 @@ function typedArray(bytes, lo, dtype, count) {
   // unaligned view (a container inside a CLIP file) or a big-endian host: copy through a DataView
   const out = new Ctor(count);
   const view = new DataView(bytes.buffer, abs, count * size);
-  const get = { '<f4': 'getFloat32', '<f8': 'getFloat64', '<i4': 'getInt32', '<u4': 'getUint32',
-    '<i2': 'getInt16', '<u2': 'getUint16' }[dtype];
+  const get = {
+    '<f4': 'getFloat32',
+    '<f8': 'getFloat64',
+    '<i4': 'getInt32',
+    '<u4': 'getUint32',
+    '<i2': 'getInt16',
+    '<u2': 'getUint16',
+  }[dtype];
   for (let i = 0; i < count; i++) out[i] = view[get](i * size, true);
   return out;
 }
@@ -49,12 +61,15 @@ export function decodeContainer(data) {
     throw new ClipFormatError(`blob of ${bytes.byteLength} bytes is too short to be a pdeanim container`);
   }
   for (let i = 0; i < 8; i++) {
-    if (bytes[i] !== MAGIC.charCodeAt(i)) throw new ClipFormatError('not a pdeanim container (bad magic bytes)');
+    if (bytes[i] !== MAGIC.charCodeAt(i))
+      throw new ClipFormatError('not a pdeanim container (bad magic bytes)');
   }
   const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
   const version = view.getUint32(8, true);
   if (version !== CONTAINER_VERSION) {
-    throw new ClipFormatError(`unsupported container version ${version} (this build reads ${CONTAINER_VERSION})`);
+    throw new ClipFormatError(
+      `unsupported container version ${version} (this build reads ${CONTAINER_VERSION})`,
+    );
   }
   const hlen = view.getUint32(12, true);
   const start = 16 + hlen;
@@ -74,8 +89,14 @@ export function decodeContainer(data) {
   for (const [name, spec] of Object.entries(table)) {
     const shape = Array.isArray(spec?.shape) ? spec.shape.map(Number) : null;
     const dtype = spec?.dtype;
-    if (!shape || !(dtype in DTYPES) || shape.some((s) => !Number.isInteger(s) || s < 0)
-        || !Number.isInteger(spec.offset) || !Number.isInteger(spec.nbytes) || spec.offset < 0) {
+    if (
+      !shape ||
+      !(dtype in DTYPES) ||
+      shape.some((s) => !Number.isInteger(s) || s < 0) ||
+      !Number.isInteger(spec.offset) ||
+      !Number.isInteger(spec.nbytes) ||
+      spec.offset < 0
+    ) {
       throw new ClipFormatError(`bad array entry ${JSON.stringify(name)} in container header`);
     }
     const count = shape.reduce((a, b) => a * b, 1);

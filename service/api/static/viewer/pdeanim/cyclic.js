@@ -15,16 +15,32 @@ function vec3(x, what) {
 }
 
 function swimParams(d) {
-  if (!d || typeof d !== 'object') throw new ClipFormatError('bad cyclic-spine clip header: no swim parameters');
-  const p = { mode: 'eel', omega0: 0, omega1: 0.3, alpha: 1.5, phi: Math.PI / 2, frequency: 1, amplitude: 0.08,
-    wave: 'standing', radial: 'rotate', direction: 'lateral' };
+  if (!d || typeof d !== 'object')
+    throw new ClipFormatError('bad cyclic-spine clip header: no swim parameters');
+  const p = {
+    mode: 'eel',
+    omega0: 0,
+    omega1: 0.3,
+    alpha: 1.5,
+    phi: Math.PI / 2,
+    frequency: 1,
+    amplitude: 0.08,
+    wave: 'standing',
+    radial: 'rotate',
+    direction: 'lateral',
+  };
   for (const [k, v] of Object.entries(d)) {
     if (!(k in p)) throw new ClipFormatError(`bad cyclic-spine clip header: unknown swim parameter ${k}`);
     p[k] = SWIM_NUMBERS.includes(k) ? Number(v) : String(v);
   }
-  if (!SWIM_NUMBERS.every((k) => Number.isFinite(p[k])) || !(p.frequency >= 1e-3 && p.frequency <= 1e3)
-      || !(p.amplitude >= 0 && p.amplitude <= 1) || !WAVES.includes(p.wave) || !RADIAL.includes(p.radial)
-      || !DIRECTIONS.includes(p.direction)) {
+  if (
+    !SWIM_NUMBERS.every((k) => Number.isFinite(p[k])) ||
+    !(p.frequency >= 1e-3 && p.frequency <= 1e3) ||
+    !(p.amplitude >= 0 && p.amplitude <= 1) ||
+    !WAVES.includes(p.wave) ||
+    !RADIAL.includes(p.radial) ||
+    !DIRECTIONS.includes(p.direction)
+  ) {
     throw new ClipFormatError('bad cyclic-spine clip header: invalid swim parameters');
   }
   return p;
@@ -32,22 +48,33 @@ function swimParams(d) {
 
 /** Validate and decode the topology and coefficients containers of a cyclic-spine clip. */
 export function decodeCyclic(topo, coef) {
-  for (const [part, h] of [['topology', topo.header], ['coefficients', coef.header]]) {
+  for (const [part, h] of [
+    ['topology', topo.header],
+    ['coefficients', coef.header],
+  ]) {
     if (h.format_version !== undefined && h.format_version !== 1) {
-      throw new ClipFormatError(`unsupported cyclic-spine ${part} version ${JSON.stringify(h.format_version)}`
-        + ' (this build reads 1)');
+      throw new ClipFormatError(
+        `unsupported cyclic-spine ${part} version ${JSON.stringify(h.format_version)}` +
+          ' (this build reads 1)',
+      );
     }
   }
   const ta = topo.arrays;
   const ca = coef.arrays;
   const missing = ['faces', 'rest', 'vertex_patch', 'vertex_uv'].filter((n) => !ta[n]);
-  if (missing.length) throw new ClipFormatError(`cyclic-spine topology part lacks arrays: ${missing.join(', ')}`);
+  if (missing.length)
+    throw new ClipFormatError(`cyclic-spine topology part lacks arrays: ${missing.join(', ')}`);
   if (!ca.spine) throw new ClipFormatError('cyclic-spine coefficients part lacks arrays: spine');
   const f = topo.header.frame;
   if (!f || typeof f !== 'object') throw new ClipFormatError('bad cyclic-spine clip header: no body frame');
-  const frame = { origin: vec3(f.origin, 'frame.origin'), axis: vec3(f.axis, 'frame.axis'),
-    lateral: vec3(f.lateral, 'frame.lateral'), up: vec3(f.up, 'frame.up'), xMin: Number(f.x_min),
-    xMax: Number(f.x_max) };
+  const frame = {
+    origin: vec3(f.origin, 'frame.origin'),
+    axis: vec3(f.axis, 'frame.axis'),
+    lateral: vec3(f.lateral, 'frame.lateral'),
+    up: vec3(f.up, 'frame.up'),
+    xMin: Number(f.x_min),
+    xMax: Number(f.x_max),
+  };
   if (!Number.isFinite(frame.xMin) || !Number.isFinite(frame.xMax)) {
     throw new ClipFormatError('bad cyclic-spine clip header: frame.x_min/x_max must be numbers');
   }
@@ -59,9 +86,17 @@ export function decodeCyclic(topo, coef) {
   const uv = ta.vertex_uv;
   const V = rest.shape[0];
   const Bn = spine.shape[0];
-  const bad = spine.shape.length !== 3 || spine.shape[2] !== 3 || rest.shape.length !== 2 || rest.shape[1] !== 3
-    || patch.data.length !== V || uv.shape[0] !== V || uv.shape[1] !== 2 || !Number.isInteger(frames)
-    || frames < 1 || patch.data.some((p) => p < 0 || p >= Bn);
+  const bad =
+    spine.shape.length !== 3 ||
+    spine.shape[2] !== 3 ||
+    rest.shape.length !== 2 ||
+    rest.shape[1] !== 3 ||
+    patch.data.length !== V ||
+    uv.shape[0] !== V ||
+    uv.shape[1] !== 2 ||
+    !Number.isInteger(frames) ||
+    frames < 1 ||
+    patch.data.some((p) => p < 0 || p >= Bn);
   if (bad) throw new ClipFormatError('cyclic-spine clip arrays do not fit together');
   const faces = ta.faces;
   if (faces.shape.length !== 2 || faces.shape[1] !== 3 || faces.data.some((i) => i < 0 || i >= V)) {
@@ -69,9 +104,25 @@ export function decodeCyclic(topo, coef) {
   }
   const period = 1 / swim.frequency;
   const frameTimes = new Float64Array(frames + 1).map((_, i) => i * (period / frames));
-  return { kind: 'cyclic-spine', nVertices: V, faces: faces.data, rest: rest.data, patch: patch.data,
-    uv: uv.data, spine: spine.data, nPatches: Bn, order: spine.shape[1], frame, swim, period, frames,
-    frameTimes, looping: true, header: coef.header, topologyHeader: topo.header };
+  return {
+    kind: 'cyclic-spine',
+    nVertices: V,
+    faces: faces.data,
+    rest: rest.data,
+    patch: patch.data,
+    uv: uv.data,
+    spine: spine.data,
+    nPatches: Bn,
+    order: spine.shape[1],
+    frame,
+    swim,
+    period,
+    frames,
+    frameTimes,
+    looping: true,
+    header: coef.header,
+    topologyHeader: topo.header,
+  };
 }
 
 /** Spine point (deriv 0) or its s-derivative (deriv 1) at chain parameter s into out[0..2]. */
@@ -85,7 +136,7 @@ function spineAt(clip, s, deriv, out) {
   out[1] = 0;
   out[2] = 0;
   for (let k = deriv; k < N; k++) {
-    const w = (deriv ? k * u ** (k - 1) * B : u ** k);
+    const w = deriv ? k * u ** (k - 1) * B : u ** k;
     const o = (b * N + k) * 3;
     out[0] += w * clip.spine[o];
     out[1] += w * clip.spine[o + 1];
@@ -99,7 +150,8 @@ function wavePeak(p) {
   let peak = 0;
   for (let i = 0; i <= 2048; i++) {
     const s = i / 2048;
-    const shape = (p.omega0 + p.omega1 * s) * (p.wave === 'standing' ? Math.cos(2 * Math.PI * p.alpha * s + p.phi) : 1);
+    const shape =
+      (p.omega0 + p.omega1 * s) * (p.wave === 'standing' ? Math.cos(2 * Math.PI * p.alpha * s + p.phi) : 1);
     peak = Math.max(peak, Math.abs(shape));
   }
   return peak;
@@ -115,7 +167,7 @@ export class CyclicEvaluator {
     const axis = frame.axis;
     const length = frame.xMax - frame.xMin;
     const peak = wavePeak(p);
-    const gain = peak > 0 ? p.amplitude * length / peak : 0;
+    const gain = peak > 0 ? (p.amplitude * length) / peak : 0;
     const k = 2 * Math.PI * p.alpha;
     // per vertex: the coefficients of sin(wt) and cos(wt) in the wave (delta) and its slope,
     // and the spine-relative offset along the axis and the bend direction
@@ -140,15 +192,16 @@ export class CyclicEvaluator {
         const space = Math.cos(k * s + p.phi);
         const dspace = -k * Math.sin(k * s + p.phi);
         this.dS[v] = gain * amp * space;
-        this.gS[v] = gain * (p.omega1 * space + amp * dspace) / dxds;
-      } else { // sin(wt - a) = sin wt cos a - cos wt sin a, a = k s + phi
+        this.gS[v] = (gain * (p.omega1 * space + amp * dspace)) / dxds;
+      } else {
+        // sin(wt - a) = sin wt cos a - cos wt sin a, a = k s + phi
         const ca = Math.cos(k * s + p.phi);
         const sa = Math.sin(k * s + p.phi);
         this.dS[v] = gain * amp * ca;
         this.dC[v] = -gain * amp * sa;
         // slope = omega1 sin(wt - a) - amp k cos(wt - a)
-        this.gS[v] = gain * (p.omega1 * ca - amp * k * sa) / dxds;
-        this.gC[v] = gain * (-p.omega1 * sa - amp * k * ca) / dxds;
+        this.gS[v] = (gain * (p.omega1 * ca - amp * k * sa)) / dxds;
+        this.gC[v] = (gain * (-p.omega1 * sa - amp * k * ca)) / dxds;
       }
     }
     this.axis = axis;

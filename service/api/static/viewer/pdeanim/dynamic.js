@@ -10,11 +10,14 @@ function need(arrays, name, shape, part) {
   const a = arrays[name];
   if (!a) throw new ClipFormatError(`${part} part has no '${name}' array`);
   if (a.shape.length !== shape.length || shape.some((w, i) => w !== null && a.shape[i] !== w)) {
-    throw new ClipFormatError(`${part} array '${name}' has shape [${a.shape}], expected [${shape.map((w) => w ?? 'any')}]`);
+    throw new ClipFormatError(
+      `${part} array '${name}' has shape [${a.shape}], expected [${shape.map((w) => w ?? 'any')}]`,
+    );
   }
   if (a.dtype[1] === 'f') {
     for (let i = 0; i < a.data.length; i++) {
-      if (!Number.isFinite(a.data[i])) throw new ClipFormatError(`${part} array '${name}' has non-finite values`);
+      if (!Number.isFinite(a.data[i]))
+        throw new ClipFormatError(`${part} array '${name}' has non-finite values`);
     }
   }
   return a;
@@ -22,8 +25,10 @@ function need(arrays, name, shape, part) {
 
 function checkVersion(header, part) {
   if (header.format_version !== DYNAMIC_FORMAT_VERSION) {
-    throw new ClipFormatError(`unsupported dynamic-pde ${part} version ${JSON.stringify(header.format_version)}`
-      + ` (this build reads ${DYNAMIC_FORMAT_VERSION})`);
+    throw new ClipFormatError(
+      `unsupported dynamic-pde ${part} version ${JSON.stringify(header.format_version)}` +
+        ` (this build reads ${DYNAMIC_FORMAT_VERSION})`,
+    );
   }
 }
 
@@ -60,7 +65,8 @@ export function decodeDynamic(topo, coef) {
   }
   const faces = need(ta, 'faces', [null, 3], 'topology');
   for (let i = 0; i < faces.data.length; i++) {
-    if (faces.data[i] < 0 || faces.data[i] >= V) throw new ClipFormatError('topology faces index outside the vertices');
+    if (faces.data[i] < 0 || faces.data[i] >= V)
+      throw new ClipFormatError('topology faces index outside the vertices');
   }
   const u = need(ta, 'u', [V, null], 'topology');
   if (u.shape[1] !== 1 && u.shape[1] !== 3) {
@@ -85,7 +91,8 @@ export function decodeDynamic(topo, coef) {
     }
   }
   const motion = String(ch.motion);
-  if (!MOTIONS.includes(motion)) throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
+  if (!MOTIONS.includes(motion))
+    throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
   const D = need(ca, 'D', [C, 3], 'coefficients').data;
   const knots = need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data;
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
@@ -100,15 +107,35 @@ export function decodeDynamic(topo, coef) {
     for (const name of ['rot', 'trans']) {
       rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients').data;
       const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients').data;
-      if (mu.some((x) => x <= -Math.PI)) throw new ClipFormatError('rigid trig time constants must be above -pi');
+      if (mu.some((x) => x <= -Math.PI))
+        throw new ClipFormatError('rigid trig time constants must be above -pi');
       rigid[`${name}Mu`] = mu;
     }
   }
   return {
-    kind: 'dynamic-pde', nVertices: V, nCurves: C, nSegments: S, faces: faces.data, rest,
-    order, offsets, curveOf, u: u.data, uColumns: u.shape[1], paramMode: String(th.param_mode ?? 'chord'),
-    segmentT: segT, frameTimes, family, m, D, knots, motion, looping: Boolean(ch.looping), rigid,
-    header: ch, topologyHeader: th,
+    kind: 'dynamic-pde',
+    nVertices: V,
+    nCurves: C,
+    nSegments: S,
+    faces: faces.data,
+    rest,
+    order,
+    offsets,
+    curveOf,
+    u: u.data,
+    uColumns: u.shape[1],
+    paramMode: String(th.param_mode ?? 'chord'),
+    segmentT: segT,
+    frameTimes,
+    family,
+    m,
+    D,
+    knots,
+    motion,
+    looping: Boolean(ch.looping),
+    rigid,
+    header: ch,
+    topologyHeader: th,
   };
 }
 
@@ -183,8 +210,8 @@ export class DynamicEvaluator {
         for (let w = 0; w < 3; w++) {
           const b = v * 12 + w * 4;
           const k = kc + w * 4;
-          this.fields[off + v * 3 + w] = B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2]
-            + B[b + 3] * knots[k + 3];
+          this.fields[off + v * 3 + w] =
+            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
         }
       }
     }
@@ -258,8 +285,13 @@ export class DynamicEvaluator {
       const k1 = ((s + 1) * C + c) * 3;
       const rk = rg.rotKnots;
       const tk = rg.transKnots;
-      rodrigues(pr[0] * rk[k0] + pr[1] * rk[k1], pr[0] * rk[k0 + 1] + pr[1] * rk[k1 + 1],
-        pr[0] * rk[k0 + 2] + pr[1] * rk[k1 + 2], this.rot, c * 9);
+      rodrigues(
+        pr[0] * rk[k0] + pr[1] * rk[k1],
+        pr[0] * rk[k0 + 1] + pr[1] * rk[k1 + 1],
+        pr[0] * rk[k0 + 2] + pr[1] * rk[k1 + 2],
+        this.rot,
+        c * 9,
+      );
       for (let w = 0; w < 3; w++) this.trans[c * 3 + w] = pt[0] * tk[k0 + w] + pt[1] * tk[k1 + w];
     }
   }

@@ -6,6 +6,7 @@ import { vertexBase, vertexBasis } from './dynamic.js';
 import { locate } from './basis.js';
 
 export const TEXTURE_WIDTH = 4096;
+export const FIELDS_BUDGET_BYTES = 64 * 1024 * 1024;
 
 /** A float RGBA texture of n texels, width w: {data (Float32Array n*4, padded), width, height}. */
 function texture(nTexels, width = TEXTURE_WIDTH) {
@@ -16,33 +17,67 @@ function texture(nTexels, width = TEXTURE_WIDTH) {
 
 /**
  * Textures and constants of a decoded clip for the vertex shader (independent of t and of the mesh):
- * {kind, rigid, nCurves, textures: {vertex, knot?, mu?, rigid?}, maxHeight}.
+ * {kind, mode, rigid, nCurves, nVertices, textures: {vertex, field?, knot?, mu?, rigid?}, maxHeight}.
+ *
+ * mode "fields" (dynamic clips; the default while (S+1) x V texels fit fieldsBudget bytes) stores every
+ * knot's per-vertex contribution P_k = knots_k . S(u), computed in float64 like the CPU path, so the shader
+ * only forms base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the knots and the per-vertex basis
+ * (far smaller, but the shader then sums knot x basis terms in float32, and fitted clips' terms can be ~1e3
+ * times the result: ~1e-4 of the diagonal instead of ~1e-7).
  */
-export function gpuLayout(clip, { width = TEXTURE_WIDTH } = {}) {
+export function gpuLayout(
+  clip,
+  { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES } = {},
+) {
   if (clip.kind === 'cyclic-spine') return cyclicLayout(clip, width);
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, family, m, rigid } = clip;
+  if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
+  const useFields = mode === 'fields' || (mode === 'auto' && (S + 1) * V * 16 <= fieldsBudget);
   const B = vertexBasis(clip);
   const base = vertexBase(clip);
-  const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
-  for (let v = 0; v < V; v++) {
-    const o = v * 16;
-    vertex.data[o] = curveOf[v];
-    vertex.data.set(base.subarray(v * 3, v * 3 + 3), o + 1);
-    vertex.data.set(B.subarray(v * 12, v * 12 + 12), o + 4);
-  }
-  const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 space coefficients
-  knot.data.set(knots);
   const mu = texture(S * C, width); // per (segment, curve): signed time constants x, y, z
   for (let i = 0; i < S * C; i++) {
     for (let w = 0; w < 3; w++) mu.data[i * 4 + w] = (family[i * 3 + w] >= 2 ? -1 : 1) * m[i * 3 + w];
   }
-  const textures = { vertex, knot, mu };
+  let textures;
+  if (useFields) {
+    const vertex = texture(V, width); // per vertex: (curve, base xyz)
+    for (let v = 0; v < V; v++) {
+      vertex.data[v * 4] = curveOf[v];
+      vertex.data.set(base.subarray(v * 3, v * 3 + 3), v * 4 + 1);
+    }
+    const field = texture((S + 1) * V, width); // per (knot, vertex): P xyz
+    for (let s = 0; s <= S; s++) {
+      for (let v = 0; v < V; v++) {
+        const kc = (s * C + curveOf[v]) * 12;
+        const o = (s * V + v) * 4;
+        for (let w = 0; w < 3; w++) {
+          const b = v * 12 + w * 4;
+          const k = kc + w * 4;
+          field.data[o + w] =
+            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
+        }
+      }
+    }
+    textures = { vertex, field, mu };
+  } else {
+    const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
+    for (let v = 0; v < V; v++) {
+      const o = v * 16;
+      vertex.data[o] = curveOf[v];
+      vertex.data.set(base.subarray(v * 3, v * 3 + 3), o + 1);
+      vertex.data.set(B.subarray(v * 12, v * 12 + 12), o + 4);
+    }
+    const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 space coefficients
+    knot.data.set(knots);
+    textures = { vertex, knot, mu };
+  }
   if (rigid) {
     const Sr = rigid.segmentT.length - 1;
     const rt = texture((Sr + 1) * C * 2, width); // per (knot, curve): (rotvec, rot mu), (centroid, trans mu)
     for (let s = 0; s <= Sr; s++) {
       for (let c = 0; c < C; c++) {
-        const o = ((s * C + c) * 2) * 4;
+        const o = (s * C + c) * 2 * 4;
         const k = (s * C + c) * 3;
         rt.data.set(rigid.rotKnots.subarray(k, k + 3), o);
         rt.data.set(rigid.transKnots.subarray(k, k + 3), o + 4);
@@ -52,8 +87,16 @@ export function gpuLayout(clip, { width = TEXTURE_WIDTH } = {}) {
     }
     textures.rigid = rt;
   }
-  return { kind: clip.kind, rigid: Boolean(rigid), nCurves: C, textures, clip,
-    maxHeight: Math.max(...Object.values(textures).map((x) => x.height)) };
+  return {
+    kind: clip.kind,
+    mode: useFields ? 'fields' : 'coefficients',
+    rigid: Boolean(rigid),
+    nCurves: C,
+    nVertices: V,
+    textures,
+    clip,
+    maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
+  };
 }
 
 function cyclicLayout(clip, width) {
@@ -70,8 +113,19 @@ function cyclicLayout(clip, width) {
     vertex.data[o + 7] = ev.gC[v];
     vertex.data[o + 8] = ev.rl[v];
   }
-  return { kind: clip.kind, rigid: false, nCurves: 0, textures: { vertex }, clip, maxHeight: vertex.height,
-    axis: ev.axis, bend: ev.bend, rotate: ev.rotate };
+  return {
+    kind: clip.kind,
+    mode: 'cyclic',
+    rigid: false,
+    nCurves: 0,
+    nVertices: V,
+    textures: { vertex },
+    clip,
+    maxHeight: vertex.height,
+    axis: ev.axis,
+    bend: ev.bend,
+    rotate: ev.rotate,
+  };
 }
 
 /** The uniforms that depend on t: segment and local time (and the rigid ones), or the wave phase. */
@@ -126,8 +180,11 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
   for (let i = 0; i < n; i++) {
     const a = nb[i * 2];
     const b = nb[i * 2 + 1];
-    const ok = best[i] > 1e-6 && vertexMap[a] !== vertexMap[i] && vertexMap[b] !== vertexMap[i]
-      && vertexMap[a] !== vertexMap[b];
+    const ok =
+      best[i] > 1e-6 &&
+      vertexMap[a] !== vertexMap[i] &&
+      vertexMap[b] !== vertexMap[i] &&
+      vertexMap[a] !== vertexMap[b];
     pdeVertex[i * 3] = vertexMap[i];
     pdeVertex[i * 3 + 1] = ok ? vertexMap[a] : vertexMap[i];
     pdeVertex[i * 3 + 2] = ok ? vertexMap[b] : vertexMap[i];
@@ -156,7 +213,8 @@ function triangleQuality(pos, p, a, b, e) {
 
 /**
  * Orthonormal frame (rows t1, t2, n) of triangle (p, a, b) of positions (any vertex indexing) into out (9):
- * t1 along p->a, n the triangle normal, t2 = n x t1. The shader builds the same frame from evaluated positions.
+ * t1 along p->a, n the triangle normal, t2 = n x t1. The shader builds the same frame from evaluated
+ * positions.
  */
 export function triangleFrame(pos, p, a, b, out) {
   const e1 = [0, 1, 2].map((w) => pos[a * 3 + w] - pos[p * 3 + w]);
@@ -199,6 +257,7 @@ export function frameNormals(clipPositions, attrs, restNormals, out) {
 export function glslHeader(layout) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
+  if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
   return `${defs.join('\n')}
 in vec3 pdeVertex;
 in vec3 pdeNormalFrame;
@@ -207,9 +266,16 @@ uniform bool pdeEnabled;
 uniform int pdeSeg;
 uniform float pdeTau;
 uniform int pdeCurves;
+uniform int pdeVertices;
+uniform mat4 pdeClipToLocal;
+uniform mat3 pdeNormalToLocal;
 #ifdef PDEANIM_DYNAMIC
-uniform highp sampler2D pdeKnotTex;
 uniform highp sampler2D pdeMuTex;
+#ifdef PDEANIM_FIELDS
+uniform highp sampler2D pdeFieldTex;
+#else
+uniform highp sampler2D pdeKnotTex;
+#endif
 #endif
 #ifdef PDEANIM_RIGID
 uniform highp sampler2D pdeRigidTex;
@@ -260,6 +326,7 @@ vec2 pdeTimePair(float tau, float mu) {
   return vec2(1.0 - tau, tau);
 }
 #ifdef PDEANIM_DYNAMIC
+#ifndef PDEANIM_FIELDS
 float pdeCoord(int v, int c, int w, vec4 b) {
   float mu = pdeFetch(pdeMuTex, pdeSeg * pdeCurves + c)[w];
   vec2 ph = pdeTimePair(pdeTau, mu);
@@ -267,6 +334,7 @@ float pdeCoord(int v, int c, int w, vec4 b) {
   vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
   return dot(ph.x * k0 + ph.y * k1, b);
 }
+#endif
 #ifdef PDEANIM_RIGID
 mat3 pdeRodrigues(vec3 r) {
   float t2 = dot(r, r);
@@ -286,11 +354,22 @@ vec2 pdeRigidPair(float tau, float mu) {
 }
 #endif
 vec3 pdeEval(int v) {
+#ifdef PDEANIM_FIELDS
+  vec4 head = pdeFetch(pdeVertexTex, v);
+  int c = int(head.x + 0.5);
+  vec3 mu = pdeFetch(pdeMuTex, pdeSeg * pdeCurves + c).xyz;
+  vec2 px = pdeTimePair(pdeTau, mu.x);
+  vec2 py = pdeTimePair(pdeTau, mu.y);
+  vec2 pz = pdeTimePair(pdeTau, mu.z);
+  vec3 p = head.yzw + vec3(px.x, py.x, pz.x) * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz
+    + vec3(px.y, py.y, pz.y) * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz;
+#else
   vec4 head = pdeFetch(pdeVertexTex, v * 4);
   int c = int(head.x + 0.5);
   vec3 p = head.yzw + vec3(pdeCoord(v, c, 0, pdeFetch(pdeVertexTex, v * 4 + 1)),
                            pdeCoord(v, c, 1, pdeFetch(pdeVertexTex, v * 4 + 2)),
                            pdeCoord(v, c, 2, pdeFetch(pdeVertexTex, v * 4 + 3)));
+#endif
 #ifdef PDEANIM_RIGID
   vec4 r0 = pdeFetch(pdeRigidTex, (pdeRSeg * pdeCurves + c) * 2);
   vec4 c0 = pdeFetch(pdeRigidTex, (pdeRSeg * pdeCurves + c) * 2 + 1);
@@ -324,14 +403,16 @@ void pdeCompute() {
   int v = int(pdeVertex.x + 0.5);
   int va = int(pdeVertex.y + 0.5);
   int vb = int(pdeVertex.z + 0.5);
-  pdePosition = pdeEval(v);
+  vec3 p = pdeEval(v);
+  pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
   if (va != v) {
-    vec3 e1 = pdeEval(va) - pdePosition;
-    vec3 e2 = pdeEval(vb) - pdePosition;
+    vec3 e1 = pdeEval(va) - p;
+    vec3 e2 = pdeEval(vb) - p;
     vec3 t1 = normalize(e1);
     vec3 n = normalize(cross(e1, e2));
-    pdeNormal = pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1) + pdeNormalFrame.z * n;
+    pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
+      + pdeNormalFrame.z * n));
   }
 }
 `;

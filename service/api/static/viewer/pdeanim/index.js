@@ -2,8 +2,17 @@
 
 export { ClipFormatError, decodeContainer, CONTAINER_VERSION } from './container.js';
 export {
-  decodeClip, decodeClipFile, splitClipFile, loadClip, loadClipFile, fetchBuffer, fetchClip, fetchClipFile,
-  createEvaluator, sha256Hex,
+  decodeClip,
+  decodeClipFile,
+  splitClipFile,
+  loadClip,
+  loadClipFile,
+  fetchBuffer,
+  fetchClip,
+  fetchClipFile,
+  fetchServiceClip,
+  createEvaluator,
+  sha256Hex,
 } from './clip.js';
 export { DynamicEvaluator, DYNAMIC_FORMAT_VERSION, vertexBasis, vertexBase } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';

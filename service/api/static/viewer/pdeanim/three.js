@@ -1,8 +1,17 @@
 // three.js integration: play a pdeanim clip on an existing mesh, evaluated in the vertex shader (data
 // textures + per-vertex attributes + per-frame uniforms), keeping the mesh's materials; CPU fallback.
 
-import { DataTexture, FloatType, MeshDepthMaterial, MeshDistanceMaterial, NearestFilter, RGBAFormat,
-  BufferAttribute } from 'three';
+import {
+  BufferAttribute,
+  DataTexture,
+  FloatType,
+  Matrix3,
+  Matrix4,
+  MeshDepthMaterial,
+  MeshDistanceMaterial,
+  NearestFilter,
+  RGBAFormat,
+} from 'three';
 import { createEvaluator } from './clip.js';
 import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from './gpu.js';
 
@@ -27,8 +36,10 @@ function resolveVertexMap(geometry, clip, vertexMap) {
   }
   if (!map) {
     if (count !== clip.nVertices) {
-      throw new Error(`the mesh has ${count} vertices and the clip ${clip.nVertices}: pass options.vertexMap `
-        + '(the clip vertex of each mesh vertex) or a _pdeanim_vertex attribute');
+      throw new Error(
+        `the mesh has ${count} vertices and the clip ${clip.nVertices}: pass options.vertexMap ` +
+          '(the clip vertex of each mesh vertex) or a _pdeanim_vertex attribute',
+      );
     }
     map = Int32Array.from({ length: count }, (_, i) => i);
   }
@@ -41,54 +52,155 @@ function resolveVertexMap(geometry, clip, vertexMap) {
 function patchShader(shader, header) {
   const vs = shader.vertexShader;
   if (!vs.includes('#include <begin_vertex>') || !vs.includes('void main() {')) {
-    throw new Error('pdeanim: the material\'s vertex shader has no <begin_vertex> chunk to patch');
+    throw new Error("pdeanim: the material's vertex shader has no <begin_vertex> chunk to patch");
   }
   shader.vertexShader = vs
     .replace('#include <common>', `#include <common>\n${header}`)
     .replace('void main() {', 'void main() {\n\tif (pdeEnabled) pdeCompute();')
-    .replace('#include <beginnormal_vertex>', '#include <beginnormal_vertex>\n\tif (pdeEnabled) objectNormal = pdeNormal;')
-    .replace('#include <begin_vertex>', '#include <begin_vertex>\n\tif (pdeEnabled) transformed = pdePosition;');
+    .replace(
+      '#include <beginnormal_vertex>',
+      '#include <beginnormal_vertex>\n\tif (pdeEnabled) objectNormal = pdeNormal;',
+    )
+    .replace(
+      '#include <begin_vertex>',
+      '#include <begin_vertex>\n\tif (pdeEnabled) transformed = pdePosition;',
+    );
+}
+
+/** A plain (not interleaved, not normalised) float32 copy of a 3-component attribute. */
+function floatCopy(attr) {
+  const out = new Float32Array(attr.count * 3);
+  for (let i = 0; i < attr.count; i++) {
+    out[i * 3] = attr.getX(i);
+    out[i * 3 + 1] = attr.getY(i);
+    out[i * 3 + 2] = attr.getZ(i);
+  }
+  return out;
+}
+
+function isPlainFloat(attr) {
+  return !attr.isInterleavedBufferAttribute && !attr.normalized && attr.array instanceof Float32Array;
+}
+
+function toMatrix4(m) {
+  if (!m) return new Matrix4();
+  if (m.isMatrix4) return m.clone();
+  return new Matrix4().fromArray(m);
+}
+
+/** Apply the affine matrix (elements, column-major) to positions (n * 3) into out. */
+function transformPoints(e, src, out) {
+  for (let i = 0; i < src.length; i += 3) {
+    const x = src[i];
+    const y = src[i + 1];
+    const z = src[i + 2];
+    out[i] = e[0] * x + e[4] * y + e[8] * z + e[12];
+    out[i + 1] = e[1] * x + e[5] * y + e[9] * z + e[13];
+    out[i + 2] = e[2] * x + e[6] * y + e[10] * z + e[14];
+  }
+  return out;
+}
+
+/** Apply the 3x3 normal matrix (elements, column-major) to normals (n * 3) and normalise, in place. */
+function transformNormals(e, n) {
+  for (let i = 0; i < n.length; i += 3) {
+    const x = e[0] * n[i] + e[3] * n[i + 1] + e[6] * n[i + 2];
+    const y = e[1] * n[i] + e[4] * n[i + 1] + e[7] * n[i + 2];
+    const z = e[2] * n[i] + e[5] * n[i + 1] + e[8] * n[i + 2];
+    const l = Math.hypot(x, y, z) || 1;
+    n[i] = x / l;
+    n[i + 1] = y / l;
+    n[i + 2] = z / l;
+  }
+  return n;
+}
+
+/** Shared, mesh-independent state of a clip on the GPU and CPU: layout, textures, evaluator. */
+export function clipResources(clip, options = {}) {
+  const { textureWidth = 4096, maxTextureSize = 4096, gpuMode = 'auto' } = options;
+  const layout = gpuLayout(clip, { width: textureWidth, mode: gpuMode });
+  const gpuReason =
+    layout.maxHeight > maxTextureSize
+      ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})`
+      : null;
+  const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
+  return { clip, layout, textures, gpuReason, evaluator: createEvaluator(clip), owned: 0 };
 }
 
 /**
  * Play a decoded clip on mesh (a THREE.Mesh whose vertices are the clip's, or mapped to them by
  * options.vertexMap / a _pdeanim_vertex attribute). Returns a player: setTime(t), useGPU(bool), detach().
- * options: {gpu = true, vertexMap, textureWidth = 4096, maxTextureSize = 4096, shadows = true,
- * frustumCulled = false}.
+ * options: {gpu = true, vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip coordinates to
+ * the mesh's local frame; default identity), textureWidth = 4096, maxTextureSize = 4096, shadows = true,
+ * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), resources (from
+ * clipResources, shared between meshes)}.
  */
 export function attachClip(mesh, clip, options = {}) {
-  const { gpu = true, textureWidth = 4096, maxTextureSize = 4096, shadows = true, frustumCulled = false } = options;
+  const { gpu = true, shadows = true, frustumCulled = false } = options;
+  const res = options.resources ?? clipResources(clip, options);
+  res.owned++;
+  const { layout, textures, gpuReason, evaluator } = res;
   const geometry = mesh.geometry;
   const vertexMap = resolveVertexMap(geometry, clip, options.vertexMap);
   if (!geometry.getAttribute('normal')) geometry.computeVertexNormals();
+  const clipToLocal = toMatrix4(options.clipToLocal);
+  const localToClip = clipToLocal.clone().invert();
+  const normalToLocal = new Matrix3().getNormalMatrix(clipToLocal);
+  const normalToClip = new Matrix3().getNormalMatrix(localToClip);
+
+  // plain float32 attributes (dequantised, de-interleaved) that the CPU path can write into
+  const original = { position: geometry.getAttribute('position'), normal: geometry.getAttribute('normal') };
+  const restLocal = floatCopy(original.position);
+  const restNormalsLocal = transformNormals(new Matrix3().elements, floatCopy(original.normal));
+  for (const name of ['position', 'normal']) {
+    if (!isPlainFloat(original[name])) {
+      const copy = new BufferAttribute(floatCopy(original[name]), 3);
+      geometry.setAttribute(name, copy);
+    }
+  }
   const posAttr = geometry.getAttribute('position');
   const nrmAttr = geometry.getAttribute('normal');
-  const restPositions = Float32Array.from(posAttr.array);
-  const restNormals = Float32Array.from(nrmAttr.array);
-  const attrs = meshAttributes({ vertexMap, positions: restPositions, normals: restNormals,
-    index: geometry.index ? geometry.index.array : null });
+  const restClip = transformPoints(localToClip.elements, restLocal, new Float32Array(restLocal.length));
+  const restNormalsClip = transformNormals(normalToClip.elements, Float32Array.from(restNormalsLocal));
+  const attrs = meshAttributes({
+    vertexMap,
+    positions: restClip,
+    normals: restNormalsClip,
+    index: geometry.index ? geometry.index.array : null,
+  });
   geometry.setAttribute('pdeVertex', new BufferAttribute(attrs.pdeVertex, 3));
   geometry.setAttribute('pdeNormalFrame', new BufferAttribute(attrs.pdeNormalFrame, 3));
 
-  const layout = gpuLayout(clip, { width: textureWidth });
-  const gpuReason = layout.maxHeight > maxTextureSize
-    ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})` : null;
-  const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
   const uniforms = {
-    pdeEnabled: { value: false }, pdeSeg: { value: 0 }, pdeTau: { value: 0 }, pdeCurves: { value: layout.nCurves },
-    pdeRSeg: { value: 0 }, pdeRTau: { value: 0 }, pdeSinWt: { value: 0 }, pdeCosWt: { value: 1 },
-    pdeVertexTex: { value: textures.vertex }, pdeKnotTex: { value: textures.knot ?? null },
-    pdeMuTex: { value: textures.mu ?? null }, pdeRigidTex: { value: textures.rigid ?? null },
+    pdeEnabled: { value: false },
+    pdeSeg: { value: 0 },
+    pdeTau: { value: 0 },
+    pdeCurves: { value: layout.nCurves },
+    pdeRSeg: { value: 0 },
+    pdeRTau: { value: 0 },
+    pdeSinWt: { value: 0 },
+    pdeCosWt: { value: 1 },
+    pdeVertices: { value: layout.nVertices },
+    pdeClipToLocal: { value: clipToLocal },
+    pdeNormalToLocal: { value: normalToLocal },
+    pdeFieldTex: { value: textures.field ?? null },
+    pdeVertexTex: { value: textures.vertex },
+    pdeKnotTex: { value: textures.knot ?? null },
+    pdeMuTex: { value: textures.mu ?? null },
+    pdeRigidTex: { value: textures.rigid ?? null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
-    pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] }, pdeRotate: { value: Boolean(layout.rotate) },
+    pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
+    pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout);
-  const key = `pdeanim:${layout.kind}:${layout.rigid}`;
+  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;
     m.onBeforeCompile = (shader, renderer) => {
-      if (previous && previous !== material.constructor.prototype.onBeforeCompile) previous.call(m, shader, renderer);
+      if (previous && previous !== material.constructor.prototype.onBeforeCompile) {
+        previous.call(m, shader, renderer);
+      }
       Object.assign(shader.uniforms, uniforms);
       patchShader(shader, header);
     };
@@ -107,33 +219,54 @@ export function attachClip(mesh, clip, options = {}) {
   const originalCulled = mesh.frustumCulled;
   mesh.frustumCulled = frustumCulled;
 
-  const evaluator = createEvaluator(clip);
   const clipPositions = new Float32Array(clip.nVertices * 3);
+  const scratch = new Float32Array(vertexMap.length * 3);
   let onGPU = gpu && !gpuReason;
   let time = 0;
 
-  function writeCPU(t) {
-    evaluator.evaluate(t, clipPositions);
-    const pos = posAttr.array;
+  function restoreRest() {
+    posAttr.array.set(restLocal);
+    nrmAttr.array.set(restNormalsLocal);
+    posAttr.needsUpdate = true;
+    nrmAttr.needsUpdate = true;
+  }
+
+  function writeCPU(positions) {
     for (let i = 0; i < vertexMap.length; i++) {
       const v = vertexMap[i] * 3;
-      pos[i * 3] = clipPositions[v];
-      pos[i * 3 + 1] = clipPositions[v + 1];
-      pos[i * 3 + 2] = clipPositions[v + 2];
+      scratch[i * 3] = positions[v];
+      scratch[i * 3 + 1] = positions[v + 1];
+      scratch[i * 3 + 2] = positions[v + 2];
     }
-    frameNormals(clipPositions, attrs, restNormals, nrmAttr.array);
+    transformPoints(clipToLocal.elements, scratch, posAttr.array);
+    frameNormals(positions, attrs, restNormalsClip, nrmAttr.array);
+    transformNormals(normalToLocal.elements, nrmAttr.array);
     posAttr.needsUpdate = true;
     nrmAttr.needsUpdate = true;
   }
 
   const player = {
-    clip, layout, uniforms, textures, evaluator, vertexMap, attributes: attrs,
+    clip,
+    layout,
+    uniforms,
+    textures,
+    evaluator,
+    vertexMap,
+    attributes: attrs,
+    mesh,
     /** Why the GPU path is unavailable (null when it is available). */
     gpuUnavailableReason: gpuReason,
-    get gpu() { return onGPU; },
-    get time() { return time; },
-    /** Show the clip at normalised time t (GPU: a few uniforms; CPU: positions and normals rewritten). */
-    setTime(t) {
+    get gpu() {
+      return onGPU;
+    },
+    get time() {
+      return time;
+    },
+    /**
+     * Show the clip at normalised time t (GPU: a few uniforms; CPU: positions and normals rewritten).
+     * evaluated: the clip's CPU positions at t when the caller already has them (shared between meshes).
+     */
+    setTime(t, evaluated = null) {
       const u = timeUniforms(layout, t);
       time = t;
       uniforms.pdeSeg.value = u.seg;
@@ -142,19 +275,14 @@ export function attachClip(mesh, clip, options = {}) {
       uniforms.pdeRTau.value = u.rtau;
       uniforms.pdeSinWt.value = u.sw;
       uniforms.pdeCosWt.value = u.cw;
-      if (!onGPU) writeCPU(t);
+      if (!onGPU) writeCPU(evaluated ?? evaluator.evaluate(t, clipPositions));
       return player;
     },
     /** Switch between GPU evaluation and the CPU fallback; returns whether the GPU is used. */
     useGPU(on) {
       onGPU = Boolean(on) && !gpuReason;
       uniforms.pdeEnabled.value = onGPU;
-      if (onGPU) {
-        posAttr.array.set(restPositions);
-        nrmAttr.array.set(restNormals);
-        posAttr.needsUpdate = true;
-        nrmAttr.needsUpdate = true;
-      }
+      if (onGPU) restoreRest();
       player.setTime(time);
       return onGPU;
     },
@@ -162,21 +290,84 @@ export function attachClip(mesh, clip, options = {}) {
     positions(t, out = new Float32Array(clip.nVertices * 3)) {
       return evaluator.evaluate(t, out);
     },
-    /** Restore the mesh's materials and geometry and free the textures. */
+    /** Restore the mesh's materials and attributes; the textures are freed with their last user. */
     detach() {
       mesh.material = originalMaterial;
       [mesh.customDepthMaterial, mesh.customDistanceMaterial] = originalDepth;
       mesh.frustumCulled = originalCulled;
-      posAttr.array.set(restPositions);
-      nrmAttr.array.set(restNormals);
-      posAttr.needsUpdate = true;
-      nrmAttr.needsUpdate = true;
+      restoreRest();
+      geometry.setAttribute('position', original.position);
+      geometry.setAttribute('normal', original.normal);
       geometry.deleteAttribute('pdeVertex');
       geometry.deleteAttribute('pdeNormalFrame');
       for (const m of [patched, mesh.customDepthMaterial].flat()) m?.dispose?.();
-      for (const tex of Object.values(textures)) tex.dispose();
+      if (--res.owned === 0) for (const tex of Object.values(textures)) tex.dispose();
     },
   };
   player.useGPU(onGPU);
   return player;
+}
+
+/**
+ * Play a clip on every mesh under root (e.g. gltf.scene from GLTFLoader): meshes in depth-first order take
+ * consecutive ranges of the clip's vertices (the order pdeanim reads a glTF's primitives in, and writes its
+ * frame and animation GLBs in), each placed with its transform relative to root so that the clip's
+ * coordinates are root's. Returns a player over all meshes (one CPU evaluation per frame, shared textures).
+ * options: as attachClip (without vertexMap/clipToLocal), plus filter(mesh) to skip meshes.
+ */
+export function attachClipToScene(root, clip, options = {}) {
+  root.updateMatrixWorld(true);
+  const rootInverse = root.matrixWorld.clone().invert();
+  const meshes = [];
+  root.traverse((o) => {
+    if (o.isMesh && o.geometry?.getAttribute('position') && (!options.filter || options.filter(o))) {
+      meshes.push(o);
+    }
+  });
+  const total = meshes.reduce((n, m) => n + m.geometry.getAttribute('position').count, 0);
+  if (total !== clip.nVertices) {
+    throw new Error(`the meshes under root have ${total} vertices in all and the clip ${clip.nVertices}`);
+  }
+  const resources = clipResources(clip, options);
+  let offset = 0;
+  const players = meshes.map((mesh) => {
+    const n = mesh.geometry.getAttribute('position').count;
+    const vertexMap = Int32Array.from({ length: n }, (_, i) => offset + i);
+    offset += n;
+    const clipToLocal = rootInverse.clone().multiply(mesh.matrixWorld).invert();
+    return attachClip(mesh, clip, { ...options, vertexMap, clipToLocal, resources });
+  });
+  const positions = new Float32Array(clip.nVertices * 3);
+  let time = 0;
+  const group = {
+    clip,
+    players,
+    resources,
+    gpuUnavailableReason: resources.gpuReason,
+    get gpu() {
+      return players.every((p) => p.gpu);
+    },
+    get time() {
+      return time;
+    },
+    setTime(t) {
+      time = t;
+      const cpu = players.some((p) => !p.gpu);
+      if (cpu) resources.evaluator.evaluate(t, positions);
+      for (const p of players) p.setTime(t, cpu ? positions : null);
+      return group;
+    },
+    useGPU(on) {
+      for (const p of players) p.useGPU(on);
+      group.setTime(time);
+      return group.gpu;
+    },
+    positions(t, out = new Float32Array(clip.nVertices * 3)) {
+      return resources.evaluator.evaluate(t, out);
+    },
+    detach() {
+      for (const p of players) p.detach();
+    },
+  };
+  return group;
 }
