@@ -73,12 +73,14 @@ def ours(frames: np.ndarray, faces: np.ndarray, times: np.ndarray, normals: bool
                                 options=PackOptions(normals=normals, position_bits=bits))
 
 
-def gltfpack_cc(frames: np.ndarray, faces: np.ndarray, times: np.ndarray, normals: bool, tmp: Path) -> bytes:
-    """``gltfpack -cc`` run on a float32 morph-target GLB of the same frames."""
+def gltfpack_cc(frames: np.ndarray, faces: np.ndarray, times: np.ndarray, normals: bool,
+                tmp: Path) -> tuple[bytes, int]:
+    """``gltfpack -cc`` run on a float32 morph-target GLB of the same frames, and that input's size (what
+    ``--no-quantize --no-compress`` writes, and what the API served before the compact writer)."""
     src, out = tmp / "in.glb", tmp / "out.glb"
     src.write_bytes(animation_glb(frames, times, faces, normals=normals))
     subprocess.run([str(GLTFPACK), "-cc", "-i", str(src), "-o", str(out)], check=True, capture_output=True)
-    return out.read_bytes()
+    return out.read_bytes(), src.stat().st_size
 
 
 def grid_step(glb: bytes) -> float:
@@ -107,7 +109,8 @@ def main() -> int:
     cases += [(name, lambda n=name: sequence_frames(n, args.fps)) for name in args.sequences]
     print(f"load average before: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
     print("step = position grid step / largest bounding-box extent of the frames (precision; smaller is finer)")
-    header = f"{'case':<20} {'frames x verts':>14} {'nrm':>3} {'bits':>4} {'raw f32':>11} {'gltfpack -cc':>12} " \
+    header = f"{'case':<20} {'frames x verts':>14} {'nrm':>3} {'bits':>4} {'raw f32':>11} {'plain GLB':>11} " \
+             f"{'gltfpack -cc':>12} " \
              f"{'gp step':>8} {'ours':>11} {'ours step':>9} {'ours/gp':>7} {'ours/raw':>8} {'build s':>7}"
     print(header)
     for label, load in cases:
@@ -116,7 +119,7 @@ def main() -> int:
         extent = float(np.ptp(frames.reshape(-1, 3), axis=0).max())
         for normals in (True, False):
             with tempfile.TemporaryDirectory() as tmp:
-                gp = gltfpack_cc(frames, faces, times, normals, Path(tmp))
+                gp, plain = gltfpack_cc(frames, faces, times, normals, Path(tmp))
             matched = int(np.clip(np.ceil(np.log2(extent / grid_step(gp) + 1)), 8, 15))  # step <= gltfpack's
             for bits in sorted({args.bits, matched}, reverse=True):
                 builds, glb = [], b""
@@ -125,7 +128,7 @@ def main() -> int:
                     glb = ours(frames, faces, times, normals, bits)
                     builds.append(time.perf_counter() - start)
                 print(f"{label:<20} {f'{frames.shape[0]} x {frames.shape[1]}':>14} {'yes' if normals else 'no':>3} "
-                      f"{bits:>4} {raw:>11,} {len(gp):>12,} {grid_step(gp) / extent:>8.1e} {len(glb):>11,} "
+                      f"{bits:>4} {raw:>11,} {plain:>11,} {len(gp):>12,} {grid_step(gp) / extent:>8.1e} {len(glb):>11,} "
                       f"{grid_step(glb) / extent:>9.1e} {len(glb) / len(gp):>7.2f} {len(glb) / raw:>8.3f} "
                       f"{statistics.median(builds):>7.2f}", flush=True)
                 if args.validate:
