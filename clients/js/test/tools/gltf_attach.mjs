@@ -21,31 +21,42 @@ const bytes = readFileSync(glbPath);
 const clip = decodeClipFile(readFileSync(clipPath));
 const loader = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder);
 await MeshoptDecoder.ready;
-const gltf = await loader.parseAsync(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength), '');
+const gltf = await loader.parseAsync(
+  bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength),
+  '',
+);
 const root = gltf.scene;
 const before = [];
 root.traverse((o) => {
   if (o.isMesh) {
     const mats = Array.isArray(o.material) ? o.material : [o.material];
-    before.push({ name: o.name, materials: mats.map((m) => m.name), map: mats.map((m) => Boolean(m.map)),
+    before.push({
+      name: o.name,
+      materials: mats.map((m) => m.name),
+      map: mats.map((m) => Boolean(m.map)),
       attributes: Object.keys(o.geometry.attributes).sort(),
-      positionType: o.geometry.getAttribute('position').array.constructor.name });
+      positionType: o.geometry.getAttribute('position').array.constructor.name,
+    });
   }
 });
 const player = attachClipToScene(root, clip, { gpu: false });
 const rootInverse = root.matrixWorld.clone().invert();
-const frames = tList.split(',').map(Number).map((t) => {
-  player.setTime(t);
-  const out = [];
-  for (const p of player.players) {
-    const rel = rootInverse.clone().multiply(p.mesh.matrixWorld);
-    const pos = p.mesh.geometry.getAttribute('position');
-    for (let i = 0; i < pos.count; i++) {
-      out.push(new THREE.Vector3(pos.getX(i), pos.getY(i), pos.getZ(i)).applyMatrix4(rel).toArray());
+const frames = tList
+  .split(',')
+  .map(Number)
+  .map((t) => {
+    player.setTime(t);
+    const out = [];
+    for (const p of player.players) {
+      const rel = rootInverse.clone().multiply(p.mesh.matrixWorld);
+      const pos = p.mesh.geometry.getAttribute('position');
+      for (let i = 0; i < pos.count; i++) {
+        out.push(new THREE.Vector3(pos.getX(i), pos.getY(i), pos.getZ(i)).applyMatrix4(rel).toArray());
+      }
     }
-  }
-  return out;
-});
-const after = player.players.map((p) => (Array.isArray(p.mesh.material) ? p.mesh.material : [p.mesh.material])
-  .map((m) => m.name));
+    return out;
+  });
+const after = player.players.map((p) =>
+  (Array.isArray(p.mesh.material) ? p.mesh.material : [p.mesh.material]).map((m) => m.name),
+);
 process.stdout.write(JSON.stringify({ meshes: before, materialsWhilePlaying: after, frames }));
