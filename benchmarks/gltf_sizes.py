@@ -32,8 +32,8 @@ from pdeanim.gltf.compact import PackOptions, layout_animation_glb  # noqa: E402
 from pdeanim.gltf.layout import plain_layout  # noqa: E402
 from pdeanim.gltf.write import _check_times, _key_plan, animation_glb  # noqa: E402
 
-SEQUENCES = next((p / "shared" / "data" / "sequences" for p in (ROOT.parent, ROOT.parent.parent)
-                  if (p / "shared" / "data" / "sequences").is_dir()), ROOT.parent / "shared" / "data" / "sequences")
+_CANDIDATES = [p / "shared" / "data" / "sequences" for p in (ROOT.parent, ROOT.parent.parent)]
+SEQUENCES = next((p for p in _CANDIDATES if p.is_dir()), _CANDIDATES[0])
 GLTFPACK = ROOT / "tools" / "gltfpack" / "node_modules" / ".bin" / "gltfpack"
 
 
@@ -108,10 +108,10 @@ def main() -> int:
     cases = [] if args.no_demo else [("demo clip (spot)", lambda: demo_frames(args.fps))]
     cases += [(name, lambda n=name: sequence_frames(n, args.fps)) for name in args.sequences]
     print(f"load average before: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
-    print("step = position grid step / largest bounding-box extent of the frames (precision; smaller is finer)")
-    header = f"{'case':<20} {'frames x verts':>14} {'nrm':>3} {'bits':>4} {'raw f32':>11} {'plain GLB':>11} " \
-             f"{'gltfpack -cc':>12} " \
-             f"{'gp step':>8} {'ours':>11} {'ours step':>9} {'ours/gp':>7} {'ours/raw':>8} {'build s':>7}"
+    print("step = position grid step / largest bounding-box extent of the frames (smaller is finer)")
+    header = (f"{'case':<20} {'frames x verts':>14} {'nrm':>3} {'bits':>4} {'raw f32':>11} {'plain GLB':>11} "
+              f"{'gltfpack -cc':>12} {'gp step':>8} {'ours':>11} {'ours step':>9} {'ours/gp':>7} "
+              f"{'ours/raw':>8} {'build s':>7}")
     print(header)
     for label, load in cases:
         frames, faces, times = load()
@@ -127,8 +127,9 @@ def main() -> int:
                     start = time.perf_counter()
                     glb = ours(frames, faces, times, normals, bits)
                     builds.append(time.perf_counter() - start)
-                print(f"{label:<20} {f'{frames.shape[0]} x {frames.shape[1]}':>14} {'yes' if normals else 'no':>3} "
-                      f"{bits:>4} {raw:>11,} {plain:>11,} {len(gp):>12,} {grid_step(gp) / extent:>8.1e} {len(glb):>11,} "
+                shape = f"{frames.shape[0]} x {frames.shape[1]}"
+                print(f"{label:<20} {shape:>14} {'yes' if normals else 'no':>3} {bits:>4} {raw:>11,} "
+                      f"{plain:>11,} {len(gp):>12,} {grid_step(gp) / extent:>8.1e} {len(glb):>11,} "
                       f"{grid_step(glb) / extent:>9.1e} {len(glb) / len(gp):>7.2f} {len(glb) / raw:>8.3f} "
                       f"{statistics.median(builds):>7.2f}", flush=True)
                 if args.validate:

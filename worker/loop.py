@@ -97,7 +97,8 @@ class Worker:
             clip_id = (job.params or {}).get("clip_id")
             if clip_id:
                 clip = session.get(ClipRecord, clip_id)
-                payload["clip"] = {"topology_key": clip.topology_key, "coefficients_key": clip.coefficients_key}
+                payload["clip"] = {"topology_key": clip.topology_key,
+                                   "coefficients_key": clip.coefficients_key}
         return payload
 
     def _should_stop(self) -> bool:

@@ -1,5 +1,5 @@
-"""The pipeline stages a job runs (inside the child process): simulate, fit, cyclic, export. Library modules are
-imported here, lazily, so the worker starts even before a stage exists in this build."""
+"""The pipeline stages a job runs (inside the child process): simulate, fit, cyclic and export. Library
+modules are imported here, lazily, so the worker starts even before a stage exists in this build."""
 
 from __future__ import annotations
 
@@ -113,7 +113,8 @@ def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
 
 def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
                partial: Partial | None = None) -> dict:
-    """Clip -> animation GLB (quantised, meshopt-compressed, keeping the source mesh's look), stored as a blob."""
+    """Clip -> animation GLB (quantised, meshopt-compressed, keeping the source mesh's look) in the blob
+    store."""
     from pdeanim.clip import load_clip
     from pdeanim.gltf.clipexport import ExportOptions, clip_animation_glb, estimate_export
     from pdeanim.gltf.layout import source_layout
@@ -126,7 +127,8 @@ def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
     data = blobs.get(mesh["blob_key"]) if mesh.get("blob_key") else None
     layout = source_layout(data, mesh.get("filename", ""), clip.faces, clip.n_vertices)
     progress(0.1, f"export: {estimate.frames} frames")
-    glb = clip_animation_glb(clip, opts.fps, options=opts.pack(), layout=layout, max_frames=settings.max_frames)
+    glb = clip_animation_glb(clip, opts.fps, options=opts.pack(), layout=layout,
+                             max_frames=settings.max_frames)
     progress(0.95, "export: store")
     return {"export": {"blob_key": blobs.put(glb), "bytes": len(glb), "layout": layout.source,
                        **estimate.to_dict()}}

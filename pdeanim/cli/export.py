@@ -1,5 +1,6 @@
 """``pdeanim export CLIP --fps 30 --out FILE.glb [--mesh SOURCE]``: the clip as a morph-target animation,
-quantised and meshopt-compressed by default, keeping a glTF/OBJ source mesh's look when ``--mesh`` names it."""
+quantised and meshopt-compressed by default, keeping a glTF/OBJ source mesh's look when ``--mesh`` names
+it."""
 
 from __future__ import annotations
 
@@ -18,24 +19,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "export", help="write a clip as an animated GLB (morph targets + weights animation)",
         description="Sample a clip at --fps over its duration (last frame included; looping clips loop "
                     "seamlessly) and write a glTF 2.0 binary file. By default positions are quantised to a "
-                    "14-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, and every stream is compressed "
-                    "with EXT_meshopt_compression (three.js GLTFLoader with MeshoptDecoder, Babylon.js and "
-                    "gltfpack read it); --no-compress --no-quantize writes plain float32.")
+                    "14-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, "
+                    "and every stream is compressed with EXT_meshopt_compression (three.js GLTFLoader with "
+                    "MeshoptDecoder, Babylon.js and gltfpack read it); --no-compress --no-quantize writes "
+                    "plain float32.")
     p.add_argument("clip", metavar="CLIP", help="clip file written by `pdeanim fit` or `pdeanim cyclic`")
     p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation (default 30)")
     p.add_argument("--out", required=True, metavar="FILE.glb", help="output GLB path")
     p.add_argument("--mesh", metavar="SOURCE",
-                   help="the mesh the clip was made from (GLB/glTF: keep its materials, textures, UVs, primitives "
-                        "and node names; OBJ: keep its UVs); must have the clip's vertex count")
+                   help="the mesh the clip was made from (GLB/glTF: keep its materials, textures, UVs, "
+                        "primitives and node names; OBJ: keep its UVs); must have the clip's vertex count")
     p.add_argument("--no-quantize", dest="quantize", action="store_false",
                    help="store float32 positions and normals instead of the integer grid and bytes")
     p.add_argument("--no-compress", dest="compress", action="store_false",
                    help="do not use EXT_meshopt_compression (for viewers without a meshopt decoder)")
     p.add_argument("--position-bits", type=int, default=14, metavar="N",
-                   help="bits per axis of the position grid, 8..15 (default 14: a step of 6.1e-5 of the extent)")
+                   help="bits per axis of the position grid, 8..15 (default 14: a step of 6.1e-5 of the "
+                        "extent)")
     p.add_argument("--no-normal-targets", dest="normals", action="store_false",
-                   help="leave out per-frame normal deltas (smaller; every frame lit with the first frame's normals)")
-    p.add_argument("--quantize", dest="quantize", action="store_true", help=argparse.SUPPRESS)  # the old default
+                   help="leave out per-frame normal deltas (smaller; every frame is lit with the first "
+                        "frame's normals)")
+    # --quantize was an opt-in flag before quantising became the default: still accepted, hidden
+    p.add_argument("--quantize", dest="quantize", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=run)
 
 
@@ -60,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     out.write_bytes(glb)
     packing = [w for w, on in (("quantised", args.quantize), ("meshopt", args.compress)) if on]
     look = f", look of {layout.source} source" if layout is not None and layout.source != "plain" else ""
+    loop = ", looping" if clip.looping else ""
+    packed = ", " + " + ".join(packing) if packing else ""
     print(f"wrote {out} ({len(glb)} bytes, {clip.n_vertices} vertices, {len(clip.frame_times)} source frames, "
-          f"{args.fps:g} fps{', looping' if clip.looping else ''}{', ' + ' + '.join(packing) if packing else ''}"
-          f"{look})")
+          f"{args.fps:g} fps{loop}{packed}{look})")
     return 0

@@ -33,7 +33,8 @@ def export_times(duration: float, fps: float, max_frames: int = DEFAULT_MAX_FRAM
         return np.zeros(1)
     n = int(np.floor(duration * fps + 1e-6)) + 1
     if n + 1 > max_frames:
-        raise LimitError("exported frame count", n + 1, max_frames, "max_frames (PDEANIM_MAX_FRAMES in the service)")
+        raise LimitError("exported frame count", n + 1, max_frames,
+                         "max_frames (PDEANIM_MAX_FRAMES in the service)")
     t = np.arange(n) / fps
     if duration - t[-1] > 1e-6 * duration:
         t = np.append(t, duration)
@@ -78,7 +79,8 @@ class ExportOptions:
             if "fps" in kw:
                 kw["fps"] = float(kw["fps"])
             if "position_bits" in kw:
-                if isinstance(kw["position_bits"], bool) or float(kw["position_bits"]) != int(kw["position_bits"]):
+                bits = kw["position_bits"]
+                if isinstance(bits, bool) or float(bits) != int(bits):
                     raise ValueError("position_bits must be an integer")
                 kw["position_bits"] = int(kw["position_bits"])
         except (TypeError, ValueError, OverflowError) as exc:

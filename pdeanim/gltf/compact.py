@@ -2,8 +2,8 @@
 (float32 positions and unit normals), or an animation as morph targets with a one-hot ``weights`` track,
 small by default: positions on an integer grid (KHR_mesh_quantization, ``position_bits`` per axis over the
 animation's extent: 14 gives a step of 6.1e-5 of it, at least as fine as gltfpack -cc's default grid, which
-measured 6.9e-5 to 1.4e-4 in benchmarks/gltf_sizes.py), triangles in vertex-cache order, normals and their per-frame deltas as normalized bytes, and every stream compressed
-with EXT_meshopt_compression.
+measured 6.9e-5 to 1.4e-4 in benchmarks/gltf_sizes.py), triangles in vertex-cache order, normals and their
+per-frame deltas as normalized bytes, and every stream compressed with EXT_meshopt_compression.
 
 Each mesh node's positions are quantised in its own local frame; the dequantising translation and uniform
 scale go on the node itself when it is a plain leaf (the plain layout), else on a new child node that holds
@@ -31,8 +31,8 @@ TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one mesho
 
 @dataclass(frozen=True)
 class PackOptions:
-    """How an animation GLB is stored: ``quantize`` positions to ``position_bits`` (8..15, default 14) per axis over
-    the frames' extent (max error half a step) and normals
+    """How an animation GLB is stored: ``quantize`` positions to ``position_bits`` (8..15, default 14) per
+    axis over the frames' extent (max error half a step) and normals
     to bytes, ``compress`` with EXT_meshopt_compression, ``normals`` as per-frame morph deltas (else every
     frame is lit with the first frame's normals)."""
 
@@ -246,8 +246,8 @@ def _add_targets(doc: dict, views: list[bytes], positions: np.ndarray, normals: 
             else:
                 nd, stride, dt = d.astype(np.float32), 12, np.float32
             for target, (view, off) in zip(targets, _target_views(doc, views, nd, stride), strict=True):
-                target["NORMAL"] = add_accessor(doc, views, np.zeros((n, 3), dt), "VEC3", normalized=opts.quantize,
-                                                view=view, byte_offset=off)
+                target["NORMAL"] = add_accessor(doc, views, np.zeros((n, 3), dt), "VEC3",
+                                                normalized=opts.quantize, view=view, byte_offset=off)
     return pos, nrm, targets
 
 
@@ -317,5 +317,6 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
     doc["animations"] = [{
         "name": "pdeanim", "extras": {"loop": bool(loop)},
         "samplers": [{"input": t_acc, "output": w_acc, "interpolation": "LINEAR"} for _ in holders],
-        "channels": [{"sampler": i, "target": {"node": h, "path": "weights"}} for i, h in enumerate(holders)]}]
+        "channels": [{"sampler": i, "target": {"node": h, "path": "weights"}}
+                     for i, h in enumerate(holders)]}]
     return _assemble(doc, views, opts.compress)

@@ -95,7 +95,8 @@ class GltfDocument:
         if ext is not None:
             buf, start = self._meshopt_view(view_index, view, ext), offset
         else:
-            buf = self.buffers[view.get("buffer", 0)] if 0 <= view.get("buffer", 0) < len(self.buffers) else None
+            index = view.get("buffer", 0)
+            buf = self.buffers[index] if 0 <= index < len(self.buffers) else None
             if buf is None:
                 raise self.error(f"bufferView {view_index} refers to a missing buffer")
             start = int(view.get("byteOffset", 0)) + offset

@@ -83,10 +83,11 @@ def plain_layout(faces: np.ndarray | None, n_vertices: int, uv: np.ndarray | Non
     prim: dict[str, Any] = {"attributes": {}, "mode": 4 if len(f) else 0}
     if len(f):
         dtype = np.uint16 if n_vertices <= 65535 else np.uint32
-        prim["indices"] = add_accessor(doc, views, cache_order(f, n_vertices).reshape(-1).astype(dtype), "SCALAR",
-                                       ELEMENT_ARRAY_BUFFER)
+        ordered = cache_order(f, n_vertices).reshape(-1).astype(dtype)
+        prim["indices"] = add_accessor(doc, views, ordered, "SCALAR", ELEMENT_ARRAY_BUFFER)
     if uv is not None and len(uv) == n_vertices:
-        prim["attributes"]["TEXCOORD_0"] = add_accessor(doc, views, np.asarray(uv, np.float32), "VEC2", ARRAY_BUFFER)
+        uv32 = np.asarray(uv, np.float32)
+        prim["attributes"]["TEXCOORD_0"] = add_accessor(doc, views, uv32, "VEC2", ARRAY_BUFFER)
     doc["meshes"] = [{"primitives": [prim]}]
     slot = Slot(0, 0, 0, int(n_vertices), bool(len(f)))
     return Layout(doc, views, [Part(0, 0, np.eye(4), [slot])], int(n_vertices), f, None,
@@ -325,7 +326,8 @@ def source_layout(data: bytes | None, filename: str, faces: np.ndarray | None, n
         plain.notes.append(f"source mesh not used: {exc}")
         return plain
     if layout.n_vertices != n_vertices:
-        plain.notes.append(f"source mesh has {layout.n_vertices} vertices, the clip {n_vertices}: written plain")
+        plain.notes.append(f"source mesh has {layout.n_vertices} vertices, the clip {n_vertices}: "
+                           "written plain")
         log.info("%s", plain.notes[-1])
         return plain
     return layout

@@ -105,7 +105,8 @@ def compress_glb(doc: dict[str, Any], binary: bytes) -> bytes:
         doc["bufferViews"] = views
         return pack_glb(doc, b"".join(packed))
     doc["bufferViews"] = views
-    doc["buffers"] = [{"byteLength": offset}, {"byteLength": fallback, "extensions": {EXT: {"fallback": True}}}]
+    doc["buffers"] = [{"byteLength": offset},
+                      {"byteLength": fallback, "extensions": {EXT: {"fallback": True}}}]
     for key in ("extensionsUsed", "extensionsRequired"):
         doc[key] = [*[e for e in doc.get(key, []) if e != EXT], EXT]
     return pack_glb(doc, b"".join(packed))
@@ -123,7 +124,8 @@ def decode_view(ext: dict[str, Any], buffers: list[bytes]) -> bytes:
         out = meshoptimizer.decode_vertex_buffer(count, stride, src).view(np.uint8).reshape(-1)
         flt = ext.get("filter", "NONE")
         if flt != "NONE":
-            decode = {"OCTAHEDRAL": meshoptimizer.decode_filter_oct, "QUATERNION": meshoptimizer.decode_filter_quat,
+            decode = {"OCTAHEDRAL": meshoptimizer.decode_filter_oct,
+                      "QUATERNION": meshoptimizer.decode_filter_quat,
                       "EXPONENTIAL": meshoptimizer.decode_filter_exp}[flt]
             out = np.asarray(decode(out.copy(), count, stride)).view(np.uint8).reshape(-1)
         return out[: count * stride].tobytes()

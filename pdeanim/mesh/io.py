@@ -1,7 +1,8 @@
 """Read a triangle mesh (OBJ, PLY, STL, OFF, GLB/glTF) into a validated SurfaceMesh.
 
 Parsing is done by trimesh with ``process=False`` (and ``maintain_order`` for OBJ), and by pdeanim's own glTF
-reader for GLB/glTF (every primitive's vertices, in file order), so the vertex order of the file is kept; every problem becomes a MeshInputError naming it, every configured limit a LimitError.
+reader for GLB/glTF (every primitive's vertices, in file order), so the vertex order of the file is kept;
+every problem becomes a MeshInputError naming it, every configured limit a LimitError.
 """
 
 from __future__ import annotations
@@ -183,7 +184,8 @@ def gltf_arrays(data: bytes, name: str, folder: Path | None = None) -> tuple[np.
     try:
         vertices, faces = read_static_mesh(source)
     except MeshInputError as exc:
-        raise MeshInputError(f"cannot parse {name!r} as {Path(name).suffix[1:].upper() or 'glTF'}: {exc}") from exc
+        kind = Path(name).suffix[1:].upper() or "glTF"
+        raise MeshInputError(f"cannot parse {name!r} as {kind}: {exc}") from exc
     return np.asarray(vertices, np.float64), np.asarray(faces, np.int64).reshape(-1, 3)
 
 

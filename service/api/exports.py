@@ -72,5 +72,5 @@ def check_fps(fps: float, settings: Settings) -> None:
 
 def export_job_hint(clip_id: str, fps: float) -> str:
     """How to ask for an export that is too large for the request: the job to submit and where to get it."""
-    return (f'submit an export job: POST /v1/jobs {{"kind": "export", "clip_id": "{clip_id}", "fps": {fps:g}}}, '
-            f"then download GET /v1/exports/{{job_id}} when the job has succeeded")
+    return (f'submit an export job: POST /v1/jobs {{"kind": "export", "clip_id": "{clip_id}", '
+            f'"fps": {fps:g}}}, then download GET /v1/exports/{{job_id}} when the job has succeeded')

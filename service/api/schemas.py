@@ -58,8 +58,9 @@ class JobRequest(BaseModel):
     """A job. ``simulate``: mesh_id + params (scene parameters), optionally then_fit + fit (fit options);
     ``fit``: poses_id (or mesh_id: its latest poses) + params (fit options); ``cyclic``: mesh_id + params
     (cyclic options); ``export``: clip_id + params (fps, quantize, compress, position_bits, normals), the
-    animation GLB built by a worker (download it from ``result.export_url``). Parameters may also be given flat, next to ``kind`` (``{"kind": "fit", "mesh_id": ...,
-    "segments": 4}``); they are merged into ``params``."""
+    animation GLB built by a worker (download it from ``result.export_url``). Parameters may also be given
+    flat, next to ``kind`` (``{"kind": "fit", "mesh_id": ..., "segments": 4}``); they are merged into
+    ``params``."""
 
     model_config = ConfigDict(extra="allow", json_schema_extra={"examples": [
         {"kind": "simulate", "mesh_id": "mesh_...", "params": {"frames": 60}, "then_fit": True,
@@ -85,7 +86,8 @@ class JobResult(BaseModel):
     clip_id: str | None = None
     tet_cache_key: str | None = Field(None, description="tets a simulation used (blob tets-<key>, shared)")
     failed_stage: str | None = Field(None, description='the stage that failed after partial results, e.g. "fit"')
-    export_url: str | None = Field(None, description="export: where to download the GLB (GET /v1/exports/{job_id})")
+    export_url: str | None = Field(None,
+                                   description="export: where to download the GLB (GET /v1/exports/{job_id})")
     export_bytes: int | None = Field(None, description="export: size of the GLB in bytes")
 
 

@@ -117,8 +117,8 @@ def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
 
 
 def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
-    """A clip fitted on poses of a textured glTF, exported with ``--mesh``: the GLB has the source's materials,
-    texture and node names; options are checked (exit 2 with a message)."""
+    """A clip fitted on poses of a textured glTF, exported with ``--mesh``: the GLB has the source's
+    materials, texture and node names; options are checked (exit 2 with a message)."""
     fitclip = pytest.importorskip("pdeanim.model.fitclip")
     from pdeanim.gltf.glb import unpack_glb
     from pdeanim.gltf.read import read_static_mesh
@@ -137,7 +137,8 @@ def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
     assert main(["export", str(clip_path), "--mesh", str(mesh_path), "--out", str(out), "--fps", "30"]) == 0
     assert "look of gltf source" in capsys.readouterr().out
     doc, _ = unpack_glb(out.read_bytes())
-    assert [m["name"] for m in doc["materials"]] == ["skin", "cloth"] and doc["images"][0]["name"] == "checker"
+    assert [m["name"] for m in doc["materials"]] == ["skin", "cloth"]
+    assert doc["images"][0]["name"] == "checker"
     assert [n.get("name") for n in doc["nodes"][:3]] == ["body", "hat", "wing"]
     assert_clean(validate_many([out.read_bytes()])[0], "CLI export with --mesh")
     assert read_animated_poses(out.read_bytes(), fps=30).n_frames == 10

@@ -73,12 +73,14 @@ def test_animation_keeps_the_look_quantised_and_compressed():
     k = 6
     frames = moving_frames(rest, k)
     times = np.arange(k, dtype=np.float32) / 10
-    glb = layout_animation_glb(gltf_layout(src), frames, times, np.arange(k), k, names=[f"f{i}" for i in range(k)])
+    names = [f"f{i}" for i in range(k)]
+    glb = layout_animation_glb(gltf_layout(src), frames, times, np.arange(k), k, names=names)
     doc, _ = unpack_glb(glb)
     assert doc["extensionsRequired"] == ["KHR_mesh_quantization", EXT] == doc["extensionsUsed"]
     assert doc["buffers"][1]["extensions"][EXT] == {"fallback": True} and "uri" not in doc["buffers"][1]
     assert "skins" not in doc and [n.get("name") for n in doc["nodes"][:3]] == ["body", "hat", "wing"]
-    assert doc["nodes"][0]["children"][0] == 3 and doc["nodes"][3]["name"] == "body_mesh"  # dequantising child
+    # the dequantising child node comes first, so depth-first order is kept
+    assert doc["nodes"][0]["children"][0] == 3 and doc["nodes"][3]["name"] == "body_mesh"
     assert len(doc["animations"][0]["channels"]) == 3
     assert doc["meshes"][0]["extras"]["targetNames"] == [f"f{i}" for i in range(k)]
     sdoc, _ = unpack_glb(src)
@@ -139,13 +141,14 @@ def test_fast_frame_writer_matches_the_plain_one(spot_path):
     src = textured_scene_glb()
     rest, _ = read_static_mesh(src)
     spot = load_mesh(spot_path)
-    cases = [(gltf_layout(src), moving_frames(rest, 3)[2]),
-             (source_layout(spot_path.read_bytes(), "spot.obj", spot.faces, len(spot.vertices)), spot.vertices * 1.1)]
+    obj = source_layout(spot_path.read_bytes(), "spot.obj", spot.faces, len(spot.vertices))
+    cases = [(gltf_layout(src), moving_frames(rest, 3)[2]), (obj, spot.vertices * 1.1)]
     for layout, positions in cases:
         fast, slow = LayoutFrames(layout)(positions), layout_frame_glb(layout, positions)
         dfast, bfast = unpack_glb(fast)
         dslow, bslow = unpack_glb(slow)
         assert dfast == dslow  # same JSON, bounds included
         # normals: float32 incidence product vs the float64 path, within 1e-6 (see FaceNormals)
-        np.testing.assert_allclose(np.frombuffer(bfast, np.float32), np.frombuffer(bslow, np.float32), atol=1e-6)
+        np.testing.assert_allclose(np.frombuffer(bfast, np.float32), np.frombuffer(bslow, np.float32),
+                                   atol=1e-6)
         assert_clean(validate_many([fast])[0], "fast frame")

@@ -1,7 +1,8 @@
-"""Animation exports through real HTTP (a real ``pdeanim serve`` and ``pdeanim worker``): a clip of an uploaded
-textured glTF keeps its look in frame and animation GLBs; the animation is quantised and meshopt-compressed;
-fps above PDEANIM_MAX_EXPORT_FPS is a 422; an export above PDEANIM_MAX_SYNC_EXPORT_BYTES is refused by the
-route (413 naming the job to submit) and built by an ``export`` job instead, downloadable from its result."""
+"""Animation exports through real HTTP (a real ``pdeanim serve`` and ``pdeanim worker``): a clip of an
+uploaded textured glTF keeps its look in frame and animation GLBs; the animation is quantised and
+meshopt-compressed; fps above PDEANIM_MAX_EXPORT_FPS is a 422; an export above
+PDEANIM_MAX_SYNC_EXPORT_BYTES is refused by the route (413 naming the job to submit) and built by an
+``export`` job instead, downloadable from its result."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ pytestmark = pytest.mark.slow
 FRAMES = 10  # poses at 30 fps: 0.3 s
 VERTICES = 43  # of textured_scene_glb
 MAX_FPS = 60
-SYNC_BYTES = 8_000  # 30 fps: 10 frames x 43 x 12 = 5160 bytes (in the request); 60 fps: 19 frames = 9804 (job)
+# 30 fps: 10 frames x 43 vertices x 12 = 5160 bytes (built in the request); 60 fps: 19 frames, 9804 (a job)
+SYNC_BYTES = 8_000
 
 
 @pytest.fixture(scope="module")
@@ -101,21 +103,25 @@ def test_frame_and_animation_keep_the_look(api, scene):
     assert poses.n_frames == FRAMES
     diag = float(np.linalg.norm(np.ptp(scene["frames"][0], axis=0)))
     assert np.abs(poses.vertices - scene["frames"]).max() < 0.05 * diag  # a 1-segment fit of a smooth wave
-    for label, report in zip(["frame", "animation"], validate_many([frame.content, anim.content]), strict=True):
+    reports = validate_many([frame.content, anim.content])
+    for label, report in zip(["frame", "animation"], reports, strict=True):
         assert_clean(report, label)
 
 
 def test_fps_is_bounded_by_the_setting(api, scene):
     cid = scene["clip_id"]
-    msg = assert_error(api.get(f"/v1/clips/{cid}/animation", params={"fps": MAX_FPS + 1}), 422, "fps_out_of_range")
+    too_fast = api.get(f"/v1/clips/{cid}/animation", params={"fps": MAX_FPS + 1})
+    msg = assert_error(too_fast, 422, "fps_out_of_range")
     assert "PDEANIM_MAX_EXPORT_FPS" in msg
     assert api.get(f"/v1/clips/{cid}/animation", params={"fps": 0}).status_code == 422
-    assert_error(api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "fps": 1000}), 422, "fps_out_of_range")
+    job = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "fps": 1000})
+    assert_error(job, 422, "fps_out_of_range")
 
 
 def test_large_export_is_a_job_with_a_downloadable_glb(api, other, scene, services):
     cid = scene["clip_id"]
-    msg = assert_error(api.get(f"/v1/clips/{cid}/animation", params={"fps": MAX_FPS}), 413, "export_too_large")
+    big = api.get(f"/v1/clips/{cid}/animation", params={"fps": MAX_FPS})
+    msg = assert_error(big, 413, "export_too_large")
     assert '"kind": "export"' in msg and cid in msg and "PDEANIM_MAX_SYNC_EXPORT_BYTES" in msg
     r = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "fps": MAX_FPS})
     assert r.status_code == 202, r.text
@@ -136,8 +142,10 @@ def test_large_export_is_a_job_with_a_downloadable_glb(api, other, scene, servic
 def test_export_job_requests_are_checked(api, scene):
     cid = scene["clip_id"]
     assert_error(api.post("/v1/jobs", json={"kind": "export"}), 422, "invalid_parameter")
-    assert_error(api.post("/v1/jobs", json={"kind": "export", "clip_id": "clip_nope"}), 404, "not_found")
-    assert_error(api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "bogus": 1}), 422, "invalid_parameter")
+    missing = api.post("/v1/jobs", json={"kind": "export", "clip_id": "clip_nope"})
+    assert_error(missing, 404, "not_found")
+    bogus = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "bogus": 1})
+    assert_error(bogus, 422, "invalid_parameter")
     assert_error(api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "position_bits": 20}), 422,
                  "invalid_parameter")
     assert_error(api.post("/v1/jobs", json={"kind": "fit", "clip_id": cid}), 422, "invalid_parameter")

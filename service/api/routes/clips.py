@@ -137,7 +137,8 @@ def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep
 @router.get("/v1/clips/{clip_id}/animation", operation_id="getClipAnimation", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 413, 422)})
 def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep,
-                  fps: float = Query(30.0, gt=0, description="frames per second (at most PDEANIM_MAX_EXPORT_FPS)")
+                  fps: float = Query(30.0, gt=0,
+                                     description="frames per second (at most PDEANIM_MAX_EXPORT_FPS)")
                   ) -> Response:
     """The whole clip sampled at ``fps`` (last frame included; a looping clip wraps seamlessly) as a GLB:
     one morph target per frame and a weights animation, quantised (KHR_mesh_quantization) and compressed

@@ -110,7 +110,8 @@ def get_job(job_id: str, tenant: TenantDep, session: SessionDep) -> JobOut:
 @router.get("/v1/exports/{job_id}", operation_id="getExport", response_class=Response,
             responses={200: {"content": {"model/gltf-binary": {}}, "description": "the export job's GLB"},
                        **responses(304, 401, 404, 409, 422)})
-def get_export(job_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep) -> Response:
+def get_export(job_id: str, request: Request, tenant: TenantDep, session: SessionDep,
+               store: StoreDep) -> Response:
     """The animation GLB an ``export`` job built (409 while the job has not succeeded)."""
     from ..httpcache import immutable_response
 
@@ -119,5 +120,6 @@ def get_export(job_id: str, request: Request, tenant: TenantDep, session: Sessio
         raise ApiError(404, "not_found", f"job {job_id!r} is a {job.kind} job, not an export")
     key = (job.result or {}).get("export_key")
     if job.state != "succeeded" or not key:
-        raise ApiError(409, "not_ready", f"export job {job_id} is {job.state}; download it when it has succeeded")
+        raise ApiError(409, "not_ready",
+                       f"export job {job_id} is {job.state}; download it when it has succeeded")
     return immutable_response(request, key, lambda: store.blobs.get(key), "model/gltf-binary")
