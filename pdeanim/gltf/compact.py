@@ -256,12 +256,13 @@ def _quantised_normals(normals: np.ndarray) -> np.ndarray:
     return np.rint(normals * 127) / 127
 
 
-def _mesh_node(doc: dict, part: Part, grid: _Grid | None, name: str | None) -> int:
-    """The node that holds the part's mesh: the part's own node when it is a plain leaf, else a new child."""
+def _mesh_node(doc: dict, part: Part, grid: _Grid | None, name: str | None, own: bool) -> int:
+    """The node that holds the part's mesh: the part's own node when pdeanim made it (``own``, a plain layout)
+    and it is a leaf without a transform, else a new child, so a source's node transforms stay as they were."""
     node = doc["nodes"][part.node]
     if grid is None:
         return part.node
-    plain = not any(k in node for k in ("matrix", "translation", "rotation", "scale", "children"))
+    plain = own and not any(k in node for k in ("matrix", "translation", "rotation", "scale", "children"))
     if plain:
         node.update(grid.node())
         return part.node
@@ -306,7 +307,7 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
         mesh["weights"] = [0.0] * n_targets
         if names is not None:
             mesh.setdefault("extras", {})["targetNames"] = [str(x) for x in names][:n_targets]
-        holders.append(_mesh_node(doc, part, grid, mesh.get("name")))
+        holders.append(_mesh_node(doc, part, grid, mesh.get("name"), own=layout.source != "gltf"))
     if opts.quantize:
         for key in ("extensionsUsed", "extensionsRequired"):
             doc[key] = [*[e for e in doc.get(key, []) if e != QUANT], QUANT]

@@ -89,6 +89,9 @@ def test_animation_keeps_the_look_quantised_and_compressed():
     assert doc["meshes"][0]["extras"]["targetNames"] == [f"f{i}" for i in range(k)]
     sdoc, _ = unpack_glb(src)
     assert all(doc[key] == sdoc[key] for key in LOOK_KEYS)
+    trs = ("matrix", "translation", "rotation", "scale")
+    for node, source_node in zip(doc["nodes"][:3], sdoc["nodes"], strict=True):  # source transforms untouched
+        assert {k: node.get(k) for k in trs} == {k: source_node.get(k) for k in trs}
     np.testing.assert_array_equal(uv_of(glb, 1, 0), uv_of(src, 1, 0))
     back = read_animated_poses(glb, fps=10)
     # the body node scales by 2: world error <= 2 x half a 14-bit step of its local extent; 2x margin
