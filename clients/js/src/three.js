@@ -118,13 +118,36 @@ function transformNormals(e, n) {
 /** Shared, mesh-independent state of a clip on the GPU and CPU: layout, textures, evaluator. */
 export function clipResources(clip, options = {}) {
   const { textureWidth = 4096, maxTextureSize = 4096, gpuMode = 'auto' } = options;
-  const layout = gpuLayout(clip, { width: textureWidth, mode: gpuMode });
+  const evaluator = createEvaluator(clip);
+  const layout = gpuLayout(clip, {
+    width: textureWidth,
+    mode: gpuMode,
+    evaluator: clip.kind === 'dynamic-pde' ? evaluator : null,
+  });
   const gpuReason =
     layout.maxHeight > maxTextureSize
       ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})`
       : null;
   const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
-  return { clip, layout, textures, gpuReason, evaluator: createEvaluator(clip), owned: 0 };
+  let lastT = null;
+  let last = null;
+  return {
+    clip,
+    layout,
+    textures,
+    gpuReason,
+    evaluator,
+    owned: 0,
+    /** The uniforms at t, and the per-curve table rewritten and marked for upload (once per distinct t). */
+    frame(t) {
+      if (t !== lastT) {
+        last = timeUniforms(layout, t);
+        lastT = t;
+        if (textures.curve) textures.curve.needsUpdate = true;
+      }
+      return last;
+    },
+  };
 }
 
 /**
@@ -174,10 +197,7 @@ export function attachClip(mesh, clip, options = {}) {
   const uniforms = {
     pdeEnabled: { value: false },
     pdeSeg: { value: 0 },
-    pdeTau: { value: 0 },
     pdeCurves: { value: layout.nCurves },
-    pdeRSeg: { value: 0 },
-    pdeRTau: { value: 0 },
     pdeSinWt: { value: 0 },
     pdeCosWt: { value: 1 },
     pdeVertices: { value: layout.nVertices },
@@ -186,8 +206,7 @@ export function attachClip(mesh, clip, options = {}) {
     pdeFieldTex: { value: textures.field ?? null },
     pdeVertexTex: { value: textures.vertex },
     pdeKnotTex: { value: textures.knot ?? null },
-    pdeMuTex: { value: textures.mu ?? null },
-    pdeRigidTex: { value: textures.rigid ?? null },
+    pdeCurveTex: { value: textures.curve ?? null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
     pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
     pdeRotate: { value: Boolean(layout.rotate) },
@@ -267,12 +286,9 @@ export function attachClip(mesh, clip, options = {}) {
      * evaluated: the clip's CPU positions at t when the caller already has them (shared between meshes).
      */
     setTime(t, evaluated = null) {
-      const u = timeUniforms(layout, t);
+      const u = res.frame(t);
       time = t;
       uniforms.pdeSeg.value = u.seg;
-      uniforms.pdeTau.value = u.tau;
-      uniforms.pdeRSeg.value = u.rseg;
-      uniforms.pdeRTau.value = u.rtau;
       uniforms.pdeSinWt.value = u.sw;
       uniforms.pdeCosWt.value = u.cw;
       if (!onGPU) writeCPU(evaluated ?? evaluator.evaluate(t, clipPositions));

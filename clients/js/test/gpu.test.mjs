@@ -12,8 +12,8 @@ import { attachClip, attachClipToScene } from '../src/three.js';
 import { FIXTURES, manifest, readBytes } from './helpers.mjs';
 
 const man = manifest();
-const MU_TRIG_MAX = 0.95 * Math.PI;
 
+/** texelFetch of texel i of a {data, width} texture, row-major as pdeFetch addresses it. */
 function fetch(tex, i) {
   const w = tex.width;
   const x = i % w;
@@ -22,66 +22,7 @@ function fetch(tex, i) {
   return [...tex.data.subarray(o, o + 4)];
 }
 
-function sinhRatio(x, m) {
-  if (m < 0.5) {
-    const a = m * x * m * x;
-    const b = m * m;
-    const sa = 1 + a * (1 / 6 + a * (1 / 120 + a * (1 / 5040 + a / 362880)));
-    const sb = 1 + b * (1 / 6 + b * (1 / 120 + b * (1 / 5040 + b / 362880)));
-    return (x * sa) / sb;
-  }
-  return (Math.exp(m * (x - 1)) * (1 - Math.exp(-2 * m * x))) / (1 - Math.exp(-2 * m));
-}
-
-function sinRatio(x, m) {
-  if (m < 0.5) {
-    const a = m * x * m * x;
-    const b = m * m;
-    const sa = 1 - a * (1 / 6 - a * (1 / 120 - a * (1 / 5040 - a / 362880)));
-    const sb = 1 - b * (1 / 6 - b * (1 / 120 - b * (1 / 5040 - b / 362880)));
-    return (x * sa) / sb;
-  }
-  return Math.sin(m * x) / Math.sin(m);
-}
-
-function timePair(tau, mu) {
-  if (mu > 1e-12) return [sinhRatio(1 - tau, mu), sinhRatio(tau, mu)];
-  if (mu < -1e-12) {
-    const m = Math.min(-mu, MU_TRIG_MAX);
-    return [sinRatio(1 - tau, m), sinRatio(tau, m)];
-  }
-  return [1 - tau, tau];
-}
-
-function rigidPair(tau, mu) {
-  if (mu < 0) {
-    const m = Math.min(-mu, MU_TRIG_MAX);
-    return [sinRatio(1 - tau, m), sinRatio(tau, m)];
-  }
-  if (mu < 1e-12) return [1 - tau, tau];
-  return [sinhRatio(1 - tau, mu), sinhRatio(tau, mu)];
-}
-
-function rodrigues(r) {
-  // rows of I + a K + b K^2
-  const t2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-  const th = Math.sqrt(t2);
-  const a = th < 0.05 ? 1 - t2 / 6 + (t2 * t2) / 120 : Math.sin(th) / th;
-  const b = th < 0.05 ? 0.5 - t2 / 24 + (t2 * t2) / 720 : (1 - Math.cos(th)) / t2;
-  const K = [
-    [0, -r[2], r[1]],
-    [r[2], 0, -r[0]],
-    [-r[1], r[0], 0],
-  ];
-  return [0, 1, 2].map((i) =>
-    [0, 1, 2].map(
-      (j) =>
-        (i === j ? 1 : 0) + a * K[i][j] + b * (K[i][0] * K[0][j] + K[i][1] * K[1][j] + K[i][2] * K[2][j]),
-    ),
-  );
-}
-
-/** The shader's pdeEval(v) in JS. */
+/** The shader's pdeEval(v) in JS (after timeUniforms(layout, t) wrote the per-curve table). */
 function emulate(layout, u, v) {
   const T = layout.textures;
   const C = layout.nCurves;
@@ -100,34 +41,28 @@ function emulate(layout, u, v) {
     return [0, 1, 2].map((k) => a[k] + ca * layout.axis[k] + cl * layout.bend[k]);
   }
   const fields = layout.mode === 'fields';
+  const K = layout.curveTexels;
   const head = fetch(T.vertex, fields ? v : v * 4);
   const c = Math.round(head[0]);
+  const f0 = fetch(T.curve, c * K);
+  const f1 = fetch(T.curve, c * K + 1);
+  const V = layout.nVertices;
   let p = [0, 1, 2].map((w) => {
     if (fields) {
-      const [f0, f1] = timePair(u.tau, fetch(T.mu, u.seg * C + c)[w]);
-      const V = layout.nVertices;
       return (
-        head[1 + w] + f0 * fetch(T.field, u.seg * V + v)[w] + f1 * fetch(T.field, (u.seg + 1) * V + v)[w]
+        head[1 + w] +
+        f0[w] * fetch(T.field, u.seg * V + v)[w] +
+        f1[w] * fetch(T.field, (u.seg + 1) * V + v)[w]
       );
     }
-    const mu = fetch(T.mu, u.seg * C + c)[w];
-    const [f0, f1] = timePair(u.tau, mu);
     const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
     const k1 = fetch(T.knot, ((u.seg + 1) * C + c) * 3 + w);
     const b = fetch(T.vertex, v * 4 + 1 + w);
-    return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + (f0 * k0[k] + f1 * k1[k]) * b[k], 0);
+    return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + (f0[w] * k0[k] + f1[w] * k1[k]) * b[k], 0);
   });
   if (layout.rigid) {
-    const r0 = fetch(T.rigid, (u.rseg * C + c) * 2);
-    const c0 = fetch(T.rigid, (u.rseg * C + c) * 2 + 1);
-    const r1 = fetch(T.rigid, ((u.rseg + 1) * C + c) * 2);
-    const c1 = fetch(T.rigid, ((u.rseg + 1) * C + c) * 2 + 1);
-    const pr = rigidPair(u.rtau, r0[3]);
-    const pt = rigidPair(u.rtau, c0[3]);
-    const R = rodrigues([0, 1, 2].map((k) => pr[0] * r0[k] + pr[1] * r1[k]));
-    p = [0, 1, 2].map(
-      (i) => R[i][0] * p[0] + R[i][1] * p[1] + R[i][2] * p[2] + pt[0] * c0[i] + pt[1] * c1[i],
-    );
+    const r = [2, 3, 4].map((i) => fetch(T.curve, c * K + i));
+    p = r.map((row) => row[0] * p[0] + row[1] * p[1] + row[2] * p[2] + row[3]);
   }
   return p;
 }
@@ -138,12 +73,16 @@ function termMagnitude(layout, u, v) {
   const T = layout.textures;
   const C = layout.nCurves;
   const c = Math.round(fetch(T.vertex, v * 4)[0]);
+  const f0 = fetch(T.curve, c * layout.curveTexels);
+  const f1 = fetch(T.curve, c * layout.curveTexels + 1);
   return [0, 1, 2].map((w) => {
-    const [f0, f1] = timePair(u.tau, fetch(T.mu, u.seg * C + c)[w]);
     const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
     const k1 = fetch(T.knot, ((u.seg + 1) * C + c) * 3 + w);
     const b = fetch(T.vertex, v * 4 + 1 + w);
-    return [0, 1, 2, 3].reduce((s, k) => s + Math.abs(f0 * k0[k] * b[k]) + Math.abs(f1 * k1[k] * b[k]), 0);
+    return [0, 1, 2, 3].reduce(
+      (s, k) => s + Math.abs(f0[w] * k0[k] * b[k]) + Math.abs(f1[w] * k1[k] * b[k]),
+      0,
+    );
   });
 }
 
@@ -267,7 +206,7 @@ test('attachClip patches every built-in material (and the shadow materials) and 
       assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
       assert.match(shader.vertexShader, /transformed = pdePosition;/);
       assert.ok(shader.uniforms.pdeFieldTex.value instanceof THREE.DataTexture);
-      assert.ok(shader.uniforms.pdeMuTex.value instanceof THREE.DataTexture);
+      assert.ok(shader.uniforms.pdeCurveTex.value instanceof THREE.DataTexture);
       assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:fields:true/);
     }
     assert.equal(player.gpu, true);
@@ -287,9 +226,18 @@ test('setTime drives the uniforms; the CPU fallback writes the evaluated positio
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
     const player = attachClip(mesh, clip);
     player.setTime(0.4);
+    const table = player.textures.curve ? Float32Array.from(player.textures.curve.image.data) : null;
+    const version = player.textures.curve?.version;
     const u = timeUniforms(player.layout, 0.4);
     assert.equal(player.uniforms.pdeSeg.value, u.seg);
-    assert.equal(player.uniforms.pdeTau.value, u.tau);
+    assert.equal(player.uniforms.pdeSinWt.value, u.sw);
+    if (table) {
+      assert.deepEqual(Float32Array.from(player.textures.curve.image.data), table);
+      player.setTime(0.4); // the same t: no new upload
+      assert.equal(player.textures.curve.version, version);
+      player.setTime(0.45);
+      assert.ok(player.textures.curve.version > version);
+    }
     assert.equal(player.useGPU(false), false);
     player.setTime(0.4);
     const cpu = createEvaluator(clip).evaluate(0.4);
