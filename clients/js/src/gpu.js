@@ -273,8 +273,9 @@ export function frameNormals(clipPositions, attrs, restNormals, out) {
 }
 
 /** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
-export function glslHeader(layout) {
+export function glslHeader(layout, { normals = 'frame' } = {}) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
+  if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
@@ -363,6 +364,7 @@ void pdeCompute() {
   vec3 p = pdeEval(v);
   pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
+#ifndef PDEANIM_REST_NORMALS
   if (va != v) {
     vec3 e1 = pdeEval(va) - p;
     vec3 e2 = pdeEval(vb) - p;
@@ -371,6 +373,7 @@ void pdeCompute() {
     pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
       + pdeNormalFrame.z * n));
   }
+#endif
 }
 `;
 }

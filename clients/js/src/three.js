@@ -155,11 +155,13 @@ export function clipResources(clip, options = {}) {
  * options.vertexMap / a _pdeanim_vertex attribute). Returns a player: setTime(t), useGPU(bool), detach().
  * options: {gpu = true, vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip coordinates to
  * the mesh's local frame; default identity), textureWidth = 4096, maxTextureSize = 4096, shadows = true,
- * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), resources (from
- * clipResources, shared between meshes)}.
+ * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), normals = 'frame'
+ * (turned with each vertex's triangle: right lighting, 3 evaluations per vertex) | 'rest' (kept as they are:
+ * one evaluation per vertex, for speed), resources (from clipResources, shared between meshes)}.
  */
 export function attachClip(mesh, clip, options = {}) {
-  const { gpu = true, shadows = true, frustumCulled = false } = options;
+  const { gpu = true, shadows = true, frustumCulled = false, normals = 'frame' } = options;
+  if (normals !== 'frame' && normals !== 'rest') throw new RangeError(`normals must be 'frame' or 'rest'`);
   const res = options.resources ?? clipResources(clip, options);
   res.owned++;
   const { layout, textures, gpuReason, evaluator } = res;
@@ -211,8 +213,8 @@ export function attachClip(mesh, clip, options = {}) {
     pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
     pdeRotate: { value: Boolean(layout.rotate) },
   };
-  const header = glslHeader(layout);
-  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}`;
+  const header = glslHeader(layout, { normals });
+  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;
@@ -258,9 +260,10 @@ export function attachClip(mesh, clip, options = {}) {
       scratch[i * 3 + 2] = positions[v + 2];
     }
     transformPoints(clipToLocal.elements, scratch, posAttr.array);
+    posAttr.needsUpdate = true;
+    if (normals === 'rest') return;
     frameNormals(positions, attrs, restNormalsClip, nrmAttr.array);
     transformNormals(normalToLocal.elements, nrmAttr.array);
-    posAttr.needsUpdate = true;
     nrmAttr.needsUpdate = true;
   }
 

@@ -288,6 +288,23 @@ test('mode auto picks fields within the budget and coefficients above it', () =>
   assert.doesNotMatch(glslHeader(small), /#define PDEANIM_FIELDS/);
 });
 
+test("normals: 'rest' skips the neighbour evaluations and keeps the normals", () => {
+  const clip = loadCase(man.cases.find((x) => x.name === 'fit-displacement-chord'));
+  assert.match(glslHeader(gpuLayout(clip), { normals: 'rest' }), /#define PDEANIM_REST_NORMALS/);
+  assert.doesNotMatch(glslHeader(gpuLayout(clip)), /#define PDEANIM_REST_NORMALS/);
+  const mesh = meshOf(clip, THREE.MeshStandardMaterial);
+  mesh.geometry.computeVertexNormals();
+  const rest = Float32Array.from(mesh.geometry.getAttribute('normal').array);
+  const player = attachClip(mesh, clip, { gpu: false, normals: 'rest' });
+  assert.match(mesh.material.customProgramCacheKey(), /:rest$/);
+  player.setTime(0.6);
+  assert.deepEqual(Float32Array.from(mesh.geometry.getAttribute('normal').array), rest);
+  assert.throws(
+    () => attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { normals: 'smooth' }),
+    RangeError,
+  );
+});
+
 test('the GLSL header declares what the patched chunks use', () => {
   const clip = loadCase(man.cases.find((x) => x.kind === 'cyclic-spine'));
   const header = glslHeader(gpuLayout(clip));

@@ -62,4 +62,4 @@ export declare function frameNormals(
   out: Float32Array,
 ): Float32Array;
 /** GLSL ES 3.00 declarations and functions (pdeCompute() sets pdePosition and pdeNormal). */
-export declare function glslHeader(layout: GpuLayout): string;
+export declare function glslHeader(layout: GpuLayout, options?: { normals?: 'frame' | 'rest' }): string;

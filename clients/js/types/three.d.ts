@@ -12,6 +12,9 @@ export interface AttachOptions {
   vertexMap?: Int32Array | number[];
   /** Clip coordinates to the mesh's local frame (Matrix4 or 16 numbers, column-major; default identity). */
   clipToLocal?: Matrix4 | number[];
+  /** 'frame' (default): normals turned with each vertex's triangle (3 evaluations per vertex); 'rest':
+   * kept as they are. */
+  normals?: 'frame' | 'rest';
   /** 'auto' (default): per-knot per-vertex fields while they fit 64 MB, else 'coefficients'. */
   gpuMode?: 'auto' | 'fields' | 'coefficients';
   /** Shared layout/textures/evaluator (from clipResources) when several meshes play one clip. */
