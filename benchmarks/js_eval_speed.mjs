@@ -1,6 +1,6 @@
 // CPU evaluation speed of the JavaScript client (clients/js) on 15k-vertex clips: one frame per call into a
 // preallocated Float32Array, median of 2000 random t after a warm-up (goal < 2 ms per frame), plus the
-// one-off decode + precompute time and the per-frame JavaScript of the GPU path (uniforms only).
+// one-off decode + precompute time and the per-frame JavaScript of the GPU path (uniforms + curve table).
 // Clips come from benchmarks/js_eval_clips.py (run through .venv/bin/python when missing).
 // Run: node benchmarks/js_eval_speed.mjs [CLIPDIR]
 
@@ -75,7 +75,7 @@ for (const name of NAMES) {
   );
   console.log(
     `  decode ${(t1 - t0).toFixed(1)} ms, precompute ${(t2 - t1).toFixed(1)} ms, GPU textures ` +
-      `${(t4 - t3).toFixed(1)} ms; GPU-path JS per frame (uniforms): ` +
+      `${(t4 - t3).toFixed(1)} ms; GPU-path JS per frame (uniforms + per-curve table): ` +
       `median ${(stats(uni).median * 1e3).toFixed(2)} us`,
   );
 }
