@@ -60,6 +60,10 @@ def test_attach_to_gltfloader_scene_matches_python(asset, glb):
     assert {n for m in res["meshes"] for n in m["materials"]} == {"skin", "cloth"}
     assert res["materialsWhilePlaying"] == [m["materials"] for m in res["meshes"]]
     assert all("uv" in m["attributes"] for m in res["meshes"])
+    assert all(not any(w) for w in res["morphWhilePlaying"])  # a GLB's own morph targets are off while playing
+    assert res["morphAfter"] == res["morphBefore"]
+    if glb == "animation.glb":
+        assert any(res["morphBefore"])
     want = clip.evaluate(np.asarray(TIMES))
     diag = float(np.linalg.norm(np.ptp(want[0], axis=0)))
     got = np.asarray(res["frames"])

@@ -239,6 +239,10 @@ export function attachClip(mesh, clip, options = {}) {
   }
   const originalCulled = mesh.frustumCulled;
   mesh.frustumCulled = frustumCulled;
+  // morph targets (e.g. of an animation GLB) would add their deltas to the clip's positions: off while
+  // attached
+  const originalInfluences = mesh.morphTargetInfluences ? [...mesh.morphTargetInfluences] : null;
+  if (originalInfluences) mesh.morphTargetInfluences.fill(0);
 
   const clipPositions = new Float32Array(clip.nVertices * 3);
   const scratch = new Float32Array(vertexMap.length * 3);
@@ -314,6 +318,9 @@ export function attachClip(mesh, clip, options = {}) {
       mesh.material = originalMaterial;
       [mesh.customDepthMaterial, mesh.customDistanceMaterial] = originalDepth;
       mesh.frustumCulled = originalCulled;
+      if (originalInfluences) {
+        mesh.morphTargetInfluences.splice(0, originalInfluences.length, ...originalInfluences);
+      }
       restoreRest();
       geometry.setAttribute('position', original.position);
       geometry.setAttribute('normal', original.normal);

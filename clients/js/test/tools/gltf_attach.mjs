@@ -39,6 +39,10 @@ root.traverse((o) => {
     });
   }
 });
+const morphBefore = [];
+root.traverse(
+  (o) => o.isMesh && morphBefore.push(o.morphTargetInfluences ? [...o.morphTargetInfluences] : []),
+);
 const player = attachClipToScene(root, clip, { gpu: false });
 const rootInverse = root.matrixWorld.clone().invert();
 const frames = tList
@@ -59,4 +63,17 @@ const frames = tList
 const after = player.players.map((p) =>
   (Array.isArray(p.mesh.material) ? p.mesh.material : [p.mesh.material]).map((m) => m.name),
 );
-process.stdout.write(JSON.stringify({ meshes: before, materialsWhilePlaying: after, frames }));
+const influences = (p) => (p.mesh.morphTargetInfluences ? [...p.mesh.morphTargetInfluences] : []);
+const morphWhilePlaying = player.players.map(influences);
+player.detach();
+const morphAfter = player.players.map(influences);
+process.stdout.write(
+  JSON.stringify({
+    meshes: before,
+    materialsWhilePlaying: after,
+    frames,
+    morphWhilePlaying,
+    morphAfter,
+    morphBefore,
+  }),
+);
