@@ -117,7 +117,10 @@ function transformNormals(e, n) {
 
 /** Shared, mesh-independent state of a clip on the GPU and CPU: layout, textures, evaluator. */
 export function clipResources(clip, options = {}) {
-  const { textureWidth = 4096, maxTextureSize = 4096, gpuMode = 'auto' } = options;
+  // the renderer's limit when given (WebGL 2 guarantees only 2048), else 4096
+  const limit = options.renderer?.capabilities?.maxTextureSize ?? 4096;
+  const { maxTextureSize = limit, gpuMode = 'auto' } = options;
+  const textureWidth = Math.min(options.textureWidth ?? 4096, maxTextureSize);
   const evaluator = createEvaluator(clip);
   const layout = gpuLayout(clip, {
     width: textureWidth,
@@ -154,7 +157,8 @@ export function clipResources(clip, options = {}) {
  * Play a decoded clip on mesh (a THREE.Mesh whose vertices are the clip's, or mapped to them by
  * options.vertexMap / a _pdeanim_vertex attribute). Returns a player: setTime(t), useGPU(bool), detach().
  * options: {gpu = true, vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip coordinates to
- * the mesh's local frame; default identity), textureWidth = 4096, maxTextureSize = 4096, shadows = true,
+ * the mesh's local frame; default identity), renderer (its maxTextureSize bounds the data textures),
+ * textureWidth = 4096, maxTextureSize = renderer's or 4096, shadows = true,
  * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), normals = 'frame'
  * (turned with each vertex's triangle: right lighting, 3 evaluations per vertex) | 'rest' (kept as they are:
  * one evaluation per vertex, for speed), resources (from clipResources, shared between meshes)}.

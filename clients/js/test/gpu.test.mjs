@@ -288,6 +288,21 @@ test('mode auto picks fields within the budget and coefficients above it', () =>
   assert.doesNotMatch(glslHeader(small), /#define PDEANIM_FIELDS/);
 });
 
+test('small renderer textures: narrow data textures, or the CPU fallback when they do not fit', () => {
+  const clip = loadCase(man.cases.find((x) => x.name === 'fit-displacement-chord'));
+  const narrow = attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, {
+    renderer: { capabilities: { maxTextureSize: 8 } },
+  });
+  assert.ok(Object.values(narrow.layout.textures).every((t) => t.width <= 8));
+  assert.match(narrow.gpuUnavailableReason, /limit 8\)/);
+  assert.equal(narrow.gpu, false);
+  const fits = attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, {
+    renderer: { capabilities: { maxTextureSize: 64 } },
+  });
+  assert.equal(fits.gpu, true);
+  assert.ok(Object.values(fits.layout.textures).every((t) => t.width <= 64 && t.height <= 64));
+});
+
 test("normals: 'rest' skips the neighbour evaluations and keeps the normals", () => {
   const clip = loadCase(man.cases.find((x) => x.name === 'fit-displacement-chord'));
   assert.match(glslHeader(gpuLayout(clip), { normals: 'rest' }), /#define PDEANIM_REST_NORMALS/);

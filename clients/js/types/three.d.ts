@@ -19,6 +19,8 @@ export interface AttachOptions {
   gpuMode?: 'auto' | 'fields' | 'coefficients';
   /** Shared layout/textures/evaluator (from clipResources) when several meshes play one clip. */
   resources?: ClipResources;
+  /** The renderer: its capabilities.maxTextureSize bounds the data textures (else 4096 is assumed). */
+  renderer?: { capabilities?: { maxTextureSize?: number } };
   /** Data texture width in texels (default 4096). */
   textureWidth?: number;
   /** Largest texture height the renderer allows (default 4096); larger clips fall back to the CPU. */
