@@ -1,6 +1,7 @@
-"""Bytes a client downloads to play a clip (topology + coefficients, gzip as the service serves them) against
-the animation GLB the service serves for the same frames, ``gltfpack -cc`` of those frames, and the raw float32
-frames: for the demo clip and sequences of ../shared/data/sequences (read from there, never copied).
+"""Bytes a client downloads to play a clip (topology + coefficients, gzip as the service serves
+them) against the animation GLB the service serves for the same frames, ``gltfpack -cc`` of those frames,
+and the raw float32 frames: for the demo clip and sequences of ../shared/data/sequences (read from there,
+never copied).
 
     .venv/bin/python benchmarks/clip_bytes.py [--sequences pcow horse-collapse] [--no-demo]
 
@@ -53,7 +54,8 @@ def wire(api: httpx.Client, path: str, **params) -> tuple[int, int]:
 
 def animation(api: httpx.Client, clip_id: str, fps: float) -> tuple[int, int, str]:
     """The animation GLB as served: the route, or an export job when the route says it is too large."""
-    r = api.get(f"/v1/clips/{clip_id}/animation", params={"fps": fps}, headers={"Accept-Encoding": "identity"})
+    r = api.get(f"/v1/clips/{clip_id}/animation", params={"fps": fps},
+                headers={"Accept-Encoding": "identity"})
     if r.status_code == 200:
         return (*wire(api, f"/v1/clips/{clip_id}/animation", fps=fps), "route")
     if r.status_code != 413:
@@ -125,7 +127,8 @@ def main() -> int:
     os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
     print(f"fit options {FIT}; animation GLB and gltfpack at {FPS:g} fps; sizes in KiB; "
           "'gz' = gzip as served (level 6)")
-    head = (f"{'case':<18} {'frames x verts':>14} {'raw f32':>9} {'clip gz':>8} {'(topo+coef)':>15} {'clip raw':>8} "
+    head = (f"{'case':<18} {'frames x verts':>14} {'raw f32':>9} {'clip gz':>8} {'(topo+coef)':>15} "
+            f"{'clip raw':>8} "
             f"{'anim GLB gz':>11} {'GLB raw':>8} {'gltfpack':>8} {'gp gz':>7} {'clip/GLB':>8} {'clip/gp':>7} "
             f"{'clip/raw':>8}")
     print(head)
@@ -134,8 +137,10 @@ def main() -> int:
         try:
             key, url = _key(Path(tmp)), services.start()
             with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=900) as api:
-                cases = [] if args.no_demo else [("demo (spot)", lambda: run_job(api, "spot.obj", SPOT.read_bytes(),
-                                                                                    SCENE, FIT)[0])]
+                def demo() -> dict:
+                    return run_job(api, "spot.obj", SPOT.read_bytes(), SCENE, FIT)[0]
+
+                cases = [] if args.no_demo else [("demo (spot)", demo)]
                 cases += [(name, lambda n=name: sequence_upload(api, n)) for name in args.sequences]
                 for label, make in cases:
                     job = make()
@@ -147,7 +152,8 @@ def main() -> int:
                     gp, gp_gz = gltfpack_cc(api, cid, FPS, Path(tmp))
                     raw = meta["sizes"]["raw_float32_bytes"]
                     clip_gz = topo_gz + coef_gz
-                    print(f"{label:<18} {meta['frames']:>5} x {meta['info'].get('n_vertices', 0):>6} {kib(raw):>9} "
+                    verts = meta["info"].get("n_vertices", 0)
+                    print(f"{label:<18} {meta['frames']:>5} x {verts:>6} {kib(raw):>9} "
                           f"{kib(clip_gz):>8} {kib(topo_gz) + '+' + kib(coef_gz):>15} {kib(topo + coef):>8} "
                           f"{kib(glb_gz):>11} {kib(glb):>8} {kib(gp):>8} {kib(gp_gz):>7} "
                           f"{clip_gz / glb_gz:>8.2f} {clip_gz / gp_gz:>7.2f} {clip_gz / raw:>8.3f}"

@@ -1,6 +1,7 @@
 // Playback in the viewer in headless Chromium (software WebGL: SwiftShader): frames per second and the
 // JavaScript milliseconds of each frame (time uniforms or CPU evaluation + three.js render call), per mode.
-// Driven by benchmarks/viewer_playback.py; argument: a JSON job {url, modes, runs, seconds, width, height, out}.
+// Driven by benchmarks/viewer_playback.py; argument: a JSON job
+// {url, modes, runs, seconds, width, height, out}.
 import { writeFileSync } from 'node:fs';
 import { launchChromium } from '../tests/browser/chromium.mjs';
 
@@ -22,7 +23,7 @@ try {
   });
   for (const mode of job.modes) {
     out.runs[mode] = [];
-    // "static": the CPU path paused on one frame and drawn every frame, i.e. the cost of drawing the mesh alone
+    // "static": the CPU path paused on one frame and drawn every frame: the cost of drawing the mesh alone
     const got = await page.evaluate((m) => {
       const v = window.pdeanimViewer;
       v.setMode(m === 'static' ? 'cpu' : m);
@@ -31,7 +32,10 @@ try {
       v.play();
       return v.mode;
     }, mode);
-    if (got !== mode) throw new Error(`could not switch to ${mode}: ${await page.evaluate('window.pdeanimViewer.gpuUnavailableReason')}`);
+    if (got !== mode) {
+      const why = await page.evaluate('window.pdeanimViewer.gpuUnavailableReason');
+      throw new Error(`could not switch to ${mode}: ${why}`);
+    }
     await sleep(1500); // warm-up: shader compilation, first uploads
     for (let r = 0; r < job.runs; r++) {
       await page.evaluate(() => window.pdeanimViewer.resetFrameStats());

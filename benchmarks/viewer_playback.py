@@ -4,7 +4,8 @@ and JavaScript milliseconds per frame, GPU (vertex shader) against CPU evaluatio
     .venv/bin/python benchmarks/viewer_playback.py [--vertices 50000] [--runs 5] [--seconds 4]
 
 Starts the API server and a worker on a temporary data directory, makes the clip as the demo does (spot,
-here refined to ``--vertices`` vertices, simulated and fitted), opens ``/viewer`` in Chromium and lets it play.
+here refined to ``--vertices`` vertices, simulated and fitted), opens ``/viewer`` in Chromium and lets it
+play.
 Figures are medians over ``--runs`` windows of ``--seconds``; the load average is printed because the
 machine may be shared. Needs script/setup's chromium and tests/browser/node_modules (puppeteer-core).
 """
@@ -80,7 +81,8 @@ def main() -> int:
     ap.add_argument("--width", type=int, default=1280, help="page width (the 3D view is this minus 308 px)")
     ap.add_argument("--height", type=int, default=720)
     ap.add_argument("--modes", nargs="*", default=["gpu", "cpu", "static"],
-                    help="gpu, cpu, and static (the mesh drawn every frame without animating: drawing cost alone)")
+                    help="gpu, cpu, and static (the mesh drawn every frame without animating: the drawing "
+                    "cost alone)")
     ap.add_argument("--data-dir", type=Path, help="keep the service data here and reuse its clip on a rerun "
                     "(default: a temporary directory)")
     args = ap.parse_args()
@@ -100,11 +102,12 @@ def main() -> int:
                     clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
                     (data / "clip.json").write_text(json.dumps({"clip_id": clip["id"]}))
                     print(f"simulate + fit: {total:.0f} s")
-            print(f"clip: {clip['kind']}, {clip['info'].get('n_vertices')} vertices, {clip['frames']} frames, "
-                  f"{clip['segments']} segments, {clip['curves']} curves")
+            print(f"clip: {clip['kind']}, {clip['info'].get('n_vertices')} vertices, "
+                  f"{clip['frames']} frames, {clip['segments']} segments, {clip['curves']} curves")
             out_path = Path(tmp) / "playback.json"
-            job_arg = {"url": f"{url}/viewer#clip={clip['id']}&key={key}", "modes": args.modes, "runs": args.runs,
-                       "seconds": args.seconds, "width": args.width, "height": args.height, "out": str(out_path)}
+            job_arg = {"url": f"{url}/viewer#clip={clip['id']}&key={key}", "modes": args.modes,
+                       "runs": args.runs, "seconds": args.seconds, "width": args.width, "height": args.height,
+                       "out": str(out_path)}
             subprocess.run(["node", str(ROOT / "benchmarks" / "viewer_playback.mjs"), json.dumps(job_arg)],
                            check=True, cwd=ROOT, timeout=1800)
             res = json.loads(out_path.read_text())
@@ -112,7 +115,8 @@ def main() -> int:
             services.stop()
     print(f"Chromium WebGL renderer: {res['renderer']}; canvas {res['canvas'][0]}x{res['canvas'][1]}; "
           f"{res['vertices']} vertices")
-    print(f"{'mode':<5} {'fps (median of runs)':>20} {'JS ms/frame median':>19} {'JS ms/frame p95':>16}  runs")
+    print(f"{'mode':<6} {'fps (median of runs)':>20} {'JS ms/frame median':>19} {'JS ms/frame p95':>16}"
+          "  runs")
     for mode, runs in res["runs"].items():
         fps = statistics.median(r["fps"] for r in runs)
         med = statistics.median(r["jsMsMedian"] for r in runs)

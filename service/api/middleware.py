@@ -28,7 +28,8 @@ class JsonErrorCORSMiddleware(CORSMiddleware):
         if response.status_code < 400:
             return response
         reason = response.body.decode(errors="replace") or "CORS preflight refused"
-        headers = {k: v for k, v in response.headers.items() if k.lower() not in ("content-length", "content-type")}
+        headers = {k: v for k, v in response.headers.items()
+                   if k.lower() not in ("content-length", "content-type")}
         return JSONResponse(error_body("cors_refused", f"{reason} (allowed origins: PDEANIM_CORS_ORIGINS)"),
                             response.status_code, headers=headers)
 

@@ -24,7 +24,8 @@ def test_vendored_libraries_carry_their_licenses_and_pinned_versions():
     assert set(versions) == {"three", "swagger-ui-dist", "redoc"}
     package = json.loads((ROOT / "tools" / "web-vendor" / "package.json").read_text())
     assert package["dependencies"] == versions  # exact pins, so the copies are reproducible
-    for folder, words in (("three", "MIT License"), ("redoc", "MIT License"), ("swagger-ui", "Apache License")):
+    licenses = (("three", "MIT License"), ("redoc", "MIT License"), ("swagger-ui", "Apache License"))
+    for folder, words in licenses:
         assert words in (STATIC / "vendor" / folder / "LICENSE").read_text()
 
 

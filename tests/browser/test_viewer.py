@@ -31,8 +31,9 @@ def browser_tools_missing() -> str | None:
         return "node is not installed"
     if not (HERE / "node_modules" / "puppeteer-core").is_dir():
         return "puppeteer-core is not installed (npm ci in tests/browser, done by script/setup)"
-    if not any(Path(p).exists() for p in ("/usr/bin/chromium", "/usr/bin/chromium-browser",
-                                          "/usr/bin/google-chrome", os.environ.get("CHROMIUM", "/nonexistent"))):
+    candidates = ("/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome",
+                  os.environ.get("PDEANIM_CHROMIUM", "/none"), os.environ.get("CHROMIUM", "/none"))
+    if not any(Path(p).exists() for p in candidates):
         return "chromium is not installed (apt-get install chromium, done by script/setup)"
     return None
 
@@ -79,15 +80,18 @@ def clips(services, data_dir) -> dict:
     obj = (data_dir / "fish_eel.obj").read_bytes()
     mesh = api.post("/v1/meshes", files={"file": ("fish.obj", obj, "application/octet-stream")})
     assert mesh.status_code == 201, mesh.text
-    verts = np.array([ln.split()[1:4] for ln in obj.decode().splitlines() if ln.startswith("v ")], dtype=np.float32)
+    verts = np.array([ln.split()[1:4] for ln in obj.decode().splitlines() if ln.startswith("v ")],
+                     dtype=np.float32)
     buf = io.BytesIO()
     np.savez(buf, vertices=wave(verts, FRAMES))
     mid = mesh.json()["id"]
-    poses = api.post(f"/v1/meshes/{mid}/poses", files={"file": ("p.npz", buf.getvalue(), "application/octet-stream")})
+    poses = api.post(f"/v1/meshes/{mid}/poses",
+                     files={"file": ("p.npz", buf.getvalue(), "application/octet-stream")})
     assert poses.status_code == 201, poses.text
     out = {"key": key}
-    for kind, body in (("dynamic-pde", {"kind": "fit", "poses_id": poses.json()["id"], "params": {"segments": 2}}),
-                       ("cyclic-spine", {"kind": "cyclic", "mesh_id": mid, "params": CYCLIC})):
+    fit = {"kind": "fit", "poses_id": poses.json()["id"], "params": {"segments": 2}}
+    cyclic = {"kind": "cyclic", "mesh_id": mid, "params": CYCLIC}
+    for kind, body in (("dynamic-pde", fit), ("cyclic-spine", cyclic)):
         r = api.post("/v1/jobs", json=body)
         assert r.status_code == 202, r.text
         job = wait_job(api, r.json()["id"], timeout=300)
@@ -123,12 +127,14 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
 
     cid, key = clips[kind], clips["key"]
     api = client(services, key)
-    clip = load_clip(api.get(f"/v1/clips/{cid}/topology").content, api.get(f"/v1/clips/{cid}/coefficients").content)
+    clip = load_clip(api.get(f"/v1/clips/{cid}/topology").content,
+                     api.get(f"/v1/clips/{cid}/coefficients").content)
     shots = [{"t": 0.1, "mode": "gpu", "path": str(tmp_path / "gpu_a.png")},
              {"t": 0.6, "mode": "gpu", "path": str(tmp_path / "gpu_b.png")},
              {"t": 0.6, "mode": "cpu", "path": str(tmp_path / "cpu_b.png")}]
-    result = run_viewer(services, tmp_path, {"url": f"{services.url}/viewer#clip={cid}&key={key}", "times": TIMES,
-                                             "shots": shots, "measureGlb": kind == "dynamic-pde"})
+    job = {"url": f"{services.url}/viewer#clip={cid}&key={key}", "times": TIMES, "shots": shots,
+           "measureGlb": kind == "dynamic-pde"}
+    result = run_viewer(services, tmp_path, job)
     info = result["info"]
     assert info["kind"] == kind and info["nVertices"] == clip.n_vertices
     assert info["mode"] == "gpu", info["gpuUnavailableReason"]
@@ -141,7 +147,8 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
 
     # bytes: what the page downloaded (gzip as served) next to raw frames and the animation GLB
     sizes = info["sizes"]
-    assert 0 < sizes["topologyWire"] <= sizes["topology"] and 0 < sizes["coefficientsWire"] <= sizes["coefficients"]
+    assert 0 < sizes["topologyWire"] <= sizes["topology"]
+    assert 0 < sizes["coefficientsWire"] <= sizes["coefficients"]
     assert sizes["raw"] > 0 and "raw float32 frames" in info["stats"]
     if kind == "dynamic-pde":
         assert result["glb"] and result["glb"] > 0 and "animation GLB" in info["statsAfter"]
@@ -163,7 +170,8 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
 
 
 def test_viewer_without_a_valid_key_says_why(services, clips, tmp_path):
-    job = {"url": f"{services.url}/viewer#clip={clips['dynamic-pde']}&key=pda_wrong", "out": str(tmp_path / "r.json")}
+    job = {"url": f"{services.url}/viewer#clip={clips['dynamic-pde']}&key=pda_wrong",
+           "out": str(tmp_path / "r.json")}
     proc = subprocess.run(["node", str(HERE / "viewer_check.mjs"), json.dumps(job)], cwd=HERE,
                           capture_output=True, text=True, timeout=300)
     result = json.loads(Path(job["out"]).read_text())
@@ -174,5 +182,6 @@ def test_viewer_page_needs_no_key_and_sends_none(services):
     r = client(services, None).get("/viewer")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     assert r.headers["referrer-policy"] == "no-referrer" and "importmap" in r.text
-    for path in ("/static/viewer/viewer.js", "/static/viewer/pdeanim/index.js", "/static/vendor/three/three.module.js"):
+    for path in ("/static/viewer/viewer.js", "/static/viewer/pdeanim/index.js",
+                 "/static/vendor/three/three.module.js"):
         assert client(services, None).get(path).status_code == 200, path

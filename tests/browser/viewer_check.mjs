@@ -1,6 +1,7 @@
 // Drive the viewer in headless Chromium for tests/browser/test_viewer.py: open /viewer#clip=…&key=…, wait for
 // window.pdeanimViewer.ready, evaluate positions at the given times, screenshot GPU and CPU frames.
-// Usage: node viewer_check.mjs '{"url": …, "times": [..], "shots": [{"t":…, "mode":"gpu", "path":…}], "out": …}'
+// Usage: node viewer_check.mjs JOB, JOB = JSON {"url", "times": [t...], "shots": [{"t", "mode", "path"}],
+// "measureGlb", "out"}
 import { writeFileSync } from 'node:fs';
 import { launchChromium } from './chromium.mjs';
 

@@ -66,7 +66,8 @@ def sphere(api, data_dir) -> dict:
     frames[:, :, side] += 0.05 * np.ptp(verts[:, axis]) * u * np.sin(2 * np.pi * u - phase)
     buf = io.BytesIO()
     np.savez(buf, vertices=frames)
-    poses = api.post(f"/v1/meshes/{mid}/poses", files={"file": ("p.npz", buf.getvalue(), "application/octet-stream")})
+    poses = api.post(f"/v1/meshes/{mid}/poses",
+                     files={"file": ("p.npz", buf.getvalue(), "application/octet-stream")})
     assert poses.status_code == 201, poses.text
     clips = {}
     for kind, body in (("fit", {"poses_id": poses.json()["id"], "params": {"segments": 2}}),
@@ -97,8 +98,9 @@ def raw_get(base: str, path: str, headers: dict[str, str]) -> tuple[httpx.Respon
 def test_cors_preflight_and_simple_requests_for_allowed_origins(services, api, sphere):
     svc, _ = services
     path = f"/v1/clips/{sphere['fit']['id']}/coefficients"
-    pre = httpx.options(svc.url + path, headers={"Origin": ORIGIN, "Access-Control-Request-Method": "GET",
-                                                  "Access-Control-Request-Headers": "authorization, if-none-match"})
+    pre = httpx.options(svc.url + path, headers={
+        "Origin": ORIGIN, "Access-Control-Request-Method": "GET",
+        "Access-Control-Request-Headers": "authorization, if-none-match"})
     assert pre.status_code == 200, pre.text
     assert pre.headers["access-control-allow-origin"] == ORIGIN
     assert "GET" in pre.headers["access-control-allow-methods"]
@@ -184,7 +186,8 @@ def test_authenticated_immutable_resources_are_private(api, sphere):
 SCRIPT_OR_LINK = re.compile(r"""(?:src|href)\s*=\s*["']([^"']+)["']""")
 
 
-@pytest.mark.parametrize("page,needle", [("/docs", "swagger-ui-bundle.js"), ("/redoc", "redoc.standalone.js")])
+@pytest.mark.parametrize("page,needle", [("/docs", "swagger-ui-bundle.js"),
+                                         ("/redoc", "redoc.standalone.js")])
 def test_docs_pages_load_everything_from_the_service(services, page, needle):
     svc, _ = services
     with httpx.Client(base_url=svc.url, timeout=60) as c:

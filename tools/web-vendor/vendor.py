@@ -20,7 +20,8 @@ VERSIONS = STATIC / "vendor" / "versions.json"
 
 # npm package -> [(file in the package, destination under static/vendor)]
 NPM_FILES: dict[str, list[tuple[str, str]]] = {
-    "three": [("build/three.module.js", "three/three.module.js"), ("build/three.core.js", "three/three.core.js"),
+    "three": [("build/three.module.js", "three/three.module.js"),
+              ("build/three.core.js", "three/three.core.js"),
               ("examples/jsm/controls/OrbitControls.js", "three/addons/controls/OrbitControls.js"),
               ("LICENSE", "three/LICENSE")],
     "swagger-ui-dist": [("swagger-ui-bundle.js", "swagger-ui/swagger-ui-bundle.js"),
@@ -77,7 +78,8 @@ def main(argv: list[str]) -> int:
         problems = drift()
         for line in problems:
             print(line)
-        print("static files drifted: run python tools/web-vendor/vendor.py" if problems else "static files in sync")
+        print("static files drifted: run python tools/web-vendor/vendor.py" if problems
+              else "static files in sync")
         return 1 if problems else 0
     if not MODULES.is_dir():
         print("run `npm ci` in tools/web-vendor first", file=sys.stderr)

@@ -63,15 +63,16 @@ def get_mesh(mesh_id: str, tenant: TenantDep, session: SessionDep) -> MeshOut:
                              "description": "the topology part (pdeanim container)"},
                        **responses(304, 401, 404, 422)})
 def get_topology(mesh_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
-                 clip_id: str | None = Query(None, description="required: the clip whose topology to send "
-                                             "(a mesh may have clips of several kinds with different topologies)")
+                 clip_id: str | None = Query(None, description="required: the clip whose topology to send (a "
+                                             "mesh may have clips of several kinds with different topologies)")
                  ) -> Response:
     """The static part of clip ``clip_id`` of this mesh (prefer ``GET /v1/clips/{clip_id}/topology``)."""
     owned(session, Mesh, mesh_id, tenant, "mesh")
     if clip_id is None:
         raise ApiError(422, "clip_id_required",
-                       "clip_id is required: a mesh may have several clips (fit, cyclic) whose topologies differ, "
-                       f"so ask for GET /v1/clips/CLIP_ID/topology or /v1/meshes/{mesh_id}/topology?clip_id=CLIP_ID")
+                       "clip_id is required: a mesh may have several clips (fit, cyclic) whose topologies "
+                       "differ, so ask for GET /v1/clips/CLIP_ID/topology or "
+                       f"/v1/meshes/{mesh_id}/topology?clip_id=CLIP_ID")
     clip = owned(session, ClipRecord, clip_id, tenant, "clip")
     if clip.mesh_id != mesh_id:
         raise ApiError(404, "not_found", f"clip {clip_id!r} does not belong to mesh {mesh_id!r}")

@@ -41,9 +41,12 @@ function wireBytes(url, decoded) {
 }
 
 async function apiJson(path, key) {
-  const res = await fetch(ROOT + path, { headers: { Authorization: `Bearer ${key}`, Accept: 'application/json' } });
+  const headers = { Authorization: `Bearer ${key}`, Accept: 'application/json' };
+  const res = await fetch(ROOT + path, { headers });
   const body = await res.json().catch(() => null);
-  if (!res.ok) throw new Error(body?.error?.message ? `${res.status}: ${body.error.message}` : `HTTP ${res.status}`);
+  if (!res.ok) {
+    throw new Error(body?.error?.message ? `${res.status}: ${body.error.message}` : `HTTP ${res.status}`);
+  }
   return body;
 }
 
@@ -57,7 +60,8 @@ function sourceFps(clip) {
 
 class Viewer {
   constructor() {
-    this.renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias: true, preserveDrawingBuffer: true });
+    this.renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias: true,
+      preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.renderer.outputColorSpace = THREE.SRGBColorSpace;
     this.scene = new THREE.Scene();
@@ -105,7 +109,8 @@ class Viewer {
       coefficientsWire: wireBytes(urls.coefficients, clip.bytes.coefficients),
       topology: clip.bytes.topology,
       coefficients: clip.bytes.coefficients,
-      raw: this.meta.sizes?.raw_float32_bytes ?? (this.meta.frames ?? clip.frameTimes.length) * clip.nVertices * 12,
+      raw: this.meta.sizes?.raw_float32_bytes
+        ?? (this.meta.frames ?? clip.frameTimes.length) * clip.nVertices * 12,
       glb: null,
       glbNote: 'not measured',
     };
@@ -137,7 +142,9 @@ class Viewer {
     const pos = new Float32Array(clip.nVertices * 3);
     for (const t of [0, 0.25, 0.5, 0.75, 1]) {
       this.evaluator.evaluate(t, pos);
-      for (let i = 0; i < pos.length; i += 3) box.expandByPoint(new THREE.Vector3(pos[i], pos[i + 1], pos[i + 2]));
+      for (let i = 0; i < pos.length; i += 3) {
+        box.expandByPoint(new THREE.Vector3(pos[i], pos[i + 1], pos[i + 2]));
+      }
     }
     const center = box.getCenter(new THREE.Vector3());
     const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2, 1e-6);
@@ -169,8 +176,12 @@ class Viewer {
   setMode(mode) {
     const gpu = mode === 'gpu';
     if (this.player) this.player.useGPU(gpu);
-    if (gpu && (!this.player || !this.player.gpu)) message(`GPU evaluation unavailable: ${this.gpuReason}`, true);
-    for (const input of document.querySelectorAll('input[name=mode]')) input.checked = input.value === this.mode;
+    if (gpu && (!this.player || !this.player.gpu)) {
+      message(`GPU evaluation unavailable: ${this.gpuReason}`, true);
+    }
+    for (const input of document.querySelectorAll('input[name=mode]')) {
+      input.checked = input.value === this.mode;
+    }
     this.apply(this.t);
     this.renderStats();
     return this.mode;
@@ -199,7 +210,9 @@ class Viewer {
     }
     $('play').onclick = () => (this.playing ? this.pause() : this.play());
     $('scrub').oninput = (e) => { this.pause(); this.apply(Number(e.target.value)); };
-    for (const input of document.querySelectorAll('input[name=mode]')) input.onchange = () => this.setMode(input.value);
+    for (const input of document.querySelectorAll('input[name=mode]')) {
+      input.onchange = () => this.setMode(input.value);
+    }
     this.setMode(this.player?.gpu ? 'gpu' : 'cpu');
   }
 
@@ -283,7 +296,9 @@ class Viewer {
     ];
     $('stats').tBodies[0].replaceChildren(...rows.map(([k, v]) => {
       const tr = document.createElement('tr');
-      for (const text of [k, v]) tr.appendChild(Object.assign(document.createElement('td'), { textContent: text }));
+      for (const text of [k, v]) {
+        tr.appendChild(Object.assign(document.createElement('td'), { textContent: text }));
+      }
       return tr;
     }));
   }

@@ -230,13 +230,16 @@ export class DynamicEvaluator {
     }
   }
 
-  /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
-  evaluate(t, out = new Float32Array(this.nVertices * 3)) {
+  /**
+   * The per-curve state at t (everything t changes before the per-vertex sums): fills this.phi0, this.phi1
+   * (C * 3 time pairs of the segment) and, for rigid clips, this.rot (C * 9) and this.trans (C * 3);
+   * returns the segment index.
+   */
+  prepare(t) {
     if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
-    if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
     const clip = this.clip;
     const [s, tau, tw] = locate(clip.segmentT, t, clip.looping);
-    const { phi0, phi1, pair, item, base } = this;
+    const { phi0, phi1, pair } = this;
     const n = phi0.length;
     const mo = s * n;
     for (let i = 0; i < n; i++) {
@@ -244,6 +247,17 @@ export class DynamicEvaluator {
       phi0[i] = pair[0];
       phi1[i] = pair[1];
     }
+    if (clip.rigid) this._rigidAt(tw);
+    return s;
+  }
+
+  /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
+  evaluate(t, out = new Float32Array(this.nVertices * 3)) {
+    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
+    if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
+    const clip = this.clip;
+    const s = this.prepare(t);
+    const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
     const P0 = this.fields.subarray(s * N, (s + 1) * N);
     const P1 = this.fields.subarray((s + 1) * N, (s + 2) * N);
@@ -254,7 +268,6 @@ export class DynamicEvaluator {
       }
       return out;
     }
-    this._rigidAt(tw);
     const { rot, trans } = this;
     const curveOf = clip.curveOf;
     for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {

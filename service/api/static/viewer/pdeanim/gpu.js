@@ -2,8 +2,7 @@
 // the GLSL that evaluates a clip in a vertex shader (docs/format.md has the math; this mirrors the CPU path).
 
 import { CyclicEvaluator } from './cyclic.js';
-import { vertexBase, vertexBasis } from './dynamic.js';
-import { locate } from './basis.js';
+import { DynamicEvaluator, vertexBasis } from './dynamic.js';
 
 export const TEXTURE_WIDTH = 4096;
 export const FIELDS_BUDGET_BYTES = 64 * 1024 * 1024;
@@ -16,29 +15,28 @@ function texture(nTexels, width = TEXTURE_WIDTH) {
 }
 
 /**
- * Textures and constants of a decoded clip for the vertex shader (independent of t and of the mesh):
- * {kind, mode, rigid, nCurves, nVertices, textures: {vertex, field?, knot?, mu?, rigid?}, maxHeight}.
+ * Textures and constants of a decoded clip for the vertex shader (independent of the mesh):
+ * {kind, mode, rigid, nCurves, nVertices, curveTexels, textures: {vertex, field | knot, curve}, maxHeight,
+ * evaluator}. The `curve` texture is the per-frame table that timeUniforms() rewrites: per curve the time
+ * pairs (phi0 xyz, phi1 xyz) of the current segment and, for rigid clips, the rows of R with the centroid
+ * (R row i, c_i), all computed in float64 by the CPU evaluator's own code (a few us per frame).
  *
- * mode "fields" (dynamic clips; the default while (S+1) x V texels fit fieldsBudget bytes) stores every
- * knot's per-vertex contribution P_k = knots_k . S(u), computed in float64 like the CPU path, so the shader
- * only forms base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the knots and the per-vertex basis
- * (far smaller, but the shader then sums knot x basis terms in float32, and fitted clips' terms can be ~1e3
- * times the result: ~1e-4 of the diagonal instead of ~1e-7).
+ * mode "fields" (the default while (S+1) x V texels fit fieldsBudget bytes) stores every knot's per-vertex
+ * contribution P_k = knots_k . S(u) (the CPU evaluator's float32 fields), so the shader only forms
+ * base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the knots and the per-vertex space basis (far
+ * smaller, but the shader then sums knot x basis terms in float32, and fitted clips' terms can be ~1e3 times
+ * the result: ~1e-5 of the diagonal instead of ~1e-7).
  */
 export function gpuLayout(
   clip,
-  { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES } = {},
+  { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES, evaluator = null } = {},
 ) {
   if (clip.kind === 'cyclic-spine') return cyclicLayout(clip, width);
-  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, family, m, rigid } = clip;
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
   if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
   const useFields = mode === 'fields' || (mode === 'auto' && (S + 1) * V * 16 <= fieldsBudget);
-  const B = vertexBasis(clip);
-  const base = vertexBase(clip);
-  const mu = texture(S * C, width); // per (segment, curve): signed time constants x, y, z
-  for (let i = 0; i < S * C; i++) {
-    for (let w = 0; w < 3; w++) mu.data[i * 4 + w] = (family[i * 3 + w] >= 2 ? -1 : 1) * m[i * 3 + w];
-  }
+  const ev = evaluator ?? new DynamicEvaluator(clip);
+  const base = ev.base;
   let textures;
   if (useFields) {
     const vertex = texture(V, width); // per vertex: (curve, base xyz)
@@ -47,20 +45,10 @@ export function gpuLayout(
       vertex.data.set(base.subarray(v * 3, v * 3 + 3), v * 4 + 1);
     }
     const field = texture((S + 1) * V, width); // per (knot, vertex): P xyz
-    for (let s = 0; s <= S; s++) {
-      for (let v = 0; v < V; v++) {
-        const kc = (s * C + curveOf[v]) * 12;
-        const o = (s * V + v) * 4;
-        for (let w = 0; w < 3; w++) {
-          const b = v * 12 + w * 4;
-          const k = kc + w * 4;
-          field.data[o + w] =
-            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
-        }
-      }
-    }
-    textures = { vertex, field, mu };
+    for (let i = 0; i < (S + 1) * V; i++) field.data.set(ev.fields.subarray(i * 3, i * 3 + 3), i * 4);
+    textures = { vertex, field };
   } else {
+    const B = vertexBasis(clip);
     const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
     for (let v = 0; v < V; v++) {
       const o = v * 16;
@@ -70,31 +58,20 @@ export function gpuLayout(
     }
     const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 space coefficients
     knot.data.set(knots);
-    textures = { vertex, knot, mu };
+    textures = { vertex, knot };
   }
-  if (rigid) {
-    const Sr = rigid.segmentT.length - 1;
-    const rt = texture((Sr + 1) * C * 2, width); // per (knot, curve): (rotvec, rot mu), (centroid, trans mu)
-    for (let s = 0; s <= Sr; s++) {
-      for (let c = 0; c < C; c++) {
-        const o = (s * C + c) * 2 * 4;
-        const k = (s * C + c) * 3;
-        rt.data.set(rigid.rotKnots.subarray(k, k + 3), o);
-        rt.data.set(rigid.transKnots.subarray(k, k + 3), o + 4);
-        rt.data[o + 3] = s < Sr ? rigid.rotMu[s * C + c] : 0;
-        rt.data[o + 7] = s < Sr ? rigid.transMu[s * C + c] : 0;
-      }
-    }
-    textures.rigid = rt;
-  }
+  const curveTexels = rigid ? 5 : 2;
+  textures.curve = texture(C * curveTexels, width);
   return {
     kind: clip.kind,
     mode: useFields ? 'fields' : 'coefficients',
     rigid: Boolean(rigid),
     nCurves: C,
     nVertices: V,
+    curveTexels,
     textures,
     clip,
+    evaluator: ev,
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
 }
@@ -128,19 +105,38 @@ function cyclicLayout(clip, width) {
   };
 }
 
-/** The uniforms that depend on t: segment and local time (and the rigid ones), or the wave phase. */
+/**
+ * The state at t: returns the uniforms {seg, sw, cw} (segment of the dynamic clip; sin and cos of the swim
+ * phase of a cyclic one) and rewrites the per-curve table layout.textures.curve.data (dynamic clips; upload
+ * it after this call).
+ */
 export function timeUniforms(layout, t) {
   if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
   const clip = layout.clip;
   if (clip.kind === 'cyclic-spine') {
     const wt = 2 * Math.PI * clip.swim.frequency * (t * clip.period);
-    return { seg: 0, tau: 0, rseg: 0, rtau: 0, sw: Math.sin(wt), cw: Math.cos(wt) };
+    return { seg: 0, sw: Math.sin(wt), cw: Math.cos(wt) };
   }
-  const [seg, tau, tw] = locate(clip.segmentT, t, clip.looping);
-  let rseg = 0;
-  let rtau = 0;
-  if (clip.rigid) [rseg, rtau] = locate(clip.rigid.segmentT, tw, false);
-  return { seg, tau, rseg, rtau, sw: 0, cw: 0 };
+  const ev = layout.evaluator;
+  const seg = ev.prepare(t);
+  const d = layout.textures.curve.data;
+  const K = layout.curveTexels * 4;
+  for (let c = 0; c < layout.nCurves; c++) {
+    const o = c * K;
+    for (let w = 0; w < 3; w++) {
+      d[o + w] = ev.phi0[c * 3 + w];
+      d[o + 4 + w] = ev.phi1[c * 3 + w];
+    }
+    if (layout.rigid) {
+      for (let i = 0; i < 3; i++) {
+        d[o + 8 + i * 4] = ev.rot[c * 9 + i * 3];
+        d[o + 9 + i * 4] = ev.rot[c * 9 + i * 3 + 1];
+        d[o + 10 + i * 4] = ev.rot[c * 9 + i * 3 + 2];
+        d[o + 11 + i * 4] = ev.trans[c * 3 + i];
+      }
+    }
+  }
+  return { seg, sw: 0, cw: 0 };
 }
 
 /**
@@ -231,56 +227,75 @@ export function triangleFrame(pos, p, a, b, out) {
 
 /**
  * CPU counterpart of the shader's normals: mesh normals (n * 3) from clip positions (V * 3) and the mesh
- * attributes of meshAttributes(); vertices without a frame keep restNormals.
+ * attributes of meshAttributes(); vertices without a frame keep restNormals. Allocation-free (per frame).
  */
 export function frameNormals(clipPositions, attrs, restNormals, out) {
   const { pdeVertex, pdeNormalFrame } = attrs;
-  const fr = new Float64Array(9);
+  const P = clipPositions;
   for (let i = 0; i < pdeVertex.length; i += 3) {
-    const p = pdeVertex[i];
-    const a = pdeVertex[i + 1];
-    const b = pdeVertex[i + 2];
+    const p = pdeVertex[i] * 3;
+    const a = pdeVertex[i + 1] * 3;
+    const b = pdeVertex[i + 2] * 3;
     if (a === p) {
       out[i] = restNormals ? restNormals[i] : 0;
       out[i + 1] = restNormals ? restNormals[i + 1] : 0;
       out[i + 2] = restNormals ? restNormals[i + 2] : 1;
       continue;
     }
-    triangleFrame(clipPositions, p, a, b, fr);
-    const [x, y, z] = [pdeNormalFrame[i], pdeNormalFrame[i + 1], pdeNormalFrame[i + 2]];
-    for (let w = 0; w < 3; w++) out[i + w] = x * fr[w] + y * fr[3 + w] + z * fr[6 + w];
+    const e1x = P[a] - P[p];
+    const e1y = P[a + 1] - P[p + 1];
+    const e1z = P[a + 2] - P[p + 2];
+    const e2x = P[b] - P[p];
+    const e2y = P[b + 1] - P[p + 1];
+    const e2z = P[b + 2] - P[p + 2];
+    const l1 = Math.hypot(e1x, e1y, e1z) || 1;
+    const t1x = e1x / l1;
+    const t1y = e1y / l1;
+    const t1z = e1z / l1;
+    let nx = e1y * e2z - e1z * e2y;
+    let ny = e1z * e2x - e1x * e2z;
+    let nz = e1x * e2y - e1y * e2x;
+    const ln = Math.hypot(nx, ny, nz) || 1;
+    nx /= ln;
+    ny /= ln;
+    nz /= ln;
+    const t2x = ny * t1z - nz * t1y;
+    const t2y = nz * t1x - nx * t1z;
+    const t2z = nx * t1y - ny * t1x;
+    const x = pdeNormalFrame[i];
+    const y = pdeNormalFrame[i + 1];
+    const z = pdeNormalFrame[i + 2];
+    out[i] = x * t1x + y * t2x + z * nx;
+    out[i + 1] = x * t1y + y * t2y + z * ny;
+    out[i + 2] = x * t1z + y * t2z + z * nz;
   }
   return out;
 }
 
 /** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
-export function glslHeader(layout) {
+export function glslHeader(layout, { normals = 'frame' } = {}) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
+  if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
+  defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
   return `${defs.join('\n')}
 in vec3 pdeVertex;
 in vec3 pdeNormalFrame;
 uniform highp sampler2D pdeVertexTex;
 uniform bool pdeEnabled;
 uniform int pdeSeg;
-uniform float pdeTau;
 uniform int pdeCurves;
 uniform int pdeVertices;
 uniform mat4 pdeClipToLocal;
 uniform mat3 pdeNormalToLocal;
 #ifdef PDEANIM_DYNAMIC
-uniform highp sampler2D pdeMuTex;
+uniform highp sampler2D pdeCurveTex;
 #ifdef PDEANIM_FIELDS
 uniform highp sampler2D pdeFieldTex;
 #else
 uniform highp sampler2D pdeKnotTex;
 #endif
-#endif
-#ifdef PDEANIM_RIGID
-uniform highp sampler2D pdeRigidTex;
-uniform int pdeRSeg;
-uniform float pdeRTau;
 #endif
 #ifdef PDEANIM_CYCLIC
 uniform float pdeSinWt;
@@ -295,89 +310,32 @@ vec4 pdeFetch(highp sampler2D tex, int i) {
   int w = textureSize(tex, 0).x;
   return texelFetch(tex, ivec2(i - (i / w) * w, i / w), 0);
 }
-// sinh(m x) / sinh(m) for m > 0 (series of sinh(y) / y below m = 0.5, no cancellation in float32)
-float pdeSinhRatio(float x, float m) {
-  if (m < 0.5) {
-    float a = m * x * m * x;
-    float b = m * m;
-    float sa = 1.0 + a * (1.0 / 6.0 + a * (1.0 / 120.0 + a * (1.0 / 5040.0 + a / 362880.0)));
-    float sb = 1.0 + b * (1.0 / 6.0 + b * (1.0 / 120.0 + b * (1.0 / 5040.0 + b / 362880.0)));
-    return x * sa / sb;
-  }
-  return exp(m * (x - 1.0)) * (1.0 - exp(-2.0 * m * x)) / (1.0 - exp(-2.0 * m));
-}
-// sin(m x) / sin(m) for 0 < m < pi
-float pdeSinRatio(float x, float m) {
-  if (m < 0.5) {
-    float a = m * x * m * x;
-    float b = m * m;
-    float sa = 1.0 - a * (1.0 / 6.0 - a * (1.0 / 120.0 - a * (1.0 / 5040.0 - a / 362880.0)));
-    float sb = 1.0 - b * (1.0 / 6.0 - b * (1.0 / 120.0 - b * (1.0 / 5040.0 - b / 362880.0)));
-    return x * sa / sb;
-  }
-  return sin(m * x) / sin(m);
-}
-vec2 pdeTimePair(float tau, float mu) {
-  if (mu > 1e-12) return vec2(pdeSinhRatio(1.0 - tau, mu), pdeSinhRatio(tau, mu));
-  if (mu < -1e-12) {
-    float m = min(-mu, ${(0.95 * Math.PI).toFixed(9)});
-    return vec2(pdeSinRatio(1.0 - tau, m), pdeSinRatio(tau, m));
-  }
-  return vec2(1.0 - tau, tau);
-}
 #ifdef PDEANIM_DYNAMIC
-#ifndef PDEANIM_FIELDS
-float pdeCoord(int v, int c, int w, vec4 b) {
-  float mu = pdeFetch(pdeMuTex, pdeSeg * pdeCurves + c)[w];
-  vec2 ph = pdeTimePair(pdeTau, mu);
-  vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
-  vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-  return dot(ph.x * k0 + ph.y * k1, b);
-}
-#endif
-#ifdef PDEANIM_RIGID
-mat3 pdeRodrigues(vec3 r) {
-  float t2 = dot(r, r);
-  float th = sqrt(t2);
-  float a = th < 0.05 ? 1.0 - t2 / 6.0 + t2 * t2 / 120.0 : sin(th) / th;
-  float b = th < 0.05 ? 0.5 - t2 / 24.0 + t2 * t2 / 720.0 : (1.0 - cos(th)) / t2;
-  mat3 K = mat3(0.0, r.z, -r.y, -r.z, 0.0, r.x, r.y, -r.x, 0.0); // column-major
-  return mat3(1.0) + a * K + b * (K * K);
-}
-vec2 pdeRigidPair(float tau, float mu) {
-  if (mu < 0.0) {
-    float m = min(-mu, ${(0.95 * Math.PI).toFixed(9)});
-    return vec2(pdeSinRatio(1.0 - tau, m), pdeSinRatio(tau, m));
-  }
-  if (mu < 1e-12) return vec2(1.0 - tau, tau);
-  return vec2(pdeSinhRatio(1.0 - tau, mu), pdeSinhRatio(tau, mu));
-}
-#endif
 vec3 pdeEval(int v) {
 #ifdef PDEANIM_FIELDS
   vec4 head = pdeFetch(pdeVertexTex, v);
-  int c = int(head.x + 0.5);
-  vec3 mu = pdeFetch(pdeMuTex, pdeSeg * pdeCurves + c).xyz;
-  vec2 px = pdeTimePair(pdeTau, mu.x);
-  vec2 py = pdeTimePair(pdeTau, mu.y);
-  vec2 pz = pdeTimePair(pdeTau, mu.z);
-  vec3 p = head.yzw + vec3(px.x, py.x, pz.x) * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz
-    + vec3(px.y, py.y, pz.y) * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz;
 #else
   vec4 head = pdeFetch(pdeVertexTex, v * 4);
+#endif
   int c = int(head.x + 0.5);
-  vec3 p = head.yzw + vec3(pdeCoord(v, c, 0, pdeFetch(pdeVertexTex, v * 4 + 1)),
-                           pdeCoord(v, c, 1, pdeFetch(pdeVertexTex, v * 4 + 2)),
-                           pdeCoord(v, c, 2, pdeFetch(pdeVertexTex, v * 4 + 3)));
+  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
+  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
+#ifdef PDEANIM_FIELDS
+  vec3 p = head.yzw + f0 * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz
+    + f1 * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz;
+#else
+  vec3 p = head.yzw;
+  for (int w = 0; w < 3; w++) {
+    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
+    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
+    p[w] += dot(f0[w] * k0 + f1[w] * k1, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
+  }
 #endif
 #ifdef PDEANIM_RIGID
-  vec4 r0 = pdeFetch(pdeRigidTex, (pdeRSeg * pdeCurves + c) * 2);
-  vec4 c0 = pdeFetch(pdeRigidTex, (pdeRSeg * pdeCurves + c) * 2 + 1);
-  vec4 r1 = pdeFetch(pdeRigidTex, ((pdeRSeg + 1) * pdeCurves + c) * 2);
-  vec4 c1 = pdeFetch(pdeRigidTex, ((pdeRSeg + 1) * pdeCurves + c) * 2 + 1);
-  vec2 pr = pdeRigidPair(pdeRTau, r0.w);
-  vec2 pt = pdeRigidPair(pdeRTau, c0.w);
-  p = pdeRodrigues(pr.x * r0.xyz + pr.y * r1.xyz) * p + (pt.x * c0.xyz + pt.y * c1.xyz);
+  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2);
+  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3);
+  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 4);
+  p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
 #endif
   return p;
 }
@@ -406,6 +364,7 @@ void pdeCompute() {
   vec3 p = pdeEval(v);
   pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
+#ifndef PDEANIM_REST_NORMALS
   if (va != v) {
     vec3 e1 = pdeEval(va) - p;
     vec3 e2 = pdeEval(vb) - p;
@@ -414,6 +373,7 @@ void pdeCompute() {
     pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
       + pdeNormalFrame.z * n));
   }
+#endif
 }
 `;
 }

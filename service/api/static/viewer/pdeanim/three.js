@@ -117,26 +117,55 @@ function transformNormals(e, n) {
 
 /** Shared, mesh-independent state of a clip on the GPU and CPU: layout, textures, evaluator. */
 export function clipResources(clip, options = {}) {
-  const { textureWidth = 4096, maxTextureSize = 4096, gpuMode = 'auto' } = options;
-  const layout = gpuLayout(clip, { width: textureWidth, mode: gpuMode });
+  // the renderer's limit when given (WebGL 2 guarantees only 2048), else 4096
+  const limit = options.renderer?.capabilities?.maxTextureSize ?? 4096;
+  const { maxTextureSize = limit, gpuMode = 'auto' } = options;
+  const textureWidth = Math.min(options.textureWidth ?? 4096, maxTextureSize);
+  const evaluator = createEvaluator(clip);
+  const layout = gpuLayout(clip, {
+    width: textureWidth,
+    mode: gpuMode,
+    evaluator: clip.kind === 'dynamic-pde' ? evaluator : null,
+  });
   const gpuReason =
     layout.maxHeight > maxTextureSize
       ? `the clip needs a ${layout.maxHeight}-row data texture (limit ${maxTextureSize})`
       : null;
   const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
-  return { clip, layout, textures, gpuReason, evaluator: createEvaluator(clip), owned: 0 };
+  let lastT = null;
+  let last = null;
+  return {
+    clip,
+    layout,
+    textures,
+    gpuReason,
+    evaluator,
+    owned: 0,
+    /** The uniforms at t, and the per-curve table rewritten and marked for upload (once per distinct t). */
+    frame(t) {
+      if (t !== lastT) {
+        last = timeUniforms(layout, t);
+        lastT = t;
+        if (textures.curve) textures.curve.needsUpdate = true;
+      }
+      return last;
+    },
+  };
 }
 
 /**
  * Play a decoded clip on mesh (a THREE.Mesh whose vertices are the clip's, or mapped to them by
  * options.vertexMap / a _pdeanim_vertex attribute). Returns a player: setTime(t), useGPU(bool), detach().
  * options: {gpu = true, vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip coordinates to
- * the mesh's local frame; default identity), textureWidth = 4096, maxTextureSize = 4096, shadows = true,
- * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), resources (from
- * clipResources, shared between meshes)}.
+ * the mesh's local frame; default identity), renderer (its maxTextureSize bounds the data textures),
+ * textureWidth = 4096, maxTextureSize = renderer's or 4096, shadows = true,
+ * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), normals = 'frame'
+ * (turned with each vertex's triangle: right lighting, 3 evaluations per vertex) | 'rest' (kept as they are:
+ * one evaluation per vertex, for speed), resources (from clipResources, shared between meshes)}.
  */
 export function attachClip(mesh, clip, options = {}) {
-  const { gpu = true, shadows = true, frustumCulled = false } = options;
+  const { gpu = true, shadows = true, frustumCulled = false, normals = 'frame' } = options;
+  if (normals !== 'frame' && normals !== 'rest') throw new RangeError(`normals must be 'frame' or 'rest'`);
   const res = options.resources ?? clipResources(clip, options);
   res.owned++;
   const { layout, textures, gpuReason, evaluator } = res;
@@ -174,10 +203,7 @@ export function attachClip(mesh, clip, options = {}) {
   const uniforms = {
     pdeEnabled: { value: false },
     pdeSeg: { value: 0 },
-    pdeTau: { value: 0 },
     pdeCurves: { value: layout.nCurves },
-    pdeRSeg: { value: 0 },
-    pdeRTau: { value: 0 },
     pdeSinWt: { value: 0 },
     pdeCosWt: { value: 1 },
     pdeVertices: { value: layout.nVertices },
@@ -186,14 +212,13 @@ export function attachClip(mesh, clip, options = {}) {
     pdeFieldTex: { value: textures.field ?? null },
     pdeVertexTex: { value: textures.vertex },
     pdeKnotTex: { value: textures.knot ?? null },
-    pdeMuTex: { value: textures.mu ?? null },
-    pdeRigidTex: { value: textures.rigid ?? null },
+    pdeCurveTex: { value: textures.curve ?? null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
     pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
     pdeRotate: { value: Boolean(layout.rotate) },
   };
-  const header = glslHeader(layout);
-  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}`;
+  const header = glslHeader(layout, { normals });
+  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;
@@ -218,6 +243,10 @@ export function attachClip(mesh, clip, options = {}) {
   }
   const originalCulled = mesh.frustumCulled;
   mesh.frustumCulled = frustumCulled;
+  // morph targets (e.g. of an animation GLB) would add their deltas to the clip's positions: off while
+  // attached
+  const originalInfluences = mesh.morphTargetInfluences ? [...mesh.morphTargetInfluences] : null;
+  if (originalInfluences) mesh.morphTargetInfluences.fill(0);
 
   const clipPositions = new Float32Array(clip.nVertices * 3);
   const scratch = new Float32Array(vertexMap.length * 3);
@@ -239,9 +268,10 @@ export function attachClip(mesh, clip, options = {}) {
       scratch[i * 3 + 2] = positions[v + 2];
     }
     transformPoints(clipToLocal.elements, scratch, posAttr.array);
+    posAttr.needsUpdate = true;
+    if (normals === 'rest') return;
     frameNormals(positions, attrs, restNormalsClip, nrmAttr.array);
     transformNormals(normalToLocal.elements, nrmAttr.array);
-    posAttr.needsUpdate = true;
     nrmAttr.needsUpdate = true;
   }
 
@@ -267,12 +297,9 @@ export function attachClip(mesh, clip, options = {}) {
      * evaluated: the clip's CPU positions at t when the caller already has them (shared between meshes).
      */
     setTime(t, evaluated = null) {
-      const u = timeUniforms(layout, t);
+      const u = res.frame(t);
       time = t;
       uniforms.pdeSeg.value = u.seg;
-      uniforms.pdeTau.value = u.tau;
-      uniforms.pdeRSeg.value = u.rseg;
-      uniforms.pdeRTau.value = u.rtau;
       uniforms.pdeSinWt.value = u.sw;
       uniforms.pdeCosWt.value = u.cw;
       if (!onGPU) writeCPU(evaluated ?? evaluator.evaluate(t, clipPositions));
@@ -295,6 +322,9 @@ export function attachClip(mesh, clip, options = {}) {
       mesh.material = originalMaterial;
       [mesh.customDepthMaterial, mesh.customDistanceMaterial] = originalDepth;
       mesh.frustumCulled = originalCulled;
+      if (originalInfluences) {
+        mesh.morphTargetInfluences.splice(0, originalInfluences.length, ...originalInfluences);
+      }
       restoreRest();
       geometry.setAttribute('position', original.position);
       geometry.setAttribute('normal', original.normal);
