@@ -1,6 +1,6 @@
 // The vertex-shader path in a real browser: headless Chromium (software WebGL 2) renders fixture clips with
 // the GPU path and with the CPU fallback; the images must agree and move between two t. Skipped (with the
-// reason) when no Chromium is installed (script/setup installs it with the viewer's dependencies).
+// reason) when no Chromium is installed outside CI (script/setup installs it with the viewer's dependencies).
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -63,6 +63,11 @@ function serve() {
 }
 
 const chromium = findChromium();
+
+// as the viewer's test: a missing browser is a failure in CI (CI=true), a skip elsewhere
+test('Chromium is available in CI', { skip: process.env.CI === 'true' ? false : 'not in CI' }, () => {
+  assert.ok(chromium, 'no Chromium found (script/setup installs it; or set PDEANIM_CHROMIUM)');
+});
 
 test(
   'the vertex shader renders what the CPU path renders, in headless Chromium',
