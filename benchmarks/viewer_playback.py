@@ -83,6 +83,8 @@ def main() -> int:
     ap.add_argument("--modes", nargs="*", default=["gpu", "cpu", "static"],
                     help="gpu, cpu, and static (the mesh drawn every frame without animating: the drawing "
                     "cost alone)")
+    ap.add_argument("--no-antialias", action="store_true",
+                    help="open the viewer with #aa=0 (no multisampling)")
     ap.add_argument("--data-dir", type=Path, help="keep the service data here and reuse its clip on a rerun "
                     "(default: a temporary directory)")
     args = ap.parse_args()
@@ -105,7 +107,8 @@ def main() -> int:
             print(f"clip: {clip['kind']}, {clip['info'].get('n_vertices')} vertices, "
                   f"{clip['frames']} frames, {clip['segments']} segments, {clip['curves']} curves")
             out_path = Path(tmp) / "playback.json"
-            job_arg = {"url": f"{url}/viewer#clip={clip['id']}&key={key}", "modes": args.modes,
+            aa = "&aa=0" if args.no_antialias else ""
+            job_arg = {"url": f"{url}/viewer#clip={clip['id']}&key={key}{aa}", "modes": args.modes,
                        "runs": args.runs, "seconds": args.seconds, "width": args.width, "height": args.height,
                        "out": str(out_path)}
             subprocess.run(["node", str(ROOT / "benchmarks" / "viewer_playback.mjs"), json.dumps(job_arg)],
@@ -113,8 +116,8 @@ def main() -> int:
             res = json.loads(out_path.read_text())
         finally:
             services.stop()
-    print(f"Chromium WebGL renderer: {res['renderer']}; canvas {res['canvas'][0]}x{res['canvas'][1]}; "
-          f"{res['vertices']} vertices")
+    print(f"Chromium WebGL renderer: {res['renderer']}; canvas {res['canvas'][0]}x{res['canvas'][1]}"
+          f"{' without' if args.no_antialias else ' with'} multisampling; {res['vertices']} vertices")
     print(f"{'mode':<6} {'fps (median of runs)':>20} {'JS ms/frame median':>19} {'JS ms/frame p95':>16}"
           "  runs")
     for mode, runs in res["runs"].items():

@@ -59,8 +59,8 @@ function sourceFps(clip) {
 }
 
 class Viewer {
-  constructor() {
-    this.renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias: true,
+  constructor({ antialias = true } = {}) {
+    this.renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias,
       preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.renderer.outputColorSpace = THREE.SRGBColorSpace;
@@ -162,7 +162,7 @@ class Viewer {
   async attachPlayer(clip) {
     try {
       const { attachClip } = await import('pdeanim/three.js');
-      this.player = attachClip(this.mesh, clip, { gpu: true });
+      this.player = attachClip(this.mesh, clip, { gpu: true, renderer: this.renderer });
       this.gpuReason = this.player.gpuUnavailableReason ?? null;
     } catch (err) {
       this.player = null;
@@ -304,7 +304,8 @@ class Viewer {
   }
 }
 
-const viewer = new Viewer();
+// #aa=0 turns multisampling off (cheaper on software WebGL)
+const viewer = new Viewer({ antialias: new URLSearchParams(location.hash.slice(1)).get('aa') !== '0' });
 requestAnimationFrame((n) => viewer.tick(n));
 
 function fragment() {
