@@ -3,7 +3,9 @@
 A 150 x 100 torus (15,000 vertices, 150 ring curves) with a travelling bend over 40 frames, fitted with 4
 segments in three motion modes (displacement, rigid, displacement looping), plus a cyclic-spine eel
 (tests/data/fish_eel.obj subdivided twice: 23,042 vertices).
-Run: .venv/bin/python benchmarks/js_eval_clips.py OUTDIR
+With --50k: a 250 x 200 torus (50,000 vertices, 250 ring curves, 8 segments; displacement and rigid) for
+js_gpu_speed.mjs instead.
+Run: .venv/bin/python benchmarks/js_eval_clips.py OUTDIR [--50k]
 """
 
 from __future__ import annotations
@@ -23,9 +25,16 @@ from pdeanim.model.fitclip import FitOptions, fit_poses  # noqa: E402
 CASES = {"displacement": {}, "rigid": {"motion": "rigid"}, "loop": {"loop": True}}
 
 
-def main(out: Path) -> None:
+def main(out: Path, big: bool = False) -> None:
     """Fit and write one CLIP file per case into out."""
     out.mkdir(parents=True, exist_ok=True)
+    if big:
+        poses = torus_poses(250, 200, 40)
+        for name, opts in (("displacement", {}), ("rigid", {"motion": "rigid"})):
+            parts = fit_poses(poses, FitOptions(segments=8, **opts), curves=ring_curves(250, 200))
+            write_clip_file(out / f"torus50k-{name}.clip", parts)
+            print(f"wrote {out / f'torus50k-{name}.clip'}")
+        return
     poses = torus_poses(150, 100, 40)
     for name, opts in CASES.items():
         parts = fit_poses(poses, FitOptions(segments=4, **opts), curves=ring_curves(150, 100))
@@ -39,4 +48,4 @@ def main(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]))
+    main(Path(sys.argv[1]), "--50k" in sys.argv[2:])
