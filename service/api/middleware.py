@@ -35,7 +35,8 @@ class JsonErrorCORSMiddleware(CORSMiddleware):
 
 
 class WeakEtagWhenEncoded:
-    """Mark a strong ETag weak (``W/"…"``) on responses sent with a Content-Encoding (RFC 9110 8.8.1)."""
+    """Mark a strong ETag weak (``W/"…"``) on responses sent with a Content-Encoding (RFC 9110 8.8.1), and
+    drop the ``Content-Encoding: identity`` marker of bodies sent as they are."""
 
     def __init__(self, app: ASGIApp):
         self.app = app
@@ -48,6 +49,8 @@ class WeakEtagWhenEncoded:
         async def send_weak(message: Message) -> None:
             if message["type"] == "http.response.start":
                 headers = MutableHeaders(raw=message.setdefault("headers", []))
+                if headers.get("content-encoding", "").lower() == "identity":
+                    del headers["content-encoding"]
                 etag = headers.get("etag")
                 if etag and "content-encoding" in headers and not etag.startswith("W/"):
                     headers["ETag"] = "W/" + etag

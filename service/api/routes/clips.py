@@ -131,7 +131,7 @@ def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep
     def body() -> bytes:
         return item.frame_glb(np.asarray(item.clip.evaluate(float(t))))
 
-    return immutable_response(request, tag, body, GLB)
+    return immutable_response(request, tag, body, GLB, compress=False)  # float32 frames: gzip is not worth it
 
 
 @router.get("/v1/clips/{clip_id}/animation", operation_id="getClipAnimation", response_class=Response,

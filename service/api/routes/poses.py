@@ -93,4 +93,4 @@ def get_poses(poses_id: str, request: Request, tenant: TenantDep, session: Sessi
         return Response(poses_out(row).model_dump_json(), media_type="application/json")
     headers = {"Content-Disposition": f'attachment; filename="{poses_id}.npz"', "Vary": "Accept"}
     return immutable_response(request, row.blob_key, lambda: store.blobs.get(row.blob_key),
-                              "application/octet-stream", headers)
+                              "application/octet-stream", headers, compress=False)  # float32 frames
