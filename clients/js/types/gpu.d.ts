@@ -1,6 +1,6 @@
 // Type declarations of pdeanim/gpu: data for evaluating a clip in a vertex shader (no three.js needed).
 
-import type { Clip } from './index.js';
+import type { Clip, Evaluator } from './index.js';
 
 export declare const TEXTURE_WIDTH: number;
 
@@ -13,10 +13,25 @@ export interface FloatTexture {
 
 export interface GpuLayout {
   kind: Clip['kind'];
+  /** 'fields' | 'coefficients' for dynamic clips, 'cyclic' for cyclic ones. */
+  mode: 'fields' | 'coefficients' | 'cyclic';
   rigid: boolean;
   nCurves: number;
-  textures: { vertex: FloatTexture; knot?: FloatTexture; mu?: FloatTexture; rigid?: FloatTexture };
+  nVertices: number;
+  /** Texture row length in texels (a power of two). */
+  width: number;
+  /** Texels per curve in the per-frame curve table (2, or 5 with rigid motion). */
+  curveTexels?: number;
+  textures: {
+    vertex: FloatTexture;
+    field?: FloatTexture;
+    knot?: FloatTexture;
+    /** Per-frame table rewritten by timeUniforms(). */
+    curve?: FloatTexture;
+  };
   clip: Clip;
+  /** The CPU evaluator whose per-curve state fills the curve table (dynamic clips). */
+  evaluator?: Evaluator;
   /** Largest texture height (compare with the renderer's MAX_TEXTURE_SIZE). */
   maxHeight: number;
   axis?: number[];
@@ -25,10 +40,9 @@ export interface GpuLayout {
 }
 
 export interface TimeUniforms {
+  /** Segment of the dynamic clip at t. */
   seg: number;
-  tau: number;
-  rseg: number;
-  rtau: number;
+  /** sin and cos of the swim phase (cyclic clips). */
   sw: number;
   cw: number;
 }
@@ -40,7 +54,12 @@ export interface MeshAttributes {
   pdeNormalFrame: Float32Array;
 }
 
-export declare function gpuLayout(clip: Clip, options?: { width?: number }): GpuLayout;
+export declare function gpuLayout(
+  clip: Clip,
+  options?: { width?: number; mode?: 'auto' | 'fields' | 'coefficients'; fieldsBudget?: number;
+    evaluator?: Evaluator | null },
+): GpuLayout;
+/** The uniforms at t; also rewrites layout.textures.curve.data (upload it afterwards). */
 export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
 export declare function meshAttributes(mesh: {
   vertexMap: ArrayLike<number>;
