@@ -54,6 +54,12 @@ def _fit(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
                                                                    param_mode=param_mode, loop=loop))
 
 
+def _single_frame_rigid() -> ClipParts:
+    """A one-frame clip (rigid motion): every t shows that frame."""
+    p = _sphere_poses()
+    return fit_poses(make_poses(p.vertices[:1], p.faces, p.times[:1]), FitOptions(motion="rigid"))
+
+
 def _capsule():
     return trimesh.creation.capsule(height=3.0, radius=0.5, count=[10, 10])
 
@@ -133,6 +139,7 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "fit-rigid-chord": (_fit("rigid", "chord", False), {}),
     "fit-displacement-chord-loop": (_fit("displacement", "chord", True), {}),
     "fit-rigid-paper-loop": (_fit("rigid", "paper", True), {}),
+    "fit-rigid-single-frame": (_single_frame_rigid, {}),
     "synthetic-displacement-paper": (_synthetic_dynamic("displacement", "paper", False), {}),
     "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
     "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),
