@@ -60,7 +60,7 @@ def test_attach_to_gltfloader_scene_matches_python(asset, glb):
     assert {n for m in res["meshes"] for n in m["materials"]} == {"skin", "cloth"}
     assert res["materialsWhilePlaying"] == [m["materials"] for m in res["meshes"]]
     assert all("uv" in m["attributes"] for m in res["meshes"])
-    assert all(not any(w) for w in res["morphWhilePlaying"])  # a GLB's own morph targets are off while playing
+    assert all(not any(w) for w in res["morphWhilePlaying"])  # the GLB's morph targets are off meanwhile
     assert res["morphAfter"] == res["morphBefore"]
     if glb == "animation.glb":
         assert any(res["morphBefore"])
