@@ -7,11 +7,16 @@ import { DynamicEvaluator, vertexBasis } from './dynamic.js';
 export const TEXTURE_WIDTH = 4096;
 export const FIELDS_BUDGET_BYTES = 64 * 1024 * 1024;
 
-/** A float RGBA texture of n texels, width w: {data (Float32Array n*4, padded), width, height}. */
-function texture(nTexels, width = TEXTURE_WIDTH) {
-  const w = Math.max(1, Math.min(width, nTexels));
-  const h = Math.max(1, Math.ceil(nTexels / w));
-  return { data: new Float32Array(w * h * 4), width: w, height: h };
+/** The largest power of two <= width (texel addressing in the shader is then a shift and a mask). */
+function pow2Width(width) {
+  if (!(width >= 1)) throw new RangeError(`texture width must be >= 1, got ${width}`);
+  return 2 ** Math.floor(Math.log2(width));
+}
+
+/** A float RGBA texture of n texels, rows of w (a power of two): {data (padded), width, height}. */
+function texture(nTexels, width) {
+  const h = Math.max(1, Math.ceil(nTexels / width));
+  return { data: new Float32Array(width * h * 4), width, height: h };
 }
 
 /**
@@ -31,6 +36,7 @@ export function gpuLayout(
   clip,
   { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES, evaluator = null } = {},
 ) {
+  width = pow2Width(width);
   if (clip.kind === 'cyclic-spine') return cyclicLayout(clip, width);
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
   if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
@@ -68,6 +74,7 @@ export function gpuLayout(
     rigid: Boolean(rigid),
     nCurves: C,
     nVertices: V,
+    width,
     curveTexels,
     textures,
     clip,
@@ -96,6 +103,7 @@ function cyclicLayout(clip, width) {
     rigid: false,
     nCurves: 0,
     nVertices: V,
+    width,
     textures: { vertex },
     clip,
     maxHeight: vertex.height,
@@ -279,6 +287,8 @@ export function glslHeader(layout, { normals = 'frame' } = {}) {
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
+  defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
+  defs.push(`#define PDEANIM_WIDTH_MASK ${layout.width - 1}`);
   return `${defs.join('\n')}
 in vec3 pdeVertex;
 in vec3 pdeNormalFrame;
@@ -307,8 +317,7 @@ uniform bool pdeRotate;
 vec3 pdePosition;
 vec3 pdeNormal;
 vec4 pdeFetch(highp sampler2D tex, int i) {
-  int w = textureSize(tex, 0).x;
-  return texelFetch(tex, ivec2(i - (i / w) * w, i / w), 0);
+  return texelFetch(tex, ivec2(i & PDEANIM_WIDTH_MASK, i >> PDEANIM_WIDTH_SHIFT), 0);
 }
 #ifdef PDEANIM_DYNAMIC
 vec3 pdeEval(int v) {

@@ -218,7 +218,7 @@ export function attachClip(mesh, clip, options = {}) {
     pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout, { normals });
-  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}`;
+  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;
