@@ -14,8 +14,9 @@ OPTIONS = {
     "simulate": "pdeanim.sim.scene:SceneParams",
     "fit": "pdeanim.model.fitclip:FitOptions",
     "cyclic": "pdeanim.cyclic.job:CyclicOptions",
+    "export": "pdeanim.gltf.clipexport:ExportOptions",
 }
-DISTRIBUTIONS = ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild")
+DISTRIBUTIONS = ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild", "meshoptimizer")
 
 
 class StageUnavailable(RuntimeError):

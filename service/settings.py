@@ -24,11 +24,18 @@ class Settings(BaseSettings):
     s3_endpoint_url: str | None = Field(None, description="S3 endpoint for MinIO/moto; None = AWS")
     s3_region: str = "us-east-1"
 
+    max_export_fps: float = Field(120.0, gt=0, description="highest fps of an animation export (GLB); above: 422")
+    max_sync_export_bytes: int = Field(
+        32 * 1024 * 1024, ge=0, description="GET /v1/clips/{id}/animation builds an export in the request only "
+        "while its sampled frames as raw float32 stay within this; larger ones need an export job")
+
     max_upload_bytes: int = Field(50 * 1024 * 1024, gt=0)
     max_vertices: int = Field(500_000, gt=0)
     max_faces: int = Field(1_000_000, gt=0)
     max_frames: int = Field(2_000, gt=0)
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
+    cors_origins: str = Field("", description="comma-separated origins allowed by CORS (``*`` for any); "
+                              "empty = CORS off")
 
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
     max_attempts: int = Field(3, ge=1, description="attempts before a job fails for good")
@@ -38,6 +45,10 @@ class Settings(BaseSettings):
     shutdown_grace_seconds: float = Field(20.0, ge=0, description="on SIGTERM, time to finish the attempt")
     job_memory_bytes: int = Field(0, ge=0, description="RLIMIT_AS of a job's child process; 0 = unlimited")
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
+
+    def cors_origin_list(self) -> list[str]:
+        """The allowed CORS origins (scheme://host[:port], no trailing slash); empty when CORS is off."""
+        return [o.strip().rstrip("/") for o in self.cors_origins.split(",") if o.strip()]
 
     def resolved_data_dir(self) -> Path:
         """The data directory as an absolute path (created on demand)."""

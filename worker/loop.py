@@ -16,7 +16,7 @@ import time
 from service.jobspec import library_versions
 from service.settings import Settings
 from service.store.context import Store
-from service.store.models import Mesh, PosesRecord
+from service.store.models import ClipRecord, Mesh, PosesRecord
 from service.store.queue import Claimed
 
 from .attempt import run_attempt
@@ -94,6 +94,11 @@ class Worker:
                 payload["mesh"] = {"blob_key": mesh.blob_key, "filename": mesh.filename}
             if job.poses_id:
                 payload["poses"] = {"blob_key": session.get(PosesRecord, job.poses_id).blob_key}
+            clip_id = (job.params or {}).get("clip_id")
+            if clip_id:
+                clip = session.get(ClipRecord, clip_id)
+                payload["clip"] = {"topology_key": clip.topology_key,
+                                   "coefficients_key": clip.coefficients_key}
         return payload
 
     def _should_stop(self) -> bool:

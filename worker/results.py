@@ -43,6 +43,11 @@ def result_writer(job: Claimed, result: dict[str, Any]) -> Callable[[Session], d
             session.add(row)
             session.flush()
             ids["clip_id"] = row.id
+        if "export" in result:
+            e = result["export"]
+            ids.update(export_key=str(e["blob_key"]), export_bytes=int(e["bytes"]),
+                       export_url=f"/v1/exports/{job.id}",
+                       export={k: v for k, v in e.items() if k != "blob_key"})
         return ids
 
     return write

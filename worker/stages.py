@@ -1,5 +1,5 @@
-"""The pipeline stages a job runs (inside the child process): simulate, fit, cyclic. Library modules are
-imported here, lazily, so the worker starts even before a stage exists in this build."""
+"""The pipeline stages a job runs (inside the child process): simulate, fit, cyclic and export. Library
+modules are imported here, lazily, so the worker starts even before a stage exists in this build."""
 
 from __future__ import annotations
 
@@ -111,4 +111,27 @@ def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
     return {"clip": _store_clip(parts, blobs, frames, len(mesh.vertices))}
 
 
-STAGES = {"simulate": run_simulate, "fit": run_fit, "cyclic": run_cyclic}
+def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
+               partial: Partial | None = None) -> dict:
+    """Clip -> animation GLB (quantised, meshopt-compressed, keeping the source mesh's look) in the blob
+    store."""
+    from pdeanim.clip import load_clip
+    from pdeanim.gltf.clipexport import ExportOptions, clip_animation_glb, estimate_export
+    from pdeanim.gltf.layout import source_layout
+
+    opts = ExportOptions.from_dict(job["params"]["params"])
+    progress(0.0, "export: load clip")
+    clip = load_clip(blobs.get(job["clip"]["topology_key"]), blobs.get(job["clip"]["coefficients_key"]))
+    estimate = estimate_export(clip, opts.fps, settings.max_frames)
+    mesh = job.get("mesh") or {}
+    data = blobs.get(mesh["blob_key"]) if mesh.get("blob_key") else None
+    layout = source_layout(data, mesh.get("filename", ""), clip.faces, clip.n_vertices)
+    progress(0.1, f"export: {estimate.frames} frames")
+    glb = clip_animation_glb(clip, opts.fps, options=opts.pack(), layout=layout,
+                             max_frames=settings.max_frames)
+    progress(0.95, "export: store")
+    return {"export": {"blob_key": blobs.put(glb), "bytes": len(glb), "layout": layout.source,
+                       **estimate.to_dict()}}
+
+
+STAGES = {"simulate": run_simulate, "fit": run_fit, "cyclic": run_cyclic, "export": run_export}

@@ -1,4 +1,6 @@
-"""``pdeanim export CLIP --fps 30 --out FILE.glb [--quantize]``: the clip as a morph-target animation."""
+"""``pdeanim export CLIP --fps 30 --out FILE.glb [--mesh SOURCE]``: the clip as a morph-target animation,
+quantised and meshopt-compressed by default, keeping a glTF/OBJ source mesh's look when ``--mesh`` names
+it."""
 
 from __future__ import annotations
 
@@ -6,28 +8,65 @@ import argparse
 from pathlib import Path
 
 from ..clip import load_clip_file
+from ..errors import InputError
 from ..gltf.clipexport import clip_animation_glb
+from ..gltf.compact import PackOptions
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``export`` sub-command."""
-    p = subparsers.add_parser("export", help="write a clip as an animated GLB (morph targets + weights animation)",
-                              description="Sample a clip at --fps over its duration (last frame included; "
-                                          "looping clips loop seamlessly) and write a glTF 2.0 binary file.")
+    p = subparsers.add_parser(
+        "export", help="write a clip as an animated GLB (morph targets + weights animation)",
+        description="Sample a clip at --fps over its duration (last frame included; looping clips loop "
+                    "seamlessly) and write a glTF 2.0 binary file. By default positions are quantised to a "
+                    "14-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, "
+                    "and every stream is compressed with EXT_meshopt_compression (three.js GLTFLoader with "
+                    "MeshoptDecoder, Babylon.js and gltfpack read it); --no-compress --no-quantize writes "
+                    "plain float32.")
     p.add_argument("clip", metavar="CLIP", help="clip file written by `pdeanim fit` or `pdeanim cyclic`")
     p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation (default 30)")
     p.add_argument("--out", required=True, metavar="FILE.glb", help="output GLB path")
-    p.add_argument("--quantize", action="store_true",
-                   help="store positions as 16-bit integers (KHR_mesh_quantization), about 40%% smaller")
+    p.add_argument("--mesh", metavar="SOURCE",
+                   help="the mesh the clip was made from (GLB/glTF: keep its materials, textures, UVs, "
+                        "primitives and node names; OBJ: keep its UVs); must have the clip's vertex count")
+    p.add_argument("--no-quantize", dest="quantize", action="store_false",
+                   help="store float32 positions and normals instead of the integer grid and bytes")
+    p.add_argument("--no-compress", dest="compress", action="store_false",
+                   help="do not use EXT_meshopt_compression (for viewers without a meshopt decoder)")
+    p.add_argument("--position-bits", type=int, default=14, metavar="N",
+                   help="bits per axis of the position grid, 8..15 (default 14: a step of 6.1e-5 of the "
+                        "extent)")
+    p.add_argument("--no-normal-targets", dest="normals", action="store_false",
+                   help="leave out per-frame normal deltas (smaller; every frame is lit with the first "
+                        "frame's normals)")
+    # --quantize was an opt-in flag before quantising became the default: still accepted, hidden
+    p.add_argument("--quantize", dest="quantize", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Load the clip, sample it and write the GLB; prints what was written."""
+    """Load the clip (and source mesh), sample it and write the GLB; prints what was written."""
     clip = load_clip_file(args.clip)
-    glb = clip_animation_glb(clip, args.fps, quantize=args.quantize)
+    layout = None
+    if args.mesh:
+        from ..gltf.layout import source_layout
+
+        path = Path(args.mesh)
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise InputError(f"cannot read --mesh {path}: {exc}") from exc
+        layout = source_layout(data, path.name, clip.faces, clip.n_vertices)
+        for note in layout.notes:
+            print(f"note: {note}")
+    options = PackOptions(args.quantize, args.compress, args.position_bits, args.normals)
+    glb = clip_animation_glb(clip, args.fps, options=options, layout=layout)
     out = Path(args.out)
     out.write_bytes(glb)
+    packing = [w for w, on in (("quantised", args.quantize), ("meshopt", args.compress)) if on]
+    look = f", look of {layout.source} source" if layout is not None and layout.source != "plain" else ""
+    loop = ", looping" if clip.looping else ""
+    packed = ", " + " + ".join(packing) if packing else ""
     print(f"wrote {out} ({len(glb)} bytes, {clip.n_vertices} vertices, {len(clip.frame_times)} source frames, "
-          f"{args.fps:g} fps{', looping' if clip.looping else ''}{', quantised' if args.quantize else ''})")
+          f"{args.fps:g} fps{loop}{packed}{look})")
     return 0

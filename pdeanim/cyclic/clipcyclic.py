@@ -124,6 +124,9 @@ def _need(arrays: dict[str, np.ndarray], names: tuple[str, ...], part: str) -> N
 
 def clip_from_parts(th: dict, ta: dict[str, np.ndarray], ch: dict, ca: dict[str, np.ndarray]) -> CyclicClip:
     """Decode both parts (headers and arrays from :func:`pdeanim.container.unpack`) into a CyclicClip."""
+    for part, header in (("topology", th), ("coefficients", ch)):
+        if header.get("format_version", 1) != 1:  # no key means version 1 (docs/format.md, section 5)
+            raise ClipFormatError(f"unsupported cyclic-spine {part} version {header.get('format_version')!r}")
     _need(ta, ("faces", "rest", "vertex_patch", "vertex_uv"), "topology")
     _need(ca, ("spine",), "coefficients")
     try:

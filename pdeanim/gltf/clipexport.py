@@ -1,14 +1,20 @@
 """GLB of a decoded clip: one frame at normalised time t, or the whole clip sampled at an fps as a
-morph-target animation (seamlessly looping for looping clips). Shared by ``pdeanim export``/``frame`` and
-the service's frame and animation endpoints."""
+morph-target animation (seamlessly looping for looping clips), small by default (quantised + meshopt, see
+:mod:`.compact`) and keeping the source mesh's look when a :class:`~.layout.Layout` of it is given. Shared by
+``pdeanim export``/``frame``, the service's frame and animation routes and its ``export`` jobs."""
 
 from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 
 from ..clip import Clip
 from ..errors import LimitError, ParameterError
-from .write import animation_glb, frame_glb
+from .compact import PackOptions, layout_animation_glb, layout_frame_glb
+from .layout import Layout, plain_layout
+from .write import _check_times, _key_plan, animation_glb, frame_glb
 
 DEFAULT_MAX_FRAMES = 10_000
 
@@ -27,17 +33,90 @@ def export_times(duration: float, fps: float, max_frames: int = DEFAULT_MAX_FRAM
         return np.zeros(1)
     n = int(np.floor(duration * fps + 1e-6)) + 1
     if n + 1 > max_frames:
-        raise LimitError("exported frame count", n + 1, max_frames)
+        raise LimitError("exported frame count", n + 1, max_frames,
+                         "max_frames (PDEANIM_MAX_FRAMES in the service)")
     t = np.arange(n) / fps
     if duration - t[-1] > 1e-6 * duration:
         t = np.append(t, duration)
     return t
 
 
-def clip_animation_glb(clip: Clip, fps: float = 30.0, *, quantize: bool = False,
-                       max_frames: int = DEFAULT_MAX_FRAMES) -> bytes:
+@dataclass(frozen=True)
+class ExportEstimate:
+    """What an animation export will hold before it is built: sampled frames, morph targets, and the bytes
+    of those frames as raw float32 positions (the work and memory building it takes scale with them)."""
+
+    frames: int
+    targets: int
+    vertices: int
+    raw_frame_bytes: int
+
+    def to_dict(self) -> dict[str, int]:
+        """JSON-ready fields."""
+        return {"frames": self.frames, "targets": self.targets, "vertices": self.vertices,
+                "raw_frame_bytes": self.raw_frame_bytes}
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """Options of an animation export (the service's ``export`` job): ``fps`` and how it is packed."""
+
+    fps: float = 30.0
+    quantize: bool = True
+    compress: bool = True
+    position_bits: int = 14
+    normals: bool = True
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> ExportOptions:
+        """Build from a JSON-like dict; ParameterError on unknown keys or bad values."""
+        names = {f.name for f in fields(ExportOptions)}
+        unknown = set(d) - names
+        if unknown:
+            raise ParameterError(f"unknown export option(s): {', '.join(sorted(unknown))}")
+        kw = dict(d)
+        try:
+            if "fps" in kw:
+                kw["fps"] = float(kw["fps"])
+            if "position_bits" in kw:
+                bits = kw["position_bits"]
+                if isinstance(bits, bool) or float(bits) != int(bits):
+                    raise ValueError("position_bits must be an integer")
+                kw["position_bits"] = int(kw["position_bits"])
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise ParameterError(f"bad export option: {exc}") from exc
+        for k in ("quantize", "compress", "normals"):
+            if k in kw and not isinstance(kw[k], bool):
+                raise ParameterError(f"{k} must be true or false, got {kw[k]!r}")
+        opts = ExportOptions(**kw)
+        if not np.isfinite(opts.fps) or opts.fps <= 0:
+            raise ParameterError(f"fps must be a positive number, got {opts.fps}")
+        opts.pack()  # checks position_bits
+        return opts
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict that :meth:`from_dict` reads back."""
+        return asdict(self)
+
+    def pack(self) -> PackOptions:
+        """The packing part of the options."""
+        return PackOptions(self.quantize, self.compress, self.position_bits, self.normals)
+
+
+def estimate_export(clip: Clip, fps: float, max_frames: int = DEFAULT_MAX_FRAMES) -> ExportEstimate:
+    """Frames, morph targets and raw float32 frame bytes of ``clip_animation_glb(clip, fps)``, cheaply."""
+    k = len(export_times(clip_duration(clip), fps, max_frames))
+    targets = k - 1 if bool(clip.looping) and k > 1 else k
+    return ExportEstimate(k, targets, int(clip.n_vertices), int(k * clip.n_vertices * 12))
+
+
+def clip_animation_glb(clip: Clip, fps: float = 30.0, *, options: PackOptions | None = None,
+                       layout: Layout | None = None, max_frames: int = DEFAULT_MAX_FRAMES) -> bytes:
     """The clip as an animated GLB: frames evaluated at ``fps`` over its duration, last frame included; for a
-    looping clip the last key is the first frame exactly, so playback wraps without a seam."""
+    looping clip the last key is the first frame exactly, so playback wraps without a seam. ``options``
+    default to quantised + meshopt-compressed with per-frame normal deltas; ``layout`` (default plain)
+    keeps a source mesh's look. ``PackOptions(quantize=False, compress=False)`` writes plain float32."""
+    opts = options or PackOptions()
     duration = clip_duration(clip)
     seconds = export_times(duration, fps, max_frames)
     t = seconds / duration if duration > 0 else seconds
@@ -46,11 +125,21 @@ def clip_animation_glb(clip: Clip, fps: float = 30.0, *, quantize: bool = False,
     if loop:
         frames[-1] = frames[0]  # period 1 in t: the end of the cycle is its start
     names = [f"t{x:.4f}" for x in t]
-    return animation_glb(frames, seconds, clip.faces, quantize=quantize, loop=loop, names=names)
+    if layout is None and not opts.quantize and not opts.compress:
+        return animation_glb(frames, seconds, clip.faces, loop=loop, names=names, normals=opts.normals)
+    lay = layout or plain_layout(clip.faces, clip.n_vertices)
+    t32 = _check_times(seconds, len(frames))
+    key_times, key_target, n_targets = _key_plan(frames, t32, loop)
+    return layout_animation_glb(lay, frames, key_times, key_target, n_targets, options=opts,
+                                names=names[:n_targets], loop=loop)
 
 
-def clip_frame_glb(clip: Clip, t: float) -> bytes:
-    """One frame of the clip at normalised time t as GLB (positions, normals, original faces)."""
+def clip_frame_glb(clip: Clip, t: float, layout: Layout | None = None) -> bytes:
+    """One frame of the clip at normalised time t as GLB (positions, normals, original faces; the source's
+    look when ``layout`` is given)."""
     if not np.isfinite(t):
         raise ParameterError(f"t must be a finite number, got {t}")
-    return frame_glb(np.asarray(clip.evaluate(float(t)), np.float32).reshape(-1, 3), clip.faces)
+    positions = np.asarray(clip.evaluate(float(t)), np.float32).reshape(-1, 3)
+    if layout is None:
+        return frame_glb(positions, clip.faces)
+    return layout_frame_glb(layout, positions)

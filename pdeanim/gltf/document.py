@@ -22,8 +22,8 @@ MAX_ACCESSOR_VALUES = 60_000_000  # cap on components of one accessor not backed
 MALFORMED = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError, ZeroDivisionError,
              RecursionError, np.linalg.LinAlgError)
 # required extensions that change how geometry is stored and that this reader cannot decode
-UNSUPPORTED_GEOMETRY = ("KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression",
-                        "EXT_mesh_gpu_instancing")
+UNSUPPORTED_GEOMETRY = ("KHR_draco_mesh_compression", "KHR_meshopt_compression", "EXT_mesh_gpu_instancing")
+MESHOPT = "EXT_meshopt_compression"  # decoded here (pdeanim.gltf.meshopt)
 
 
 @contextmanager
@@ -42,6 +42,7 @@ class GltfDocument:
 
     def __init__(self, doc: dict[str, Any], buffers: list[bytes], error: type[InputError] = PosesInputError):
         self.doc, self.buffers, self.error = doc, buffers, error
+        self._decoded: dict[int, bytes] = {}
         version = str(doc.get("asset", {}).get("version", ""))
         if not version.startswith("2."):
             raise error(f"unsupported glTF version {version!r} (need 2.x)")
@@ -90,10 +91,15 @@ class GltfDocument:
 
     def _strided(self, view_index: Any, offset: int, count: int, width: int, dtype: np.dtype) -> np.ndarray:
         view = self.item("bufferViews", view_index)
-        buf = self.buffers[view.get("buffer", 0)] if 0 <= view.get("buffer", 0) < len(self.buffers) else None
-        if buf is None:
-            raise self.error(f"bufferView {view_index} refers to a missing buffer")
-        start = int(view.get("byteOffset", 0)) + offset
+        ext = (view.get("extensions") or {}).get(MESHOPT)
+        if ext is not None:
+            buf, start = self._meshopt_view(view_index, view, ext), offset
+        else:
+            index = view.get("buffer", 0)
+            buf = self.buffers[index] if 0 <= index < len(self.buffers) else None
+            if buf is None:
+                raise self.error(f"bufferView {view_index} refers to a missing buffer")
+            start = int(view.get("byteOffset", 0)) + offset
         elem = width * dtype.itemsize
         stride = int(view.get("byteStride", elem))
         need = (count - 1) * stride + elem if count else 0
@@ -104,6 +110,37 @@ class GltfDocument:
         rows = np.lib.stride_tricks.as_strided(np.frombuffer(buf, np.uint8, need, start), (count, elem),
                                                (stride, 1))
         return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+
+    def view_bytes(self, index: int) -> bytes:
+        """The (decoded) bytes of buffer view ``index``."""
+        view = self.item("bufferViews", index)
+        ext = (view.get("extensions") or {}).get(MESHOPT)
+        if ext is not None:
+            return self._meshopt_view(index, view, ext)[: int(view.get("byteLength", 0))]
+        buffer = view.get("buffer", 0)
+        if not isinstance(buffer, int) or not 0 <= buffer < len(self.buffers):
+            raise self.error(f"bufferView {index} refers to a missing buffer")
+        start = int(view.get("byteOffset", 0))
+        data = self.buffers[buffer][start: start + int(view.get("byteLength", 0))]
+        if len(data) != int(view.get("byteLength", 0)):
+            raise self.error(f"bufferView {index} runs past the end of its buffer")
+        return data
+
+    def _meshopt_view(self, index: int, view: dict, ext: dict) -> bytes:
+        """The decoded bytes of an EXT_meshopt_compression view (decoded once, then kept)."""
+        if index not in self._decoded:
+            from .meshopt import decode_view
+
+            if not 0 <= int(ext.get("buffer", 0)) < len(self.buffers):
+                raise self.error(f"compressed bufferView {index} refers to a missing buffer")
+            try:
+                data = decode_view(ext, self.buffers)
+            except (RuntimeError, ValueError, KeyError) as exc:
+                raise self.error(f"cannot decode compressed bufferView {index}: {exc}") from exc
+            if len(data) < int(view.get("byteLength", 0)):
+                raise self.error(f"compressed bufferView {index} decodes to fewer bytes than its byteLength")
+            self._decoded[index] = data
+        return self._decoded[index]
 
     def _sparse(self, sparse: dict, data: np.ndarray, width: int, dtype: np.dtype, index: int) -> np.ndarray:
         try:
@@ -126,6 +163,8 @@ def _buffer_bytes(buf: dict, index: int, glb_bin: bytes | None, base: Path | Non
     if uri is None:
         if index == 0 and glb_bin is not None:
             return glb_bin
+        if ((buf.get("extensions") or {}).get(MESHOPT) or {}).get("fallback"):
+            return b""  # a fallback buffer of EXT_meshopt_compression: its views are decoded instead
         raise error(f"buffer {index} has no data (no uri and no GLB binary chunk)")
     if uri.startswith("data:"):
         head, _, payload = uri.partition(",")

@@ -1,7 +1,8 @@
 """Read a triangle mesh (OBJ, PLY, STL, OFF, GLB/glTF) into a validated SurfaceMesh.
 
-Parsing is done by trimesh with ``process=False`` (and ``maintain_order`` for OBJ) so the vertex order of the
-file is kept; every problem becomes a MeshInputError naming it, every configured limit a LimitError.
+Parsing is done by trimesh with ``process=False`` (and ``maintain_order`` for OBJ), and by pdeanim's own glTF
+reader for GLB/glTF (every primitive's vertices, in file order), so the vertex order of the file is kept;
+every problem becomes a MeshInputError naming it, every configured limit a LimitError.
 """
 
 from __future__ import annotations
@@ -145,6 +146,8 @@ def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = Non
 
     ``folder`` lets a .gltf on disk load its external buffers; bytes from an upload get no resolver.
     """
+    if file_type in ("glb", "gltf"):
+        return gltf_arrays(data, name, folder)
     import trimesh
 
     kwargs: dict = {"process": False}
@@ -168,6 +171,22 @@ def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = Non
     finally:
         logger.setLevel(level)
     return geometry_arrays(loaded, name)
+
+
+def gltf_arrays(data: bytes, name: str, folder: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and faces of a glTF/GLB scene at rest, in file order (scene nodes depth-first, each mesh's
+    primitives in order, every vertex of every primitive kept) with node transforms and skins applied: the
+    order the animated-poses reader and the look-keeping GLB writer (``pdeanim.gltf.layout``) use."""
+    from ..gltf.read import read_static_mesh
+
+    path = folder / Path(name).name if folder is not None else None
+    source: Path | bytes = path if path is not None and path.is_file() else data
+    try:
+        vertices, faces = read_static_mesh(source)
+    except MeshInputError as exc:
+        kind = Path(name).suffix[1:].upper() or "glTF"
+        raise MeshInputError(f"cannot parse {name!r} as {kind}: {exc}") from exc
+    return np.asarray(vertices, np.float64), np.asarray(faces, np.int64).reshape(-1, 3)
 
 
 OBJ_ZERO_INDEX = re.compile(rb"^[ \t]*f(?=[ \t])[^\n]*?(?<=[ \t])0(?:/\S*)?(?=\s|$)", re.MULTILINE)

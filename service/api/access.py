@@ -22,6 +22,7 @@ def owned(session: Session, model: type[T], row_id: str, tenant_id: str, what: s
 
 DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malformed request",
                 401: "missing or invalid API key", 404: "not found (or another tenant's)",
+                409: "conflict: not ready yet (e.g. an export job still running)",
                 413: "over a configured limit", 415: "wrong content type",
                 422: "invalid input or parameters", 501: "stage not available in this build"}
 

@@ -12,7 +12,9 @@ from ..store.context import Store
 from .cache import ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
+from .middleware import install_http_middleware
 from .routes import clips, health, jobs, meshes, poses
+from .routes.pages import install_pages
 
 API_VERSION = "1.0.0"
 DESCRIPTION = ("Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
@@ -33,13 +35,16 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         if own:
             app.state.store.close()
 
-    app = FastAPI(title="pdeanim", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="pdeanim", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan,
+                  docs_url=None, redoc_url=None)
     app.state.store = store
     app.state.clip_cache = ClipCache(settings.max_clip_cache)
     app.state.key_cache = KeyCache(ttl=30.0)
     install_error_handlers(app)
     for module in (health, meshes, poses, jobs, clips):
         app.include_router(module.router)
+    install_pages(app)
+    install_http_middleware(app, settings)
     return app
 
 

@@ -123,3 +123,70 @@ def sparse_morph_glb() -> bytes:
                         "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
     })
     return b.to_glb()
+
+
+def _png(rgb: tuple[int, int, int]) -> bytes:
+    """A 4x4 PNG of one colour with a checker of black pixels."""
+    import io
+
+    from PIL import Image
+
+    img = Image.new("RGB", (4, 4), rgb)
+    for i in range(0, 4, 2):
+        img.putpixel((i, i), (0, 0, 0))
+    out = io.BytesIO()
+    img.save(out, format="PNG")
+    return out.getvalue()
+
+
+def grid(n: int, z: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """An n x n vertex grid in the unit square at height z: positions, normals (+z), UVs and triangles."""
+    u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    pos = np.stack([u.ravel(), v.ravel(), np.full(n * n, z)], 1).astype(np.float32)
+    nrm = np.tile(np.array([0, 0, 1], np.float32), (n * n, 1))
+    uv = np.stack([u.ravel(), 1 - v.ravel()], 1).astype(np.float32)
+    i = np.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    return pos, nrm, uv, faces.astype(np.uint16)
+
+
+def textured_scene_glb() -> bytes:
+    """A small asset with a look: node "body" (rotated, scaled, translated) holding a mesh of two primitives
+    (textured material, coloured material; UVs, normals, tangents), its child "hat", and "wing" instancing
+    the hat's mesh; one embedded PNG texture with a sampler."""
+    b = GlbBuilder("pdeanim-tests")
+    prims = []
+    for n, z, material in ((4, 0.0, 0), (3, 0.5, 1)):
+        pos, nrm, uv, faces = grid(n, z)
+        attrs = {"POSITION": b.add_accessor(pos, target=ARRAY_BUFFER, minmax=True),
+                 "NORMAL": b.add_accessor(nrm, target=ARRAY_BUFFER),
+                 "TEXCOORD_0": b.add_accessor(uv, target=ARRAY_BUFFER)}
+        if material == 0:
+            tangents = np.tile(np.array([1, 0, 0, 1], np.float32), (len(pos), 1))
+            attrs["TANGENT"] = b.add_accessor(tangents, target=ARRAY_BUFFER)
+        idx = b.add_accessor(faces.reshape(-1), target=ELEMENT_ARRAY_BUFFER, acc_type="SCALAR")
+        prims.append({"attributes": attrs, "indices": idx, "material": material})
+    pos, nrm, uv, faces = grid(3, 0.0)
+    hat = {"attributes": {"POSITION": b.add_accessor(pos * 0.5, target=ARRAY_BUFFER, minmax=True),
+                          "TEXCOORD_0": b.add_accessor(uv, target=ARRAY_BUFFER)},
+           "indices": b.add_accessor(faces.reshape(-1), target=ELEMENT_ARRAY_BUFFER, acc_type="SCALAR"),
+           "material": 1}
+    image_view = b.add_view(_png((200, 40, 40)))
+    s = float(np.sqrt(0.5))
+    b.doc.update({
+        "scene": 0, "scenes": [{"nodes": [0, 2]}],
+        "nodes": [{"name": "body", "mesh": 0, "translation": [1.0, 2.0, 3.0], "rotation": [0.0, s, 0.0, s],
+                   "scale": [2.0, 2.0, 2.0], "children": [1]},
+                  {"name": "hat", "mesh": 1, "translation": [0.0, 1.0, 0.0]},
+                  {"name": "wing", "mesh": 1, "translation": [5.0, 0.0, 0.0]}],
+        "meshes": [{"name": "body_mesh", "primitives": prims}, {"name": "hat_mesh", "primitives": [hat]}],
+        "materials": [{"name": "skin", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
+                                                                 "metallicFactor": 0.0}},
+                      {"name": "cloth", "pbrMetallicRoughness": {"baseColorFactor": [0.1, 0.3, 0.9, 1.0]},
+                       "doubleSided": True}],
+        "textures": [{"sampler": 0, "source": 0}],
+        "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}],
+        "images": [{"name": "checker", "bufferView": image_view, "mimeType": "image/png"}],
+    })
+    return b.to_glb()

@@ -11,6 +11,7 @@ from pdeanim.cli import main
 from pdeanim.clip import Clip, write_clip_file
 from pdeanim.errors import LimitError, ParameterError
 from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb, export_times
+from pdeanim.gltf.compact import PackOptions
 from pdeanim.gltf.read import read_animated_poses
 from pdeanim.gltf.validate import assert_clean, validate_many
 
@@ -54,11 +55,15 @@ def test_export_samples_with_last_frame_and_loops_seamlessly(wave):
     np.testing.assert_allclose(export_times(1.25, 10), [*np.arange(13) / 10, 1.25])  # off-grid end appended
     assert poses.n_frames == len(seconds)
     want = wave.evaluate(seconds / 1.3)
-    np.testing.assert_allclose(poses.vertices[:-1], want[:-1], atol=1e-6)
+    step = float(np.ptp(want.reshape(-1, 3), axis=0).max()) / (2**14 - 1)  # the default 14-bit grid
+    np.testing.assert_allclose(poses.vertices[:-1], want[:-1], atol=step)  # rounding: half a step, 2x margin
     np.testing.assert_array_equal(poses.vertices[-1], poses.vertices[0])  # seamless wrap
     once = WaveClip(wave.rest, wave.faces, looping=False)
-    p2 = read_animated_poses(clip_animation_glb(once, fps=10), fps=10)
-    np.testing.assert_allclose(p2.vertices, once.evaluate(seconds / 1.3), atol=1e-6)
+    plain = PackOptions(quantize=False, compress=False)
+    p2 = read_animated_poses(clip_animation_glb(once, fps=10, options=plain), fps=10)
+    np.testing.assert_allclose(p2.vertices, once.evaluate(seconds / 1.3), atol=1e-6)  # float32 storage
+    p3 = read_animated_poses(clip_animation_glb(once, fps=10, options=PackOptions(quantize=False)), fps=10)
+    np.testing.assert_allclose(p3.vertices, p2.vertices, atol=1e-6)  # meshopt alone is lossless
 
 
 def test_frame_and_bad_parameters(wave):
@@ -68,7 +73,7 @@ def test_frame_and_bad_parameters(wave):
         clip_animation_glb(wave, fps=1e6)
     with pytest.raises(ParameterError):
         clip_frame_glb(wave, float("nan"))
-    reports = validate_many([clip_frame_glb(wave, 0.37), clip_animation_glb(wave, 8, quantize=True)])
+    reports = validate_many([clip_frame_glb(wave, 0.37), clip_animation_glb(wave, 8)])
     for label, report in zip(["frame", "quantised animation"], reports, strict=True):
         assert_clean(report, label)
 
@@ -79,7 +84,7 @@ def test_cli_export_of_a_real_cyclic_clip(data_dir, tmp_path, capsys):
     parts = job.make_cyclic_clip(mesh, job.CyclicOptions.from_dict({"mode": "eel", "frames": 12}))
     clip_path, out = tmp_path / "swim.clip", tmp_path / "swim.glb"
     write_clip_file(clip_path, parts)
-    assert main(["export", str(clip_path), "--fps", "12", "--out", str(out), "--quantize"]) == 0
+    assert main(["export", str(clip_path), "--fps", "12", "--out", str(out)]) == 0
     assert "wrote" in capsys.readouterr().out
     glb = out.read_bytes()
     assert_clean(validate_many([glb])[0], "cyclic export")
@@ -100,7 +105,7 @@ def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
     poses = read_animated_poses(animation_glb(frames[:30], times[:30], faces), fps=30)
     parts = fitclip.fit_poses(poses, fitclip.FitOptions.from_dict({"target_rel_rms": 1e-2}))
     clip = load_clip(parts.topology, parts.coefficients)
-    glb = clip_animation_glb(clip, 30, quantize=True)
+    glb = clip_animation_glb(clip, 30)
     assert_clean(validate_many([glb])[0], "fitted clip export")
     back = read_animated_poses(glb, fps=30)
     assert back.n_frames == 30
@@ -109,3 +114,34 @@ def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
     assert rms / diag < 2e-2  # the fit's target, plus quantisation
     paths = fit_error_pictures(poses.vertices, back.vertices, faces, poses.times, tmp_path, "sphere")
     assert all(p.stat().st_size > 10_000 for p in paths.values())
+
+
+def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
+    """A clip fitted on poses of a textured glTF, exported with ``--mesh``: the GLB has the source's
+    materials, texture and node names; options are checked (exit 2 with a message)."""
+    fitclip = pytest.importorskip("pdeanim.model.fitclip")
+    from pdeanim.gltf.glb import unpack_glb
+    from pdeanim.gltf.read import read_static_mesh
+    from pdeanim.poses import make_poses
+
+    from .builders import textured_scene_glb
+
+    src = textured_scene_glb()
+    rest, faces = read_static_mesh(src)
+    frames = rest[None] + 0.1 * np.sin(np.arange(10)[:, None, None] / 3 + rest[None, :, :1])
+    parts = fitclip.fit_poses(make_poses(frames, faces, np.arange(10) / 30.0, {}),
+                              fitclip.FitOptions.from_dict({"segments": 1}))
+    clip_path, mesh_path, out = tmp_path / "scene.clip", tmp_path / "scene.glb", tmp_path / "anim.glb"
+    write_clip_file(clip_path, parts)
+    mesh_path.write_bytes(src)
+    assert main(["export", str(clip_path), "--mesh", str(mesh_path), "--out", str(out), "--fps", "30"]) == 0
+    assert "look of gltf source" in capsys.readouterr().out
+    doc, _ = unpack_glb(out.read_bytes())
+    assert [m["name"] for m in doc["materials"]] == ["skin", "cloth"]
+    assert doc["images"][0]["name"] == "checker"
+    assert [n.get("name") for n in doc["nodes"][:3]] == ["body", "hat", "wing"]
+    assert_clean(validate_many([out.read_bytes()])[0], "CLI export with --mesh")
+    assert read_animated_poses(out.read_bytes(), fps=30).n_frames == 10
+    assert main(["export", str(clip_path), "--mesh", str(tmp_path / "missing.glb"), "--out", str(out)]) == 2
+    assert main(["export", str(clip_path), "--position-bits", "20", "--out", str(out)]) == 2
+    assert "position_bits" in capsys.readouterr().err

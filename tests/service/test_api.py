@@ -84,13 +84,13 @@ def test_cyclic_clip_frame_animation_and_caching(api, clip, fish):
     cid = clip["id"]
     coef = api.get(f"/v1/clips/{cid}/coefficients")
     assert coef.status_code == 200 and coef.content[:8] == b"PDEANIM\0"
-    assert coef.headers["cache-control"] == "public, max-age=31536000, immutable"
+    assert coef.headers["cache-control"] == "private, max-age=31536000, immutable"
     again = api.get(f"/v1/clips/{cid}/coefficients", headers={"If-None-Match": coef.headers["etag"]})
     assert again.status_code == 304 and again.content == b""
     js = api.get(f"/v1/clips/{cid}/coefficients", headers={"Accept": "application/json"})
     assert js.json()["part"] == "coefficients" and js.headers["etag"] != coef.headers["etag"]
-    topo = api.get(f"/v1/meshes/{fish['id']}/topology")
-    assert topo.status_code == 200 and topo.headers["etag"] == f'"{clip["topology_id"]}"'
+    topo = api.get(f"/v1/clips/{cid}/topology")
+    assert topo.status_code == 200 and topo.headers["etag"].removeprefix("W/") == f'"{clip["topology_id"]}"'
     assert api.get(f"/v1/meshes/{fish['id']}/topology", params={"clip_id": cid}).content == topo.content
     frame = api.get(f"/v1/clips/{cid}/frame", params={"t": 0.37})
     assert frame.status_code == 200 and frame.headers["content-type"] == "model/gltf-binary"
@@ -115,7 +115,8 @@ def test_frame_is_a_valid_gltf(api, clip):
 
 
 def _routes(fish_id: str, clip_id: str, poses_id: str, job_id: str) -> list[tuple[str, str]]:
-    return [("GET", f"/v1/meshes/{fish_id}"), ("GET", f"/v1/meshes/{fish_id}/topology"),
+    return [("GET", f"/v1/meshes/{fish_id}"), ("GET", f"/v1/meshes/{fish_id}/topology?clip_id={clip_id}"),
+            ("GET", f"/v1/clips/{clip_id}/topology"),
             ("GET", f"/v1/poses/{poses_id}"), ("GET", f"/v1/jobs/{job_id}"), ("GET", f"/v1/clips/{clip_id}"),
             ("GET", f"/v1/clips/{clip_id}/coefficients"), ("GET", f"/v1/clips/{clip_id}/frame?t=0.5"),
             ("GET", f"/v1/clips/{clip_id}/animation?fps=5")]

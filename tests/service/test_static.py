@@ -26,7 +26,8 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     doc = json.loads(openapi_text())
     ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
     assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
-                   "getJob", "getClip", "getClipCoefficients", "getClipFrame", "getClipAnimation"}
+                   "getJob", "getClip", "getClipCoefficients", "getClipTopology", "getClipFrame",
+                   "getClipAnimation", "getExport"}
     assert "HTTPValidationError" not in doc["components"]["schemas"]
 
 

@@ -9,14 +9,13 @@ import math
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
 
-from pdeanim.errors import LimitError
-
 from ...store.context import Store
 from ...store.models import ClipRecord
 from ..access import owned, responses
 from ..cache import CachedClip
 from ..deps import ClipCacheDep, SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
+from ..exports import FrameWriter, check_fps, export_job_hint, source_layout_loader
 from ..httpcache import immutable_response
 from ..schemas import ClipOut
 
@@ -36,8 +35,9 @@ def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # no
         if row is None:
             raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
         clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+        layout = source_layout_loader(store, row.mesh_id, clip)  # keeps a glTF/OBJ source's look
         return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip,
-                          FrameGlb(clip.faces, clip.n_vertices))
+                          FrameWriter(FrameGlb(clip.faces, clip.n_vertices), layout))
 
     item = cache.get(clip_id, load)
     if item.tenant_id != tenant:
@@ -105,6 +105,18 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
                               "application/octet-stream", {"Vary": "Accept"})
 
 
+@router.get("/v1/clips/{clip_id}/topology", operation_id="getClipTopology", response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}},
+                             "description": "the topology part (pdeanim container)"},
+                       **responses(304, 401, 404, 422)})
+def get_clip_topology(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep,
+                      store: StoreDep) -> Response:
+    """The static part this clip's coefficients evaluate on (shared by clips with the same ``topology_id``)."""
+    row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    return immutable_response(request, row.topology_key, lambda: store.blobs.get(row.topology_key),
+                              "application/octet-stream")
+
+
 @router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
 def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
@@ -119,34 +131,38 @@ def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep
     def body() -> bytes:
         return item.frame_glb(np.asarray(item.clip.evaluate(float(t))))
 
-    return immutable_response(request, tag, body, GLB)
-
-
-def animation_times(clip, fps: float, max_frames: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
-    """Normalised times (K,) and seconds (K,) sampling the clip at ``fps`` (looping: one period, no endpoint)."""
-    times = np.asarray(clip.frame_times, dtype=np.float64)
-    duration = float(times[-1] - times[0]) if len(times) > 1 else 0.0
-    k = max(int(round(duration * fps)) + (0 if clip.looping else 1), 1)
-    if k > max_frames:
-        raise LimitError("animation frame count", k, max_frames, "PDEANIM_MAX_FRAMES")
-    t = np.linspace(0.0, 1.0, k, endpoint=not clip.looping) if k > 1 else np.zeros(1)
-    return t, t * duration
+    return immutable_response(request, tag, body, GLB, compress=False)  # float32 frames: gzip is not worth it
 
 
 @router.get("/v1/clips/{clip_id}/animation", operation_id="getClipAnimation", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 413, 422)})
-def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
-                  cache: ClipCacheDep, fps: float = Query(30.0, gt=0, le=240, description="frames per second")
+def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep,
+                  fps: float = Query(30.0, gt=0,
+                                     description="frames per second (at most PDEANIM_MAX_EXPORT_FPS)")
                   ) -> Response:
-    """The whole clip sampled at ``fps`` as a GLB with one morph target per frame and a weights animation."""
+    """The whole clip sampled at ``fps`` (last frame included; a looping clip wraps seamlessly) as a GLB:
+    one morph target per frame and a weights animation, quantised (KHR_mesh_quantization) and compressed
+    (EXT_meshopt_compression), keeping a glTF source's materials, textures, UVs, primitives and node names.
+    Exports whose sampled frames exceed PDEANIM_MAX_SYNC_EXPORT_BYTES (raw float32) answer 413
+    ``export_too_large``: submit an ``export`` job instead."""
+    from pdeanim.gltf.clipexport import estimate_export
+
+    settings = store.settings
+    check_fps(fps, settings)
     item = _cached(clip_id, tenant, store, cache)
-    t, seconds = animation_times(item.clip, fps, store.settings.max_frames)
-    tag = hashlib.sha256(f"{item.coefficients_key}:animation:{fps!r}".encode()).hexdigest()
+    estimate = estimate_export(item.clip, fps, settings.max_frames)
+    if estimate.raw_frame_bytes > settings.max_sync_export_bytes:
+        raise ApiError(413, "export_too_large",
+                       f"this export samples {estimate.frames} frames x {estimate.vertices} vertices "
+                       f"({estimate.raw_frame_bytes} bytes as raw float32), more than a request builds "
+                       f"(PDEANIM_MAX_SYNC_EXPORT_BYTES = {settings.max_sync_export_bytes}); "
+                       + export_job_hint(clip_id, fps))
+    tag = hashlib.sha256(f"{item.coefficients_key}:animation:meshopt-v1:{fps!r}".encode()).hexdigest()
 
     def body() -> bytes:
-        from pdeanim.gltf.write import animation_glb
+        from pdeanim.gltf.clipexport import clip_animation_glb
 
-        frames = np.asarray(item.clip.evaluate(t)).reshape(len(t), -1, 3)
-        return animation_glb(frames, seconds, item.clip.faces, loop=bool(item.clip.looping))
+        layout = item.frame_glb.layout.get()
+        return clip_animation_glb(item.clip, fps, layout=layout, max_frames=settings.max_frames)
 
     return immutable_response(request, tag, body, GLB)

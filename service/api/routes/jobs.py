@@ -1,12 +1,13 @@
-"""Jobs: submit simulate / fit / cyclic work (parameters validated now), and follow its state."""
+"""Jobs: submit simulate / fit / cyclic / export work (parameters validated now), follow its state, and
+download an export job's GLB."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request, Response
 from sqlalchemy import select
 
 from ...jobspec import StageUnavailable, normalize_request
-from ...store.models import Job, Mesh, PosesRecord
+from ...store.models import ClipRecord, Job, Mesh, PosesRecord
 from ..access import owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
@@ -25,6 +26,17 @@ def job_out(job: Job) -> JobOut:
 
 
 def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  # noqa: ANN001
+    if req.clip_id is not None and req.kind != "export":
+        raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no clip_id")
+    if req.kind == "export":
+        if not req.clip_id:
+            raise ApiError(422, "invalid_parameter", "an export job needs clip_id")
+        if req.poses_id or req.then_fit or req.fit is not None:
+            raise ApiError(422, "invalid_parameter", "an export job takes clip_id and export options only")
+        clip = owned(session, ClipRecord, req.clip_id, tenant, "clip")
+        if req.mesh_id and req.mesh_id != clip.mesh_id:
+            raise ApiError(422, "invalid_parameter", f"clip {clip.id} belongs to mesh {clip.mesh_id}")
+        return clip.mesh_id, None
     if req.kind == "fit":
         if not req.poses_id and not req.mesh_id:
             raise ApiError(422, "invalid_parameter", "a fit job needs poses_id (or mesh_id to fit its latest poses)")
@@ -70,6 +82,11 @@ def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: S
         spec = normalize_request(req.kind, _merged_params(req), req.then_fit, req.fit)
     except StageUnavailable as exc:
         raise ApiError(501, "not_implemented", str(exc)) from exc
+    if req.kind == "export":
+        from ..exports import check_fps
+
+        check_fps(spec["params"]["fps"], store.settings)
+        spec["clip_id"] = req.clip_id
     frames = spec["params"].get("frames")
     if isinstance(frames, int) and frames > store.settings.max_frames:
         from pdeanim.errors import LimitError
@@ -88,3 +105,21 @@ def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: S
 def get_job(job_id: str, tenant: TenantDep, session: SessionDep) -> JobOut:
     """State (queued, running, succeeded, failed), progress 0..1, stage, error and result ids."""
     return job_out(owned(session, Job, job_id, tenant, "job"))
+
+
+@router.get("/v1/exports/{job_id}", operation_id="getExport", response_class=Response,
+            responses={200: {"content": {"model/gltf-binary": {}}, "description": "the export job's GLB"},
+                       **responses(304, 401, 404, 409, 422)})
+def get_export(job_id: str, request: Request, tenant: TenantDep, session: SessionDep,
+               store: StoreDep) -> Response:
+    """The animation GLB an ``export`` job built (409 while the job has not succeeded)."""
+    from ..httpcache import immutable_response
+
+    job = owned(session, Job, job_id, tenant, "job")
+    if job.kind != "export":
+        raise ApiError(404, "not_found", f"job {job_id!r} is a {job.kind} job, not an export")
+    key = (job.result or {}).get("export_key")
+    if job.state != "succeeded" or not key:
+        raise ApiError(409, "not_ready",
+                       f"export job {job_id} is {job.state}; download it when it has succeeded")
+    return immutable_response(request, key, lambda: store.blobs.get(key), "model/gltf-binary")

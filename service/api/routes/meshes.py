@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Request, Response
-from sqlalchemy import select
+from fastapi import APIRouter, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
 from ...settings import Settings
 from ...store.models import ClipRecord, Mesh
 from ..access import owned, responses
-from ..deps import SessionDep, SettingsDep, StoreDep, TenantDep
+from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
-from ..httpcache import IMMUTABLE, REVALIDATE, immutable_response
+from ..httpcache import immutable_response
 from ..schemas import MeshOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
 
@@ -64,18 +63,18 @@ def get_mesh(mesh_id: str, tenant: TenantDep, session: SessionDep) -> MeshOut:
                              "description": "the topology part (pdeanim container)"},
                        **responses(304, 401, 404, 422)})
 def get_topology(mesh_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
-                 settings: SettingsDep, clip_id: str | None = None) -> Response:
-    """The static part of the mesh's latest clip (or of ``clip_id``), needed once per mesh by clients."""
+                 clip_id: str | None = Query(None, description="required: the clip whose topology to send (a "
+                                             "mesh may have clips of several kinds with different topologies)")
+                 ) -> Response:
+    """The static part of clip ``clip_id`` of this mesh (prefer ``GET /v1/clips/{clip_id}/topology``)."""
     owned(session, Mesh, mesh_id, tenant, "mesh")
-    if clip_id is not None:
-        clip = owned(session, ClipRecord, clip_id, tenant, "clip")
-        if clip.mesh_id != mesh_id:
-            raise ApiError(404, "not_found", f"clip {clip_id!r} does not belong to mesh {mesh_id!r}")
-    else:
-        clip = session.execute(select(ClipRecord).where(ClipRecord.mesh_id == mesh_id, ClipRecord.tenant_id == tenant)
-                               .order_by(ClipRecord.created_at.desc()).limit(1)).scalar_one_or_none()
-        if clip is None:
-            raise ApiError(404, "not_found", f"mesh {mesh_id!r} has no clip yet (run a fit or cyclic job)")
+    if clip_id is None:
+        raise ApiError(422, "clip_id_required",
+                       "clip_id is required: a mesh may have several clips (fit, cyclic) whose topologies "
+                       "differ, so ask for GET /v1/clips/CLIP_ID/topology or "
+                       f"/v1/meshes/{mesh_id}/topology?clip_id=CLIP_ID")
+    clip = owned(session, ClipRecord, clip_id, tenant, "clip")
+    if clip.mesh_id != mesh_id:
+        raise ApiError(404, "not_found", f"clip {clip_id!r} does not belong to mesh {mesh_id!r}")
     return immutable_response(request, clip.topology_key, lambda: store.blobs.get(clip.topology_key),
-                              "application/octet-stream",
-                              cache_control=IMMUTABLE if clip_id is not None else REVALIDATE)
+                              "application/octet-stream")

@@ -14,6 +14,7 @@ from ...store.context import Store
 from ...store.models import Mesh, PosesRecord
 from ..access import owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
+from ..httpcache import immutable_response
 from ..schemas import PosesOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
 
@@ -84,12 +85,12 @@ async def upload_poses(mesh_id: str, request: Request, tenant: TenantDep, store:
             responses={200: {"content": {"application/octet-stream": {}, "application/json": {
                 "schema": PosesOut.model_json_schema()}},
                 "description": "POSES.npz (vertices, faces, times); metadata with Accept: application/json"},
-                **responses(401, 404, 422)})
+                **responses(304, 401, 404, 422)})
 def get_poses(poses_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep) -> Response:
     """The poses as a .npz (``vertices`` (F,V,3) float32, ``faces``, ``times``), or metadata as JSON."""
     row = owned(session, PosesRecord, poses_id, tenant, "poses")
     if "application/json" in request.headers.get("accept", ""):
         return Response(poses_out(row).model_dump_json(), media_type="application/json")
-    return Response(store.blobs.get(row.blob_key), media_type="application/octet-stream",
-                    headers={"Content-Disposition": f'attachment; filename="{poses_id}.npz"',
-                             "ETag": f'"{row.blob_key}"'})
+    headers = {"Content-Disposition": f'attachment; filename="{poses_id}.npz"', "Vary": "Accept"}
+    return immutable_response(request, row.blob_key, lambda: store.blobs.get(row.blob_key),
+                              "application/octet-stream", headers, compress=False)  # float32 frames

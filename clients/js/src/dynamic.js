@@ -1,0 +1,311 @@
+// Decode and evaluate "dynamic-pde" clips (docs/format.md §3) on the CPU.
+
+import { ClipFormatError } from './container.js';
+import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
+
+export const DYNAMIC_FORMAT_VERSION = 1;
+const MOTIONS = ['displacement', 'absolute', 'rigid'];
+
+function need(arrays, name, shape, part) {
+  const a = arrays[name];
+  if (!a) throw new ClipFormatError(`${part} part has no '${name}' array`);
+  if (a.shape.length !== shape.length || shape.some((w, i) => w !== null && a.shape[i] !== w)) {
+    throw new ClipFormatError(
+      `${part} array '${name}' has shape [${a.shape}], expected [${shape.map((w) => w ?? 'any')}]`,
+    );
+  }
+  if (a.dtype[1] === 'f') {
+    for (let i = 0; i < a.data.length; i++) {
+      if (!Number.isFinite(a.data[i]))
+        throw new ClipFormatError(`${part} array '${name}' has non-finite values`);
+    }
+  }
+  return a;
+}
+
+function checkVersion(header, part) {
+  if (header.format_version !== DYNAMIC_FORMAT_VERSION) {
+    throw new ClipFormatError(
+      `unsupported dynamic-pde ${part} version ${JSON.stringify(header.format_version)}` +
+        ` (this build reads ${DYNAMIC_FORMAT_VERSION})`,
+    );
+  }
+}
+
+function nondecreasing(a) {
+  for (let i = 1; i < a.length; i++) if (!(a[i] >= a[i - 1])) return false;
+  return true;
+}
+
+/** Validate and decode the topology and coefficients containers of a dynamic-PDE clip. */
+export function decodeDynamic(topo, coef) {
+  const th = topo.header;
+  const ch = coef.header;
+  checkVersion(th, 'topology');
+  checkVersion(ch, 'coefficients');
+  const V = Number(th.n_vertices);
+  if (!Number.isInteger(V) || V < 0) throw new ClipFormatError('topology header has no valid n_vertices');
+  const ta = topo.arrays;
+  const ca = coef.arrays;
+  const order = need(ta, 'order', [V], 'topology').data;
+  const offsets = need(ta, 'offsets', [null], 'topology').data;
+  const C = offsets.length - 1;
+  if (C < 0 || offsets[0] !== 0 || offsets[C] !== V || !nondecreasing(offsets)) {
+    throw new ClipFormatError('topology curves are invalid: offsets must run from 0 to n_vertices');
+  }
+  const curveOf = new Int32Array(V).fill(-1);
+  for (let c = 0; c < C; c++) {
+    for (let i = offsets[c]; i < offsets[c + 1]; i++) {
+      const v = order[i];
+      if (v < 0 || v >= V || curveOf[v] !== -1) {
+        throw new ClipFormatError('topology curves are invalid: order must be a permutation of the vertices');
+      }
+      curveOf[v] = c;
+    }
+  }
+  const faces = need(ta, 'faces', [null, 3], 'topology');
+  for (let i = 0; i < faces.data.length; i++) {
+    if (faces.data[i] < 0 || faces.data[i] >= V)
+      throw new ClipFormatError('topology faces index outside the vertices');
+  }
+  const u = need(ta, 'u', [V, null], 'topology');
+  if (u.shape[1] !== 1 && u.shape[1] !== 3) {
+    throw new ClipFormatError(`topology array 'u' must have 1 or 3 columns, got ${u.shape[1]}`);
+  }
+  const rest = need(ta, 'rest', [V, 3], 'topology').data;
+
+  const S = Number(ch.n_segments);
+  const segT = need(ca, 'segment_t', [S + 1], 'coefficients').data;
+  if (!(S >= 1) || !nondecreasing(segT)) {
+    throw new ClipFormatError('segment boundaries must be non-decreasing with at least one segment');
+  }
+  const family = need(ca, 'family', [S, C, 3], 'coefficients').data;
+  const m = need(ca, 'm', [S, C, 3], 'coefficients').data;
+  for (let i = 0; i < family.length; i++) {
+    if (family[i] > 3) throw new ClipFormatError('family codes must be 0..3');
+    if (family[i] % 2 !== family[i % (C * 3)] % 2) {
+      throw new ClipFormatError('the space kind of a curve+coordinate must be the same in every segment');
+    }
+    if (m[i] < 0 || (family[i] >= 2 && m[i] >= Math.PI)) {
+      throw new ClipFormatError('time constants must be >= 0 (and < pi for trig families)');
+    }
+  }
+  const motion = String(ch.motion);
+  if (!MOTIONS.includes(motion))
+    throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
+  const D = need(ca, 'D', [C, 3], 'coefficients').data;
+  const knots = need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data;
+  const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
+  let rigid = null;
+  if (motion === 'rigid') {
+    const rs = need(ca, 'rigid_segment_t', [null], 'coefficients').data;
+    const Sr = rs.length - 1;
+    if (Sr < 1 || !nondecreasing(rs)) {
+      throw new ClipFormatError('rigid segment boundaries must be non-decreasing with at least one segment');
+    }
+    rigid = { segmentT: rs, centre: need(ca, 'rigid_centre', [C, 3], 'coefficients').data };
+    for (const name of ['rot', 'trans']) {
+      rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients').data;
+      const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients').data;
+      if (mu.some((x) => x <= -Math.PI))
+        throw new ClipFormatError('rigid trig time constants must be above -pi');
+      rigid[`${name}Mu`] = mu;
+    }
+  }
+  return {
+    kind: 'dynamic-pde',
+    nVertices: V,
+    nCurves: C,
+    nSegments: S,
+    faces: faces.data,
+    rest,
+    order,
+    offsets,
+    curveOf,
+    u: u.data,
+    uColumns: u.shape[1],
+    paramMode: String(th.param_mode ?? 'chord'),
+    segmentT: segT,
+    frameTimes,
+    family,
+    m,
+    D,
+    knots,
+    motion,
+    looping: Boolean(ch.looping),
+    rigid,
+    header: ch,
+    topologyHeader: th,
+  };
+}
+
+/** Per-vertex space basis (V, 3, 4) float64 of a decoded dynamic clip (t-independent). */
+export function vertexBasis(clip) {
+  const { nVertices: V, curveOf, u, uColumns, D, family } = clip;
+  const B = new Float64Array(V * 12);
+  for (let v = 0; v < V; v++) {
+    const c = curveOf[v];
+    for (let w = 0; w < 3; w++) {
+      const uu = u[uColumns === 1 ? v : v * 3 + w];
+      spaceBasis(uu, D[c * 3 + w], family[c * 3 + w] % 2, B, v * 12 + w * 4);
+    }
+  }
+  return B;
+}
+
+/** The vertex positions before motion ("base"): rest, zeros, or rest - centre (float32, as in Python). */
+export function vertexBase(clip) {
+  const { nVertices: V, rest, motion, rigid, curveOf } = clip;
+  const base = new Float32Array(V * 3);
+  if (motion === 'displacement') base.set(rest);
+  else if (motion === 'rigid') {
+    for (let v = 0; v < V; v++) {
+      const c = curveOf[v];
+      for (let w = 0; w < 3; w++) base[v * 3 + w] = rest[v * 3 + w] - rigid.centre[c * 3 + w];
+    }
+  }
+  return base;
+}
+
+/** Rodrigues rotation of vector r (3 values at r[ro]) into the 9 values of R at out[o] (row-major). */
+export function rodrigues(rx, ry, rz, out, o = 0) {
+  const th2 = rx * rx + ry * ry + rz * rz;
+  const th = Math.sqrt(th2);
+  let a;
+  let b;
+  if (th < 1e-4) {
+    a = 1 - th2 / 6;
+    b = 0.5 - th2 / 24;
+  } else {
+    a = Math.sin(th) / th;
+    b = (1 - Math.cos(th)) / th2;
+  }
+  // K = [[0, -rz, ry], [rz, 0, -rx], [-ry, rx, 0]]; R = I + a K + b K^2
+  out[o] = 1 + b * (-rz * rz - ry * ry);
+  out[o + 1] = -a * rz + b * (rx * ry);
+  out[o + 2] = a * ry + b * (rx * rz);
+  out[o + 3] = a * rz + b * (rx * ry);
+  out[o + 4] = 1 + b * (-rz * rz - rx * rx);
+  out[o + 5] = -a * rx + b * (ry * rz);
+  out[o + 6] = -a * ry + b * (rx * rz);
+  out[o + 7] = a * rx + b * (ry * rz);
+  out[o + 8] = 1 + b * (-ry * ry - rx * rx);
+  return out;
+}
+
+/** CPU evaluator of a decoded dynamic-PDE clip; everything independent of t is computed here once. */
+export class DynamicEvaluator {
+  constructor(clip) {
+    this.clip = clip;
+    const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, family, m } = clip;
+    this.nVertices = V;
+    const B = vertexBasis(clip);
+    // per knot the per-vertex contribution P[s] (V, 3), float32 like the Python evaluator
+    this.fields = new Float32Array((S + 1) * V * 3);
+    for (let s = 0; s <= S; s++) {
+      const off = s * V * 3;
+      const ko = s * C * 12;
+      for (let v = 0; v < V; v++) {
+        const kc = ko + curveOf[v] * 12;
+        for (let w = 0; w < 3; w++) {
+          const b = v * 12 + w * 4;
+          const k = kc + w * 4;
+          this.fields[off + v * 3 + w] =
+            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
+        }
+      }
+    }
+    this.item = new Int32Array(V * 3); // (curve, coordinate) item of each value
+    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = curveOf[v] * 3 + w;
+    this.mu = new Float64Array(S * C * 3); // signed time constants
+    for (let i = 0; i < this.mu.length; i++) this.mu[i] = (family[i] >= 2 ? -1 : 1) * m[i];
+    this.base = vertexBase(clip);
+    this.phi0 = new Float64Array(C * 3);
+    this.phi1 = new Float64Array(C * 3);
+    this.pair = new Float64Array(2);
+    this.pair2 = new Float64Array(2);
+    if (clip.rigid) {
+      this.rot = new Float64Array(C * 9);
+      this.trans = new Float64Array(C * 3);
+    }
+  }
+
+  /**
+   * The per-curve state at t (everything t changes before the per-vertex sums): fills this.phi0, this.phi1
+   * (C * 3 time pairs of the segment) and, for rigid clips, this.rot (C * 9) and this.trans (C * 3);
+   * returns the segment index.
+   */
+  prepare(t) {
+    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
+    const clip = this.clip;
+    const [s, tau, tw] = locate(clip.segmentT, t, clip.looping);
+    const { phi0, phi1, pair } = this;
+    const n = phi0.length;
+    const mo = s * n;
+    for (let i = 0; i < n; i++) {
+      timePair(tau, this.mu[mo + i], pair);
+      phi0[i] = pair[0];
+      phi1[i] = pair[1];
+    }
+    if (clip.rigid) this._rigidAt(tw);
+    return s;
+  }
+
+  /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
+  evaluate(t, out = new Float32Array(this.nVertices * 3)) {
+    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
+    if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
+    const clip = this.clip;
+    const s = this.prepare(t);
+    const { phi0, phi1, item, base } = this;
+    const N = this.nVertices * 3;
+    const P0 = this.fields.subarray(s * N, (s + 1) * N);
+    const P1 = this.fields.subarray((s + 1) * N, (s + 2) * N);
+    if (!clip.rigid) {
+      for (let i = 0; i < N; i++) {
+        const k = item[i];
+        out[i] = base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
+      }
+      return out;
+    }
+    const { rot, trans } = this;
+    const curveOf = clip.curveOf;
+    for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {
+      const kx = item[i];
+      const x = Math.fround(base[i] + Math.fround(phi0[kx] * P0[i] + phi1[kx] * P1[i]));
+      const y = Math.fround(base[i + 1] + Math.fround(phi0[kx + 1] * P0[i + 1] + phi1[kx + 1] * P1[i + 1]));
+      const z = Math.fround(base[i + 2] + Math.fround(phi0[kx + 2] * P0[i + 2] + phi1[kx + 2] * P1[i + 2]));
+      const c = curveOf[v];
+      const r = c * 9;
+      out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
+      out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
+      out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+    }
+    return out;
+  }
+
+  /** Per-curve rotation (C, 3, 3) and centroid (C, 3) of the rigid tracks at wrapped time tw. */
+  _rigidAt(tw) {
+    const rg = this.clip.rigid;
+    const C = this.clip.nCurves;
+    const [s, tau] = locate(rg.segmentT, tw, false);
+    const pr = this.pair;
+    const pt = this.pair2;
+    for (let c = 0; c < C; c++) {
+      rigidTimePair(tau, rg.rotMu[s * C + c], pr);
+      rigidTimePair(tau, rg.transMu[s * C + c], pt);
+      const k0 = (s * C + c) * 3;
+      const k1 = ((s + 1) * C + c) * 3;
+      const rk = rg.rotKnots;
+      const tk = rg.transKnots;
+      rodrigues(
+        pr[0] * rk[k0] + pr[1] * rk[k1],
+        pr[0] * rk[k0 + 1] + pr[1] * rk[k1 + 1],
+        pr[0] * rk[k0 + 2] + pr[1] * rk[k1 + 2],
+        this.rot,
+        c * 9,
+      );
+      for (let w = 0; w < 3; w++) this.trans[c * 3 + w] = pt[0] * tk[k0 + w] + pt[1] * tk[k1 + w];
+    }
+  }
+}

@@ -1,0 +1,85 @@
+// The node command: CLIP file or two parts in, little-endian float32 (K, V, 3) out; exit 2 on bad input.
+
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { spawnSync } from 'node:child_process';
+import { mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { dirname, join } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { splitClipFile } from '../src/index.js';
+import { FIXTURES, expected, manifest, readBytes } from './helpers.mjs';
+
+const BIN = join(dirname(fileURLToPath(import.meta.url)), '..', 'bin', 'pdeanim-eval.mjs');
+const tmp = mkdtempSync(join(tmpdir(), 'pdeanim-eval-'));
+const man = manifest();
+
+function run(args) {
+  return spawnSync(process.execPath, [BIN, ...args], { encoding: 'utf8', timeout: 120_000 });
+}
+
+function readF32LE(path) {
+  const b = readFileSync(path);
+  const view = new DataView(b.buffer, b.byteOffset, b.byteLength);
+  return Float32Array.from({ length: b.byteLength / 4 }, (_, i) => view.getFloat32(i * 4, true));
+}
+
+for (const c of [
+  man.cases.find((x) => x.motion === 'rigid' && x.looping),
+  man.cases.find((x) => x.kind === 'cyclic-spine'),
+]) {
+  test(`pdeanim-eval writes the expected frames of ${c.name}`, () => {
+    const out = join(tmp, `${c.name}.bin`);
+    const r = run([join(FIXTURES, c.clip), '--t', c.t.join(','), '--out', out]);
+    assert.equal(r.status, 0, r.stderr);
+    const got = readF32LE(out);
+    const want = expected(c);
+    assert.equal(got.length, c.t.length * c.n_vertices * 3);
+    const worst = got.reduce((m, v, i) => Math.max(m, Math.abs(v - want[i])), 0);
+    assert.ok(worst <= 1e-6 * c.diagonal, `max deviation ${worst}`);
+  });
+}
+
+test('pdeanim-eval reads the two parts from separate files', () => {
+  const c = man.cases.find((x) => x.motion === 'absolute');
+  const p = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+  writeFileSync(join(tmp, 'topo.bin'), p.topology);
+  writeFileSync(join(tmp, 'coef.bin'), p.coefficients);
+  const out = join(tmp, 'parts.bin');
+  const r = run([
+    '--coefficients',
+    join(tmp, 'coef.bin'),
+    '--topology',
+    join(tmp, 'topo.bin'),
+    '--t',
+    '0.25,-0.5',
+    '--out',
+    out,
+  ]);
+  assert.equal(r.status, 0, r.stderr);
+  assert.equal(readFileSync(out).byteLength, 2 * c.n_vertices * 3 * 4);
+});
+
+test('pdeanim-eval exits 2 with a reason on bad input', () => {
+  const clip = join(FIXTURES, man.cases[0].clip);
+  const out = join(tmp, 'bad.bin');
+  const cases = [
+    [[join(tmp, 'missing.clip'), '--t', '0', '--out', out], /cannot read clip file/],
+    [[join(FIXTURES, 'manifest.json'), '--t', '0', '--out', out], /bad magic/],
+    [[clip, '--t', '0,abc', '--out', out], /finite numbers/],
+    [[clip, '--t', 'nan', '--out', out], /finite numbers/],
+    [[clip, '--out', out], /--t is required/],
+    [[clip, '--t', '0'], /--out is required/],
+    [['--t', '0', '--out', out], /give a CLIP file/],
+    [[clip, '--topology', clip, '--t', '0', '--out', out], /not both/],
+    [['--topology', clip, '--coefficients', clip, '--t', '0', '--out', out], /expected a topology part/],
+    [[clip, '--bogus'], /bogus/],
+    [[clip, '--t', '0', '--out', join(tmp, 'no', 'such', 'dir', 'x.bin')], /cannot write/],
+  ];
+  for (const [args, reason] of cases) {
+    const r = run(args);
+    assert.equal(r.status, 2, `${args.join(' ')}: ${r.stderr}`);
+    assert.match(r.stderr, reason);
+    assert.doesNotMatch(r.stderr, /at .*\.js:\d+/); // a reason, not a stack trace
+  }
+});

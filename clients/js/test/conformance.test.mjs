@@ -1,0 +1,62 @@
+// Every conformance fixture written by the Python library evaluates to the same positions in JS.
+
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { join } from 'node:path';
+import { createEvaluator, decodeClip, decodeClipFile, loadClipFile, splitClipFile } from '../src/index.js';
+import { FIXTURES, expected, manifest, readBytes } from './helpers.mjs';
+
+const man = manifest();
+
+test('the fixture set covers every kind, motion, parameterisation and looping mode', () => {
+  const cases = man.cases;
+  assert.ok(cases.length >= 10);
+  const kinds = new Set(cases.map((c) => c.kind));
+  assert.deepEqual([...kinds].sort(), ['cyclic-spine', 'dynamic-pde']);
+  const dyn = cases.filter((c) => c.kind === 'dynamic-pde');
+  assert.deepEqual([...new Set(dyn.map((c) => c.motion))].sort(), ['absolute', 'displacement', 'rigid']);
+  assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
+  assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
+});
+
+for (const c of man.cases) {
+  test(`fixture ${c.name} matches the Python evaluator to 1e-6 of the diagonal`, async () => {
+    const clip = await loadClipFile(readBytes(join(FIXTURES, c.clip)));
+    assert.equal(clip.kind, c.kind);
+    assert.equal(clip.nVertices, c.n_vertices);
+    assert.equal(clip.looping, c.looping);
+    const ev = createEvaluator(clip);
+    const want = expected(c);
+    const N = c.n_vertices * 3;
+    assert.equal(want.length, c.t.length * N);
+    const out = new Float32Array(N);
+    const tol = man.tolerance_rel_diagonal * c.diagonal;
+    c.t.forEach((t, k) => {
+      ev.evaluate(t, out);
+      let worst = 0;
+      for (let i = 0; i < N; i++) worst = Math.max(worst, Math.abs(out[i] - want[k * N + i]));
+      assert.ok(worst <= tol, `t = ${t}: max deviation ${worst} > ${tol}`);
+    });
+  });
+}
+
+test('decoding the two parts equals decoding the CLIP file', () => {
+  const c = man.cases.find((x) => x.motion === 'rigid');
+  const bytes = readBytes(join(FIXTURES, c.clip));
+  const { topology, coefficients } = splitClipFile(bytes);
+  const a = createEvaluator(decodeClip(topology.slice(), coefficients.slice())).evaluate(0.61);
+  const b = createEvaluator(decodeClipFile(bytes)).evaluate(0.61);
+  assert.deepEqual(a, b);
+});
+
+test('looping clips repeat with period 1 and open clips clamp', () => {
+  for (const c of man.cases) {
+    const ev = createEvaluator(decodeClipFile(readBytes(join(FIXTURES, c.clip))));
+    const diff = (x, y) => Math.max(...ev.evaluate(x).map((v, i) => Math.abs(v - ev.evaluate(y)[i])));
+    if (c.looping) assert.ok(diff(0.2, 3.2) <= 1e-6 * c.diagonal, c.name);
+    else {
+      assert.equal(diff(-2, 0), 0, c.name);
+      assert.equal(diff(7, 1), 0, c.name);
+    }
+  }
+});

@@ -1,0 +1,84 @@
+// Type declarations of pdeanim/gpu: data for evaluating a clip in a vertex shader (no three.js needed).
+
+import type { Clip, Evaluator } from './index.js';
+
+export declare const TEXTURE_WIDTH: number;
+
+export interface FloatTexture {
+  /** RGBA float32 texels, width * height * 4 values. */
+  data: Float32Array;
+  width: number;
+  height: number;
+}
+
+export interface GpuLayout {
+  kind: Clip['kind'];
+  /** 'fields' | 'coefficients' for dynamic clips, 'cyclic' for cyclic ones. */
+  mode: 'fields' | 'coefficients' | 'cyclic';
+  rigid: boolean;
+  nCurves: number;
+  nVertices: number;
+  /** Texture row length in texels (a power of two). */
+  width: number;
+  /** Texels per curve in the per-frame curve table (2, or 5 with rigid motion). */
+  curveTexels?: number;
+  textures: {
+    vertex: FloatTexture;
+    field?: FloatTexture;
+    knot?: FloatTexture;
+    /** Per-frame table rewritten by timeUniforms(). */
+    curve?: FloatTexture;
+  };
+  clip: Clip;
+  /** The CPU evaluator whose per-curve state fills the curve table (dynamic clips). */
+  evaluator?: Evaluator;
+  /** Largest texture height (compare with the renderer's MAX_TEXTURE_SIZE). */
+  maxHeight: number;
+  axis?: number[];
+  bend?: number[];
+  rotate?: boolean;
+}
+
+export interface TimeUniforms {
+  /** Segment of the dynamic clip at t. */
+  seg: number;
+  /** sin and cos of the swim phase (cyclic clips). */
+  sw: number;
+  cw: number;
+}
+
+export interface MeshAttributes {
+  /** Per mesh vertex: clip vertex of itself and of two triangle neighbours (n * 3). */
+  pdeVertex: Float32Array;
+  /** Per mesh vertex: its normal in the rest frame of that triangle (n * 3). */
+  pdeNormalFrame: Float32Array;
+}
+
+export declare function gpuLayout(
+  clip: Clip,
+  options?: { width?: number; mode?: 'auto' | 'fields' | 'coefficients'; fieldsBudget?: number;
+    evaluator?: Evaluator | null },
+): GpuLayout;
+/** The uniforms at t; also rewrites layout.textures.curve.data (upload it afterwards). */
+export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
+export declare function meshAttributes(mesh: {
+  vertexMap: ArrayLike<number>;
+  positions: ArrayLike<number>;
+  normals?: ArrayLike<number> | null;
+  index?: ArrayLike<number> | null;
+}): MeshAttributes;
+export declare function triangleFrame(
+  positions: ArrayLike<number>,
+  p: number,
+  a: number,
+  b: number,
+  out: Float64Array,
+): Float64Array;
+export declare function frameNormals(
+  clipPositions: ArrayLike<number>,
+  attributes: MeshAttributes,
+  restNormals: ArrayLike<number> | null,
+  out: Float32Array,
+): Float32Array;
+/** GLSL ES 3.00 declarations and functions (pdeCompute() sets pdePosition and pdeNormal). */
+export declare function glslHeader(layout: GpuLayout, options?: { normals?: 'frame' | 'rest' }): string;

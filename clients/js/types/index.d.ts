@@ -1,0 +1,203 @@
+// Type declarations of the pdeanim package (hand-written; the sources are plain ES modules).
+
+export type BytesLike = ArrayBuffer | ArrayBufferView;
+export type TypedArray =
+  Float32Array | Float64Array | Int32Array | Uint32Array | Int16Array | Uint16Array | Uint8Array | Int8Array;
+
+export declare const CONTAINER_VERSION: 1;
+export declare const DYNAMIC_FORMAT_VERSION: 1;
+
+/** Thrown for anything that is not a valid pdeanim container, part, clip or CLIP file. */
+export declare class ClipFormatError extends Error {
+  constructor(message: string);
+}
+
+export interface ContainerArray {
+  dtype: '<f4' | '<f8' | '<i4' | '<u4' | '<i2' | '<u2' | '<u1' | '<i1';
+  shape: number[];
+  data: TypedArray;
+}
+
+export interface Container {
+  header: Record<string, any>;
+  arrays: Record<string, ContainerArray>;
+}
+
+/** Decode container bytes (magic, version, JSON header, little-endian arrays). */
+export declare function decodeContainer(data: BytesLike): Container;
+
+interface ClipBase {
+  nVertices: number;
+  /** Triangles (T * 3) in the original vertex order. */
+  faces: Int32Array;
+  /** Rest (first-frame) positions, V * 3. */
+  rest: Float32Array;
+  /** Seconds of the source frames (cyclic: i * period / frames). */
+  frameTimes: Float64Array;
+  looping: boolean;
+  /** SHA-256 hex of the topology part the coefficients were made for. */
+  topologyId: string | null;
+  /** Header of the coefficients part. */
+  header: Record<string, any>;
+  /** Header of the topology part. */
+  topologyHeader: Record<string, any>;
+  /** Body sizes as received (set by fetchClip). */
+  bytes?: { topology: number; coefficients: number };
+}
+
+export interface RigidTracks {
+  segmentT: Float64Array;
+  centre: Float32Array;
+  rotKnots: Float32Array;
+  rotMu: Float32Array;
+  transKnots: Float32Array;
+  transMu: Float32Array;
+}
+
+export interface DynamicClip extends ClipBase {
+  kind: 'dynamic-pde';
+  nCurves: number;
+  nSegments: number;
+  motion: 'displacement' | 'absolute' | 'rigid';
+  paramMode: string;
+  order: Int32Array;
+  offsets: Int32Array;
+  /** Curve of every vertex (V). */
+  curveOf: Int32Array;
+  u: Float32Array;
+  uColumns: 1 | 3;
+  segmentT: Float64Array;
+  family: Uint8Array;
+  m: Float32Array;
+  D: Float32Array;
+  knots: Float32Array;
+  rigid: RigidTracks | null;
+}
+
+export interface SwimParams {
+  mode: string;
+  omega0: number;
+  omega1: number;
+  alpha: number;
+  phi: number;
+  frequency: number;
+  amplitude: number;
+  wave: 'standing' | 'travelling';
+  radial: 'rotate' | 'translate';
+  direction: 'lateral' | 'vertical';
+}
+
+export interface CyclicClip extends ClipBase {
+  kind: 'cyclic-spine';
+  nPatches: number;
+  order: number;
+  patch: Int32Array;
+  uv: Float32Array;
+  spine: Float64Array;
+  frame: { origin: number[]; axis: number[]; lateral: number[]; up: number[]; xMin: number; xMax: number };
+  swim: SwimParams;
+  period: number;
+  frames: number;
+}
+
+export type Clip = DynamicClip | CyclicClip;
+
+/** CPU evaluator: positions (V * 3, original vertex order) at normalised clip time t. */
+export interface Evaluator {
+  readonly nVertices: number;
+  /** Writes into out (allocated when omitted) and returns it; throws RangeError for a non-finite t. */
+  evaluate(t: number, out?: Float32Array): Float32Array;
+}
+
+export declare class DynamicEvaluator implements Evaluator {
+  constructor(clip: DynamicClip);
+  readonly nVertices: number;
+  evaluate(t: number, out?: Float32Array): Float32Array;
+}
+
+export declare class CyclicEvaluator implements Evaluator {
+  constructor(clip: CyclicClip);
+  readonly nVertices: number;
+  evaluate(t: number, out?: Float32Array): Float32Array;
+}
+
+/** Decode a clip from its two parts (synchronous; no topology_id check). */
+export declare function decodeClip(topology: BytesLike, coefficients: BytesLike): Clip;
+/** The two parts of a CLIP file. */
+export declare function splitClipFile(data: BytesLike): {
+  topology: Uint8Array;
+  coefficients: Uint8Array;
+  header: Record<string, any>;
+};
+/** Decode a CLIP file (synchronous; no topology_id check). */
+export declare function decodeClipFile(data: BytesLike): Clip;
+/** Decode a clip and check topology_id (SHA-256 via WebCrypto where available). */
+export declare function loadClip(topology: BytesLike, coefficients: BytesLike): Promise<Clip>;
+export declare function loadClipFile(data: BytesLike): Promise<Clip>;
+export declare function sha256Hex(data: BytesLike): Promise<string | null>;
+
+export interface FetchOptions {
+  /** Sent as Authorization: Bearer KEY. */
+  key?: string;
+  headers?: Record<string, string>;
+  fetch?: typeof globalThis.fetch;
+  signal?: AbortSignal;
+}
+
+export declare function fetchBuffer(url: string, options?: Omit<FetchOptions, 'key'>): Promise<ArrayBuffer>;
+/** Fetch both parts (in parallel) and decode them; the result has .bytes. */
+export declare function fetchClip(
+  options: FetchOptions & { topology: string; coefficients: string },
+): Promise<Clip>;
+/** Fetch clip clipId from a pdeanim service (GET /v1/clips/{id}/topology and /coefficients). */
+export declare function fetchServiceClip(
+  baseUrl: string,
+  clipId: string,
+  options?: FetchOptions,
+): Promise<Clip>;
+export declare function fetchClipFile(url: string, options?: FetchOptions): Promise<Clip>;
+
+/** The CPU evaluator of a decoded clip (precomputes everything independent of t). */
+export declare function createEvaluator(clip: DynamicClip): DynamicEvaluator;
+export declare function createEvaluator(clip: CyclicClip): CyclicEvaluator;
+export declare function createEvaluator(clip: Clip): Evaluator;
+
+/** Per-vertex space basis (V * 12: vertex, coordinate, function) of a dynamic clip. */
+export declare function vertexBasis(clip: DynamicClip): Float64Array;
+/** Positions before the motion: rest, zeros, or rest - centre (V * 3). */
+export declare function vertexBase(clip: DynamicClip): Float32Array;
+/** The four balanced space functions (space kind 0 = D0, 1 = D1) into out[o..o+3]. */
+export declare function spaceBasis(
+  u: number,
+  D: number,
+  kind: 0 | 1,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
+/** The time pair (phi0, phi1) of a signed constant into out[o], out[o+1]. */
+export declare function timePair(
+  tau: number,
+  mu: number,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
+export declare function rigidTimePair(
+  tau: number,
+  mu: number,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
+/** [segment, tau, wrapped t] of t on the boundaries. */
+export declare function locate(
+  bounds: ArrayLike<number>,
+  t: number,
+  looping: boolean,
+): [number, number, number];
+
+/** Area-weighted vertex normals. */
+export declare function computeNormals(
+  positions: ArrayLike<number>,
+  faces: ArrayLike<number>,
+  out?: Float32Array,
+): Float32Array;
+export declare function boundingBoxDiagonal(positions: ArrayLike<number>): number;

@@ -1,0 +1,20 @@
+// pdeanim: decode and evaluate pdeanim clips (dynamic-PDE and cyclic-spine) in browsers and node.
+
+export { ClipFormatError, decodeContainer, CONTAINER_VERSION } from './container.js';
+export {
+  decodeClip,
+  decodeClipFile,
+  splitClipFile,
+  loadClip,
+  loadClipFile,
+  fetchBuffer,
+  fetchClip,
+  fetchClipFile,
+  fetchServiceClip,
+  createEvaluator,
+  sha256Hex,
+} from './clip.js';
+export { DynamicEvaluator, DYNAMIC_FORMAT_VERSION, vertexBasis, vertexBase } from './dynamic.js';
+export { CyclicEvaluator } from './cyclic.js';
+export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
+export { computeNormals, boundingBoxDiagonal } from './geometry.js';

@@ -1,0 +1,187 @@
+"""The clip viewer in headless Chromium against a real service and worker: ``positions(t)`` matches the Python
+evaluation, and screenshots show a lit mesh that moves between two t, the same on the GPU and the CPU path."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.service.harness import Services, client, make_key, wait_job
+
+pytestmark = pytest.mark.slow
+HERE = Path(__file__).resolve().parent
+FRAMES = 12
+CYCLIC = {"mode": "eel", "frames": 8, "n_curves": 12, "points": 16, "modes": 3}
+TIMES = [0.0, 0.23, 0.5, 0.77, 1.0]
+# float32 evaluation in JS against float64-accumulated numpy: observed about 1e-7 of the diagonal; the issue's
+# bound (1e-6) leaves ten times that
+TOLERANCE = 1e-6
+
+
+def browser_tools_missing() -> str | None:
+    """Why the browser test cannot run here (None when it can)."""
+    if shutil.which("node") is None:
+        return "node is not installed"
+    if not (HERE / "node_modules" / "puppeteer-core").is_dir():
+        return "puppeteer-core is not installed (npm ci in tests/browser, done by script/setup)"
+    candidates = ("/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome",
+                  os.environ.get("PDEANIM_CHROMIUM", "/none"), os.environ.get("CHROMIUM", "/none"))
+    if not any(Path(p).exists() for p in candidates):
+        return "chromium is not installed (apt-get install chromium, done by script/setup)"
+    return None
+
+
+@pytest.fixture(scope="module")
+def browser_ready() -> None:
+    reason = browser_tools_missing()
+    if reason and os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+        pytest.fail(f"the browser test must run under CI: {reason}")
+    if reason:
+        pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def services(browser_ready, tmp_path_factory):
+    from tests.service.conftest import open_backend
+
+    with open_backend("sqlite", tmp_path_factory.mktemp("data"), None) as backend:
+        svc = Services(backend, tmp_path_factory.mktemp("svc"))
+        try:
+            svc.start_server()
+            svc.start_worker()
+            yield svc
+        finally:
+            svc.stop()
+
+
+def wave(verts: np.ndarray, frames: int) -> np.ndarray:
+    """Poses (F, V, 3) float32: a sideways wave travelling along the longest axis, 5% of its length."""
+    axis = int(np.argmax(np.ptp(verts, axis=0)))
+    side = (axis + 1) % 3
+    u = (verts[:, axis] - verts[:, axis].min()) / np.ptp(verts[:, axis])
+    phase = np.linspace(0, 2 * np.pi, frames)[:, None]
+    out = np.repeat(verts[None].astype(np.float32), frames, axis=0)
+    out[:, :, side] += 0.05 * np.ptp(verts[:, axis]) * u * np.sin(2 * np.pi * u - phase)
+    return out
+
+
+@pytest.fixture(scope="module")
+def clips(services, data_dir) -> dict:
+    """A key and two clips of the fish mesh: a dynamic-PDE fit of a travelling wave, and a cyclic swim."""
+    key = make_key(services.backend, "viewer")
+    api = client(services, key)
+    obj = (data_dir / "fish_eel.obj").read_bytes()
+    mesh = api.post("/v1/meshes", files={"file": ("fish.obj", obj, "application/octet-stream")})
+    assert mesh.status_code == 201, mesh.text
+    verts = np.array([ln.split()[1:4] for ln in obj.decode().splitlines() if ln.startswith("v ")],
+                     dtype=np.float32)
+    buf = io.BytesIO()
+    np.savez(buf, vertices=wave(verts, FRAMES))
+    mid = mesh.json()["id"]
+    poses = api.post(f"/v1/meshes/{mid}/poses",
+                     files={"file": ("p.npz", buf.getvalue(), "application/octet-stream")})
+    assert poses.status_code == 201, poses.text
+    out = {"key": key}
+    fit = {"kind": "fit", "poses_id": poses.json()["id"], "params": {"segments": 2}}
+    cyclic = {"kind": "cyclic", "mesh_id": mid, "params": CYCLIC}
+    for kind, body in (("dynamic-pde", fit), ("cyclic-spine", cyclic)):
+        r = api.post("/v1/jobs", json=body)
+        assert r.status_code == 202, r.text
+        job = wait_job(api, r.json()["id"], timeout=300)
+        assert job["state"] == "succeeded", (job, services.logs())
+        out[kind] = job["result"]["clip_id"]
+    return out
+
+
+def run_viewer(services: Services, tmp_path: Path, job: dict, timeout: float = 300) -> dict:
+    """Run viewer_check.mjs on ``job``; its JSON result (with the page's console on failure)."""
+    job = {**job, "out": str(tmp_path / "result.json")}
+    proc = subprocess.run(["node", str(HERE / "viewer_check.mjs"), json.dumps(job)], cwd=HERE,
+                          capture_output=True, text=True, timeout=timeout)
+    result = json.loads(Path(job["out"]).read_text()) if Path(job["out"]).exists() else {}
+    assert proc.returncode == 0 and "error" not in result, (proc.stdout, proc.stderr, result, services.logs())
+    return result
+
+
+def load_png(path: str) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
+
+
+def canvas_part(img: np.ndarray) -> np.ndarray:
+    """The 3D view (left of the side panel, which is 22rem = 308 px wide)."""
+    return img[:, : img.shape[1] - 320]
+
+
+@pytest.mark.parametrize("kind", ["dynamic-pde", "cyclic-spine"])
+def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp_path):
+    from pdeanim.clip import load_clip
+
+    cid, key = clips[kind], clips["key"]
+    api = client(services, key)
+    clip = load_clip(api.get(f"/v1/clips/{cid}/topology").content,
+                     api.get(f"/v1/clips/{cid}/coefficients").content)
+    shots = [{"t": 0.1, "mode": "gpu", "path": str(tmp_path / "gpu_a.png")},
+             {"t": 0.6, "mode": "gpu", "path": str(tmp_path / "gpu_b.png")},
+             {"t": 0.6, "mode": "cpu", "path": str(tmp_path / "cpu_b.png")}]
+    job = {"url": f"{services.url}/viewer#clip={cid}&key={key}", "times": TIMES, "shots": shots,
+           "measureGlb": kind == "dynamic-pde"}
+    result = run_viewer(services, tmp_path, job)
+    info = result["info"]
+    assert info["kind"] == kind and info["nVertices"] == clip.n_vertices
+    assert info["mode"] == "gpu", info["gpuUnavailableReason"]
+
+    diag = float(np.linalg.norm(np.ptp(clip.evaluate(0.0), axis=0)))
+    for t, got in zip(TIMES, result["positions"], strict=True):
+        js = np.asarray(got, dtype=np.float64).reshape(-1, 3)
+        err = float(np.abs(js - clip.evaluate(t)).max())
+        assert err <= TOLERANCE * diag, (t, err / diag)
+
+    # bytes: what the page downloaded (gzip as served) next to raw frames and the animation GLB
+    sizes = info["sizes"]
+    assert 0 < sizes["topologyWire"] <= sizes["topology"]
+    assert 0 < sizes["coefficientsWire"] <= sizes["coefficients"]
+    assert sizes["raw"] > 0 and "raw float32 frames" in info["stats"]
+    if kind == "dynamic-pde":
+        assert result["glb"] and result["glb"] > 0 and "animation GLB" in info["statsAfter"]
+
+    gpu_a, gpu_b, cpu_b = (canvas_part(load_png(s["path"])) for s in shots)
+    background = gpu_a[2, 2]
+    mesh = np.abs(gpu_a - background).sum(axis=2) > 30
+    # the long thin fish, framed by the bounding sphere of its motion, covers about 2.5% of the view
+    assert mesh.mean() > 0.01, f"the mesh covers only {mesh.mean():.1%} of the view"
+    lum = gpu_a[mesh].mean(axis=1)
+    assert lum.std() > 8 and np.ptp(lum) > 60, "the mesh looks flat: is it lit?"
+    moved = np.abs(gpu_a - gpu_b).sum(axis=2) > 30
+    assert moved.mean() > 0.002, f"only {moved.mean():.2%} of pixels change between t=0.1 and t=0.6"
+    # the shader and the CPU path draw the same frame (antialiasing and float rounding aside)
+    same = np.abs(gpu_b - cpu_b).sum(axis=2) > 60
+    assert same.mean() < 0.005, f"GPU and CPU frames differ on {same.mean():.2%} of pixels"
+    for shot in shots:  # keep them for a person to look at
+        shutil.copy(shot["path"], services.log_dir / f"{kind}-{Path(shot['path']).name}")
+
+
+def test_viewer_without_a_valid_key_says_why(services, clips, tmp_path):
+    job = {"url": f"{services.url}/viewer#clip={clips['dynamic-pde']}&key=pda_wrong",
+           "out": str(tmp_path / "r.json")}
+    proc = subprocess.run(["node", str(HERE / "viewer_check.mjs"), json.dumps(job)], cwd=HERE,
+                          capture_output=True, text=True, timeout=300)
+    result = json.loads(Path(job["out"]).read_text())
+    assert proc.returncode == 1 and "invalid API key" in result["error"], result
+
+
+def test_viewer_page_needs_no_key_and_sends_none(services):
+    r = client(services, None).get("/viewer")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    assert r.headers["referrer-policy"] == "no-referrer" and "importmap" in r.text
+    for path in ("/static/viewer/viewer.js", "/static/viewer/pdeanim/index.js",
+                 "/static/vendor/three/three.module.js"):
+        assert client(services, None).get(path).status_code == 200, path

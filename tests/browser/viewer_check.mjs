@@ -1,0 +1,45 @@
+// Drive the viewer in headless Chromium for tests/browser/test_viewer.py: open /viewer#clip=…&key=…, wait for
+// window.pdeanimViewer.ready, evaluate positions at the given times, screenshot GPU and CPU frames.
+// Usage: node viewer_check.mjs JOB, JOB = JSON {"url", "times": [t...], "shots": [{"t", "mode", "path"}],
+// "measureGlb", "out"}
+import { writeFileSync } from 'node:fs';
+import { launchChromium } from './chromium.mjs';
+
+const job = JSON.parse(process.argv[2]);
+const browser = await launchChromium();
+const logs = [];
+try {
+  const page = await browser.newPage();
+  page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
+  page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
+  page.on('requestfailed', (r) => logs.push(`requestfailed: ${r.url()} ${r.failure()?.errorText}`));
+  await page.setViewport({ width: job.width ?? 800, height: job.height ?? 600 });
+  await page.goto(job.url, { waitUntil: 'load', timeout: 120_000 });
+  await page.waitForFunction('window.pdeanimViewer !== undefined', { timeout: 120_000 });
+  await page.evaluate('window.pdeanimViewer.ready');
+  const result = { logs };
+  result.info = await page.evaluate(() => {
+    const v = window.pdeanimViewer;
+    return { mode: v.mode, gpuUnavailableReason: v.gpuUnavailableReason, nVertices: v.clip.nVertices,
+      kind: v.clip.kind, sizes: v.sizes(), stats: document.querySelector('#stats').innerText };
+  });
+  result.positions = [];
+  for (const t of job.times ?? []) {
+    result.positions.push(await page.evaluate((tt) => Array.from(window.pdeanimViewer.positions(tt)), t));
+  }
+  if (job.measureGlb) result.glb = await page.evaluate(() => window.pdeanimViewer.measureGlb());
+  result.shots = [];
+  for (const shot of job.shots ?? []) {
+    const mode = await page.evaluate((m) => window.pdeanimViewer.setMode(m), shot.mode);
+    await page.evaluate((t) => window.pdeanimViewer.show(t), shot.t);
+    await page.screenshot({ path: shot.path });
+    result.shots.push({ ...shot, mode });
+  }
+  result.info.statsAfter = await page.evaluate(() => document.querySelector('#stats').innerText);
+  writeFileSync(job.out, JSON.stringify(result));
+} catch (err) {
+  writeFileSync(job.out, JSON.stringify({ error: String(err?.stack ?? err), logs }));
+  process.exitCode = 1;
+} finally {
+  await browser.close();
+}

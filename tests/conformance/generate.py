@@ -1,0 +1,206 @@
+"""Conformance fixtures shared with the JavaScript client: clips of every kind, motion, parameterisation
+and looping mode, with the positions the Python evaluator gives at chosen times.
+
+``python -m tests.conformance.generate OUTDIR`` writes, per case, ``NAME.clip`` (a CLIP file) and
+``NAME.expected.bin`` (little-endian float32 (K, V, 3)), plus ``manifest.json`` listing every case's times,
+vertex count, bounding-box diagonal and what it covers. Fitted cases go through the real fit and cyclic
+pipelines on tiny meshes; synthetic cases encode hand-chosen coefficients that reach every branch of the
+evaluator (all four families, D on both sides of D_SWITCH and near 0, trig constants at their cap, a
+zero-length segment, large and tiny rigid rotations).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from pdeanim import container
+from pdeanim.clip import ClipParts, load_clip, write_clip_file
+from pdeanim.curveset import CurveSet
+from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
+from pdeanim.model.clipformat import CoefficientData, encode_coefficients, encode_topology
+from pdeanim.model.families import MU_TRIG_MAX
+from pdeanim.model.fitclip import FitOptions, fit_poses
+from pdeanim.poses import make_poses
+
+FIXTURE_VERSION = 1
+"""Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
+
+
+def _sphere_poses(n_frames: int = 13, loop: bool = False):
+    """A 42-vertex icosphere that sways, twists and breathes over n_frames frames (periodic when loop)."""
+    mesh = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
+    rest = np.asarray(mesh.vertices, np.float64)
+    span = n_frames - 1 if loop else n_frames
+    frames = []
+    for f in range(n_frames):
+        ph = 2 * np.pi * f / span
+        ang = 0.6 * np.sin(ph) * (rest[:, 2] + 1.0)
+        c, s = np.cos(ang), np.sin(ang)
+        x = np.stack([c * rest[:, 0] - s * rest[:, 1], s * rest[:, 0] + c * rest[:, 1], rest[:, 2]], 1)
+        x *= 1.0 + 0.15 * np.sin(ph + rest[:, 1:2])
+        x[:, 0] += 0.3 * np.sin(ph)
+        frames.append(x)
+    return make_poses(np.stack(frames), np.asarray(mesh.faces), np.arange(n_frames) / 24.0)
+
+
+def _fit(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
+    return lambda: fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion,
+                                                                   param_mode=param_mode, loop=loop))
+
+
+def _single_frame_rigid() -> ClipParts:
+    """A one-frame clip (rigid motion): every t shows that frame."""
+    p = _sphere_poses()
+    return fit_poses(make_poses(p.vertices[:1], p.faces, p.times[:1]), FitOptions(motion="rigid"))
+
+
+def _capsule():
+    return trimesh.creation.capsule(height=3.0, radius=0.5, count=[10, 10])
+
+
+def _cyclic(mode: str, **overrides) -> Callable[[], ClipParts]:
+    opts = CyclicOptions(mode=mode, overrides=overrides, n_curves=7, points=12, modes=3, frames=8)
+    return lambda: make_cyclic_clip(_capsule(), opts)
+
+
+def _synthetic_topology(param_mode: str) -> tuple[bytes, int, np.ndarray]:
+    """A 5 x 6 grid of 30 vertices in 5 curves (vertex order shuffled against curve order)."""
+    rng = np.random.default_rng(7)
+    gx, gy = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-0.5, 0.5, 5))
+    rest = np.stack([gx.ravel(), gy.ravel(), 0.1 * np.sin(3 * gx.ravel())], 1)
+    V = len(rest)
+    perm = rng.permutation(V)  # curve c holds the grid row c, stored at shuffled vertex indices
+    order = perm.astype(np.int32)
+    offsets = np.arange(0, V + 1, 6, dtype=np.int32)
+    faces = []
+    for r in range(4):
+        for c in range(5):
+            a, b, d, e = r * 6 + c, r * 6 + c + 1, (r + 1) * 6 + c, (r + 1) * 6 + c + 1
+            faces += [[a, b, e], [a, e, d]]
+    faces = perm[np.asarray(faces)]
+    u_row = np.array([0.0, 0.2, 0.5, 0.50004, 0.8, 1.0])  # exact 0, 1/2 (x = 0) and the tiny-x series
+    u = np.zeros((V, 3))
+    u[perm] = u_row[np.tile(np.arange(6), 5)][:, None]
+    if param_mode == "paper":
+        u[perm, 1] = rng.uniform(0, 1, V)
+        u[perm, 2] = 1.0 - u[perm, 0]
+    pos = np.zeros((V, 3))
+    pos[perm] = rest
+    topo = encode_topology(CurveSet(order, offsets), u, faces, pos, param_mode)
+    return topo, 5, pos
+
+
+def _synthetic_dynamic(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
+    def make() -> ClipParts:
+        topo, C, _ = _synthetic_topology(param_mode)
+        rng = np.random.default_rng(11)
+        S = 4
+        seg_t = np.array([0.0, 0.3, 0.3, 0.55, 1.0])  # a zero-length segment at t = 0.3
+        space = rng.integers(0, 2, (C, 3))
+        trig = rng.integers(0, 2, (S, C, 3))
+        family = (2 * trig + space[None]).astype(np.uint8)
+        m = rng.choice([0.0, 1e-13, 1e-3, 0.4, 2.0, 9.0, 32.0], (S, C, 3))
+        m = np.where(trig == 1, rng.choice([0.0, 1e-3, 1.0, MU_TRIG_MAX * 0.9999], (S, C, 3)), m)
+        D = np.array([[0.0, 1e-5, 0.5], [2.0, 3.99, 4.0], [4.01, 8.0, 20.0], [1.0, 6.0, 0.05],
+                      [3.0, 3.0, 12.0]])
+        knots = rng.normal(0, 0.05, (S + 1, C, 3, 4))
+        if loop:
+            knots[-1] = knots[0]
+        extra = {}
+        if motion == "rigid":
+            Sr = 2
+            extra = {"rigid_segment_t": np.array([0.0, 0.5, 1.0]),
+                     "rigid_centre": rng.normal(0, 0.3, (C, 3)).astype(np.float32),
+                     "rigid_rot_knots": np.concatenate([rng.normal(0, 1.2, (Sr + 1, C - 1, 3)),
+                                                        np.full((Sr + 1, 1, 3), 1e-6)], 1).astype(np.float32),
+                     "rigid_rot_mu": np.array([[0.0, 2.0, -1.5, 1e-13, -2.9], [5.0, 0.0, -0.5, 0.3, 1.0]],
+                                              np.float32),
+                     "rigid_trans_knots": rng.normal(0, 0.4, (Sr + 1, C, 3)).astype(np.float32),
+                     "rigid_trans_mu": np.array([[-2.0, 0.0, 3.0, -0.1, 0.7], [1.0, -2.5, 0.0, 8.0, 0.0]],
+                                                np.float32)}
+            if loop:
+                for k in ("rigid_rot_knots", "rigid_trans_knots"):
+                    extra[k][-1] = extra[k][0]
+        data = CoefficientData(seg_t, np.linspace(0.0, 2.0, 9), family, m, D, knots, motion, loop,
+                               {"errors": {}}, extra)
+        return ClipParts(topo, encode_coefficients(topo, data))
+    return make
+
+
+CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
+    "fit-displacement-chord": (_fit("displacement", "chord", False), {}),
+    "fit-absolute-paper": (_fit("absolute", "paper", False), {}),
+    "fit-rigid-chord": (_fit("rigid", "chord", False), {}),
+    "fit-displacement-chord-loop": (_fit("displacement", "chord", True), {}),
+    "fit-rigid-paper-loop": (_fit("rigid", "paper", True), {}),
+    "fit-rigid-single-frame": (_single_frame_rigid, {}),
+    "synthetic-displacement-paper": (_synthetic_dynamic("displacement", "paper", False), {}),
+    "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
+    "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),
+    "synthetic-rigid-chord-loop": (_synthetic_dynamic("rigid", "chord", True), {}),
+    "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
+    "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
+    "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
+                                                {}),
+}
+
+
+def case_times(parts: ClipParts) -> list[float]:
+    """t = 0 and 1, every segment boundary (rigid ones too), midpoints, clamping or loop wrap."""
+    ch, ca = container.unpack(parts.coefficients)
+    ts = {0.0, 1.0, 0.37, 0.999}
+    for name in ("segment_t", "rigid_segment_t"):
+        if name in ca:
+            b = [float(x) for x in ca[name]]
+            ts.update(b)
+            ts.update(0.5 * (x + y) for x, y in zip(b, b[1:], strict=False))
+    looping = bool(ch.get("looping", False)) or ch.get("kind") == "cyclic-spine"
+    ts.update([1.25, -0.3, 2.0, -1.0] if looping else [-0.5, 1.5])
+    return sorted(ts)
+
+
+def generate(out: Path, names: list[str] | None = None) -> dict:
+    """Write the fixture files of the chosen cases (all by default) into out; returns the manifest."""
+    out.mkdir(parents=True, exist_ok=True)
+    manifest: dict = {"fixture_version": FIXTURE_VERSION, "tolerance_rel_diagonal": 1e-6, "cases": []}
+    for name, (make, _) in CASES.items():
+        if names and name not in names:
+            continue
+        parts = make()
+        parts.report = {}  # timings would make the files differ run to run
+        write_clip_file(out / f"{name}.clip", parts)
+        clip = load_clip(parts.topology, parts.coefficients)
+        ts = case_times(parts)
+        pos = np.asarray(clip.evaluate(np.asarray(ts)), np.float32)
+        (out / f"{name}.expected.bin").write_bytes(pos.astype("<f4").tobytes())
+        th, _ = container.unpack(parts.topology)
+        ch, _ = container.unpack(parts.coefficients)
+        rest = np.asarray(clip.evaluate(0.0), np.float64)
+        manifest["cases"].append({
+            "name": name, "clip": f"{name}.clip", "expected": f"{name}.expected.bin", "kind": clip.kind,
+            "motion": ch.get("motion"), "param_mode": th.get("param_mode"), "looping": bool(clip.looping),
+            "format_version": ch.get("format_version"), "n_vertices": int(clip.n_vertices), "t": ts,
+            "diagonal": float(np.linalg.norm(np.ptp(rest, axis=0)))})
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
+    return manifest
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: python -m tests.conformance.generate OUTDIR [CASE ...]."""
+    args = sys.argv[1:] if argv is None else argv
+    if not args:
+        print("usage: python -m tests.conformance.generate OUTDIR [CASE ...]", file=sys.stderr)
+        return 2
+    manifest = generate(Path(args[0]), args[1:] or None)
+    print(f"wrote {len(manifest['cases'])} conformance cases to {args[0]}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

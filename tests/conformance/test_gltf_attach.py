@@ -1,0 +1,72 @@
+"""The JS client plays a clip on GLBs that pdeanim writes, loaded by three.js's GLTFLoader: a frame GLB and
+a quantised, meshopt-compressed animation GLB of an asset with several nodes, primitives and materials.
+``attachClipToScene`` must put every vertex where the Python evaluator puts it and keep the materials."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pdeanim.clip import load_clip, write_clip_file
+from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb
+from pdeanim.gltf.layout import gltf_layout
+from pdeanim.gltf.read import read_static_mesh
+from pdeanim.model.fitclip import FitOptions, fit_poses
+from pdeanim.poses import make_poses
+from tests.gltf.builders import textured_scene_glb
+
+JS = Path(__file__).resolve().parents[2] / "clients" / "js"
+SCRIPT = JS / "test" / "tools" / "gltf_attach.mjs"
+NODE = shutil.which("node")
+pytestmark = pytest.mark.skipif(NODE is None or not (JS / "node_modules" / "three").is_dir(),
+                                reason="node and clients/js/node_modules (npm ci) are needed")
+TIMES = [0.0, 0.35, 1.0]
+
+
+@pytest.fixture(scope="module")
+def asset(tmp_path_factory):
+    """A textured 4-primitive scene, a clip fitted to a wave over it, and its frame and animation GLBs."""
+    out = tmp_path_factory.mktemp("gltf-attach")
+    src = textured_scene_glb()
+    rest, faces = read_static_mesh(src)
+    phase = np.arange(9)[:, None, None]
+    frames = rest[None] + 0.05 * np.sin(rest[None, :, :1] * 3 + 0.7 * phase) * np.array([0.0, 1.0, 0.5])
+    parts = fit_poses(make_poses(frames.astype(np.float32), faces), FitOptions(segments=2))
+    write_clip_file(out / "asset.clip", parts)
+    clip = load_clip(parts.topology, parts.coefficients)
+    layout = gltf_layout(src)
+    (out / "frame.glb").write_bytes(clip_frame_glb(clip, 0.6, layout))
+    (out / "animation.glb").write_bytes(clip_animation_glb(clip, 8.0, layout=layout))
+    return out, clip
+
+
+def _run(glb: Path, clip: Path) -> dict:
+    proc = subprocess.run([NODE, str(SCRIPT), str(glb), str(clip), ",".join(map(str, TIMES))],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout)
+
+
+@pytest.mark.parametrize("glb", ["frame.glb", "animation.glb"])
+def test_attach_to_gltfloader_scene_matches_python(asset, glb):
+    out, clip = asset
+    res = _run(out / glb, out / "asset.clip")
+    assert [m["name"] for m in res["meshes"]] and len(res["meshes"]) == 4  # 2 + 1 + 1 primitives
+    assert {n for m in res["meshes"] for n in m["materials"]} == {"skin", "cloth"}
+    assert res["materialsWhilePlaying"] == [m["materials"] for m in res["meshes"]]
+    assert all("uv" in m["attributes"] for m in res["meshes"])
+    assert all(not any(w) for w in res["morphWhilePlaying"])  # the GLB's morph targets are off meanwhile
+    assert res["morphAfter"] == res["morphBefore"]
+    if glb == "animation.glb":
+        assert any(res["morphBefore"])
+    want = clip.evaluate(np.asarray(TIMES))
+    diag = float(np.linalg.norm(np.ptp(want[0], axis=0)))
+    got = np.asarray(res["frames"])
+    assert got.shape == want.shape
+    # float32 local coordinates through the nodes' transforms: 1e-6 of the diagonal is ~10x the rounding
+    assert np.abs(got - want).max() <= 1e-6 * diag

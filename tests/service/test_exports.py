@@ -1,0 +1,158 @@
+"""Animation exports through real HTTP (a real ``pdeanim serve`` and ``pdeanim worker``): a clip of an
+uploaded textured glTF keeps its look in frame and animation GLBs; the animation is quantised and
+meshopt-compressed; fps above PDEANIM_MAX_EXPORT_FPS is a 422; an export above
+PDEANIM_MAX_SYNC_EXPORT_BYTES is refused by the route (413 naming the job to submit) and built by an
+``export`` job instead, downloadable from its result."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+from pdeanim.gltf.glb import unpack_glb
+from pdeanim.gltf.read import read_animated_poses, read_static_mesh
+from pdeanim.gltf.validate import assert_clean, validate_many
+
+from ..gltf.builders import textured_scene_glb
+from .harness import Services, client, make_key, wait_job
+
+pytestmark = pytest.mark.slow
+FRAMES = 10  # poses at 30 fps: 0.3 s
+VERTICES = 43  # of textured_scene_glb
+MAX_FPS = 60
+# 30 fps: 10 frames x 43 vertices x 12 = 5160 bytes (built in the request); 60 fps: 19 frames, 9804 (a job)
+SYNC_BYTES = 8_000
+
+
+@pytest.fixture(scope="module")
+def services(module_backend, tmp_path_factory):
+    svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
+                   env_extra={"PDEANIM_MAX_EXPORT_FPS": str(MAX_FPS),
+                              "PDEANIM_MAX_SYNC_EXPORT_BYTES": str(SYNC_BYTES)})
+    svc.start_server()
+    svc.start_worker()
+    yield svc
+    svc.stop()
+
+
+@pytest.fixture(scope="module")
+def api(services):
+    with client(services, make_key(services.backend, "alice")) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def other(services):
+    with client(services, make_key(services.backend, "mallory")) as c:
+        yield c
+
+
+def upload(api, name: str, data: bytes, path: str = "/v1/meshes"):
+    return api.post(path, files={"file": (name, data, "application/octet-stream")})
+
+
+def assert_error(r, status: int, code: str) -> str:
+    assert r.status_code == status, r.text
+    assert r.json()["error"]["code"] == code, r.json()
+    return r.json()["error"]["message"]
+
+
+@pytest.fixture(scope="module")
+def scene(api, services) -> dict:
+    """The textured scene uploaded as a mesh, waving poses of it, and the fitted clip."""
+    src = textured_scene_glb()
+    mesh = upload(api, "scene.glb", src)
+    assert mesh.status_code == 201, mesh.text
+    assert mesh.json()["vertices"] == VERTICES
+    rest, _ = read_static_mesh(src)
+    phase = np.arange(FRAMES)[:, None, None] / FRAMES
+    frames = rest[None] + 0.1 * np.sin(2 * np.pi * phase + rest[None, :, :1])
+    buf = io.BytesIO()
+    np.savez(buf, vertices=frames.astype(np.float32))
+    poses = upload(api, "wave.npz", buf.getvalue(), f"/v1/meshes/{mesh.json()['id']}/poses")
+    assert poses.status_code == 201, poses.text
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses.json()["id"], "params": {"segments": 1}})
+    assert r.status_code == 202, r.text
+    job = wait_job(api, r.json()["id"], timeout=240)
+    assert job["state"] == "succeeded", (job, services.logs())
+    return {"src": src, "mesh": mesh.json(), "clip_id": job["result"]["clip_id"], "frames": frames}
+
+
+def check_look(glb: bytes, src: bytes) -> dict:
+    doc, _ = unpack_glb(glb)
+    sdoc, _ = unpack_glb(src)
+    assert all(doc[k] == sdoc[k] for k in ("materials", "textures", "samplers"))
+    assert [n.get("name") for n in doc["nodes"][:3]] == ["body", "hat", "wing"]
+    assert [len(m["primitives"]) for m in doc["meshes"]] == [2, 1, 1]
+    assert all("TEXCOORD_0" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])
+    return doc
+
+
+def test_frame_and_animation_keep_the_look(api, scene):
+    cid = scene["clip_id"]
+    frame = api.get(f"/v1/clips/{cid}/frame", params={"t": 0.5})
+    assert frame.status_code == 200, frame.text
+    check_look(frame.content, scene["src"])
+    anim = api.get(f"/v1/clips/{cid}/animation", params={"fps": 30})
+    assert anim.status_code == 200, anim.text
+    doc = check_look(anim.content, scene["src"])
+    assert doc["extensionsRequired"] == ["KHR_mesh_quantization", "EXT_meshopt_compression"]
+    poses = read_animated_poses(anim.content, fps=30)  # decodes meshopt
+    assert poses.n_frames == FRAMES
+    diag = float(np.linalg.norm(np.ptp(scene["frames"][0], axis=0)))
+    assert np.abs(poses.vertices - scene["frames"]).max() < 0.05 * diag  # a 1-segment fit of a smooth wave
+    reports = validate_many([frame.content, anim.content])
+    for label, report in zip(["frame", "animation"], reports, strict=True):
+        assert_clean(report, label)
+
+
+def test_fps_is_bounded_by_the_setting(api, scene):
+    cid = scene["clip_id"]
+    too_fast = api.get(f"/v1/clips/{cid}/animation", params={"fps": MAX_FPS + 1})
+    msg = assert_error(too_fast, 422, "fps_out_of_range")
+    assert "PDEANIM_MAX_EXPORT_FPS" in msg
+    assert api.get(f"/v1/clips/{cid}/animation", params={"fps": 0}).status_code == 422
+    job = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "fps": 1000})
+    assert_error(job, 422, "fps_out_of_range")
+
+
+def test_large_export_is_a_job_with_a_downloadable_glb(api, other, scene, services):
+    cid = scene["clip_id"]
+    big = api.get(f"/v1/clips/{cid}/animation", params={"fps": MAX_FPS})
+    msg = assert_error(big, 413, "export_too_large")
+    assert '"kind": "export"' in msg and cid in msg and "PDEANIM_MAX_SYNC_EXPORT_BYTES" in msg
+    r = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "fps": MAX_FPS})
+    assert r.status_code == 202, r.text
+    assert r.json()["mesh_id"] == scene["mesh"]["id"] and r.json()["params"]["params"]["fps"] == MAX_FPS
+    job = wait_job(api, r.json()["id"])
+    assert job["state"] == "succeeded", (job, services.logs())
+    url = job["result"]["export_url"]
+    assert url == f"/v1/exports/{job['id']}"
+    glb = api.get(url)
+    assert glb.status_code == 200 and glb.headers["content-type"] == "model/gltf-binary"
+    assert len(glb.content) == job["result"]["export_bytes"]
+    check_look(glb.content, scene["src"])
+    assert read_animated_poses(glb.content, fps=MAX_FPS).n_frames == 19  # 0.3 s at 60 fps, both ends
+    assert_clean(validate_many([glb.content])[0], "export job GLB")
+    assert_error(other.get(url), 404, "not_found")  # another tenant's job
+
+
+def test_export_job_requests_are_checked(api, scene):
+    cid = scene["clip_id"]
+    assert_error(api.post("/v1/jobs", json={"kind": "export"}), 422, "invalid_parameter")
+    missing = api.post("/v1/jobs", json={"kind": "export", "clip_id": "clip_nope"})
+    assert_error(missing, 404, "not_found")
+    bogus = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "bogus": 1})
+    assert_error(bogus, 422, "invalid_parameter")
+    assert_error(api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "position_bits": 20}), 422,
+                 "invalid_parameter")
+    assert_error(api.post("/v1/jobs", json={"kind": "fit", "clip_id": cid}), 422, "invalid_parameter")
+    fit_job = api.get(f"/v1/clips/{cid}").json()["job_id"]
+    assert_error(api.get(f"/v1/exports/{fit_job}"), 404, "not_found")  # not an export job
+    queued = api.post("/v1/jobs", json={"kind": "export", "clip_id": cid, "fps": 5}).json()
+    r = api.get(f"/v1/exports/{queued['id']}")
+    assert r.status_code in (200, 409)  # 409 not_ready until the worker is done
+    assert wait_job(api, queued["id"])["state"] == "succeeded"
+    assert api.get(f"/v1/exports/{queued['id']}").status_code == 200
