@@ -115,7 +115,8 @@ def test_options_validation_and_round_trip():
 def test_absolute_and_paper_modes_fit_without_nan(morph_small, short_curves):
     for opts in (FitOptions(segments=3, motion="absolute"), FitOptions(segments=3, param_mode="paper")):
         r = fit_poses(morph_small, opts, curves=short_curves).report
-        assert np.isfinite(r["rms"]) and r["rel_rms"] < 0.1
+        # achieved rel RMS 0.0139 (absolute) and 0.0126 (paper); the mean pose alone scores 0.156
+        assert np.isfinite(r["rms"]) and r["rel_rms"] < 0.035
 
 
 def test_loop_clip_wraps_and_closes(morph_small, short_curves):

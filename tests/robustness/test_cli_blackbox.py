@@ -70,7 +70,8 @@ def test_poses_edge_cases_fit_and_export(tmp_path, capsys, ico, frames, moving, 
     with np.load(frames_out) as data:
         got = data["vertices"]
     assert got.shape == (frames, len(vertices), 3) and np.isfinite(got).all()
-    assert np.abs(got - np.load(poses)["vertices"]).max() <= 0.01 * scale * 4
+    # achieved max error 1.4e-4 x scale (the motion's amplitude is 0.09 x scale); 0 for F = 1 and constant
+    assert np.abs(got - np.load(poses)["vertices"]).max() <= 4e-4 * scale
     assert cli(capsys, "export", clip, "--out", anim)[0] == 0
     assert_clean(validate_many([anim.read_bytes()])[0])
 

@@ -13,6 +13,8 @@ from service.api.openapi import DEFAULT_PATH, openapi_text
 from service.settings import Settings
 from service.store.queue import QueuePolicy
 
+from ..ci import missing
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -30,8 +32,9 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     assert "HTTPValidationError" not in doc["components"]["schemas"]
 
 
-@pytest.mark.skipif(shutil.which("docker-compose") is None, reason="docker-compose is not installed")
 def test_docker_compose_file_is_valid():
+    if shutil.which("docker-compose") is None:
+        missing("docker-compose is not installed (script/setup installs it with apt-get)")
     out = subprocess.run(["docker-compose", "-f", str(ROOT / "docker-compose.yml"), "config", "-q"],
                          capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
