@@ -25,7 +25,7 @@ from pdeanim.model.fitcore import (
 from pdeanim.model.metrics import bbox_diagonal, paper_errors
 from pdeanim.model.parameterisation import chord_parameters
 from pdeanim.model.segments import Segmentation
-from pdeanim.poses import load_poses
+from pdeanim.posefiles import load_poses
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "AnimatedMorphSphere.npz"
 

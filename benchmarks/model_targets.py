@@ -12,7 +12,7 @@ from pathlib import Path
 
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.model.heldout import heldout_comparison
-from pdeanim.poses import load_poses
+from pdeanim.posefiles import load_poses
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "AnimatedMorphSphere.npz"
 TARGETS = (1e-2, 3e-3, 1e-3)

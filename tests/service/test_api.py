@@ -79,6 +79,9 @@ def test_mesh_upload_stats(api, fish):
     lo, hi = np.array(fish["bbox"]["min"]), np.array(fish["bbox"]["max"])
     assert lo.shape == (3,) and np.all(hi > lo)
     assert api.get(f"/v1/meshes/{fish['id']}").json() == fish
+    opened = upload(api, "open.obj", OBJ.rsplit(b"f ", 1)[0])  # the tetrahedron without its last face
+    assert opened.status_code == 201, opened.text
+    assert opened.json()["watertight"] is False and opened.json()["faces"] == 3
 
 
 def test_cyclic_clip_frame_animation_and_caching(api, clip, fish):
@@ -211,7 +214,7 @@ SCENE = {"frames": 12, "target_tets": 600}
 
 def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, services):
     mesh = upload(api, "spot.obj", (data_dir / "spot.obj").read_bytes()).json()
-    assert mesh["stats"]["watertight"] is False  # spot's UV seams duplicate vertices: open by index
+    assert mesh["stats"]["watertight"] is True  # spot is closed (the loader welds its UV seams)
     r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE, "then_fit": True,
                                    "fit": {"target_rel_rms": 0.005}})
     assert r.status_code == 202, r.text

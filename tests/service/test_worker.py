@@ -118,8 +118,8 @@ def test_sigkilled_worker_job_completes_once_on_another(services, api, mesh_id):
         time.sleep(0.05)
     assert orphans, "the job process never started"
     os.kill(first.pid, signal.SIGKILL)
-    first.wait(10)
-    deadline = time.monotonic() + 10
+    first.wait(60)
+    deadline = time.monotonic() + 60
     while any(Path(f"/proc/{p}").exists() for p in orphans) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(Path(f"/proc/{p}/cmdline").exists() and Path(f"/proc/{p}/cmdline").read_bytes()
@@ -148,13 +148,13 @@ def test_sigterm_idle_exits_zero_and_busy_releases_the_job(services, api, mesh_i
     idle = services.start_worker()
     wait_started(services, 0)
     idle.send_signal(signal.SIGTERM)
-    assert idle.wait(15) == 0
+    assert idle.wait(60) == 0
     services.env_extra["PDEANIM_SHUTDOWN_GRACE_SECONDS"] = "0"
     job_id = submit(api, mesh_id, HEAVY)
     busy = services.start_worker()
     assert wait_state(api, job_id, ("running", "succeeded"))["state"] == "running"
     busy.send_signal(signal.SIGTERM)
-    assert busy.wait(20) == 0
+    assert busy.wait(60) == 0
     store = Store.open(services.backend.settings())
     with store.sessions() as s:
         job = s.get(Job, job_id)
