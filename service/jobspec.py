@@ -5,7 +5,6 @@ API starts even when a stage is not installed in this build."""
 from __future__ import annotations
 
 import importlib
-from importlib import metadata
 from typing import Any
 
 from pdeanim.errors import ParameterError
@@ -15,9 +14,6 @@ OPTIONS = {
     "fit": "pdeanim.model.fitclip:FitOptions",
     "cyclic": "pdeanim.cyclic.job:CyclicOptions",
 }
-DISTRIBUTIONS = ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild")
-
-
 class StageUnavailable(RuntimeError):
     """The library stage for a job kind cannot be imported in this build."""
 
@@ -50,14 +46,3 @@ def normalize_request(kind: str, params: dict[str, Any], then_fit: bool, fit: di
     if then_fit:
         spec["fit"] = normalize("fit", fit)
     return spec
-
-
-def library_versions() -> dict[str, str]:
-    """Installed versions of the distributions whose code produces results."""
-    out = {}
-    for name in DISTRIBUTIONS:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "absent"
-    return out

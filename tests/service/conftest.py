@@ -5,7 +5,6 @@ created and dropped per test or module) with S3 on moto's server. Under CI a mis
 from __future__ import annotations
 
 import os
-import socket
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -14,16 +13,11 @@ from pathlib import Path
 
 import pytest
 
+from service.launcher import free_port
 from service.settings import Settings
 
 from ..ci import missing
 from .pgserver import PgServer, start_or_find
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @dataclass

@@ -8,11 +8,12 @@ import glob
 import os
 import pwd
 import shutil
-import socket
 import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+
+from service.launcher import free_port
 
 DEFAULT = "127.0.0.1:5432"
 
@@ -60,12 +61,6 @@ def _tool(name: str) -> str:
     return found
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _throwaway() -> PgServer:
     """initdb + pg_ctl start in a fresh temporary directory; raises with the reason on failure."""
     initdb, pg_ctl = _tool("initdb"), _tool("pg_ctl")
@@ -75,7 +70,7 @@ def _throwaway() -> PgServer:
         user = pwd.getpwnam("postgres")
         os.chown(root, user.pw_uid, user.pw_gid)
         run_as = ["runuser", "-u", "postgres", "--"]
-    port = _free_port()
+    port = free_port()
     server = PgServer("127.0.0.1", port, root, run_as)
     try:
         subprocess.run([*run_as, initdb, "-D", str(root / "db"), "-U", "postgres", "--auth=trust", "-E", "UTF8"],
