@@ -213,3 +213,19 @@ def test_knot_at_every_frame_reproduces_frames(rng):
     pts = CurveSet(np.arange(5, dtype=np.int32), np.arange(6, dtype=np.int32))
     r = fit_poses(make_poses(v, None), FitOptions(segments=5), curves=pts).report
     assert r["max"] < 1e-5
+
+
+def test_topology_whose_curves_miss_a_vertex_is_an_error(fixed_fit):
+    """A vertex no curve holds has no curve id: the clip refuses it instead of gathering a wrapped-around one."""
+    from dataclasses import replace
+
+    from pdeanim.model.clipformat import decode_coefficients, decode_topology
+    from pdeanim.model.clipmodel import DynamicClip
+
+    topo = decode_topology(*container.unpack(fixed_fit.topology))
+    coef = decode_coefficients(*container.unpack(fixed_fit.coefficients), topo.curves.n_curves)
+    first = topo.curves.order[topo.curves.offsets[0]:topo.curves.offsets[1]]
+    short = CurveSet(topo.curves.order[1:], np.maximum(topo.curves.offsets - 1, 0))  # drop one vertex
+    assert len(first) > 1 and short.n_curves == topo.curves.n_curves
+    with pytest.raises(ClipFormatError, match="do not cover every vertex"):
+        DynamicClip(replace(topo, curves=short), coef)
