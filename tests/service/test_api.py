@@ -12,6 +12,7 @@ from .harness import Services, client, make_key, wait_job
 
 pytestmark = pytest.mark.slow
 UPLOAD_LIMIT = 1_500_000
+IMMUTABLE = "public, max-age=31536000, immutable"
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
 
 
@@ -89,14 +90,18 @@ def test_cyclic_clip_frame_animation_and_caching(api, clip, fish):
     cid = clip["id"]
     coef = api.get(f"/v1/clips/{cid}/coefficients")
     assert coef.status_code == 200 and coef.content[:8] == b"PDEANIM\0"
-    assert coef.headers["cache-control"] == "public, max-age=31536000, immutable"
+    assert coef.headers["cache-control"] == IMMUTABLE
     again = api.get(f"/v1/clips/{cid}/coefficients", headers={"If-None-Match": coef.headers["etag"]})
     assert again.status_code == 304 and again.content == b""
     js = api.get(f"/v1/clips/{cid}/coefficients", headers={"Accept": "application/json"})
     assert js.json()["part"] == "coefficients" and js.headers["etag"] != coef.headers["etag"]
     topo = api.get(f"/v1/meshes/{fish['id']}/topology")
     assert topo.status_code == 200 and topo.headers["etag"] == f'"{clip["topology_id"]}"'
-    assert api.get(f"/v1/meshes/{fish['id']}/topology", params={"clip_id": cid}).content == topo.content
+    assert topo.headers["cache-control"] == "no-cache"  # "the latest clip's topology" may change: revalidate
+    assert api.get(f"/v1/meshes/{fish['id']}/topology",
+                   headers={"If-None-Match": topo.headers["etag"]}).status_code == 304
+    pinned = api.get(f"/v1/meshes/{fish['id']}/topology", params={"clip_id": cid})
+    assert pinned.content == topo.content and pinned.headers["cache-control"] == IMMUTABLE  # one clip's: fixed
     frame = api.get(f"/v1/clips/{cid}/frame", params={"t": 0.37})
     assert frame.status_code == 200 and frame.headers["content-type"] == "model/gltf-binary"
     assert frame.content[:4] == b"glTF" and "etag" in frame.headers
