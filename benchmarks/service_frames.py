@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import statistics
 import sys
 import tempfile
@@ -166,6 +167,7 @@ def main() -> int:
                     print(f"frames over HTTP: {res}")
         finally:
             services.stop()
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (shared machine)")
     if args.json:
         print(json.dumps(out, indent=2))
     return 0
