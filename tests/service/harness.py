@@ -57,8 +57,8 @@ def client(services: Services, key: str | None) -> httpx.Client:
     return httpx.Client(base_url=services.url, headers=headers, timeout=60)
 
 
-def wait_job(api: httpx.Client, job_id: str, timeout: float = 120) -> dict:
-    """Poll a job until it succeeds or fails."""
+def wait_job(api: httpx.Client, job_id: str, timeout: float = 300) -> dict:
+    """Poll a job until it succeeds or fails (a generous deadline: the machine may be loaded)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         job = api.get(f"/v1/jobs/{job_id}").json()

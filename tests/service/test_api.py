@@ -224,7 +224,7 @@ def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, service
                                    "fit": {"target_rel_rms": 0.005}})
     assert r.status_code == 202, r.text
     assert r.json()["params"]["params"]["seed"] == 0  # the record keeps every parameter, seed included
-    job = wait_job(api, r.json()["id"], timeout=240)
+    job = wait_job(api, r.json()["id"], timeout=600)
     assert job["state"] == "succeeded", (job, services.logs())
     poses = np.load(io.BytesIO(api.get(f"/v1/poses/{job['result']['poses_id']}").content))
     assert poses["vertices"].shape == (12, mesh["vertices"], 3)
