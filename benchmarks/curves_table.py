@@ -150,8 +150,9 @@ def speed_row() -> None:
         t0 = time.perf_counter()
         cs = extract_curves(v, f)
         runs.append(time.perf_counter() - t0)
-    print(f"\n## Speed: extract_curves on {len(v)} vertices: median {np.median(runs):.2f} s of {len(runs)} runs "
-          f"(min {min(runs):.2f}, max {max(runs):.2f}), {cs.n_curves} curves; load average {os.getloadavg()[0]:.1f}")
+    print(f"\n## Speed: extract_curves on {len(v)} vertices: median {np.median(runs):.2f} s of {len(runs)} "
+          f"runs (min {min(runs):.2f}, max {max(runs):.2f}), {cs.n_curves} curves; "
+          f"load average {os.getloadavg()[0]:.1f}")
 
 
 def main() -> None:

@@ -71,7 +71,8 @@ def main() -> None:
     rows = [row(name, args.mode, args.pictures) for name in BODIES]
     head = (f"{'body':<13}{'V':>6}{'curves':>7}{'coef B':>8}{'topo B':>8}{'mesh B':>8}{'cycle raw B':>12}"
             f"{'rest mean':>10}{'rest max':>10}{'build s':>8}{'fps(1)':>9}{'fps(240)':>10}")
-    print(f"mode {args.mode}; rest distance = mesh vertex to PDE surface / bbox diagonal; raw = 25 frames float32; "
+    print(f"mode {args.mode}; rest distance = mesh vertex to PDE surface / bbox diagonal; "
+          "raw = 25 frames float32; "
           f"load average {os.getloadavg()[0]:.1f}")
     print(head)
     for r in rows:

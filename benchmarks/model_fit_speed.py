@@ -48,11 +48,14 @@ def main(repeats: int = 5) -> None:
         fit_poses(poses, FitOptions(target_rel_rms=1e-3), curves=curves)
         adaptive.append(time.perf_counter() - t0)
     r = parts.report
-    ms = lambda v: f"{np.median(v) * 1e3:.0f} ms (min {min(v) * 1e3:.0f}, max {max(v) * 1e3:.0f})"  # noqa: E731
+    def ms(v: list[float]) -> str:
+        return f"{np.median(v) * 1e3:.0f} ms (min {min(v) * 1e3:.0f}, max {max(v) * 1e3:.0f})"
+
     fit = np.array(spaces) + np.array(times)
     print(f"{curves.n_curves} curves x {poses.n_frames} frames ({poses.n_vertices} vertices), 4 segments; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    print(f"whole fit_poses call: {ms(totals)} (median of {repeats}; target 200 ms); rel rms {r['rel_rms']:.2e}, "
+    print(f"whole fit_poses call: {ms(totals)} (median of {repeats}; target 200 ms); "
+          f"rel rms {r['rel_rms']:.2e}, "
           f"coefficients {len(parts.coefficients)} bytes")
     print(f"  of which space stage {ms(spaces)} + time stage {ms(times)} = {ms(fit)} on prepared data")
     print(f"with target rel rms 1e-3 (adaptive segments): {ms(adaptive)} (median of {len(adaptive)})")

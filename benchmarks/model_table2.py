@@ -87,7 +87,8 @@ def row(name: str, design: int, stored: int, orig: np.ndarray, fitted: np.ndarra
     """One table row; ``design`` vector design variables, ``stored`` float values kept in all."""
     Ea, Em = paper_errors(orig, fitted)
     rms = np.sqrt(np.mean(np.sum((orig - fitted) ** 2, axis=-1))) / diag
-    return (f"{name:22s} {design:4d} {stored:6d} {Ea[0] * 1e3:9.3f} {Em[0] * 1e3:9.3f} {Ea[1] * 1e3:9.3f} {Em[1] * 1e3:9.3f} "
+    return (f"{name:22s} {design:4d} {stored:6d} {Ea[0] * 1e3:9.3f} {Em[0] * 1e3:9.3f} "
+            f"{Ea[1] * 1e3:9.3f} {Em[1] * 1e3:9.3f} "
             f"{rms:10.2e} {ms:8.3f}")
 
 
@@ -100,7 +101,8 @@ def main() -> None:
         orig = frames[:, curve]
         u = chord_parameters(orig[0][None], np.ones((1, len(curve)), bool))
         print(f"\n{label}: {len(curve)} points per frame, frames 20 and 100 (PM = {2 * len(curve)})")
-        print(f"{'method':22s} {'PBB':>4s} {'floats':>6s} {'E_A1e-3':>9s} {'E_m1e-3':>9s} {'E_A2e-3':>9s} {'E_m2e-3':>9s} "
+        print(f"{'method':22s} {'PBB':>4s} {'floats':>6s} {'E_A1e-3':>9s} {'E_m1e-3':>9s} "
+              f"{'E_A2e-3':>9s} {'E_m2e-3':>9s} "
               f"{'rel rms':>10s} {'CPU ms':>8s}")
         pts = orig[:, None]
         n = len(curve)
@@ -114,9 +116,9 @@ def main() -> None:
         print(row("cubic Bezier", 8, 24, orig, fb[:, 0], ms, diag))
         (_, fs), ms = timed(lambda p=pts, uu=u: fit_bspline(p, uu, n_ctrl=4))
         print(row("uniform cubic B-spline", 8, 24, orig, fs[:, 0], ms, diag))
-    print("\nPBB: vector-valued design variables stored (PDE: 8 knots for both frames, plus the first frame's N "
-          "points when fitting the displacement; Bezier/B-spline: 4 control points per frame). floats: every "
-          "stored value, m and D per coordinate included.")
+    print("\nPBB: vector-valued design variables stored (PDE: 8 knots for both frames, plus the first "
+          "frame's N points when fitting the displacement; Bezier/B-spline: 4 control points per frame). "
+          "floats: every stored value, m and D per coordinate included.")
     print(f"load average {os.getloadavg()[0]:.1f} (shared 2-core machine)")
 
 

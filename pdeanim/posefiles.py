@@ -1,5 +1,6 @@
 """Poses from a file of any supported kind: POSES.npz (:mod:`pdeanim.poses`) or an animated glTF
-(:mod:`pdeanim.gltf.read`). A module of its own so that ``poses`` and ``gltf.read`` do not import each other."""
+(:mod:`pdeanim.gltf.read`). A module of its own so that ``poses`` and ``gltf.read`` do not import each
+other."""
 
 from __future__ import annotations
 

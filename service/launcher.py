@@ -43,9 +43,9 @@ class Launcher:
     def spawn(self, args: list[str], name: str) -> subprocess.Popen:
         """Start ``pdeanim ARGS`` with its output appended to ``log_dir/NAME.log``."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        with open(self.log_dir / f"{name}.log", "ab") as log:  # the child keeps its own copy of the descriptor
-            return subprocess.Popen(CONSOLE + args, env=self.environment(), stdout=log, stderr=subprocess.STDOUT,
-                                    cwd=self.cwd)
+        with open(self.log_dir / f"{name}.log", "ab") as log:  # the child keeps its own descriptor
+            return subprocess.Popen(CONSOLE + args, env=self.environment(), stdout=log,
+                                    stderr=subprocess.STDOUT, cwd=self.cwd)
 
     def start_server(self, *extra: str, timeout: float = 120.0) -> str:
         """Start the API server on a free port and wait until /healthz answers 200; returns its URL."""
@@ -61,7 +61,8 @@ class Launcher:
             except httpx.HTTPError:
                 pass
             time.sleep(0.2)
-        raise RuntimeError(f"the API server did not answer /healthz within {timeout:.0f} s; see {self.log_dir}")
+        raise RuntimeError(f"the API server did not answer /healthz within {timeout:.0f} s; "
+                           f"see {self.log_dir}")
 
     def start_worker(self, *extra: str) -> subprocess.Popen:
         """Start one more ``pdeanim worker`` (log ``worker<N>.log``)."""

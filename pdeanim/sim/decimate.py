@@ -59,7 +59,8 @@ def quadric_decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) ->
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
     """Reduce to at most ``max_faces`` (T, 3) faces (unchanged if already small enough): quadric decimation
-    when fast-simplification is installed, else vertex clustering on a grid coarsened until few enough remain."""
+    when fast-simplification is installed, else vertex clustering on a grid coarsened until few enough
+    remain."""
     if len(faces) <= max_faces:
         return vertices, faces
     quadric = quadric_decimate(vertices, faces, max_faces)

@@ -46,7 +46,8 @@ def test_fit_meets_target_and_prints_summary(fit_run, poses_file):
     assert lines[0].startswith(f"fitted {frames} frames x {vertices} vertices with ")
     assert f"(rel {errors['rel_rms']:.3g})" in lines[1]
     assert lines[2].endswith(": met")
-    assert lines[3].startswith(f"bytes: topology {len(parts.topology)}, coefficients {len(parts.coefficients)}, "
+    assert lines[3].startswith(f"bytes: topology {len(parts.topology)}, "
+                               f"coefficients {len(parts.coefficients)}, "
                                f"raw float32 {frames * vertices * 12} ")
     assert lines[4].startswith("time ") and lines[4].endswith(f" s -> {clip_file}")
 

@@ -216,7 +216,7 @@ def test_knot_at_every_frame_reproduces_frames(rng):
 
 
 def test_topology_whose_curves_miss_a_vertex_is_an_error(fixed_fit):
-    """A vertex no curve holds has no curve id: the clip refuses it instead of gathering a wrapped-around one."""
+    """A vertex no curve holds has no curve id: the clip refuses it, not gathering a wrapped-around one."""
     from dataclasses import replace
 
     from pdeanim.model.clipformat import decode_coefficients, decode_topology

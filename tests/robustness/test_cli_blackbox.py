@@ -99,8 +99,8 @@ def test_bad_inputs_exit_2_with_a_message(tmp_path, capsys, ico) -> None:
 
 
 def test_unwritable_out_exits_2_before_any_work(tmp_path, capsys, ico, monkeypatch) -> None:
-    """A missing directory, a directory, and a path below a file: exit 2 with a message, checked before the fit
-    (the fit is made to fail the test if it runs) and leaving no file behind."""
+    """A missing directory, a directory, and a path below a file: exit 2 with a message, checked before the
+    fit (the fit is made to fail the test if it runs) and leaving no file behind."""
     import pdeanim.model.fitclip as fitclip
 
     poses = sphere_poses(tmp_path / "p.npz", 3, np.asarray(ico.vertices), np.asarray(ico.faces))

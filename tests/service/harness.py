@@ -22,7 +22,8 @@ def process_env(backend: Backend, **extra: str) -> dict[str, str]:
     """The environment of a service process on ``backend`` (fast polls for tests). The lease is 10 s, not the
     fastest the tests could use: on a loaded machine a 3 s lease expired between heartbeats and the job ran
     a second attempt that tests asserting ``attempt == 1`` saw."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PDEANIM_LEASE_SECONDS": "10", "PDEANIM_POLL_SECONDS": "0.2",
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PDEANIM_LEASE_SECONDS": "10",
+           "PDEANIM_POLL_SECONDS": "0.2",
            "PDEANIM_BACKOFF_SECONDS": "0.5", "PDEANIM_SHUTDOWN_GRACE_SECONDS": "5", **backend.env, **extra}
     return env
 

@@ -1,6 +1,6 @@
-"""The PostgreSQL server of the tests: the one on ``PDEANIM_TEST_PG`` (default 127.0.0.1:5432, trust auth) if it
-answers, else a throwaway cluster that the tests start themselves (initdb + pg_ctl in a temporary directory on
-a free port, as the ``postgres`` user when run as root) and stop at the end of the session."""
+"""The PostgreSQL server of the tests: the one on ``PDEANIM_TEST_PG`` (default 127.0.0.1:5432, trust auth)
+if it answers, else a throwaway cluster that the tests start themselves (initdb + pg_ctl in a temporary
+directory on a free port, as the ``postgres`` user when run as root) and stop at the end of the session."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ DEFAULT = "127.0.0.1:5432"
 
 @dataclass
 class PgServer:
-    """Where a PostgreSQL server listens (user ``postgres``, trust auth), and how to stop it if we started it."""
+    """Where a PostgreSQL server listens (user ``postgres``, trust auth), and how to stop one we started."""
 
     host: str
     port: int
@@ -36,8 +36,8 @@ class PgServer:
     def stop(self) -> None:
         if self.data_dir is None:
             return
-        subprocess.run([*(self.run_as or []), _tool("pg_ctl"), "-D", str(self.data_dir / "db"), "-m", "immediate",
-                        "-w", "stop"], capture_output=True, check=False, timeout=120)
+        subprocess.run([*(self.run_as or []), _tool("pg_ctl"), "-D", str(self.data_dir / "db"),
+                        "-m", "immediate", "-w", "stop"], capture_output=True, check=False, timeout=120)
         shutil.rmtree(self.data_dir, ignore_errors=True)
 
 
@@ -54,8 +54,8 @@ def _reachable(host: str, port: int) -> str | None:
 
 def _tool(name: str) -> str:
     """A PostgreSQL server program from PATH or Debian's /usr/lib/postgresql/*/bin."""
-    found = shutil.which(name) or next(iter(sorted(glob.glob(f"/usr/lib/postgresql/*/bin/{name}"), reverse=True)),
-                                       None)
+    debian = sorted(glob.glob(f"/usr/lib/postgresql/*/bin/{name}"), reverse=True)
+    found = shutil.which(name) or (debian[0] if debian else None)
     if not found:
         raise FileNotFoundError(f"{name} is not installed (apt-get install postgresql)")
     return found
@@ -73,15 +73,16 @@ def _throwaway() -> PgServer:
     port = free_port()
     server = PgServer("127.0.0.1", port, root, run_as)
     try:
-        subprocess.run([*run_as, initdb, "-D", str(root / "db"), "-U", "postgres", "--auth=trust", "-E", "UTF8"],
-                       capture_output=True, check=True, timeout=300)
+        subprocess.run([*run_as, initdb, "-D", str(root / "db"), "-U", "postgres", "--auth=trust",
+                        "-E", "UTF8"], capture_output=True, check=True, timeout=300)
         subprocess.run([*run_as, pg_ctl, "-D", str(root / "db"), "-l", str(root / "log"), "-w", "-t", "120",
                         "-o", f"-p {port} -k {root} -c listen_addresses=127.0.0.1 -c fsync=off", "start"],
                        capture_output=True, check=True, timeout=180)
     except (OSError, subprocess.SubprocessError) as exc:
         detail = getattr(exc, "stderr", b"") or b""
         server.stop()
-        raise RuntimeError(f"could not start a throwaway PostgreSQL: {exc} {detail.decode(errors='replace')}") from exc
+        why = detail.decode(errors="replace")
+        raise RuntimeError(f"could not start a throwaway PostgreSQL: {exc} {why}") from exc
     return server
 
 

@@ -182,7 +182,8 @@ def test_crashed_job_process_is_retried_and_the_worker_survives(services, api, m
 def test_out_of_memory_fails_after_max_attempts_and_the_worker_survives(services, api, mesh_id):
     """Every attempt must end in the memory limit's MemoryError ("out_of_memory"), not in the job timeout: the
     timeout is set far above the attempts' run time so that only the limit can stop them."""
-    services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(520 * 2**20), "PDEANIM_JOB_TIMEOUT_SECONDS": "600"})
+    services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(520 * 2**20),
+                               "PDEANIM_JOB_TIMEOUT_SECONDS": "600"})
     worker = services.start_worker()
     job_id = submit(api, mesh_id, HEAVY)
     job = wait_job(api, job_id, timeout=300)

@@ -66,8 +66,9 @@ def test_large_surfaces_are_decimated_before_fTetWild(tmp_path):
 
 
 def test_cache_key_names_the_decimation_method_only_when_it_applies(spot_path, monkeypatch):
-    """Quadric decimation and vertex clustering give different surfaces, hence different tets: a large surface's
-    key changes with the method (injected here), a surface below the limit is never decimated and keeps it."""
+    """Quadric decimation and vertex clustering give different surfaces, hence different tets: a large
+    surface's key changes with the method (injected here); a surface below the limit is never decimated and
+    keeps its key."""
     import pdeanim.sim.tetra as tetra
 
     spot = load_mesh(spot_path)
