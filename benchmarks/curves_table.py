@@ -15,6 +15,7 @@ Run: .venv/bin/python benchmarks/curves_table.py [--quick]
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -144,10 +145,14 @@ def speed_row() -> None:
     """Print the extraction time on bob subdivided once (about 22k vertices)."""
     m = trimesh.load(DATA / "bob.obj", process=False)
     v, f = trimesh.remesh.subdivide(np.asarray(m.vertices), np.asarray(m.faces))
-    t0 = time.perf_counter()
-    cs = extract_curves(v, f)
-    print(f"\n## Speed: extract_curves on {len(v)} vertices: {time.perf_counter() - t0:.2f} s, {cs.n_curves} "
-          f"curves")
+    runs = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        cs = extract_curves(v, f)
+        runs.append(time.perf_counter() - t0)
+    print(f"\n## Speed: extract_curves on {len(v)} vertices: median {np.median(runs):.2f} s of {len(runs)} "
+          f"runs (min {min(runs):.2f}, max {max(runs):.2f}), {cs.n_curves} curves; "
+          f"load average {os.getloadavg()[0]:.1f}")
 
 
 def main() -> None:

@@ -9,6 +9,7 @@ Usage: python benchmarks/cyclic_table.py [--mode trout] [--pictures DIR]
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -26,14 +27,14 @@ BODIES = ["fish_capsule", "fish_trout", "fish_eel"]
 
 
 def fps(clip: object, batch: int) -> float:
-    """Frames evaluated per second, in batches of the given size (best of three)."""
+    """Frames evaluated per second, in batches of the given size (median of seven)."""
     t = np.linspace(0.0, 1.0, batch, endpoint=False)
-    best = np.inf
-    for _ in range(3):
+    runs = []
+    for _ in range(7):
         start = time.perf_counter()
         clip.evaluate(t if batch > 1 else 0.37)
-        best = min(best, time.perf_counter() - start)
-    return batch / best
+        runs.append(time.perf_counter() - start)
+    return batch / float(np.median(runs))
 
 
 def row(name: str, mode: str, pictures: Path | None) -> dict:
@@ -70,8 +71,9 @@ def main() -> None:
     rows = [row(name, args.mode, args.pictures) for name in BODIES]
     head = (f"{'body':<13}{'V':>6}{'curves':>7}{'coef B':>8}{'topo B':>8}{'mesh B':>8}{'cycle raw B':>12}"
             f"{'rest mean':>10}{'rest max':>10}{'build s':>8}{'fps(1)':>9}{'fps(240)':>10}")
-    print(f"mode {args.mode}; rest distance = mesh vertex to PDE surface / bbox diagonal; raw = 25 frames "
-          f"float32")
+    print(f"mode {args.mode}; rest distance = mesh vertex to PDE surface / bbox diagonal; "
+          "raw = 25 frames float32; "
+          f"load average {os.getloadavg()[0]:.1f}")
     print(head)
     for r in rows:
         print(f"{r['body']:<13}{r['V']:>6}{r['curves']:>7}{r['coef_B']:>8}{r['topo_B']:>8}{r['mesh_B']:>8}"

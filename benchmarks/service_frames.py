@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import statistics
 import sys
 import tempfile
@@ -25,7 +26,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from service.demo import FIT, SCENE, DemoServices, StageClock, _key  # noqa: E402
+from service.demo import FIT, SCENE, DemoServices, StageClock  # noqa: E402
+from service.settings import Settings  # noqa: E402
+from service.store.tenants import issue_key  # noqa: E402
 
 SPOT = ROOT / "tests" / "data" / "spot.obj"
 
@@ -142,7 +145,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as tmp:
         services = DemoServices(Path(tmp), args.api_processes)
         try:
-            key, url = _key(Path(tmp)), services.start()
+            key, url = issue_key(Settings(data_dir=Path(tmp)), "bench"), services.start()
             with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=300) as api:
                 job, stages, total = run_job(api, "spot.obj", SPOT.read_bytes(), SCENE, FIT)
                 out["demo_job"] = {"total_s": round(total, 2), "stages_s": {k: round(v, 2) for k, v in stages.items()}}
@@ -164,6 +167,7 @@ def main() -> int:
                     print(f"frames over HTTP: {res}")
         finally:
             services.stop()
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (shared machine)")
     if args.json:
         print(json.dumps(out, indent=2))
     return 0

@@ -34,11 +34,11 @@ class CurveSet:
         return np.diff(self.offsets)
 
     def curve_of_vertex(self, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-        """(V,) curve id and (V,) position along its curve, for every vertex."""
+        """(V,) curve id and (V,) position along its curve for every vertex; -1 where no curve holds one."""
         curve = np.repeat(np.arange(self.n_curves, dtype=np.int32), self.lengths)
         pos = np.arange(len(self.order), dtype=np.int32) - np.repeat(self.offsets[:-1], self.lengths)
-        cid = np.empty(n_vertices, np.int32)
-        idx = np.empty(n_vertices, np.int32)
+        cid = np.full(n_vertices, -1, np.int32)
+        idx = np.full(n_vertices, -1, np.int32)
         cid[self.order] = curve
         idx[self.order] = pos
         return cid, idx

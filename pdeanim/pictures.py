@@ -155,7 +155,7 @@ def error_png(vertices: np.ndarray, faces: np.ndarray | None, per_vertex_error: 
         note += f"; faces subsampled to {MAX_FACES} per view"
     fig.suptitle(f"{title}\n{note}", fontsize=10)
     path = Path(path)
-    fig.savefig(path, format="png")
+    fig.savefig(path, format="png", metadata={"Title": title, "Description": note})  # readable without OCR
     return path
 
 
@@ -193,7 +193,7 @@ def error_curve_png(per_frame_rms: np.ndarray, per_frame_max: np.ndarray, times:
     ax.legend(loc="upper left" if right else "upper right", fontsize=8, framealpha=0.9)
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, format="png")
+    fig.savefig(path, format="png", metadata={"Title": title, "Description": f"worst frame {worst}"})
     return path
 
 

@@ -126,28 +126,14 @@ def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None)
     return make_poses(vertices, faces, times, {"source": "npz"}, limits)
 
 
-def load_poses(path: str | Path, fps: float = DEFAULT_FPS, limits: PoseLimits | None = None) -> Poses:
-    """Read poses from a .npz or an animated .glb/.gltf (sampled at ``fps``)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".npz":
-        return load_poses_npz(path, limits)
-    if suffix in (".glb", ".gltf"):
-        from .gltf.read import read_animated_poses  # glTF reading lives with the glTF code
-
-        return read_animated_poses(path, fps=fps, limits=limits)
-    raise PosesInputError(f"unsupported poses file type {suffix!r}: use .npz, .glb or .gltf")
-
-
 def save_poses(path: str | Path, poses: Poses) -> None:
-    """Write POSES.npz with float32 vertices, int32 faces and float64 times."""
-    with open(path, "wb") as fh:
-        np.savez_compressed(fh, vertices=poses.vertices.astype(np.float32), faces=poses.faces.astype(np.int32),
-                            times=poses.times.astype(np.float64))
+    """Write POSES.npz (the bytes of :func:`poses_to_bytes`)."""
+    Path(path).write_bytes(poses_to_bytes(poses))
 
 
 def poses_to_bytes(poses: Poses) -> bytes:
-    """The POSES.npz file as bytes (what ``GET /v1/poses/{id}`` serves)."""
+    """The POSES.npz file as bytes, float32 vertices, int32 faces and float64 times (what
+    ``GET /v1/poses/{id}`` serves and ``pdeanim simulate`` writes)."""
     buf = io.BytesIO()
     np.savez_compressed(buf, vertices=poses.vertices.astype(np.float32), faces=poses.faces.astype(np.int32),
                         times=poses.times.astype(np.float64))

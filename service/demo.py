@@ -5,9 +5,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -16,10 +13,11 @@ from pathlib import Path
 
 import httpx
 
-from service.cli import CONSOLE
+from .launcher import Launcher
+from .settings import Settings
+from .store.tenants import issue_key
 
 SAMPLE_MESH = Path(__file__).resolve().parents[1] / "tests" / "data" / "spot.obj"
-CLI = CONSOLE
 SCENE = {"frames": 60, "target_tets": 1500}
 FIT = {"target_rel_rms": 0.002}
 
@@ -46,71 +44,23 @@ class StageClock:
             self.current = None
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _bar(fraction: float, stage: str, width: int = 30) -> str:
     done = int(round(width * min(max(fraction, 0.0), 1.0)))
     return f"\r  [{'#' * done}{'.' * (width - done)}] {100 * fraction:5.1f}%  {stage[:50]:<50}"
 
 
-class DemoServices:
-    """The API server and one worker as child processes, stopped with SIGTERM."""
+class DemoServices(Launcher):
+    """The API server (``api_processes`` uvicorn processes) and one worker on ``data_dir``."""
 
     def __init__(self, data_dir: Path, api_processes: int = 1):
-        self.env = {**os.environ, "PDEANIM_DATA_DIR": str(data_dir)}
-        self.port, self.api_processes = _free_port(), api_processes
-        self.procs: list[subprocess.Popen] = []
-        self.log = open(data_dir / "services.log", "ab")  # noqa: SIM115 - closed in stop()
+        super().__init__(data_dir / "logs", env={**os.environ, "PDEANIM_DATA_DIR": str(data_dir)})
+        self.api_processes = api_processes
 
     def start(self) -> str:
         """Start both processes and wait for /healthz; returns the base URL."""
-        serve = ["serve", "--port", str(self.port), "--workers", str(self.api_processes)]
-        for args in (serve, ["worker", "--log-level", "WARNING"]):
-            self.procs.append(subprocess.Popen(CLI + args, env=self.env, stdout=self.log, stderr=subprocess.STDOUT))
-        url = f"http://127.0.0.1:{self.port}"
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline:
-            if self.procs[0].poll() is not None:
-                raise RuntimeError("the API server exited; see services.log in the data directory")
-            try:
-                if httpx.get(url + "/healthz", timeout=1).status_code == 200:
-                    return url
-            except httpx.HTTPError:
-                time.sleep(0.2)
-        raise RuntimeError("the API server did not answer /healthz within 90 s")
-
-    def stop(self) -> None:
-        """SIGTERM both and wait (kill after 30 s)."""
-        for proc in self.procs:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
-        for proc in self.procs:
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-        self.log.close()
-
-
-def _key(data_dir: Path) -> str:
-    from sqlalchemy.orm import Session
-
-    from .settings import Settings
-    from .store.context import Store
-    from .store.tenants import create_key
-
-    store = Store.open(Settings(data_dir=data_dir), run_migrations=True)
-    try:  # one write transaction from the start: SQLite fails a read that upgrades after another commit
-        with Session(store.engine.execution_options(immediate=True)) as session:
-            key, _ = create_key(session, "demo")
-            session.commit()
-        return key
-    finally:
-        store.close()
+        url = self.start_server("--workers", str(self.api_processes))
+        self.start_worker("--log-level", "WARNING")
+        return url
 
 
 def _follow(api: httpx.Client, job_id: str) -> tuple[dict, dict[str, float]]:
@@ -149,7 +99,7 @@ def run_demo(mesh: Path | None, out_dir: Path, data_dir: Path | None, keep: bool
     print(f"pdeanim demo: data in {data_dir}, outputs in {out_dir}")
     services = DemoServices(data_dir)
     try:
-        key = _key(data_dir)
+        key = issue_key(Settings(data_dir=data_dir), "demo")
         url, t_start = _timed(services.start)
         print(f"  service and worker up at {url} ({t_start:.1f} s)")
         with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=120) as api:

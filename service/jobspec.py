@@ -5,7 +5,6 @@ API starts even when a stage is not installed in this build."""
 from __future__ import annotations
 
 import importlib
-from importlib import metadata
 from typing import Any
 
 from pdeanim.errors import ParameterError
@@ -16,7 +15,6 @@ OPTIONS = {
     "cyclic": "pdeanim.cyclic.job:CyclicOptions",
     "export": "pdeanim.gltf.clipexport:ExportOptions",
 }
-DISTRIBUTIONS = ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild", "meshoptimizer")
 
 
 class StageUnavailable(RuntimeError):
@@ -51,14 +49,3 @@ def normalize_request(kind: str, params: dict[str, Any], then_fit: bool, fit: di
     if then_fit:
         spec["fit"] = normalize("fit", fit)
     return spec
-
-
-def library_versions() -> dict[str, str]:
-    """Installed versions of the distributions whose code produces results."""
-    out = {}
-    for name in DISTRIBUTIONS:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "absent"
-    return out

@@ -69,9 +69,3 @@ class Settings(BaseSettings):
         path = self.resolved_data_dir() / "tmp"
         path.mkdir(parents=True, exist_ok=True)
         return path
-
-    def cache_dir(self) -> Path:
-        """Per-machine cache of expensive intermediate results (tetrahedral meshes)."""
-        path = self.resolved_data_dir() / "cache"
-        path.mkdir(parents=True, exist_ok=True)
-        return path

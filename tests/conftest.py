@@ -5,6 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# No per-example deadline anywhere: on a loaded, shared machine an example can take seconds, and the default
+# 200 ms deadline then fails tests that are correct.
+settings.register_profile("pdeanim", deadline=None)
+settings.load_profile("pdeanim")
 
 DATA = Path(__file__).parent / "data"
 

@@ -13,7 +13,7 @@ import socket
 import threading
 import time
 
-from service.jobspec import library_versions
+from pdeanim.records import library_versions
 from service.settings import Settings
 from service.store.context import Store
 from service.store.models import ClipRecord, Mesh, PosesRecord

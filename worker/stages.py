@@ -3,33 +3,18 @@ modules are imported here, lazily, so the worker starts even before a stage exis
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from pdeanim.poses import poses_to_bytes
 from pdeanim.progress import Progress, sub_progress
+from pdeanim.records import jsonable
 from service.settings import Settings
 from service.store.blobs import BlobStore
 
 Partial = Callable[[dict], None]  # hands a part of the result to the parent before the stage goes on
 SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
-
-
-def jsonable(value: Any) -> Any:
-    """``value`` with numpy scalars/arrays as Python values and non-finite floats as None (JSON-safe)."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
-    if hasattr(value, "tolist"):
-        return jsonable(value.tolist())
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if value is None or isinstance(value, bool | int | str):
-        return value
-    return str(value)
 
 
 def _mesh(job: dict, blobs: BlobStore, settings: Settings):  # noqa: ANN202 - SurfaceMesh

@@ -9,8 +9,9 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
-from ..errors import InputError, PdeanimError
+from ..errors import InputError, ParameterError, PdeanimError
 
 COMMANDS = [f"{__name__}.{name}" for name in ("simulate", "fit", "frame", "export", "cyclic")]
 
@@ -27,6 +28,22 @@ def build_parser(extra_commands: Sequence[str] = ()) -> argparse.ArgumentParser:
     return parser
 
 
+def check_writable(path: str) -> None:
+    """Raise ParameterError unless the file ``path`` can be created or overwritten: it is tried by opening it
+    for appending (a new file is removed again), which also catches read-only file systems and root."""
+    target = Path(path)
+    if target.is_dir():
+        raise ParameterError(f"--out {path} is a directory, not a file")
+    existed = target.exists()
+    try:
+        with open(target, "ab"):
+            pass
+    except OSError as exc:
+        raise ParameterError(f"--out {path} cannot be written: {exc.strerror or exc}") from exc
+    if not existed:
+        target.unlink()
+
+
 def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> int:
     """Entry point: parse, run the sub-command, and turn library errors into a message and exit code 2."""
     parser = build_parser(extra_commands)
@@ -35,6 +52,8 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> i
         parser.print_help()
         return 2
     try:
+        if args.command in {m.rpartition(".")[2] for m in COMMANDS} and getattr(args, "out", None):
+            check_writable(args.out)  # before any work: a long fit must not end in an unwritable path
         return int(args.func(args) or 0)
     except InputError as exc:
         print(f"pdeanim {args.command}: error: {exc}", file=sys.stderr)

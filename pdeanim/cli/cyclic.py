@@ -55,13 +55,9 @@ def register(subparsers: Any) -> None:
 
 
 def _load(path: str) -> Any:
-    """The mesh via pdeanim.mesh.io when present, else trimesh."""
-    try:
-        from ..mesh.io import load_mesh
-    except ImportError:  # pragma: no cover - the mesh module ships with the package
-        import trimesh
+    """The mesh, read and checked by :func:`pdeanim.mesh.io.load_mesh`."""
+    from ..mesh.io import load_mesh
 
-        return trimesh.load(path, force="mesh", process=False)
     return load_mesh(path)
 
 

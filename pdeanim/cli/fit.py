@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     """Load, fit, write the clip, print a short summary."""
     from ..clip import write_clip_file
     from ..model.fitclip import FitOptions, fit_poses
-    from ..poses import load_poses
+    from ..posefiles import load_poses
 
     if not args.fps > 0:
         raise ParameterError(f"--fps must be > 0, got {args.fps}")

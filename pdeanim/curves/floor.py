@@ -42,11 +42,6 @@ class FloorReport:
     per_curve_rms: np.ndarray = field(repr=False)
     per_curve_max: np.ndarray = field(repr=False)
 
-    def summary(self) -> dict:
-        """JSON-ready scalars."""
-        return {"motion": self.motion, "rms": self.rms, "max": self.max, "rel_rms": self.rel_rms,
-                "rel_max": self.rel_max, "curves": int(len(self.per_curve_rms))}
-
 
 def chord_parameters(rest: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """(C, N) float64 chord-length parameter in [0, 1] on the rest positions (V, 3); padding gets 1."""

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ClipFormatError
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
@@ -39,6 +40,8 @@ class DynamicClip:
         self.segment_t = np.asarray(coef.segment_t, np.float64)
         self._segment_list = [float(x) for x in self.segment_t]
         self._cid, _ = topo.curves.curve_of_vertex(self.n_vertices)
+        if self.n_vertices and not (self._cid.min() >= 0 and self._cid.max() < topo.curves.n_curves):
+            raise ClipFormatError("the topology's curves do not cover every vertex (corrupt topology)")
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
@@ -110,7 +113,8 @@ class DynamicClip:
     def _frame(self, s: int, tau: float, out: np.ndarray | None = None) -> np.ndarray:
         """(V, 3) float32 positions (before any rigid motion) in segment s at local time tau."""
         phi = self._time[s].pair(tau)  # (2, C*3) float32, item order
-        both = np.take(phi.reshape(-1), self._gather, out=self._scratch(), mode="wrap")  # indices in range
+        # every curve id was checked in __init__; mode="wrap" only avoids the buffered out= of "raise"
+        both = np.take(phi.reshape(-1), self._gather, out=self._scratch(), mode="wrap")
         np.multiply(both, self._pair_fields[s], out=both)  # [phi0 * P[s], phi1 * P[s+1]] per value
         n = len(self._base_flat)
         if out is None:
@@ -197,7 +201,8 @@ class _SegmentTime:
         if nt:  # (phi0, phi1) = ((1 - tau)^(2k+1), tau^(2k+1)) @ table: one small product, no float64 sine
             g[:, ne:ne + nt] = np.power(np.array([[1.0 - tau], [tau]]), _ODD) @ self.trig_table
         g[0, ne + nt:], g[1, ne + nt:] = 1.0 - tau, tau
-        return np.take(g.astype(np.float32), self.position, axis=1, mode="wrap")  # same dtype: no buffering
+        # position is a permutation of range(n) (an argsort), never out of range; "wrap": no buffering
+        return np.take(g.astype(np.float32), self.position, axis=1, mode="wrap")
 
 
 def clip_from_parts(topo_header: dict[str, Any], topo_arrays: dict[str, np.ndarray],

@@ -252,14 +252,6 @@ def _sinh_ratio(tau: np.ndarray, m: np.ndarray) -> np.ndarray:
     return np.where(m < 1e-12, tau, big)
 
 
-def time_basis_signed(tau: np.ndarray, mu: np.ndarray | float) -> np.ndarray:
-    """Time pair with a signed constant: mu > 0 is exp with m = mu, mu < 0 trig with m = -mu. (..., F, 2)."""
-    mu = np.asarray(mu, dtype=np.float64)
-    e = time_basis(tau, np.maximum(mu, 0.0), "exp")
-    t = time_basis(tau, np.clip(-mu, 0.0, np.pi * 0.999), "trig")
-    return np.where((mu < 0)[..., None, None], t, e)
-
-
 def time_basis_paper(t: np.ndarray, m: np.ndarray | float, time_kind: str) -> np.ndarray:
     """The paper's time basis {e^{mt}, e^{-mt}} or {cos mt, sin mt}, (..., F, 2) (reference only)."""
     t = np.asarray(t, dtype=np.float64)

@@ -118,13 +118,9 @@ class FitOptions:
 
 
 def default_curves(rest: np.ndarray, faces: np.ndarray, curve_points: int = 10) -> CurveSet:
-    """Curves of the curve-extraction package when installed, else the simple fallback layout."""
-    try:
-        from ..curves.extract import extract_curves
-    except ImportError:
-        from .simplecurves import simple_curves
+    """Curves of :func:`pdeanim.curves.extract.extract_curves` for the rest pose (V, 3) and faces (T, 3)."""
+    from ..curves.extract import extract_curves
 
-        return simple_curves(rest, max_points=2 * curve_points)
     return extract_curves(np.asarray(rest, np.float64), faces if len(faces) else None, target_points=curve_points)
 
 

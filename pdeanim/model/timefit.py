@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from ..errors import PdeanimError
 from .families import MU_TRIG_MAX, time_pair
 from .segments import Segmentation
 
@@ -125,15 +126,20 @@ def solve_knots(b: np.ndarray, segm: Segmentation, mu: np.ndarray, loop: bool = 
         carry[:, 0, 0] = R[:, 1, 1]
         carry[:, 0, 2:] = R[:, 1, 2:]
     z = np.empty((K, S + 1, W))
-    z[:, S] = _safe_div(carry[:, 0, 2:], carry[:, 0, :1])
+    z[:, S] = _pivot_divide(carry[:, 0, 2:], carry[:, 0, :1], S)
     for s in range(S - 1, -1, -1):
-        z[:, s] = _safe_div(rows[s, :, 2:] - rows[s, :, 1:2] * z[:, s + 1], rows[s, :, :1])
+        z[:, s] = _pivot_divide(rows[s, :, 2:] - rows[s, :, 1:2] * z[:, s + 1], rows[s, :, :1], s)
     return z
 
 
-def _safe_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
-    ok = np.abs(den) > 1e-300
-    return np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+def _pivot_divide(num: np.ndarray, den: np.ndarray, knot: int) -> np.ndarray:
+    """num / den for the back substitution of knot ``knot``. A zero pivot means no frame determines the knot
+    (e.g. a single frame): an error, not a knot silently set to 0."""
+    bad = ~(np.abs(den[:, 0]) > 1e-300)
+    if bad.any():
+        raise PdeanimError(f"time fit: knot {knot} is not determined by any frame for {int(bad.sum())} of "
+                           f"{len(bad)} tracks (zero pivot); every knot needs a frame with weight on it")
+    return num / den
 
 
 def _solve_knots_dense(b: np.ndarray, segm: Segmentation, mu: np.ndarray, loop: bool) -> np.ndarray:

@@ -8,6 +8,8 @@ and rebuilds a clean volume.
 
 from __future__ import annotations
 
+from importlib.metadata import PackageNotFoundError, version
+
 import numpy as np
 
 
@@ -35,6 +37,15 @@ def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, cell: float) -> tu
     return means, new_faces[np.sort(first)]
 
 
+def decimation_method() -> str:
+    """Which reduction :func:`decimate` applies here, with the library version it depends on (part of the tet
+    cache key: another method gives another surface and so other tets)."""
+    try:
+        return f"quadric fast-simplification {version('fast-simplification')}"
+    except PackageNotFoundError:
+        return "vertex-clustering"
+
+
 def quadric_decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray] | None:
     """Quadric decimation via trimesh when fast-simplification is importable, else None."""
     try:
@@ -47,7 +58,9 @@ def quadric_decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) ->
 
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """Cluster until at most ``max_faces`` (T, 3) faces remain (unchanged if already small enough)."""
+    """Reduce to at most ``max_faces`` (T, 3) faces (unchanged if already small enough): quadric decimation
+    when fast-simplification is installed, else vertex clustering on a grid coarsened until few enough
+    remain."""
     if len(faces) <= max_faces:
         return vertices, faces
     quadric = quadric_decimate(vertices, faces, max_faces)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import time
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ from ..errors import LimitError, ParameterError
 from ..mesh.io import SurfaceMesh
 from ..poses import Poses, make_poses
 from ..progress import Progress, sub_progress
+from ..records import library_versions
 from . import kernels
 from .drivers import build_kinematics
 from .embedding import Embedding, embed_vertices
@@ -106,7 +106,7 @@ def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene:
             "substeps": substeps, "substeps_capped": capped, "dt": dt, "colors": model.elements.n_colors,
             "backend": model.backend, "ground": None if model.ground is None else
             {"point": list(model.ground.point), "normal": list(model.ground.normal), "friction": model.ground.friction},
-            "seconds": round(time.perf_counter() - started, 3), "versions": versions()}
+            "seconds": round(time.perf_counter() - started, 3), "versions": library_versions()}
     return make_poses(frames, faces, times, meta)
 
 
@@ -130,14 +130,3 @@ def simulate_mesh(mesh: SurfaceMesh, scene: SceneParams, progress: Progress | No
     poses.meta.update(tetrahedralize_seconds=round(tet_seconds, 3), mesh_hash=mesh.content_hash,
                       source_file=mesh.source)
     return poses
-
-
-def versions() -> dict:
-    """Versions of the libraries that determine the result, for the job record."""
-    out = {}
-    for name in ("pdeanim", "numpy", "scipy", "trimesh", "pytetwild", "numba"):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = None
-    return out

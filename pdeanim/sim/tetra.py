@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import ParameterError, TetrahedralizationError
 from ..mesh.io import SurfaceMesh
-from .decimate import decimate
+from .decimate import decimate, decimation_method
 from .tetmesh import TetMesh, clean_tet_mesh
 
 TETS_PER_EDGE_CUBE = 10.0
@@ -59,9 +59,11 @@ def edge_length_for(volume: float, target_tets: int) -> float:
 
 
 def cache_key(mesh: SurfaceMesh, params: TetParams) -> str:
-    """Hex key of (mesh content, parameters, pytetwild version) under which a result is cached."""
-    blob = json.dumps({"mesh": mesh.content_hash, "params": asdict(params), "pytetwild": version("pytetwild")},
-                      sort_keys=True)
+    """Hex key of (mesh content, parameters, pytetwild version, and the decimation method with its library
+    version when the surface is large enough to be decimated) under which a result is cached."""
+    reduced = decimation_method() if len(mesh.faces) > params.max_surface_faces else None
+    blob = json.dumps({"mesh": mesh.content_hash, "params": asdict(params), "pytetwild": version("pytetwild"),
+                       "decimation": reduced}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 

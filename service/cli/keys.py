@@ -16,20 +16,8 @@ def register(subparsers) -> None:  # noqa: ANN001
 
 def run(args: argparse.Namespace) -> int:
     """Create the key (migrating the database first) and print it on stdout."""
-    from sqlalchemy.orm import Session
-
     from service.settings import Settings
-    from service.store.context import Store
-    from service.store.tenants import create_key
+    from service.store.tenants import issue_key
 
-    store = Store.open(Settings(), run_migrations=True)
-    try:
-        # one write transaction from the start (BEGIN IMMEDIATE on SQLite): a read that later writes would fail
-        # with "database is locked" when the running service committed in between
-        with Session(store.engine.execution_options(immediate=True)) as session:
-            key, _ = create_key(session, args.tenant)
-            session.commit()
-    finally:
-        store.close()
-    print(key)
+    print(issue_key(Settings(), args.tenant))
     return 0

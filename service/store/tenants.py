@@ -8,6 +8,8 @@ import secrets
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from ..settings import Settings
+from .context import Store
 from .models import ApiKey, Tenant
 
 KEY_PREFIX = "pda_"
@@ -28,6 +30,21 @@ def create_key(session: Session, tenant_name: str) -> tuple[str, Tenant]:
     key = KEY_PREFIX + secrets.token_urlsafe(32)
     session.add(ApiKey(tenant_id=tenant.id, key_hash=hash_key(key), prefix=key[:10]))
     return key, tenant
+
+
+def issue_key(settings: Settings, tenant_name: str) -> str:
+    """Migrate the database, create a key for ``tenant_name`` (and the tenant if new), commit, return the key:
+    what ``pdeanim keys create``, the demo and the tests use. One write transaction from the start (BEGIN
+    IMMEDIATE on SQLite): a read that later writes would fail with "database is locked" when the running
+    service committed in between."""
+    store = Store.open(settings, run_migrations=True)
+    try:
+        with Session(store.engine.execution_options(immediate=True)) as session:
+            key, _ = create_key(session, tenant_name)
+            session.commit()
+        return key
+    finally:
+        store.close()
 
 
 def tenant_for_key(session: Session, key: str) -> str | None:

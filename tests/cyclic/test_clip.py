@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,8 @@ from pdeanim import container
 from pdeanim.clip import Clip, ClipParts, load_clip, read_clip_file, write_clip_file
 from pdeanim.cyclic.clipcyclic import clip_from_parts
 from pdeanim.errors import ClipFormatError
+from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb
+from pdeanim.gltf.validate import assert_clean, validate_many
 
 
 def test_parts_follow_the_clip_contract(trout_parts):
@@ -67,20 +71,19 @@ def test_broken_parts_raise(trout_parts):
     other = container.pack({**th, "producer": "x"}, ta)
     with pytest.raises(ClipFormatError):
         load_clip(other, trout_parts.coefficients)  # topology_id mismatch
-    assert isinstance(ClipParts(trout_parts.topology, trout_parts.coefficients), ClipParts)
+    parts = ClipParts(trout_parts.topology, trout_parts.coefficients)
+    assert parts.topology_id == ch["topology_id"] == hashlib.sha256(trout_parts.topology).hexdigest()
+    sizes = parts.sizes(n_frames=25, n_vertices=len(ta["rest"]))
+    assert sizes["raw_float32_bytes"] == 25 * len(ta["rest"]) * 12
+    assert sizes["ratio_total_to_raw"] == pytest.approx(
+        (len(trout_parts.topology) + len(trout_parts.coefficients)) / sizes["raw_float32_bytes"])
 
 
 def test_looping_glb_is_valid(trout_clip):
-    validate = pytest.importorskip("pdeanim.gltf.validate")
-    export = pytest.importorskip("pdeanim.gltf.clipexport")
-    glb = export.clip_animation_glb(trout_clip, fps=30)
-    frame = export.clip_frame_glb(trout_clip, 0.37)
-    try:
-        reports = validate.validate_many([glb, frame])
-    except validate.ValidatorUnavailable as exc:
-        pytest.skip(str(exc))
-    for report in reports:
-        assert report["issues"]["numErrors"] == 0, validate.issue_lines(report)
+    glb = clip_animation_glb(trout_clip, fps=30)
+    frame = clip_frame_glb(trout_clip, 0.37)
+    for report, label in zip(validate_many([glb, frame]), ("animation", "frame"), strict=True):
+        assert_clean(report, label)
 
 
 def test_pde_surface_representation_moves_with_the_mesh(trout_clip):

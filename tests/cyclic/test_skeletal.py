@@ -7,10 +7,9 @@ import pytest
 
 from pdeanim.cyclic.skeletal import StepParams, cycle_world_matrices, foot_and_hip_offsets, step_cycle
 from pdeanim.errors import InputError, ParameterError
+from pdeanim.gltf import skin
 
 from .rig import JOINTS, rest_positions, rig_geometry, rig_glb
-
-skin = pytest.importorskip("pdeanim.gltf.skin")
 
 
 @pytest.fixture(scope="module")

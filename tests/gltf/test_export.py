@@ -8,12 +8,16 @@ import pytest
 import trimesh
 
 from pdeanim.cli import main
-from pdeanim.clip import Clip, write_clip_file
+from pdeanim.clip import Clip, load_clip, write_clip_file
+from pdeanim.cyclic import job
 from pdeanim.errors import LimitError, ParameterError
 from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb, export_times
 from pdeanim.gltf.compact import PackOptions
 from pdeanim.gltf.read import read_animated_poses
 from pdeanim.gltf.validate import assert_clean, validate_many
+from pdeanim.gltf.write import animation_glb
+from pdeanim.model import fitclip
+from pdeanim.pictures import fit_error_pictures
 
 
 class WaveClip:
@@ -79,7 +83,6 @@ def test_frame_and_bad_parameters(wave):
 
 
 def test_cli_export_of_a_real_cyclic_clip(data_dir, tmp_path, capsys):
-    job = pytest.importorskip("pdeanim.cyclic.job")
     mesh = trimesh.load(data_dir / "fish_capsule.obj", process=False)
     parts = job.make_cyclic_clip(mesh, job.CyclicOptions.from_dict({"mode": "eel", "frames": 12}))
     clip_path, out = tmp_path / "swim.clip", tmp_path / "swim.glb"
@@ -96,11 +99,6 @@ def test_cli_export_of_a_real_cyclic_clip(data_dir, tmp_path, capsys):
 def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
     """End to end through the model's fit: animated GLB -> poses -> dynamic-PDE clip -> validator-clean GLB,
     and the error pictures of the fit."""
-    fitclip = pytest.importorskip("pdeanim.model.fitclip")
-    from pdeanim.clip import load_clip
-    from pdeanim.gltf.write import animation_glb
-    from pdeanim.pictures import fit_error_pictures
-
     frames, faces, times = morph
     poses = read_animated_poses(animation_glb(frames[:30], times[:30], faces), fps=30)
     parts = fitclip.fit_poses(poses, fitclip.FitOptions.from_dict({"target_rel_rms": 1e-2}))
@@ -111,7 +109,8 @@ def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
     assert back.n_frames == 30
     diag = float(np.linalg.norm(np.ptp(frames[0], axis=0)))
     rms = float(np.sqrt(((back.vertices - poses.vertices) ** 2).sum(axis=-1).mean()))
-    assert rms / diag < 2e-2  # the fit's target, plus quantisation
+    # the fit achieves rel RMS 1.8e-3 (target 1e-2); 16-bit quantisation adds < 1e-7 of the diagonal here
+    assert parts.report["rel_rms"] < 1e-2 and abs(rms / diag - parts.report["rel_rms"]) < 3e-5
     paths = fit_error_pictures(poses.vertices, back.vertices, faces, poses.times, tmp_path, "sphere")
     assert all(p.stat().st_size > 10_000 for p in paths.values())
 

@@ -60,6 +60,11 @@ def test_fit_error_pictures_and_curve(morph, tmp_path):
     paths = fit_error_pictures(frames, fitted, faces, times, tmp_path, "morph")
     assert paths["worst_frame"].name == "morph_worst_frame.png" and colours(paths["worst_frame"]) > 50
     assert colours(paths["error_curve"]) > 20
+    with Image.open(paths["worst_frame"]) as im:  # the frame drawn is the one with the largest max error
+        assert im.text["Title"] == f"morph: per-vertex error at frame 50 (t = {times[50]:.3f} s)"
+        assert im.text["Description"].startswith(f"max {np.sqrt(3) * 0.05:.3g}")
+    with Image.open(paths["error_curve"]) as im:
+        assert im.text["Description"] == "worst frame 50"
     with pytest.raises(ParameterError):
         error_curve_png(np.ones(3), np.ones(4), np.arange(3), tmp_path / "x.png")
     with pytest.raises(ParameterError):

@@ -14,7 +14,8 @@ from pdeanim.gltf.sampling import sample, slerp
 from pdeanim.gltf.skin import joint_world_matrices, load_skinned, skin_vertices
 from pdeanim.gltf.validate import assert_clean, validate_many
 from pdeanim.gltf.write import animation_glb, frame_glb
-from pdeanim.poses import PoseLimits, load_poses
+from pdeanim.posefiles import load_poses
+from pdeanim.poses import PoseLimits
 
 from .builders import expected_bar, skinned_bar_glb, sparse_morph_glb, two_node_glb
 
@@ -35,7 +36,7 @@ def test_morph_round_trip_quantised_and_looping(morph, tmp_path):
     glb = animation_glb(sub, t, faces, quantize=True, loop=True)
     path = tmp_path / "loop.glb"
     path.write_bytes(glb)
-    poses = load_poses(path, fps=10)  # the poses module dispatches .glb here
+    poses = load_poses(path, fps=10)  # pdeanim.posefiles dispatches .glb here
     span = float(np.ptp(sub.reshape(-1, 3), axis=0).max())
     np.testing.assert_allclose(poses.vertices[: len(sub)], sub, atol=span / 32766)
     np.testing.assert_allclose(poses.vertices[-1], poses.vertices[0], atol=1e-7)  # closing key = first frame

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from pdeanim.model.simplecurves import simple_curves
-from pdeanim.poses import load_poses, make_poses
+from pdeanim.posefiles import load_poses
+from pdeanim.poses import make_poses
 
 
 @pytest.fixture(scope="session")

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import numpy as np
 import pytest
 
 from pdeanim.cli import main
-from pdeanim.clip import load_clip_file
+from pdeanim.clip import load_clip_file, read_clip_file
 from pdeanim.poses import make_poses, save_poses
 
 
@@ -19,16 +22,34 @@ def poses_file(tmp_path_factory, morph_poses):
 
 
 @pytest.fixture(scope="module")
-def clip_file(poses_file):
+def fit_run(poses_file) -> tuple:
+    """``pdeanim fit`` once for the module: the clip path and what the command printed."""
     out = poses_file.parent / "x.clip"
-    assert main(["fit", str(poses_file), "--out", str(out), "--target-rel-rms", "3e-3"]) == 0
-    return out
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["fit", str(poses_file), "--out", str(out), "--target-rel-rms", "3e-3"]) == 0
+    return out, printed.getvalue()
 
 
-def test_fit_meets_target_and_prints_summary(clip_file, capsys):
-    clip = load_clip_file(clip_file)
-    assert clip.info()["errors"]["rel_rms"] <= 3e-3
-    assert clip.info()["errors"]["target_met"] is True
+@pytest.fixture(scope="module")
+def clip_file(fit_run):
+    return fit_run[0]
+
+
+def test_fit_meets_target_and_prints_summary(fit_run, poses_file):
+    clip_file, printed = fit_run
+    errors = load_clip_file(clip_file).info()["errors"]
+    assert errors["rel_rms"] <= 3e-3 and errors["target_met"] is True
+    frames, vertices = np.load(poses_file)["vertices"].shape[:2]
+    parts = read_clip_file(clip_file)
+    lines = printed.splitlines()
+    assert lines[0].startswith(f"fitted {frames} frames x {vertices} vertices with ")
+    assert f"(rel {errors['rel_rms']:.3g})" in lines[1]
+    assert lines[2].endswith(": met")
+    assert lines[3].startswith(f"bytes: topology {len(parts.topology)}, "
+                               f"coefficients {len(parts.coefficients)}, "
+                               f"raw float32 {frames * vertices * 12} ")
+    assert lines[4].startswith("time ") and lines[4].endswith(f" s -> {clip_file}")
 
 
 def test_frame_single_list_and_all(clip_file, poses_file, tmp_path):

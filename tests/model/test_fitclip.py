@@ -115,7 +115,8 @@ def test_options_validation_and_round_trip():
 def test_absolute_and_paper_modes_fit_without_nan(morph_small, short_curves):
     for opts in (FitOptions(segments=3, motion="absolute"), FitOptions(segments=3, param_mode="paper")):
         r = fit_poses(morph_small, opts, curves=short_curves).report
-        assert np.isfinite(r["rms"]) and r["rel_rms"] < 0.1
+        # achieved rel RMS 0.0139 (absolute) and 0.0126 (paper); the mean pose alone scores 0.156
+        assert np.isfinite(r["rms"]) and r["rel_rms"] < 0.035
 
 
 def test_loop_clip_wraps_and_closes(morph_small, short_curves):
@@ -212,3 +213,19 @@ def test_knot_at_every_frame_reproduces_frames(rng):
     pts = CurveSet(np.arange(5, dtype=np.int32), np.arange(6, dtype=np.int32))
     r = fit_poses(make_poses(v, None), FitOptions(segments=5), curves=pts).report
     assert r["max"] < 1e-5
+
+
+def test_topology_whose_curves_miss_a_vertex_is_an_error(fixed_fit):
+    """A vertex no curve holds has no curve id: the clip refuses it, not gathering a wrapped-around one."""
+    from dataclasses import replace
+
+    from pdeanim.model.clipformat import decode_coefficients, decode_topology
+    from pdeanim.model.clipmodel import DynamicClip
+
+    topo = decode_topology(*container.unpack(fixed_fit.topology))
+    coef = decode_coefficients(*container.unpack(fixed_fit.coefficients), topo.curves.n_curves)
+    first = topo.curves.order[topo.curves.offsets[0]:topo.curves.offsets[1]]
+    short = CurveSet(topo.curves.order[1:], np.maximum(topo.curves.offsets - 1, 0))  # drop one vertex
+    assert len(first) > 1 and short.n_curves == topo.curves.n_curves
+    with pytest.raises(ClipFormatError, match="do not cover every vertex"):
+        DynamicClip(replace(topo, curves=short), coef)

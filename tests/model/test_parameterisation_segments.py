@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pdeanim.curveset import CurveSet
-from pdeanim.errors import ParameterError
+from pdeanim.errors import ParameterError, PdeanimError
 from pdeanim.model.parameterisation import chord_parameters, curve_parameters, paper_parameters
-from pdeanim.model.segments import uniform_segmentation
+from pdeanim.model.segments import Segmentation, uniform_segmentation
 from pdeanim.model.simplecurves import simple_curves
 from pdeanim.model.timefit import _solve_knots_dense, fit_tracks, predict, solve_knots
 
@@ -77,6 +77,13 @@ def test_banded_knot_solve_equals_dense_qr(rng):
         z2 = dense.copy()
         z2[:, 2] += eps
         assert ((predict(z2, segm, mu) - b) ** 2).sum() > base
+
+
+def test_a_knot_no_frame_determines_is_an_error_not_zero(rng):
+    """One frame cannot determine a segment's two knots: the solve says so instead of returning knot 1 = 0."""
+    segm = Segmentation(np.array([0, 0]), np.array([0.0]))
+    with pytest.raises(PdeanimError, match="knot 1 is not determined by any frame for 3 of 3 tracks"):
+        solve_knots(rng.normal(size=(3, 1, 4)), segm, np.zeros((3, 1)))
 
 
 def test_tracks_are_c0_and_recover_exact_model(rng):

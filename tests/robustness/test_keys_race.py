@@ -42,9 +42,13 @@ def test_keys_create_survives_a_concurrent_write(tmp_path, monkeypatch, capsys) 
     assert capsys.readouterr().out.strip().startswith("pda_")
 
 
-def test_demo_key_survives_a_concurrent_write(tmp_path, monkeypatch) -> None:
-    """The demo's key creation (same pattern) as well."""
-    from service.demo import _key
-
+def test_issue_key_survives_a_concurrent_write(tmp_path, monkeypatch) -> None:
+    """The one key-creation path (the CLI, the demo and the tests use it) called directly."""
     _inject_concurrent_write(tmp_path, monkeypatch)
-    assert _key(tmp_path / "data").startswith("pda_")
+    key = tenants.issue_key(Settings(), "demo")
+    store = Store.open(Settings())
+    try:
+        with store.sessions() as session:
+            assert tenants.tenant_for_key(session, key) is not None
+    finally:
+        store.close()

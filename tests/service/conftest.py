@@ -1,10 +1,10 @@
 """Backends for the service tests: the embedded default (SQLite + local blobs) and, as a second run of the
-same tests, PostgreSQL on 127.0.0.1:5432 (a database created and dropped per session) with S3 on moto."""
+same tests, PostgreSQL (``pgserver``: 127.0.0.1:5432, or a throwaway cluster the tests start; a database
+created and dropped per test or module) with S3 on moto's server. Under CI a missing PostgreSQL fails."""
 
 from __future__ import annotations
 
 import os
-import socket
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -13,15 +13,11 @@ from pathlib import Path
 
 import pytest
 
+from service.launcher import free_port
 from service.settings import Settings
 
-PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from ..ci import missing
+from .pgserver import PgServer, start_or_find
 
 
 @dataclass
@@ -36,20 +32,20 @@ class Backend:
         return Settings(**{**values, **overrides})
 
 
-def _pg_available() -> str | None:
-    try:
-        import psycopg
+@pytest.fixture(scope="session")
+def pg_server() -> Iterator[PgServer]:
+    """The PostgreSQL server for the session (found or started); a failure under CI when there is none."""
+    server, reason = start_or_find()
+    if server is None:
+        missing(reason)
+    yield server
+    server.stop()
 
-        with psycopg.connect("host=127.0.0.1 port=5432 user=postgres dbname=postgres", connect_timeout=3):
-            return None
-    except Exception as exc:  # noqa: BLE001
-        return f"PostgreSQL on 127.0.0.1:5432 is unreachable ({type(exc).__name__}: {exc})"
 
-
-def _admin(sql: str) -> None:
+def _admin(server: PgServer, sql: str) -> None:
     import psycopg
 
-    with psycopg.connect("host=127.0.0.1 port=5432 user=postgres dbname=postgres", autocommit=True) as conn:
+    with psycopg.connect(server.dsn(), autocommit=True) as conn:
         conn.execute(sql)
 
 
@@ -86,21 +82,19 @@ def open_backend(kind: str, data_dir: Path, request) -> Iterator[Backend]:
     if kind == "sqlite":
         yield Backend("sqlite", env)
         return
-    reason = _pg_available()
-    if reason:
-        pytest.skip(reason)
+    pg = request.getfixturevalue("pg_server")
     endpoint = request.getfixturevalue("s3_server")
     name = f"pdeanim_test_{uuid.uuid4().hex[:12]}"
-    _admin(f"CREATE DATABASE {name}")
+    _admin(pg, f"CREATE DATABASE {name}")
     _make_bucket(endpoint, name.replace("_", "-"))
-    env.update({"PDEANIM_DATABASE_URL": f"postgresql+psycopg://postgres@127.0.0.1:5432/{name}",
+    env.update({"PDEANIM_DATABASE_URL": pg.url(name),
                 "PDEANIM_BLOB_URL": f"s3://{name.replace('_', '-')}/blobs", "PDEANIM_S3_ENDPOINT_URL": endpoint,
                 "AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing",
                 "AWS_DEFAULT_REGION": "us-east-1"})
     try:
         yield Backend("postgres", env)
     finally:
-        _admin(f"DROP DATABASE IF EXISTS {name} WITH (FORCE)")
+        _admin(pg, f"DROP DATABASE IF EXISTS {name} WITH (FORCE)")
 
 
 @pytest.fixture

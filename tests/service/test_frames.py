@@ -13,7 +13,7 @@ from pdeanim.errors import ParameterError
 from pdeanim.gltf.glb import ARRAY_BUFFER, GlbBuilder, unpack_glb
 from pdeanim.gltf.normals import FaceNormals, vertex_normals
 from pdeanim.gltf.validate import assert_clean, validate_many
-from pdeanim.gltf.write import FrameGlb, frame_glb
+from pdeanim.gltf.write import FrameGlb
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +67,8 @@ def test_frame_writer_matches_the_general_builder(spot):
         n = 12 * len(p)
         assert np.array_equal(g[:n], r[:n]) and np.array_equal(g[2 * n:], r[2 * n:])  # positions, indices
         np.testing.assert_allclose(g[n: 2 * n].view(np.float32), r[n: 2 * n].view(np.float32), atol=2e-5)
-    assert writer(p) == frame_glb(p, f)
+    fresh = FrameGlb(f, len(p))(p)  # the reused buffer keeps nothing of the earlier frames
+    assert writer(p) == fresh and unpack_glb(fresh)[0] == unpack_glb(reference_glb(p, f))[0]
 
 
 def test_frame_writer_output_is_validator_clean(spot):

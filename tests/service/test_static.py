@@ -13,6 +13,8 @@ from service.api.openapi import DEFAULT_PATH, openapi_text
 from service.settings import Settings
 from service.store.queue import QueuePolicy
 
+from ..ci import missing
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -31,8 +33,9 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     assert "HTTPValidationError" not in doc["components"]["schemas"]
 
 
-@pytest.mark.skipif(shutil.which("docker-compose") is None, reason="docker-compose is not installed")
 def test_docker_compose_file_is_valid():
+    if shutil.which("docker-compose") is None:
+        missing("docker-compose is not installed (script/setup installs it with apt-get)")
     out = subprocess.run(["docker-compose", "-f", str(ROOT / "docker-compose.yml"), "config", "-q"],
                          capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
@@ -80,3 +83,30 @@ def test_etag_matching():
 
     assert etag_matches(req('"x", "abc"'), '"abc"') and etag_matches(req("*"), '"abc"')
     assert etag_matches(req('W/"abc"'), '"abc"') and not etag_matches(req('"abd"'), '"abc"')
+
+
+def test_healthz_503_has_the_error_shape(tmp_path):
+    """A database without its jobs table (a real fault: the table dropped behind the service's back) makes
+    /healthz answer 503 in the one error shape, naming the part that fails."""
+    import sqlite3
+
+    from fastapi.testclient import TestClient
+
+    from service.api.app import create_app
+    from service.store.context import Store
+
+    settings = Settings(data_dir=tmp_path)
+    store = Store.open(settings, run_migrations=True)
+    try:
+        with TestClient(create_app(settings, store=store)) as client:
+            assert client.get("/healthz").json() == {"status": "ok", "database": "ok", "blobs": "ok"}
+            with sqlite3.connect(settings.resolved_database_url().removeprefix("sqlite:///")) as db:
+                db.execute("DROP TABLE jobs")
+            r = client.get("/healthz")
+        assert r.status_code == 503
+        body = r.json()
+        assert set(body) == {"error"} and body["error"]["code"] == "unavailable"
+        assert body["error"]["message"].startswith("database: error: ") and "jobs" in body["error"]["message"]
+        assert "blobs" not in body["error"]["message"]
+    finally:
+        store.close()

@@ -65,21 +65,35 @@ def test_claim_fence_and_finish(store, tenant):
                                                                        {"pdeanim": "x"})
 
 
-def test_expired_lease_is_reaped_and_old_attempt_fenced_out(store, tenant):
-    (job_id,) = _enqueue(store, tenant)
-    first = store.queue.claim("w1")
-    assert store.queue.reap() == 0
-    time.sleep(0.6)
-    assert store.queue.reap() == 1
-    assert not store.queue.heartbeat(job_id, first.attempt)
-    second = store.queue.claim("w2")
-    assert second.attempt == 2
-    assert not store.queue.finish(job_id, 1, lambda s: {"from": "w1"})
-    time.sleep(0.6)
-    assert store.queue.reap() == 1  # second loss: max_attempts=2 -> failed
-    with store.sessions() as s:
-        job = s.get(Job, job_id)
-        assert job.state == "failed" and "lease expired" in job.error and job.failures == 2
+def _reap_when_expired(store: Store, deadline_s: float = 60.0) -> int:
+    """Call the reaper until it returns a job (the lease ran out), within a generous deadline."""
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        if n := store.queue.reap():
+            return n
+        time.sleep(0.1)
+    raise TimeoutError("no lease expired")
+
+
+def test_expired_lease_is_reaped_and_old_attempt_fenced_out(backend, tenant):
+    # a 3 s lease: long enough that the first reap sees it alive even on a stalled machine, short for the test
+    store = Store.open(backend.settings(lease_seconds=3.0, backoff_seconds=0.0, max_attempts=2),
+                       run_migrations=True)
+    try:
+        (job_id,) = _enqueue(store, tenant)
+        first = store.queue.claim("w1")
+        assert store.queue.reap() == 0
+        assert _reap_when_expired(store) == 1
+        assert not store.queue.heartbeat(job_id, first.attempt)
+        second = store.queue.claim("w2")
+        assert second.attempt == 2
+        assert not store.queue.finish(job_id, 1, lambda s: {"from": "w1"})
+        assert _reap_when_expired(store) == 1  # second loss: max_attempts=2 -> failed
+        with store.sessions() as s:
+            job = s.get(Job, job_id)
+            assert job.state == "failed" and "lease expired" in job.error and job.failures == 2
+    finally:
+        store.close()
 
 
 def test_fail_retries_then_gives_up_and_input_errors_do_not_retry(store, tenant):

@@ -4,6 +4,7 @@ crashed or out-of-memory job process that must not take the worker down."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 from pathlib import Path
@@ -52,7 +53,7 @@ def small_mesh_id(api, data_dir) -> str:
     return r.json()["id"]
 
 
-def wait_started(services: Services, index: int, timeout: float = 60) -> None:
+def wait_started(services: Services, index: int, timeout: float = 180) -> None:
     """Wait until worker ``index`` logged that it runs (its signal handlers are installed)."""
     log = services.log_dir / f"worker{index}.log"
     deadline = time.monotonic() + timeout
@@ -69,7 +70,7 @@ def submit(api, mesh_id: str, params: dict) -> str:
     return r.json()["id"]
 
 
-def wait_state(api, job_id: str, states: tuple[str, ...], timeout: float = 60) -> dict:
+def wait_state(api, job_id: str, states: tuple[str, ...], timeout: float = 180) -> dict:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         job = api.get(f"/v1/jobs/{job_id}").json()
@@ -112,19 +113,19 @@ def test_sigkilled_worker_job_completes_once_on_another(services, api, mesh_id):
     first = services.start_worker()
     job = wait_state(api, job_id, ("running", "succeeded"))
     assert job["state"] == "running", "the job finished before the worker could be killed"
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 120
     while not (orphans := job_processes(first.pid)) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert orphans, "the job process never started"
     os.kill(first.pid, signal.SIGKILL)
-    first.wait(10)
-    deadline = time.monotonic() + 10
+    first.wait(60)
+    deadline = time.monotonic() + 60
     while any(Path(f"/proc/{p}").exists() for p in orphans) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(Path(f"/proc/{p}/cmdline").exists() and Path(f"/proc/{p}/cmdline").read_bytes()
                    for p in orphans), "the killed worker's job process kept running"
     services.start_worker()
-    job = wait_job(api, job_id, timeout=180)
+    job = wait_job(api, job_id, timeout=600)
     assert job["state"] == "succeeded" and job["attempt"] == 2, (job, services.logs())
     assert clips_per_job(services.backend) == {job_id: 1}
     assert api.get(f"/v1/clips/{job['result']['clip_id']}/frame", params={"t": 0.2}).status_code == 200
@@ -135,7 +136,7 @@ def test_four_workers_drain_forty_jobs_each_once(services, api, small_mesh_id):
     services.env_extra["PDEANIM_LEASE_SECONDS"] = "15"  # no lease may expire on a starved test machine
     for _ in range(4):
         services.start_worker()
-    jobs = [wait_job(api, j, timeout=240) for j in ids]
+    jobs = [wait_job(api, j, timeout=600) for j in ids]
     assert all(j["state"] == "succeeded" and j["attempt"] == 1 for j in jobs), services.logs()
     assert clips_per_job(services.backend) == {j: 1 for j in ids}
     ran = [line for w in services.log_dir.glob("worker*.log") for line in w.read_text().splitlines()
@@ -147,13 +148,13 @@ def test_sigterm_idle_exits_zero_and_busy_releases_the_job(services, api, mesh_i
     idle = services.start_worker()
     wait_started(services, 0)
     idle.send_signal(signal.SIGTERM)
-    assert idle.wait(15) == 0
+    assert idle.wait(60) == 0
     services.env_extra["PDEANIM_SHUTDOWN_GRACE_SECONDS"] = "0"
     job_id = submit(api, mesh_id, HEAVY)
     busy = services.start_worker()
     assert wait_state(api, job_id, ("running", "succeeded"))["state"] == "running"
     busy.send_signal(signal.SIGTERM)
-    assert busy.wait(20) == 0
+    assert busy.wait(60) == 0
     store = Store.open(services.backend.settings())
     with store.sessions() as s:
         job = s.get(Job, job_id)
@@ -165,7 +166,7 @@ def test_crashed_job_process_is_retried_and_the_worker_survives(services, api, m
     job_id = submit(api, mesh_id, HEAVY)
     worker = services.start_worker()
     assert wait_state(api, job_id, ("running", "succeeded"))["state"] == "running"
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         job_procs = job_processes(worker.pid)
         if job_procs:
@@ -173,17 +174,22 @@ def test_crashed_job_process_is_retried_and_the_worker_survives(services, api, m
         time.sleep(0.05)
     for pid in job_procs:
         os.kill(pid, signal.SIGKILL)
-    job = wait_job(api, job_id, timeout=180)
+    job = wait_job(api, job_id, timeout=600)
     assert job["state"] == "succeeded" and job["attempt"] == 2, (job, services.logs())
     assert worker.poll() is None
 
 
 def test_out_of_memory_fails_after_max_attempts_and_the_worker_survives(services, api, mesh_id):
-    # Native code (OpenBLAS) may hang instead of raising when an allocation fails under RLIMIT_AS: the job
-    # timeout stops such an attempt, which then counts as failed like any other.
-    services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(520 * 2**20), "PDEANIM_JOB_TIMEOUT_SECONDS": "15"})
+    """Every attempt must end in the memory limit's MemoryError ("out_of_memory"), not in the job timeout: the
+    timeout is set far above the attempts' run time so that only the limit can stop them."""
+    services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(520 * 2**20),
+                               "PDEANIM_JOB_TIMEOUT_SECONDS": "600"})
     worker = services.start_worker()
-    job = wait_job(api, submit(api, mesh_id, HEAVY), timeout=150)
+    job_id = submit(api, mesh_id, HEAVY)
+    job = wait_job(api, job_id, timeout=300)
     assert job["state"] == "failed" and "gave up after 3 attempts" in job["error"]["message"], job
-    assert job["error"]["code"] in ("out_of_memory", "timeout", "crashed"), job
+    assert job["error"]["code"] == "out_of_memory" and "limit 545259520 bytes" in job["error"]["message"], job
+    log = (services.log_dir / "worker0.log").read_text()
+    ends = re.findall(rf"job {job_id} attempt (\d): error (\S+)", log)
+    assert ends == [("1", "out_of_memory"), ("2", "out_of_memory"), ("3", "out_of_memory")], log[-3000:]
     assert worker.poll() is None

@@ -63,3 +63,20 @@ def test_large_surfaces_are_decimated_before_fTetWild(tmp_path):
     tets = tetrahedralize(mesh, TetParams(target_tets=400, max_surface_faces=1500), workdir=tmp_path)
     assert tets.volumes().sum() == pytest.approx(2.0, rel=0.05)
     assert 0.4 * 400 <= tets.n_tets <= 2.0 * 400
+
+
+def test_cache_key_names_the_decimation_method_only_when_it_applies(spot_path, monkeypatch):
+    """Quadric decimation and vertex clustering give different surfaces, hence different tets: a large
+    surface's key changes with the method (injected here); a surface below the limit is never decimated and
+    keeps its key."""
+    import pdeanim.sim.tetra as tetra
+
+    spot = load_mesh(spot_path)
+    small, large = TetParams(target_tets=800), TetParams(target_tets=800, max_surface_faces=1000)
+    assert len(spot.faces) > 1000
+    keys = {}
+    for method in ("vertex-clustering", "quadric fast-simplification 0.1"):
+        monkeypatch.setattr(tetra, "decimation_method", lambda method=method: method)
+        keys[method] = (tetra.cache_key(spot, small), tetra.cache_key(spot, large))
+    (small_a, large_a), (small_b, large_b) = keys.values()
+    assert small_a == small_b and large_a != large_b

@@ -9,6 +9,9 @@ import math
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
 
+from pdeanim.errors import LimitError
+from pdeanim.records import jsonable
+
 from ...store.context import Store
 from ...store.models import ClipRecord
 from ..access import owned, responses
@@ -74,17 +77,9 @@ def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreD
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
     item = _cached(clip_id, tenant, store, cache)
-    info = json.loads(json.dumps(item.clip.info(), default=_jsonable))
+    info = jsonable(item.clip.info())
     info.setdefault("looping", bool(item.clip.looping))
     return clip_out(row, info)
-
-
-def _jsonable(value):  # noqa: ANN001, ANN202
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return str(value)
 
 
 @router.get("/v1/clips/{clip_id}/coefficients", operation_id="getClipCoefficients", response_class=Response,

@@ -6,15 +6,19 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
 from ..deps import StoreDep
-from ..schemas import Health
+from ..errors import ApiError
+from ..schemas import ErrorOut, Health
 
 router = APIRouter(tags=["health"])
 
 
 @router.get("/healthz", operation_id="healthz", response_model=Health,
-            responses={503: {"model": Health, "description": "database or blob store unreachable"}})
+            responses={503: {"model": ErrorOut, "description": "database or blob store unreachable"}})
 def healthz(store: StoreDep) -> JSONResponse:
-    """200 when the database (with the jobs table) and the blob store answer, else 503 with the reasons."""
+    """200 when the database (with the jobs table) and the blob store answer, else 503 in the one error shape
+    with each failing part's reason in the message."""
     status = store.check()
-    ok = all(v == "ok" for v in status.values())
-    return JSONResponse({"status": "ok" if ok else "degraded", **status}, 200 if ok else 503)
+    failing = {part: reason for part, reason in status.items() if reason != "ok"}
+    if failing:
+        raise ApiError(503, "unavailable", "; ".join(f"{part}: {reason}" for part, reason in failing.items()))
+    return JSONResponse({"status": "ok", **status}, 200)
