@@ -9,7 +9,6 @@ import math
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
 
-from pdeanim.errors import LimitError
 from pdeanim.records import jsonable
 
 from ...store.context import Store
