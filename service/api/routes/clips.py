@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
 
 from pdeanim.errors import LimitError
 
@@ -26,7 +27,8 @@ GLB_RESPONSE = {200: {"content": {GLB: {}}, "description": "a binary glTF 2.0 fi
 SUMMARY_KEYS = ("rms", "max", "rel_rms", "rel_max", "p95", "target")
 
 
-def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
+def _load(clip_id: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
+    """The clip from the cache, or read and decoded from the database row and blobs (blocking I/O)."""
     def load() -> CachedClip:
         from pdeanim.clip import load_clip
         from pdeanim.gltf.write import FrameGlb
@@ -39,10 +41,17 @@ def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # no
         return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip,
                           FrameGlb(clip.faces, clip.n_vertices))
 
-    item = cache.get(clip_id, load)
+    return cache.get(clip_id, load)
+
+
+def _owned(item: CachedClip, clip_id: str, tenant: str) -> CachedClip:
     if item.tenant_id != tenant:
         raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
     return item
+
+
+def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
+    return _owned(_load(clip_id, store, cache), clip_id, tenant)
 
 
 def _count(info: dict, report: dict, name: str) -> int | None:
@@ -107,17 +116,28 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
 
 @router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
-def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
-              cache: ClipCacheDep, t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")
-              ) -> Response:
+async def get_frame(clip_id: str, request: Request, tenant: TenantDep,
+                    t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")) -> Response:
     """One evaluated frame at ``t`` as a GLB."""
-    item = _cached(clip_id, tenant, store, cache)
+    # The hot path of the service, so ``async def``: a cached clip and frame cost no thread-pool hop; a
+    # clip is loaded (database, blobs) in the pool once per process; a new frame (about 0.6 ms for 20k
+    # vertices) is computed on the event loop, which measured faster than handing it to a thread.
+    state = request.app.state
+    item = state.clip_cache.peek(clip_id)
+    if item is None:
+        item = await run_in_threadpool(_load, clip_id, state.store, state.clip_cache)
+    _owned(item, clip_id, tenant)
     if not math.isfinite(t) or (not item.clip.looping and not 0.0 <= t <= 1.0):
         raise ApiError(422, "t_out_of_range", f"t must lie in [0, 1] for this clip, got {t}")
     tag = hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest()
 
     def body() -> bytes:
-        return item.frame_glb(np.asarray(item.clip.evaluate(float(t))))
+        frames = state.frame_cache
+        data = frames.get((clip_id, t))
+        if data is None:
+            data = item.frame_glb(item.clip.evaluate(float(t)))
+            frames.put((clip_id, t), data)
+        return data
 
     return immutable_response(request, tag, body, GLB)
 
