@@ -12,6 +12,7 @@ from ..store.context import Store
 from .cache import BodyCache, ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
+from .memory import keep_freed_memory
 from .routes import clips, health, jobs, meshes, poses
 
 API_VERSION = "1.0.0"
@@ -26,6 +27,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        keep_freed_memory()
         own = app.state.store is None
         if own:
             app.state.store = Store.open(settings)
