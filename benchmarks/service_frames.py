@@ -223,15 +223,17 @@ class Services:
         self.log.close()
 
 
-def busy_jobs(api: httpx.Client, poses_id: str, mesh_id: str, n: int = 6) -> list[str]:
-    """Queue ``n`` long jobs alternating simulate (+ fit) and fit, so every worker stays busy."""
+def busy_jobs(api: httpx.Client, poses_id: str, n: int = 10) -> list[str]:
+    """Queue ``n`` long jobs alternating simulate (spot, 400 frames, + fit) and fit (the frame clip's poses
+    with more segments), so that every worker stays busy."""
+    mesh_id = check(api.post("/v1/meshes", files={"file": ("spot.obj", SPOT.read_bytes())}))["id"]
     ids = []
     for i in range(n):
         if i % 2 == 0:
             body = {"kind": "simulate", "mesh_id": mesh_id, "then_fit": True,
                     "params": {"frames": 400, "target_tets": 3000, "seed": i}, "fit": {"target_rel_rms": 0.001}}
         else:
-            body = {"kind": "fit", "poses_id": poses_id, "params": {"target_rel_rms": 0.0005 + 1e-5 * i}}
+            body = {"kind": "fit", "poses_id": poses_id, "params": {"segments": 12 + i}}
         ids.append(check(api.post("/v1/jobs", json=body))["id"])
     return ids
 
@@ -239,6 +241,18 @@ def busy_jobs(api: httpx.Client, poses_id: str, mesh_id: str, n: int = 6) -> lis
 def running(api: httpx.Client, ids: list[str]) -> int:
     """How many of the jobs ``ids`` are running now."""
     return sum(check(api.get(f"/v1/jobs/{i}"))["state"] == "running" for i in ids)
+
+
+def wait_busy(api: httpx.Client, ids: list[str], seconds: float = 120) -> None:
+    """Wait until two of the jobs run (between two jobs a worker is briefly idle); raises past ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while running(api, ids) < 2:
+        states = [check(api.get(f"/v1/jobs/{i}"))["state"] for i in ids]
+        if "queued" not in states and states.count("running") < 2:
+            raise RuntimeError(f"the busy jobs ran out ({states}): queue longer ones")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the two workers did not run two jobs within {seconds} s ({states})")
+        time.sleep(0.3)
 
 
 def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path, label: str,
@@ -250,8 +264,8 @@ def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, 
         samples: dict[str, list[dict]] = {"bare": [], "project": []}
         loads = []
         for _ in range(args.rounds):
-            if busy is not None and running(*busy) < 2:
-                raise RuntimeError("fewer than two jobs running: queue longer jobs")
+            if busy is not None:
+                wait_busy(*busy)
             samples["bare"].append(wrk(services.bare_url + "/frame?t=", "", g, args.seconds,
                                        args.connections, script))
             samples["project"].append(wrk(f"{services.url}/v1/clips/{clip['id']}/frame?t=", key, g,
@@ -268,16 +282,55 @@ def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, 
 
 
 def animation_ms(api: httpx.Client, clip_id: str, n: int = 7) -> dict:
-    """Wall time of GET /animation?fps=30 (distinct fps each time so no cache can answer), median of n."""
-    times, size = [], 0
+    """Wall time of GET /animation at 30 fps over HTTP, median of ``n``: ``first`` at an fps not asked
+    before (30 + i * 1e-6, so no cache can answer: evaluate, normals, GLB, transfer) and ``repeat`` (the
+    same fps again: the encoded-body cache)."""
+    first, repeat, size = [], [], 0
     for i in range(n):
-        t0 = time.perf_counter()
-        r = api.get(f"/v1/clips/{clip_id}/animation", params={"fps": FPS + 1e-6 * i})
-        times.append((time.perf_counter() - t0) * 1000)
-        if r.status_code != 200:
-            raise RuntimeError(f"animation: HTTP {r.status_code} {r.text[:200]}")
-        size = len(r.content)
-    return {"median_ms": round(statistics.median(times), 1), "min_ms": round(min(times), 1), "bytes": size}
+        for times in (first, repeat):
+            t0 = time.perf_counter()
+            r = api.get(f"/v1/clips/{clip_id}/animation", params={"fps": FPS + 1e-6 * i})
+            times.append((time.perf_counter() - t0) * 1000)
+            if r.status_code != 200:
+                raise RuntimeError(f"animation: HTTP {r.status_code} {r.text[:200]}")
+            size = len(r.content)
+    return {"first_median_ms": round(statistics.median(first), 1), "first_min_ms": round(min(first), 1),
+            "repeat_median_ms": round(statistics.median(repeat), 1), "bytes": size}
+
+
+def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
+    """Median wall and CPU times here of what a route computes (``which``): a frame GLB at a new t
+    (evaluate + normals + GLB) or the 30 fps animation GLB (evaluate all frames + normals + GLB)."""
+    from pdeanim.clip import load_clip
+    from pdeanim.gltf.write import FrameGlb, animation_glb
+    from service.api.routes.clips import animation_times
+    from service.settings import Settings
+    from service.store.context import Store
+    from service.store.models import ClipRecord
+
+    store = Store.open(Settings(data_dir=data_dir))
+    try:
+        with store.sessions() as session:
+            row = session.get(ClipRecord, clip_id)
+        clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+    finally:
+        store.close()
+    writer = FrameGlb(clip.faces, clip.n_vertices)
+    t, seconds = animation_times(clip, FPS, 10_000)
+    out = {}
+    jobs = {"frame": (lambda i: writer(clip.evaluate((i + 0.5) / (20 * n))), 20 * n),
+            "animation": (lambda i: animation_glb(clip.evaluate(t), seconds, clip.faces, loop=clip.looping), n)}
+    for name, (fn, k) in ((which, jobs[which]),):
+        fn(0)  # warm (numba kernels load from their cache)
+        wall, cpu = [], []
+        for i in range(k):
+            w0, c0 = time.perf_counter(), time.process_time()
+            fn(i)
+            wall.append((time.perf_counter() - w0) * 1000)
+            cpu.append((time.process_time() - c0) * 1000)
+        out[f"{name}_ms"] = round(statistics.median(wall), 2)
+        out[f"{name}_cpu_ms"] = round(statistics.median(cpu), 2)
+    return out
 
 
 def table(rows: list[dict]) -> str:
@@ -318,17 +371,16 @@ def main() -> int:
                       f" frame GLB {body:,} B", flush=True)
                 services.start_bare(body)
                 anim = animation_ms(api, anim_clip["id"])
-                print(f"animation GLB, {anim_clip['info']['n_vertices']} vertices, {FPS} fps over "
+                print(f"animation GLB over HTTP, {anim_clip['info']['n_vertices']} vertices, {FPS} fps over "
                       f"{SECONDS_OF_CLIP:g} s: {anim}", flush=True)
+                print(f"in process, 20k-vertex frame and 15k-vertex animation: "
+                      f"{in_process_ms(Path(tmp), clip['id'], 'frame') | in_process_ms(Path(tmp), anim_clip['id'], 'animation')}"
+                      f" (load {os.getloadavg()[0]:.1f})", flush=True)
                 rows += measure(services, key, clip, args, script, "idle (1 job worker idle)")
                 if not args.skip_busy:
                     services.add_worker()
-                    ids = busy_jobs(api, clip["poses_id"], clip["mesh_id"])
-                    deadline = time.monotonic() + 120
-                    while running(api, ids) < 2:
-                        if time.monotonic() > deadline:
-                            raise RuntimeError("the two workers did not start two jobs within 120 s")
-                        time.sleep(0.5)
+                    ids = busy_jobs(api, clip["poses_id"])
+                    wait_busy(api, ids)
                     rows += measure(services, key, clip, args, script, "2 job workers busy", (api, ids))
         finally:
             services.stop()

@@ -168,10 +168,14 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
     t, seconds = animation_times(item.clip, fps, store.settings.max_frames)
     tag = hashlib.sha256(f"{item.coefficients_key}:animation:{fps!r}".encode()).hexdigest()
 
-    def body() -> bytes:
+    def body() -> bytes:  # kept in the encoded-body LRU with the frames (a repeat is a copy-free answer)
         from pdeanim.gltf.write import animation_glb
 
-        frames = np.asarray(item.clip.evaluate(t)).reshape(len(t), -1, 3)
-        return animation_glb(frames, seconds, item.clip.faces, loop=bool(item.clip.looping))
+        data = request.app.state.frame_cache.get(("animation", clip_id, fps))
+        if data is None:
+            frames = np.asarray(item.clip.evaluate(t)).reshape(len(t), -1, 3)
+            data = animation_glb(frames, seconds, item.clip.faces, loop=bool(item.clip.looping))
+            request.app.state.frame_cache.put(("animation", clip_id, fps), data)
+        return data
 
     return immutable_response(request, tag, body, GLB)
