@@ -1,10 +1,15 @@
-"""Service benchmark (loopback only): frame requests for a 15k-vertex clip over HTTP with several
-concurrent clients (requests/s, p50, p99), the CPU time of one frame GLB (evaluate + normals + GLB) in
-process, and the end-to-end time of the demo's job by stage.
+"""Frame-serving benchmark (loopback only): ``wrk -t2 -c16`` against the service as a user starts it
+(``pdeanim serve --with-workers 1``, the embedded default) and, in the same run, against a bare FastAPI
+app (two uvicorn processes, ``bare_frames_app.py``) answering a body of the same size; requests/s, p50,
+p99 and the ratio to the bare app, medians of several rounds, idle and with two job workers busy
+simulating and fitting; plus the animation GLB time (30 fps, 2 s clip of 15k vertices).
 
-    .venv/bin/python benchmarks/service_frames.py [--clients 8] [--seconds 10]
+    .venv/bin/python benchmarks/service_frames.py [--rounds 3] [--seconds 8] [--connections 16]
 
-Starts its own API server and worker on a temporary embedded data directory and stops them afterwards.
+Needs ``wrk`` (Debian package, installed by ``script/setup``). Each request asks for a random t drawn per
+request by a wrk Lua script: ``player`` t on the 30 fps grid of the clip (what a player at a fixed frame
+rate asks for; repeats hit the encoded-frame cache) and ``continuous`` t (uniform in [0, 1]: every request
+evaluates a new frame). Starts and stops everything itself in a temporary data directory.
 """
 
 from __future__ import annotations
@@ -13,10 +18,11 @@ import argparse
 import io
 import json
 import os
+import socket
 import statistics
+import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -26,16 +32,38 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from service.demo import FIT, SCENE, DemoServices, StageClock  # noqa: E402
+from service.cli import CONSOLE  # noqa: E402
 from service.settings import Settings  # noqa: E402
 from service.store.tenants import issue_key  # noqa: E402
 
 SPOT = ROOT / "tests" / "data" / "spot.obj"
+FPS, SECONDS_OF_CLIP = 30, 2.0
+
+LUA = r"""
+local path = os.getenv("BENCH_PATH")
+local grid = tonumber(os.getenv("BENCH_GRID"))
+local auth = os.getenv("BENCH_AUTH")
+if auth ~= "" then wrk.headers["Authorization"] = "Bearer " .. auth end
+local counter = 0
+function setup(thread) counter = counter + 1; thread:set("seed", counter) end
+function init(args) math.randomseed(os.time() * 1000 + seed) end
+function request()
+  local t
+  if grid > 0 then t = math.random(0, grid) / grid else t = math.random() end
+  return wrk.format("GET", path .. string.format("%.6f", t))
+end
+function done(summary, latency, requests)
+  local s = summary.errors.status + summary.errors.connect + summary.errors.read + summary.errors.write
+    + summary.errors.timeout
+  io.write(string.format('BENCH {"requests": %d, "us": %d, "p50_us": %d, "p99_us": %d, "errors": %d}\n',
+    summary.requests, summary.duration, latency:percentile(50), latency:percentile(99), s))
+end
+"""
 
 
-def spot_15k(target: int = 15_000) -> bytes:
-    """Spot subdivided once (11,714 vertices), then its largest faces split at their centroid (1 -> 3, which
-    keeps the surface closed and manifold) up to ``target`` vertices; as OBJ bytes."""
+def subdivided_spot(target: int) -> tuple[np.ndarray, np.ndarray]:
+    """Spot subdivided once (11,714 vertices), then its largest faces split at their centroid (1 -> 3,
+    which keeps the surface closed and manifold) up to ``target`` vertices."""
     import trimesh
 
     from pdeanim.mesh.io import load_mesh
@@ -48,15 +76,234 @@ def spot_15k(target: int = 15_000) -> bytes:
     new = len(t.vertices) + np.arange(k)
     faces = np.vstack([np.delete(t.faces, pick, axis=0), np.column_stack([a, b, new]),
                        np.column_stack([b, c, new]), np.column_stack([c, a, new])])
+    return np.vstack([t.vertices, t.triangles_center[pick]]), faces
+
+
+def obj_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """A Wavefront OBJ of the mesh."""
     buf = io.StringIO()
-    np.savetxt(buf, np.vstack([t.vertices, t.triangles_center[pick]]), fmt="v %.6f %.6f %.6f")
+    np.savetxt(buf, vertices, fmt="v %.6f %.6f %.6f")
     np.savetxt(buf, faces + 1, fmt="f %d %d %d")
     return buf.getvalue().encode()
 
 
-def frame_cpu(data_dir: Path, clip_id: str, n: int = 300) -> dict:
-    """In-process CPU time of what the frame route computes per request: evaluate at t, normals, GLB."""
+def swaying_poses(vertices: np.ndarray, faces: np.ndarray, seconds: float = SECONDS_OF_CLIP,
+                  fps: int = FPS) -> bytes:
+    """POSES.npz of a smooth generated motion (a travelling bend and a breathing scale) over ``seconds``."""
+    times = np.arange(int(round(seconds * fps)) + 1) / fps
+    v = vertices - vertices.mean(axis=0)
+    span = float(np.ptp(v, axis=0).max())
+    phase = 2 * np.pi * times[:, None] / seconds
+    u = v[:, 0] / span  # along the body
+    frames = np.repeat(v[None], len(times), axis=0)
+    frames[..., 1] += 0.08 * span * np.sin(phase + 3.0 * u[None])
+    frames[..., 2] += 0.05 * span * np.sin(2 * phase - 2.0 * u[None]) * u[None]
+    frames *= (1 + 0.03 * np.sin(phase))[..., None]
+    buf = io.BytesIO()
+    np.savez(buf, vertices=frames.astype(np.float32), faces=faces.astype(np.int32), times=times)
+    return buf.getvalue()
+
+
+def fitted_clip(api: httpx.Client, n_vertices: int) -> dict:
+    """Upload a mesh of about ``n_vertices`` and generated poses, fit them with a job; the clip's metadata."""
+    vertices, faces = subdivided_spot(n_vertices)
+    mesh = check(api.post("/v1/meshes", files={"file": (f"spot_{n_vertices}.obj", obj_bytes(vertices, faces))}))
+    poses = check(api.post(f"/v1/meshes/{mesh['id']}/poses",
+                           files={"file": ("poses.npz", swaying_poses(vertices, faces))}))
+    job = check(api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses["id"],
+                                            "params": {"target_rel_rms": 0.002}}))
+    job = wait_job(api, job["id"], 600)
+    return check(api.get(f"/v1/clips/{job['result']['clip_id']}"))
+
+
+def check(r: httpx.Response) -> dict:
+    """The JSON of a successful response; raises with the body otherwise."""
+    if r.status_code >= 400:
+        raise RuntimeError(f"HTTP {r.status_code} {r.request.url}: {r.text[:300]}")
+    return r.json()
+
+
+def wait_job(api: httpx.Client, job_id: str, seconds: float) -> dict:
+    """Poll a job until it ends; raises if it failed or took longer than ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        job = check(api.get(f"/v1/jobs/{job_id}"))
+        if job["state"] == "succeeded":
+            return job
+        if job["state"] == "failed":
+            raise RuntimeError(f"job {job_id} failed: {job.get('error')}")
+        time.sleep(0.2)
+    raise RuntimeError(f"job {job_id} did not finish within {seconds} s")
+
+
+def free_port() -> int:
+    """An unused loopback port."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_http(url: str, proc: subprocess.Popen, seconds: float = 120) -> None:
+    """Wait until ``url`` answers (any status); raises if ``proc`` exits first."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"{proc.args} exited with {proc.returncode}")
+        try:
+            httpx.get(url, timeout=2)
+            return
+        except httpx.HTTPError:
+            time.sleep(0.2)
+    raise RuntimeError(f"{url} did not answer within {seconds} s")
+
+
+def wrk(url_path: str, key: str, grid: int, seconds: float, connections: int, script: Path) -> dict:
+    """One wrk run (2 threads): requests/s, p50 and p99 in ms; raises on any non-2xx answer or error."""
+    base, path = url_path.split("/", 3)[2], "/" + url_path.split("/", 3)[3]
+    env = {**os.environ, "BENCH_PATH": path, "BENCH_GRID": str(grid), "BENCH_AUTH": key}
+    cmd = ["wrk", "-t2", f"-c{connections}", f"-d{seconds}s", "--timeout", "10s", "-s", str(script),
+           f"http://{base}"]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
+    line = next(ln for ln in out.splitlines() if ln.startswith("BENCH "))
+    r = json.loads(line.removeprefix("BENCH "))
+    if r["errors"] or not r["requests"]:
+        raise RuntimeError(f"wrk saw {r['errors']} errors / {r['requests']} requests on {url_path}:\n{out}")
+    return {"rps": r["requests"] / (r["us"] / 1e6), "p50_ms": r["p50_us"] / 1000, "p99_ms": r["p99_us"] / 1000}
+
+
+class Services:
+    """``pdeanim serve --with-workers 1`` (+ extra workers on demand) and the bare app, as child processes."""
+
+    def __init__(self, data_dir: Path, serve_args: list[str], body_bytes: int) -> None:
+        self.data_dir, self.serve_args, self.body_bytes = data_dir, serve_args, body_bytes
+        self.env = {**os.environ, "PDEANIM_DATA_DIR": str(data_dir)}
+        self.log = open(data_dir / "services.log", "ab")  # noqa: SIM115 - closed in stop()
+        self.procs: list[subprocess.Popen] = []
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.bare_url = ""
+
+    def _spawn(self, cmd: list[str], env: dict | None = None) -> subprocess.Popen:
+        proc = subprocess.Popen(cmd, env=env or self.env, stdout=self.log, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+        self.procs.append(proc)
+        return proc
+
+    def start_service(self) -> None:
+        """The service as a user starts it; waits for /healthz."""
+        proc = self._spawn([*CONSOLE, "serve", "--port", str(self.port), "--with-workers", "1",
+                            *self.serve_args])
+        wait_http(self.url + "/healthz", proc)
+
+    def start_bare(self, body_bytes: int) -> None:
+        """The bare FastAPI app with two uvicorn processes, answering ``body_bytes`` per request."""
+        port = free_port()
+        env = {**os.environ, "BARE_BODY_BYTES": str(body_bytes), "PYTHONPATH": str(ROOT)}
+        proc = self._spawn([sys.executable, "-m", "uvicorn", "benchmarks.bare_frames_app:app", "--port",
+                            str(port), "--workers", "2", "--log-level", "warning", "--no-access-log"], env)
+        self.bare_url = f"http://127.0.0.1:{port}"
+        wait_http(self.bare_url + "/frame?t=0.5", proc)
+
+    def add_worker(self) -> None:
+        """One more job worker (``pdeanim worker``) on the same data directory."""
+        self._spawn([*CONSOLE, "worker", "--log-level", "WARNING"])
+
+    def stop(self) -> None:
+        """SIGTERM everything started (its process group), kill what is left after 30 s."""
+        import signal
+
+        for proc in self.procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGTERM)
+        for proc in self.procs:
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        self.log.close()
+
+
+def busy_jobs(api: httpx.Client, poses_id: str, n: int = 10) -> list[str]:
+    """Queue ``n`` long jobs alternating simulate (spot, 400 frames, + fit) and fit (the frame clip's poses
+    with more segments), so that every worker stays busy."""
+    mesh_id = check(api.post("/v1/meshes", files={"file": ("spot.obj", SPOT.read_bytes())}))["id"]
+    ids = []
+    for i in range(n):
+        if i % 2 == 0:
+            body = {"kind": "simulate", "mesh_id": mesh_id, "then_fit": True,
+                    "params": {"frames": 400, "target_tets": 3000, "seed": i}, "fit": {"target_rel_rms": 0.001}}
+        else:
+            body = {"kind": "fit", "poses_id": poses_id, "params": {"segments": 12 + i}}
+        ids.append(check(api.post("/v1/jobs", json=body))["id"])
+    return ids
+
+
+def running(api: httpx.Client, ids: list[str]) -> int:
+    """How many of the jobs ``ids`` are running now."""
+    return sum(check(api.get(f"/v1/jobs/{i}"))["state"] == "running" for i in ids)
+
+
+def wait_busy(api: httpx.Client, ids: list[str], seconds: float = 120) -> None:
+    """Wait until two of the jobs run (between two jobs a worker is briefly idle); raises past ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while running(api, ids) < 2:
+        states = [check(api.get(f"/v1/jobs/{i}"))["state"] for i in ids]
+        if "queued" not in states and states.count("running") < 2:
+            raise RuntimeError(f"the busy jobs ran out ({states}): queue longer ones")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the two workers did not run two jobs within {seconds} s ({states})")
+        time.sleep(0.3)
+
+
+def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path, label: str,
+            busy: tuple[httpx.Client, list[str]] | None = None) -> list[dict]:
+    """Rounds of (bare, project) wrk runs for each t mode; one row per mode with medians."""
+    grid = int(round(SECONDS_OF_CLIP * FPS))
+    rows = []
+    for mode, g in (("player", grid), ("continuous", 0)):
+        samples: dict[str, list[dict]] = {"bare": [], "project": []}
+        loads = []
+        for _ in range(args.rounds):
+            if busy is not None:
+                wait_busy(*busy)
+            samples["bare"].append(wrk(services.bare_url + "/frame?t=", "", g, args.seconds,
+                                       args.connections, script))
+            samples["project"].append(wrk(f"{services.url}/v1/clips/{clip['id']}/frame?t=", key, g,
+                                          args.seconds, args.connections, script))
+            loads.append(os.getloadavg()[0])
+        med = {who: {k: statistics.median(s[k] for s in runs) for k in runs[0]} for who, runs in samples.items()}
+        row = {"label": label, "t": mode, **{f"{who}_{k}": round(v, 2) for who, m in med.items() for k, v in m.items()},
+               "ratio": round(statistics.median(p["rps"] / b["rps"] for p, b in
+                                                zip(samples["project"], samples["bare"], strict=True)), 3),
+               "load1": round(statistics.median(loads), 2), "rounds": args.rounds}
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return rows
+
+
+def animation_ms(api: httpx.Client, clip_id: str, n: int = 7) -> dict:
+    """Wall time of GET /animation at 30 fps over HTTP, median of ``n``: ``first`` at an fps not asked
+    before (30 + i * 1e-6, so no cache can answer: evaluate, normals, GLB, transfer) and ``repeat`` (the
+    same fps again: the encoded-body cache)."""
+    first, repeat, size = [], [], 0
+    for i in range(n):
+        for times in (first, repeat):
+            t0 = time.perf_counter()
+            r = api.get(f"/v1/clips/{clip_id}/animation", params={"fps": FPS + 1e-6 * i})
+            times.append((time.perf_counter() - t0) * 1000)
+            if r.status_code != 200:
+                raise RuntimeError(f"animation: HTTP {r.status_code} {r.text[:200]}")
+            size = len(r.content)
+    return {"first_median_ms": round(statistics.median(first), 1), "first_min_ms": round(min(first), 1),
+            "repeat_median_ms": round(statistics.median(repeat), 1), "bytes": size}
+
+
+def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
+    """Median wall and CPU times here of what a route computes (``which``): a frame GLB at a new t
+    (evaluate + normals + GLB) or the 30 fps animation GLB (evaluate all frames + normals + GLB)."""
     from pdeanim.clip import load_clip
+    from pdeanim.gltf.clipexport import clip_animation_glb
     from pdeanim.gltf.write import FrameGlb
     from service.settings import Settings
     from service.store.context import Store
@@ -70,106 +317,75 @@ def frame_cpu(data_dir: Path, clip_id: str, n: int = 300) -> dict:
     finally:
         store.close()
     writer = FrameGlb(clip.faces, clip.n_vertices)
-    ts = np.random.default_rng(0).random(n)
-    parts = {"evaluate": [], "glb": []}
-    for t in ts:
-        c0 = time.process_time_ns()
-        p = np.asarray(clip.evaluate(float(t)))
-        c1 = time.process_time_ns()
-        writer(p)
-        parts["evaluate"].append(c1 - c0)
-        parts["glb"].append(time.process_time_ns() - c1)
-    total = np.add(parts["evaluate"], parts["glb"]) / 1e6
-    out = {f"{k}_median_ms": round(float(np.median(v)) / 1e6, 3) for k, v in parts.items()}
-    return {"vertices": clip.n_vertices, "frames": n, **out, "total_median_ms": round(float(np.median(total)), 3),
-            "total_p10_ms": round(float(np.percentile(total, 10)), 3)}
+    out = {}
+    jobs = {"frame": (lambda i: writer(clip.evaluate((i + 0.5) / (20 * n))), 20 * n),
+            "animation": (lambda i: clip_animation_glb(clip, FPS, max_frames=10_000), n)}
+    for name, (fn, k) in ((which, jobs[which]),):
+        fn(0)  # warm (numba kernels load from their cache)
+        wall, cpu = [], []
+        for i in range(k):
+            w0, c0 = time.perf_counter(), time.process_time()
+            fn(i)
+            wall.append((time.perf_counter() - w0) * 1000)
+            cpu.append((time.process_time() - c0) * 1000)
+        out[f"{name}_ms"] = round(statistics.median(wall), 2)
+        out[f"{name}_cpu_ms"] = round(statistics.median(cpu), 2)
+    return out
 
 
-def run_job(api: httpx.Client, name: str, data: bytes, scene: dict, fit: dict) -> tuple[dict, dict, float]:
-    """Upload, simulate + fit; returns (job, seconds per stage, total seconds)."""
-    mesh = api.post("/v1/meshes", files={"file": (name, data)}).json()
-    job = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": scene, "then_fit": True,
-                                     "fit": fit}).json()
-    clock, start = StageClock(), time.monotonic()
-    while job["state"] not in ("succeeded", "failed"):
-        time.sleep(0.1)
-        job = api.get(f"/v1/jobs/{job['id']}").json()
-        if job["state"] == "running":
-            clock.see(job["stage"], time.monotonic())
-    clock.stop(time.monotonic())
-    if job["state"] != "succeeded":
-        raise RuntimeError(f"job failed: {job['error']}")
-    return job, clock.seconds, time.monotonic() - start
-
-
-def hammer(url: str, key: str, clip_id: str, clients: int, seconds: float, max_requests: int) -> dict:
-    """``clients`` threads requesting frames at distinct t for ``seconds``; latency percentiles and rate."""
-    latencies: list[float] = []
-    lock, stop = threading.Lock(), time.monotonic() + seconds
-
-    def client(index: int) -> None:
-        rng = np.random.default_rng(index)
-        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=30) as c:
-            while time.monotonic() < stop and len(latencies) < max_requests:
-                t0 = time.perf_counter()
-                r = c.get(f"/v1/clips/{clip_id}/frame", params={"t": float(rng.random())})
-                dt = time.perf_counter() - t0
-                if r.status_code != 200:
-                    raise RuntimeError(f"HTTP {r.status_code}: {r.text[:200]}")
-                with lock:
-                    latencies.append(dt)
-
-    threads = [threading.Thread(target=client, args=(i,)) for i in range(clients)]
-    start = time.monotonic()
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    wall = time.monotonic() - start
-    lat = np.array(latencies) * 1000
-    return {"clients": clients, "requests": len(lat), "seconds": round(wall, 2),
-            "requests_per_s": round(len(lat) / wall, 1), "p50_ms": round(float(np.percentile(lat, 50)), 2),
-            "p99_ms": round(float(np.percentile(lat, 99)), 2), "mean_ms": round(statistics.fmean(lat), 2)}
+def table(rows: list[dict]) -> str:
+    """The README table of the rows."""
+    out = ["| load | t per request | `pdeanim serve` requests/s | p50 | p99 | bare app requests/s | p50 | p99 "
+           "| ratio | load avg |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r['label']} | {r['t']} | {r['project_rps']:.0f} | {r['project_p50_ms']:.1f} ms "
+                   f"| {r['project_p99_ms']:.1f} ms | {r['bare_rps']:.0f} | {r['bare_p50_ms']:.1f} ms "
+                   f"| {r['bare_p99_ms']:.1f} ms | {r['ratio']:.2f} | {r['load1']:.1f} |")
+    return "\n".join(out)
 
 
 def main() -> int:
-    """Run both measurements and print them (and as JSON with --json)."""
+    """Build the clips, start everything, measure, print the table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--clients", type=int, default=8)
-    ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--max-requests", type=int, default=20000)
-    ap.add_argument("--api-processes", type=int, default=1, help="uvicorn processes of the API (serve --workers)")
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--rounds", type=int, default=3, help="wrk runs per configuration (medians are reported)")
+    ap.add_argument("--seconds", type=int, default=8, help="duration of one wrk run")
+    ap.add_argument("--connections", type=int, default=16)
+    ap.add_argument("--serve-args", default="", help="extra `pdeanim serve` arguments, e.g. '--workers 1'")
+    ap.add_argument("--skip-busy", action="store_true", help="only the idle measurement")
     args = ap.parse_args()
-    out: dict = {}
+    print(f"load average at start: {os.getloadavg()}, CPUs: {os.cpu_count()}", flush=True)
+    rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as tmp:
-        services = DemoServices(Path(tmp), args.api_processes)
+        script = Path(tmp) / "frames.lua"
+        script.write_text(LUA)
+        services = Services(Path(tmp), args.serve_args.split(), 0)
         try:
-            key, url = issue_key(Settings(data_dir=Path(tmp)), "bench"), services.start()
-            with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=300) as api:
-                job, stages, total = run_job(api, "spot.obj", SPOT.read_bytes(), SCENE, FIT)
-                out["demo_job"] = {"total_s": round(total, 2), "stages_s": {k: round(v, 2) for k, v in stages.items()}}
-                print(f"demo job (spot, {SCENE['frames']} frames, fit to {FIT}): {total:.1f} s  "
-                      + ", ".join(f"{k} {v:.1f} s" for k, v in stages.items()))
-                job, stages, total = run_job(api, "spot_15k.obj", spot_15k(), {"frames": 30, "target_tets": 1500},
-                                             FIT)
-                clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
-                out["frame_clip"] = {"vertices": clip["info"].get("n_vertices"), "segments": clip["segments"],
-                                     "curves": clip["curves"], "job_s": round(total, 2)}
-                print(f"frame clip: {out['frame_clip']}")
-                out["frame_cpu"] = frame_cpu(Path(tmp), clip["id"])
-                print(f"frame CPU in process (evaluate + normals + GLB): {out['frame_cpu']}")
-                api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5})  # warm the clip cache
-                for clients in sorted({1, args.clients}):
-                    res = hammer(url, key, clip["id"], clients, args.seconds, args.max_requests)
-                    res["api_processes"] = args.api_processes
-                    out.setdefault("frames", []).append(res)
-                    print(f"frames over HTTP: {res}")
+            key = issue_key(Settings(data_dir=Path(tmp)), "bench")
+            services.start_service()
+            with httpx.Client(base_url=services.url, headers={"Authorization": f"Bearer {key}"},
+                              timeout=300) as api:
+                clip = fitted_clip(api, 20_000)
+                anim_clip = fitted_clip(api, 15_000)
+                body = len(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5}).content)
+                print(f"frame clip {clip['id']}: {clip['info']['n_vertices']} vertices, {clip['segments']} segments,"
+                      f" frame GLB {body:,} B", flush=True)
+                services.start_bare(body)
+                anim = animation_ms(api, anim_clip["id"])
+                print(f"animation GLB over HTTP, {anim_clip['info']['n_vertices']} vertices, {FPS} fps over "
+                      f"{SECONDS_OF_CLIP:g} s: {anim}", flush=True)
+                print(f"in process, 20k-vertex frame and 15k-vertex animation: "
+                      f"{in_process_ms(Path(tmp), clip['id'], 'frame') | in_process_ms(Path(tmp), anim_clip['id'], 'animation')}"
+                      f" (load {os.getloadavg()[0]:.1f})", flush=True)
+                rows += measure(services, key, clip, args, script, "idle (1 job worker idle)")
+                if not args.skip_busy:
+                    services.add_worker()
+                    ids = busy_jobs(api, clip["poses_id"])
+                    wait_busy(api, ids)
+                    rows += measure(services, key, clip, args, script, "2 job workers busy", (api, ids))
         finally:
             services.stop()
-    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (shared machine)")
-    if args.json:
-        print(json.dumps(out, indent=2))
+    print(f"load average at end: {os.getloadavg()}")
+    print(table(rows))
     return 0
 
 

@@ -56,6 +56,28 @@ def _warm_blas() -> None:
     np.linalg.solve(a + 256 * np.eye(256), a[0])
 
 
+CGROUP_V1_CPU = Path("/sys/fs/cgroup/cpu")
+
+
+def lower_priority(nice: int, cpu_shares: int = 0, cgroup_root: Path = CGROUP_V1_CPU) -> str | None:
+    """Let the API keep its latency while jobs run: nice this process by ``nice`` and, with ``cpu_shares``
+    > 0 where a cgroup v1 cpu hierarchy is writable (Linux, root), move it into the group ``pdeanim-jobs``
+    with that ``cpu.shares`` (1024 = one ordinary process), so all job children together weigh that much.
+    Returns the cgroup joined, or None (cgroup v2 needs a delegated subtree and is not attempted)."""
+    if nice > 0:
+        os.nice(nice)
+    if cpu_shares <= 0 or not os.access(cgroup_root / "cgroup.procs", os.W_OK):
+        return None
+    group = cgroup_root / "pdeanim-jobs"
+    try:
+        group.mkdir(exist_ok=True)
+        (group / "cpu.shares").write_text(str(int(cpu_shares)))
+        (group / "cgroup.procs").write_text(str(os.getpid()))
+        return str(group)
+    except OSError:  # read-only or restricted hierarchy: nice alone
+        return None
+
+
 def child_main(conn, job: dict[str, Any], settings_json: str, parent_pid: int) -> None:  # noqa: ANN001
     """Entry point of the child: run the job's stage, send the outcome on ``conn``, and exit at once."""
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
@@ -79,6 +101,7 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
     from .stages import STAGES
 
     settings = Settings.model_validate_json(settings_json)
+    lower_priority(settings.job_nice, settings.job_cpu_shares)
     workdir = Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))
     last = [0.0]
 

@@ -95,7 +95,7 @@ class GlbBuilder:
         for key in ("bufferViews", "accessors"):
             if not doc[key]:
                 del doc[key]
-        return pack_glb(doc, b"".join(self._chunks))
+        return _pack(doc, self._chunks, self._length)
 
 
 def bounds(a: np.ndarray) -> dict[str, list]:
@@ -108,14 +108,20 @@ def bounds(a: np.ndarray) -> dict[str, list]:
 
 def pack_glb(doc: dict[str, Any], binary: bytes) -> bytes:
     """GLB bytes of a glTF JSON document and its binary buffer, both chunks padded to 4 bytes."""
+    return _pack(doc, [binary], len(binary))
+
+
+def _pack(doc: dict[str, Any], parts: list[bytes], length: int) -> bytes:
+    """GLB bytes of ``doc`` and a binary buffer given as ``parts`` of ``length`` bytes in total, joined
+    with one copy (large animations are tens of MB)."""
     js = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
     js += b" " * (_pad4(len(js)) - len(js))
-    out = [struct.pack("<II", len(js), CHUNK_JSON), js]
-    if binary:
-        binary = binary + b"\0" * (_pad4(len(binary)) - len(binary))
-        out += [struct.pack("<II", len(binary), CHUNK_BIN), binary]
-    body = b"".join(out)
-    return struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(body)) + body
+    out = [b"", struct.pack("<II", len(js), CHUNK_JSON), js]
+    if length:
+        padded = _pad4(length)
+        out += [struct.pack("<II", padded, CHUNK_BIN), *parts, b"\0" * (padded - length)]
+    out[0] = struct.pack("<4sII", GLB_MAGIC, 2, sum(len(x) for x in out) + 12)
+    return b"".join(out)
 
 
 def unpack_glb(data: bytes) -> tuple[dict[str, Any], bytes | None]:

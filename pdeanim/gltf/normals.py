@@ -1,12 +1,23 @@
 """Area-weighted vertex normals, vectorised over vertices (and frames), with a safe fallback direction for
-vertices that no non-degenerate face touches."""
+vertices that no non-degenerate face touches. Served frames and animations use one compiled pass over the
+faces (numba, float64 sums; numba is a pinned dependency, and the numpy path below stays as the fallback)."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import scipy.sparse as sp
 
+try:
+    from numba import njit
+
+    COMPILED = True
+except ImportError:  # pragma: no cover - numba is a pinned dependency; this keeps the numpy path usable
+    COMPILED = False
+
 _TINY = 1e-30
+_MIN_LENGTH = _TINY * 1e6  # what :func:`_finish` treats as "no normal"
 
 
 def _fallback(positions: np.ndarray) -> np.ndarray:
@@ -67,19 +78,72 @@ def vertex_normals_frames(frames: np.ndarray, faces: np.ndarray, chunk_values: i
     return out
 
 
+def _accumulate_unit(p: np.ndarray, faces: np.ndarray, acc: np.ndarray, out: np.ndarray) -> bool:
+    """One frame: area-weighted face normals summed per vertex in float64 (``acc`` is scratch), unit
+    float32 normals into ``out``; False when some vertex has none (the caller takes the careful path)."""
+    acc[:] = 0.0
+    for i in range(faces.shape[0]):
+        a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
+        ax, ay, az = np.float64(p[a, 0]), np.float64(p[a, 1]), np.float64(p[a, 2])
+        e1x, e1y, e1z = p[b, 0] - ax, p[b, 1] - ay, p[b, 2] - az
+        e2x, e2y, e2z = p[c, 0] - ax, p[c, 1] - ay, p[c, 2] - az
+        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x  # |n| = 2 * area
+        for v in (a, b, c):
+            acc[v, 0] += nx
+            acc[v, 1] += ny
+            acc[v, 2] += nz
+    for v in range(acc.shape[0]):
+        x, y, z = acc[v, 0], acc[v, 1], acc[v, 2]
+        length = math.sqrt(x * x + y * y + z * z)
+        if not length > _MIN_LENGTH:
+            return False
+        out[v, 0], out[v, 1], out[v, 2] = x / length, y / length, z / length
+    return True
+
+
+def _frames_unit(frames: np.ndarray, faces: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """:func:`_accumulate_unit` over frames (K, V, 3); returns a (K,) bool array of frames done."""
+    acc = np.empty((frames.shape[1], 3))
+    done = np.zeros(frames.shape[0], np.bool_)
+    for k in range(frames.shape[0]):
+        done[k] = _accumulate_unit(frames[k], faces, acc, out[k])
+    return done
+
+
+if COMPILED:
+    _accumulate_unit = njit(cache=True, nogil=True, boundscheck=False)(_accumulate_unit)
+    _frames_unit = njit(cache=True, nogil=True, boundscheck=False)(_frames_unit)
+
+
+def unit_normals_frames(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals (K, V, 3) float32 of frames (K, V, 3) float32 with one compiled pass per frame (the
+    float64 path of :func:`vertex_normals` for frames where some vertex has no normal)."""
+    p = np.ascontiguousarray(frames, dtype=np.float32)
+    f = np.ascontiguousarray(np.asarray(faces, dtype=np.int64).reshape(-1, 3))
+    if not COMPILED or not len(f):
+        return vertex_normals_frames(p, f)
+    out = np.empty(p.shape, np.float32)
+    done = _frames_unit(p, f, out)
+    for k in np.flatnonzero(~done):
+        out[k] = vertex_normals(p[k], f)
+    return out
+
+
 class FaceNormals:
-    """Area-weighted vertex normals of one topology, for many frames one at a time (served frames): the
-    corner indices and the (V, T) CSR face -> vertex incidence are built once, so each call is one gather,
-    the cross products and one sparse product per axis, in float32 and component-major (contiguous).
-    Same result as :func:`vertex_normals` to about 1e-6; frames with a vertex that no non-degenerate face
-    touches take that exact float64 path."""
+    """Area-weighted vertex normals of one topology, for many frames one at a time (served frames): one
+    compiled pass over the faces with float64 sums (without numba: the corner indices and the (V, T) CSR
+    face -> vertex incidence are built once, so each call is one gather, the cross products and one sparse
+    product per axis, in float32). Same result as :func:`vertex_normals` to about 1e-6; frames with a vertex
+    that no non-degenerate face touches take that exact float64 path."""
 
     def __init__(self, faces: np.ndarray, n_vertices: int) -> None:
         f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         if len(f) and (f.min() < 0 or f.max() >= n_vertices):
             raise ValueError(f"face indices must lie in [0, {n_vertices})")
         t, v = len(f), int(n_vertices)
-        self.faces, self.n_vertices = f, v
+        self.faces, self.n_vertices = np.ascontiguousarray(f), v
+        if COMPILED:
+            return
         corners = np.ascontiguousarray(f.T).reshape(-1)  # (3T,) all a, all b, all c
         self._gather = (corners[None, :] + v * np.arange(3)[:, None]).reshape(-1).astype(np.intp)  # into (3V,)
         self._incidence = sp.csr_matrix((np.ones(3 * t, np.float32), (f.ravel(), np.repeat(np.arange(t), 3))),
@@ -94,6 +158,10 @@ class FaceNormals:
         t = len(self.faces)
         if not t:
             out[:] = vertex_normals(p, self.faces)
+            return out
+        if COMPILED:
+            if not _accumulate_unit(np.ascontiguousarray(p), self.faces, np.empty((self.n_vertices, 3)), out):
+                out[:] = vertex_normals(p, self.faces)
             return out
         g = np.take(np.ascontiguousarray(p.T).reshape(-1), self._gather, mode="clip").reshape(3, 3, t)
         e1, e2 = g[:, 1] - g[:, 0], g[:, 2] - g[:, 0]  # (xyz, T) edge vectors of every face

@@ -25,7 +25,7 @@ from .glb import (
     json_float,
     unpack_glb,
 )
-from .normals import FaceNormals, vertex_normals, vertex_normals_frames
+from .normals import FaceNormals, unit_normals_frames, vertex_normals
 
 QUANT = "KHR_mesh_quantization"
 MODE_POINTS, MODE_TRIANGLES = 0, 4
@@ -91,8 +91,9 @@ def bounds(a: np.ndarray, axis: int = 0) -> dict[str, list[float]]:
 
 class FrameGlb:
     """:func:`frame_glb` for one topology, fast for many frames (the service's frame route): the faces
-    are checked, the index bytes, the normals' incidence matrix and the glTF JSON around the data are made
-    once; each call computes the normals and the position bounds and fills one preallocated GLB buffer."""
+    are checked, the index bytes, the normals' kernel inputs and the glTF JSON around the position bounds
+    are made once; each call computes the bounds (which also check the values) and the normals and fills
+    one uninitialised GLB buffer, every byte of which is written."""
 
     def __init__(self, faces: np.ndarray | None, n_vertices: int) -> None:
         self.n_vertices = int(n_vertices)
@@ -103,35 +104,60 @@ class FrameGlb:
         if len(f):
             attrs["NORMAL"] = b.add_accessor(np.zeros((self.n_vertices, 3), np.float32), target=ARRAY_BUFFER)
         _finish(b, {"primitives": [_primitive(b, attrs, f, self.n_vertices)]}, {})
-        self._doc, binary = unpack_glb(b.to_glb())
+        doc, binary = unpack_glb(b.to_glb())
         self._binary = binary or b""
         self._normals = FaceNormals(f, self.n_vertices) if len(f) else None
-        self._pos_acc = attrs["POSITION"]
-        self._offsets = {name: self._doc["bufferViews"][self._doc["accessors"][acc]["bufferView"]]["byteOffset"]
+        doc["accessors"][attrs["POSITION"]].update(min=_MIN, max=_MAX)  # placeholders, split off below
+        js = json.dumps(doc, separators=(",", ":"), allow_nan=False)
+        head, rest = js.split(json.dumps(_MIN))
+        self._json = (head.encode(), *(x.encode() for x in rest.split(json.dumps(_MAX))))
+        self._offsets = {name: doc["bufferViews"][doc["accessors"][acc]["bufferView"]]["byteOffset"]
                          for name, acc in attrs.items()}
         self._tail = self._offsets.get("NORMAL", self._offsets["POSITION"]) + 12 * self.n_vertices
 
     def __call__(self, positions: np.ndarray) -> bytes:
         """GLB bytes of one frame: positions (V, 3) of this topology."""
-        p = _check_positions(positions)
+        p = np.asarray(positions)
         if p.shape != (self.n_vertices, 3):
             raise ParameterError(f"positions must have shape ({self.n_vertices}, 3), got {p.shape}")
-        accessors = list(self._doc["accessors"])
-        accessors[self._pos_acc] = {**accessors[self._pos_acc], **bounds(np.ascontiguousarray(p.T), axis=1)}
-        js = json.dumps({**self._doc, "accessors": accessors}, separators=(",", ":"), allow_nan=False).encode()
+        pt = np.ascontiguousarray(p.T, dtype=np.float32)  # (3, V): bounds reduce along contiguous rows
+        lo, hi = pt.min(axis=1), pt.max(axis=1)
+        _check_bounds(lo, hi)
+        p = np.ascontiguousarray(p, dtype=np.float32)
+        head, middle, end = self._json
+        js = b"".join((head, _float_list(lo), middle, _float_list(hi), end))
         js += b" " * (-len(js) % 4)
         start = 28 + len(js)  # GLB header, JSON chunk header and JSON, BIN chunk header
-        out = bytearray(start + len(self._binary))
-        struct.pack_into("<4sIIII", out, 0, GLB_MAGIC, 2, len(out), len(js), CHUNK_JSON)
-        out[20: 20 + len(js)] = js
-        struct.pack_into("<II", out, start - 8, len(self._binary), CHUNK_BIN)
-        out[start + self._tail:] = self._binary[self._tail:]  # indices (and padding): the same every frame
-        view = np.frombuffer(out, np.float32, 3 * self.n_vertices, start + self._offsets["POSITION"])
-        view.reshape(-1, 3)[:] = p
+        out = np.empty(start + len(self._binary), np.uint8)
+        out[:12] = np.frombuffer(struct.pack("<4sII", GLB_MAGIC, 2, len(out)), np.uint8)
+        out[12:20] = np.frombuffer(struct.pack("<II", len(js), CHUNK_JSON), np.uint8)
+        out[20:start - 8] = np.frombuffer(js, np.uint8)
+        out[start - 8:start] = np.frombuffer(struct.pack("<II", len(self._binary), CHUNK_BIN), np.uint8)
+        out[start + self._tail:] = np.frombuffer(self._binary, np.uint8, offset=self._tail)  # indices, padding
+        block = 12 * self.n_vertices
+        pos = start + self._offsets["POSITION"]
+        out[pos:pos + block].view(np.float32).reshape(-1, 3)[:] = p
         if self._normals is not None:
-            view = np.frombuffer(out, np.float32, 3 * self.n_vertices, start + self._offsets["NORMAL"])
-            self._normals(p, out=view.reshape(-1, 3))
-        return bytes(out)
+            nrm = start + self._offsets["NORMAL"]
+            self._normals(p, out=out[nrm:nrm + block].view(np.float32).reshape(-1, 3))
+        return out.tobytes()
+
+
+_MIN, _MAX = "@@pdeanim-min@@", "@@pdeanim-max@@"
+
+
+def _float_list(values: np.ndarray) -> bytes:
+    """A JSON list of float32 values written exactly as ``json.dumps`` writes them (``repr`` of the float)."""
+    return ("[" + ",".join(repr(json_float(x)) for x in values) + "]").encode()
+
+
+def _check_bounds(lo: np.ndarray, hi: np.ndarray, what: str = "positions") -> None:
+    """The checks of :func:`_check_positions` from the float32 per-component bounds alone: a NaN or an
+    infinity (also from a float32 overflow) shows in the minimum or maximum."""
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ParameterError(f"{what} contain NaN or infinite values (or overflow float32)")
+    if max(float(np.abs(lo).max()), float(np.abs(hi).max())) > 1e37:
+        raise ParameterError(f"{what} are too large for float32 displacements (|x| > 1e37)")
 
 
 def _check_times(times: np.ndarray, k: int) -> np.ndarray:
@@ -201,10 +227,25 @@ def _key_plan(frames: np.ndarray, t32: np.ndarray, loop: bool) -> tuple[np.ndarr
     return t32, key_target, k
 
 
+def _displacement_bounds(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-component min and max (K, 3) of ``frames[k] - frames[0]`` (K, V, 3) float32, chunked so that the
+    component-major temporary stays small."""
+    k = len(frames)
+    lo, hi = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
+    step = max(1, 2_000_000 // max(frames[0].size, 1))
+    for s in range(0, k, step):
+        d = np.subtract(frames[s: s + step], frames[0]).transpose(0, 2, 1).copy()  # (Kc, 3, V)
+        d.min(axis=2, out=lo[s: s + step])
+        d.max(axis=2, out=hi[s: s + step])
+    return lo, hi
+
+
 def _add_targets(b: GlbBuilder, frames: np.ndarray, normals: np.ndarray | None, n_targets: int,
                  quant: _Quantizer | None) -> list[dict]:
     """One morph target per frame: POSITION (and NORMAL) displacement from the first frame."""
     targets = []
+    if quant is None:  # bounds of every displacement at once, reduced along contiguous rows (see bounds())
+        lo, hi = _displacement_bounds(frames[:n_targets])
     for i in range(n_targets):
         if quant is not None:
             d = quant.delta(i)
@@ -212,8 +253,12 @@ def _add_targets(b: GlbBuilder, frames: np.ndarray, normals: np.ndarray | None, 
                    b.add_accessor(d, target=ARRAY_BUFFER, normalized=True, minmax=True, stride_pad=1))
         else:
             d = frames[i] - frames[0]
-            pos = b.add_zero_accessor(len(d)) if not d.any() else b.add_accessor(d, target=ARRAY_BUFFER,
-                                                                                minmax=True)
+            if not (lo[i].any() or hi[i].any()):  # all zero (a -0.0 counts as zero, as in ndarray.any)
+                pos = b.add_zero_accessor(len(d))
+            else:
+                pos = b.add_accessor(d, target=ARRAY_BUFFER)
+                b.doc["accessors"][pos].update(min=[json_float(x) for x in lo[i]],
+                                               max=[json_float(x) for x in hi[i]])
         target = {"POSITION": pos}
         if normals is not None:
             dn = normals[i] - normals[0]
@@ -252,7 +297,7 @@ def animation_glb(frames: np.ndarray, times: np.ndarray, faces: np.ndarray | Non
     if not len(f):
         vn = None
     else:
-        vn = vertex_normals_frames(fr, f) if normals else vertex_normals(fr[0], f)[None]
+        vn = unit_normals_frames(fr, f) if normals else vertex_normals(fr[0], f)[None]
     if quant is not None:
         attrs = {"POSITION": b.add_accessor(quant.base(), target=ARRAY_BUFFER, normalized=True, minmax=True,
                                             stride_pad=1)}

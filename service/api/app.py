@@ -9,9 +9,10 @@ from fastapi import FastAPI
 
 from ..settings import Settings
 from ..store.context import Store
-from .cache import ClipCache
+from .cache import BodyCache, ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
+from .memory import keep_freed_memory
 from .middleware import install_http_middleware
 from .routes import clips, health, jobs, meshes, poses
 from .routes.pages import install_pages
@@ -28,6 +29,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        keep_freed_memory()
         own = app.state.store is None
         if own:
             app.state.store = Store.open(settings)
@@ -39,7 +41,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                   docs_url=None, redoc_url=None)
     app.state.store = store
     app.state.clip_cache = ClipCache(settings.max_clip_cache)
-    app.state.key_cache = KeyCache(ttl=30.0)
+    app.state.frame_cache = BodyCache(settings.frame_cache_bytes)
+    app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
     install_error_handlers(app)
     for module in (health, meshes, poses, jobs, clips):
         app.include_router(module.router)

@@ -1,10 +1,11 @@
-"""A bounded in-process LRU cache of decoded clips, so frame requests skip blob reads and decoding."""
+"""Bounded in-process LRU caches of the frame route: decoded clips (so frame requests skip blob reads and
+decoding) and encoded frame bodies per (clip, t) (players ask for the same t values at a fixed rate)."""
 
 from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +30,15 @@ class ClipCache:
         self._lock = threading.Lock()
         self.hits = self.misses = 0
 
+    def peek(self, clip_id: str) -> CachedClip | None:
+        """The cached clip (marked recently used) or None, without loading: no I/O, safe on the event loop."""
+        with self._lock:
+            item = self._items.get(clip_id)
+            if item is not None:
+                self._items.move_to_end(clip_id)
+                self.hits += 1
+            return item
+
     def get(self, clip_id: str, load: Callable[[], CachedClip]) -> CachedClip:
         """The cached clip, or ``load()`` it and keep it, evicting the least recently used."""
         with self._lock:
@@ -45,6 +55,49 @@ class ClipCache:
             while len(self._items) > self.max_entries:
                 self._items.popitem(last=False)
         return item
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+
+class BodyCache:
+    """LRU of encoded response bodies (immutable ``bytes``) holding at most ``max_bytes`` in total; a body
+    larger than a quarter of that is not kept. ``max_bytes`` 0 disables it."""
+
+    def __init__(self, max_bytes: int):
+        self.max_bytes = max(0, int(max_bytes))
+        self._items: OrderedDict[Hashable, bytes] = OrderedDict()
+        self._size = 0
+        self._lock = threading.Lock()
+        self.hits = self.misses = 0
+
+    def get(self, key: Hashable) -> bytes | None:
+        """The body stored under ``key`` (marked recently used), or None."""
+        with self._lock:
+            body = self._items.get(key)
+            if body is None:
+                self.misses += 1
+                return None
+            self._items.move_to_end(key)
+            self.hits += 1
+            return body
+
+    def put(self, key: Hashable, body: bytes) -> None:
+        """Keep ``body`` under ``key``, evicting the least recently used bodies beyond ``max_bytes``."""
+        if len(body) * 4 > self.max_bytes:
+            return
+        with self._lock:
+            old = self._items.pop(key, None)
+            self._size += len(body) - (len(old) if old is not None else 0)
+            self._items[key] = body
+            while self._size > self.max_bytes:
+                _, evicted = self._items.popitem(last=False)
+                self._size -= len(evicted)
+
+    @property
+    def size(self) -> int:
+        """Bytes held."""
+        return self._size
 
     def __len__(self) -> int:
         return len(self._items)

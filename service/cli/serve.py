@@ -4,6 +4,7 @@ optionally with job workers started alongside (``--with-workers N``: the embedde
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import subprocess
 
@@ -17,7 +18,9 @@ def register(subparsers) -> None:  # noqa: ANN001
     p = subparsers.add_parser("serve", help="run the HTTP API (settings from PDEANIM_* environment variables)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
-    p.add_argument("--workers", type=int, default=1, help="uvicorn (HTTP) worker processes (default 1)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="HTTP processes (uvicorn workers; default: the CPUs this process may use, "
+                        f"{default_http_workers()} here); each keeps its own clip and frame caches")
     p.add_argument("--with-workers", type=int, default=0, metavar="N",
                    help="also start N job workers (`pdeanim worker`) and stop them on exit (default 0)")
     p.add_argument("--no-migrate", action="store_true",
@@ -25,6 +28,14 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--migrate-only", action="store_true", help="run the database migrations and exit")
     p.add_argument("--log-level", default="warning")
     p.set_defaults(func=run)
+
+
+def default_http_workers() -> int:
+    """The number of CPUs this process may run on (its affinity mask), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
@@ -58,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(sig, lambda *_: None)
     try:
         uvicorn.run("service.api.app:app_from_environment", factory=True, host=args.host, port=args.port,
-                    workers=args.workers, log_level=args.log_level, access_log=False)
+                    workers=args.workers or default_http_workers(), log_level=args.log_level, access_log=False)
     finally:
         _stop(workers)
     return 0

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
 
 from pdeanim.records import jsonable
 
@@ -18,7 +19,7 @@ from ..cache import CachedClip
 from ..deps import ClipCacheDep, SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
 from ..exports import FrameWriter, check_fps, export_job_hint, source_layout_loader
-from ..httpcache import immutable_response
+from ..httpcache import IMMUTABLE, NO_COMPRESSION, etag_matches, immutable_response
 from ..schemas import ClipOut
 
 router = APIRouter(tags=["clips"])
@@ -27,7 +28,8 @@ GLB_RESPONSE = {200: {"content": {GLB: {}}, "description": "a binary glTF 2.0 fi
 SUMMARY_KEYS = ("rms", "max", "rel_rms", "rel_max", "p95", "target")
 
 
-def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
+def _load(clip_id: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
+    """The clip from the cache, or read and decoded from the database row and blobs (blocking I/O)."""
     def load() -> CachedClip:
         from pdeanim.clip import load_clip
         from pdeanim.gltf.write import FrameGlb
@@ -41,10 +43,17 @@ def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # no
         return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip,
                           FrameWriter(FrameGlb(clip.faces, clip.n_vertices), layout))
 
-    item = cache.get(clip_id, load)
+    return cache.get(clip_id, load)
+
+
+def _owned(item: CachedClip, clip_id: str, tenant: str) -> CachedClip:
     if item.tenant_id != tenant:
         raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
     return item
+
+
+def _cached(clip_id: str, tenant: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
+    return _owned(_load(clip_id, store, cache), clip_id, tenant)
 
 
 def _count(info: dict, report: dict, name: str) -> int | None:
@@ -113,19 +122,35 @@ def get_clip_topology(clip_id: str, request: Request, tenant: TenantDep, session
 
 @router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
-def get_frame(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep,
-              cache: ClipCacheDep, t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")
-              ) -> Response:
+async def get_frame(clip_id: str, request: Request, tenant: TenantDep,
+                    t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")) -> Response:
     """One evaluated frame at ``t`` as a GLB."""
-    item = _cached(clip_id, tenant, store, cache)
+    # The hot path of the service (see the README's performance section for the measurements behind it):
+    # ``async def`` with async dependencies, so a repeated frame (encoded-frame LRU) or a 304 costs no
+    # thread-pool hop; a clip is loaded (database, blobs) in the pool once per process, and a new frame is
+    # computed in the pool too (the numba normals and large numpy operations release the GIL, so a
+    # process keeps serving while it computes).
+    state = request.app.state
+    item = state.clip_cache.peek(clip_id)
+    if item is None:
+        item = await run_in_threadpool(_load, clip_id, state.store, state.clip_cache)
+    _owned(item, clip_id, tenant)
     if not math.isfinite(t) or (not item.clip.looping and not 0.0 <= t <= 1.0):
         raise ApiError(422, "t_out_of_range", f"t must lie in [0, 1] for this clip, got {t}")
-    tag = hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest()
+    etag = '"' + hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest() + '"'
+    headers = {"ETag": etag, "Cache-Control": IMMUTABLE, **NO_COMPRESSION}  # float32 frames: gzip not worth it
+    if etag_matches(request, etag):
+        return Response(status_code=304, headers=headers)
+    body = state.frame_cache.get((clip_id, t))
+    if body is None:
+        body = await run_in_threadpool(_frame_body, item, float(t))
+        state.frame_cache.put((clip_id, t), body)
+    return Response(body, media_type=GLB, headers=headers)
 
-    def body() -> bytes:
-        return item.frame_glb(np.asarray(item.clip.evaluate(float(t))))
 
-    return immutable_response(request, tag, body, GLB, compress=False)  # float32 frames: gzip is not worth it
+def _frame_body(item: CachedClip, t: float) -> bytes:
+    """The GLB of the clip's frame at ``t``."""
+    return item.frame_glb(np.asarray(item.clip.evaluate(t)))
 
 
 @router.get("/v1/clips/{clip_id}/animation", operation_id="getClipAnimation", response_class=Response,
@@ -153,10 +178,15 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
                        + export_job_hint(clip_id, fps))
     tag = hashlib.sha256(f"{item.coefficients_key}:animation:meshopt-v1:{fps!r}".encode()).hexdigest()
 
-    def body() -> bytes:
+    def body() -> bytes:  # kept in the encoded-body LRU with the frames (a repeat is a copy-free answer)
         from pdeanim.gltf.clipexport import clip_animation_glb
 
-        layout = item.frame_glb.layout.get()
-        return clip_animation_glb(item.clip, fps, layout=layout, max_frames=settings.max_frames)
+        cache = request.app.state.frame_cache
+        data = cache.get(("animation", clip_id, fps))
+        if data is None:
+            layout = item.frame_glb.layout.get()
+            data = clip_animation_glb(item.clip, fps, layout=layout, max_frames=settings.max_frames)
+            cache.put(("animation", clip_id, fps), data)
+        return data
 
     return immutable_response(request, tag, body, GLB)
