@@ -20,4 +20,4 @@ def test_jsonable_turns_numpy_into_json_and_non_finite_into_null():
 def test_library_versions_name_the_installed_distributions():
     versions = library_versions()
     assert versions["numpy"] == np.__version__ and versions["pdeanim"]
-    assert set(versions) == {"pdeanim", "numpy", "scipy", "trimesh", "pytetwild", "numba"}
+    assert set(versions) == {"pdeanim", "numpy", "scipy", "trimesh", "pytetwild", "numba", "meshoptimizer"}
