@@ -95,7 +95,8 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
     """Stored poses -> clip."""
     from pdeanim.poses import PoseLimits, load_poses_npz
 
-    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices)
+    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
+                        max_bytes=settings.max_pose_bytes)
     poses = load_poses_npz(blobs.get(job["poses"]["blob_key"]), limits)
     return {"clip": _fit(poses, job["params"]["params"], blobs, progress)}
 

@@ -30,10 +30,11 @@ def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float):  # noqa: 
     from pdeanim.poses import PoseLimits, load_poses_npz, make_poses
 
     settings: Settings = store.settings
-    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices)
+    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
+                        max_bytes=settings.max_pose_bytes)
     suffix = Path(upload.filename).suffix.lower()
     if suffix == ".npz":
-        poses = load_poses_npz(upload.path.read_bytes(), limits)
+        poses = load_poses_npz(upload.path, limits)
     elif suffix in (".glb", ".gltf"):
         from pdeanim.gltf.read import read_animated_poses
 
