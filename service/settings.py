@@ -31,6 +31,7 @@ class Settings(BaseSettings):
     max_pose_bytes: int = Field(1024**3, gt=0, description="inflated size of an uploaded poses .npz's arrays")
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
     max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
+    max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
     max_attempts: int = Field(3, ge=1, description="attempts before a job fails for good")

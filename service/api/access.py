@@ -23,7 +23,8 @@ def owned(session: Session, model: type[T], row_id: str, tenant_id: str, what: s
 DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malformed request",
                 401: "missing or invalid API key", 404: "not found (or another tenant's)",
                 413: "over a configured limit", 415: "wrong content type",
-                422: "invalid input or parameters", 501: "stage not available in this build"}
+                409: "conflict with the resource's state", 422: "invalid input or parameters",
+                501: "stage not available in this build", 503: "a dependency (database, blobs) is unavailable"}
 
 
 def responses(*statuses: int) -> dict[int | str, dict]:

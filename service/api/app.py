@@ -12,7 +12,7 @@ from ..store.context import Store
 from .cache import ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
-from .routes import clips, health, jobs, meshes, poses
+from .routes import clips, health, jobs, lifecycle, meshes, poses
 
 API_VERSION = "1.0.0"
 DESCRIPTION = ("Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
@@ -38,7 +38,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.clip_cache = ClipCache(settings.max_clip_cache)
     app.state.key_cache = KeyCache(ttl=30.0)
     install_error_handlers(app)
-    for module in (health, meshes, poses, jobs, clips):
+    for module in (health, meshes, poses, jobs, clips, lifecycle):
         app.include_router(module.router)
     return app
 

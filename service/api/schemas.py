@@ -89,7 +89,7 @@ class JobOut(BaseModel):
 
     id: str
     kind: str
-    state: Literal["queued", "running", "succeeded", "failed"]
+    state: Literal["queued", "running", "succeeded", "failed", "cancelled"]
     progress: float = Field(description="0..1")
     stage: str = Field(description='e.g. "simulate 40/100"')
     error: ErrorBody | None = None

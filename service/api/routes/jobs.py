@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+import asyncio
+import time
+
+from fastapi import APIRouter, Query, Response
 from sqlalchemy import select
+from starlette.concurrency import run_in_threadpool
 
 from ...jobspec import StageUnavailable, normalize_request
+from ...store.context import Store
 from ...store.models import Job, Mesh, PosesRecord
+from ...store.queue import FINAL
 from ..access import owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
@@ -63,7 +69,8 @@ def _merged_params(req: JobRequest) -> dict:
 
 @router.post("/v1/jobs", status_code=202, operation_id="createJob", response_model=JobOut,
              responses=responses(401, 404, 413, 422, 501))
-def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: StoreDep) -> JobOut:
+def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: StoreDep,
+               response: Response) -> JobOut:
     """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""
     mesh_id, poses_id = _inputs(req, tenant, session)
     try:
@@ -81,10 +88,44 @@ def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: S
     job = store.queue.enqueue(session, tenant_id=tenant, kind=req.kind, params=spec, mesh_id=mesh_id,
                               poses_id=poses_id)
     session.commit()
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
     return job_out(job)
 
 
+WAIT_INTERVAL = 0.25  # seconds between the server-side state checks of a long poll
+
+
+def _load(store: Store, job_id: str, tenant: str) -> JobOut:
+    with store.sessions() as session:  # a short session per check: no connection is held while waiting
+        return job_out(owned(session, Job, job_id, tenant, "job"))
+
+
 @router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut, responses=responses(401, 404, 422))
-def get_job(job_id: str, tenant: TenantDep, session: SessionDep) -> JobOut:
-    """State (queued, running, succeeded, failed), progress 0..1, stage, error and result ids."""
-    return job_out(owned(session, Job, job_id, tenant, "job"))
+async def get_job(job_id: str, tenant: TenantDep, store: StoreDep,
+                  wait: float = Query(0.0, ge=0, le=3600, description="long poll: wait up to this many seconds "
+                                      "(capped by PDEANIM_MAX_WAIT_SECONDS) for the job to change state or "
+                                      "finish; 0 answers at once")) -> JobOut:
+    """State (queued, running, succeeded, failed, cancelled), progress 0..1, stage, error and result ids;
+    with ``wait``, answers as soon as the state changes (or at the end of the wait, unchanged)."""
+    job = await run_in_threadpool(_load, store, job_id, tenant)
+    deadline = time.monotonic() + min(wait, store.settings.max_wait_seconds)
+    first = job.state
+    while job.state == first and job.state not in FINAL and (left := deadline - time.monotonic()) > 0:
+        await asyncio.sleep(min(WAIT_INTERVAL, left))
+        job = await run_in_threadpool(_load, store, job_id, tenant)
+    return job
+
+
+@router.post("/v1/jobs/{job_id}/cancel", operation_id="cancelJob", response_model=JobOut,
+             responses=responses(401, 404, 409, 422))
+def cancel_job(job_id: str, tenant: TenantDep, store: StoreDep) -> JobOut:
+    """Cancel a queued job at once, or a running one (its worker stops it at the next heartbeat); cancelling
+    a cancelled job is a no-op; 409 for a job that already succeeded or failed."""
+    job = _load(store, job_id, tenant)
+    if job.state in ("succeeded", "failed"):
+        raise ApiError(409, "conflict", f"job {job_id} already {job.state}")
+    store.queue.cancel([job_id])
+    job = _load(store, job_id, tenant)
+    if job.state in ("succeeded", "failed"):  # it finished between the check and the cancel
+        raise ApiError(409, "conflict", f"job {job_id} already {job.state}")
+    return job

@@ -35,7 +35,7 @@ def _ingest(upload: Upload, settings: Settings) -> dict:
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
              openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 413, 415, 422))
-async def upload_mesh(request: Request, tenant: TenantDep, store: StoreDep) -> MeshOut:
+async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:
     """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
     settings = store.settings
     upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
@@ -49,6 +49,7 @@ async def upload_mesh(request: Request, tenant: TenantDep, store: StoreDep) -> M
     with store.sessions() as session:
         session.add(row)
         session.commit()
+    response.headers["Location"] = f"/v1/meshes/{row.id}"
     return mesh_out(row)
 
 

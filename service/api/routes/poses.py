@@ -60,7 +60,8 @@ def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float) -> tuple[
 
 @router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses", response_model=PosesOut,
              openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 404, 413, 415, 422))
-async def upload_poses(mesh_id: str, request: Request, tenant: TenantDep, store: StoreDep,
+async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
+                       store: StoreDep,
                        fps: float = Query(30.0, gt=0, le=1000, description="sampling rate for animated GLB")
                        ) -> PosesOut:
     """Upload poses of this mesh: a .npz with ``vertices`` (F,V,3) (optional ``faces``, ``times``) or an
@@ -78,6 +79,7 @@ async def upload_poses(mesh_id: str, request: Request, tenant: TenantDep, store:
     with store.sessions() as session:
         session.add(row)
         session.commit()
+    response.headers["Location"] = f"/v1/poses/{row.id}"
     return poses_out(row)
 
 
