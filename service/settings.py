@@ -29,8 +29,10 @@ class Settings(BaseSettings):
     max_faces: int = Field(1_000_000, gt=0)
     max_frames: int = Field(2_000, gt=0)
     max_pose_bytes: int = Field(1024**3, gt=0, description="inflated size of an uploaded poses .npz's arrays")
+    max_json_bytes: int = Field(1024**2, gt=0, description="largest non-upload request body (job requests)")
+    max_header_bytes: int = Field(32 * 1024, gt=0, description="largest total size of a request's headers")
+    access_log: bool = Field(True, description="one log line per request (logger pdeanim.access, level INFO)")
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
-    max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
     max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")

@@ -12,7 +12,8 @@ from ..store.context import Store
 from .cache import ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
-from .routes import clips, health, jobs, lifecycle, meshes, poses
+from .middleware import RequestGuard
+from .routes import clips, health, jobs, meshes, poses
 
 API_VERSION = "1.0.0"
 DESCRIPTION = ("Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
@@ -38,7 +39,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.clip_cache = ClipCache(settings.max_clip_cache)
     app.state.key_cache = KeyCache(ttl=30.0)
     install_error_handlers(app)
-    for module in (health, meshes, poses, jobs, clips, lifecycle):
+    app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,
+                       max_json_bytes=settings.max_json_bytes, log_access=settings.access_log)
+    for module in (health, meshes, poses, jobs, clips):
         app.include_router(module.router)
     return app
 

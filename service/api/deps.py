@@ -83,6 +83,7 @@ def get_tenant(creds: Annotated[HTTPAuthorizationCredentials | None, Depends(bea
     tenant = request.app.state.key_cache.lookup(creds.credentials, store)
     if tenant is None:
         raise ApiError(401, "unauthorized", "invalid API key", challenge)
+    request.state.tenant = tenant  # for the access log line
     return tenant
 
 

@@ -119,3 +119,39 @@ def test_poses_reproducers_answer_4xx(raw):
     for blob, expected in cases:
         error_of(*raw.upload(path, b"p.npz", blob), expected)
     assert raw.request("GET", "/healthz")[0] == 200
+
+
+def test_json_body_and_header_limits(api):
+    """Defect 5: a job body over PDEANIM_MAX_JSON_BYTES (declared or chunked) is a 413 before it is parsed, and
+    headers over PDEANIM_MAX_HEADER_BYTES are a 431."""
+    boxes = [{"box": [0, 0, 0, 1, 1, 1]}] * 100_000
+    body = json.dumps({"kind": "simulate", "mesh_id": "mesh_x", "params": {"pins": boxes}}).encode()
+    r = api.post("/v1/jobs", content=body, headers={"Content-Type": "application/json"})
+    assert error_of(r.status_code, r.json(), 413) == "payload_too_large"
+    assert "PDEANIM_MAX_JSON_BYTES" in r.json()["error"]["message"]
+
+    def chunks():
+        for i in range(0, len(body), 65536):
+            yield body[i:i + 65536]
+
+    r = api.post("/v1/jobs", content=chunks(), headers={"Content-Type": "application/json"})
+    assert error_of(r.status_code, r.json(), 413) == "payload_too_large"
+    r = api.get("/v1/meshes/nope", headers={"X-Padding": "a" * 20_000})
+    assert error_of(r.status_code, r.json(), 431) == "request_header_fields_too_large"
+
+
+def test_access_log_and_listen_line(services, api):
+    """Operations: the server says where it listens and logs one line per request with the tenant."""
+    import time
+
+    marker = f"/v1/meshes/nope-{uuid.uuid4().hex[:8]}"
+    assert api.get(marker).status_code == 404
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        text = (services.log_dir / "server.log").read_text()
+        if marker in text:
+            break
+        time.sleep(0.1)
+    assert f"listening on http://127.0.0.1:{services.port}" in text
+    line = next(line for line in text.splitlines() if marker in line)
+    assert f"GET {marker} 404" in line and "ms tenant=" in line and "tenant=-" not in line, line
