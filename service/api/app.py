@@ -13,7 +13,7 @@ from .cache import ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
 from .middleware import RequestGuard
-from .routes import clips, health, jobs, meshes, poses
+from .routes import clips, health, jobs, lifecycle, meshes, poses
 
 API_VERSION = "1.0.0"
 DESCRIPTION = ("Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
@@ -41,7 +41,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     install_error_handlers(app)
     app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,
                        max_json_bytes=settings.max_json_bytes, log_access=settings.access_log)
-    for module in (health, meshes, poses, jobs, clips):
+    for module in (health, meshes, poses, jobs, clips, lifecycle):
         app.include_router(module.router)
     return app
 
