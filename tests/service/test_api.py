@@ -213,7 +213,7 @@ def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, service
     r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE, "then_fit": True,
                                    "fit": {"target_rel_rms": 0.005}})
     assert r.status_code == 202, r.text
-    assert r.json()["params"]["params"]["seed"] == 0  # the record keeps every parameter, seed included
+    assert r.json()["params"]["params"]["max_substeps"] == 400  # the record keeps every parameter, defaults too
     job = wait_job(api, r.json()["id"], timeout=240)
     assert job["state"] == "succeeded", (job, services.logs())
     poses = np.load(io.BytesIO(api.get(f"/v1/poses/{job['result']['poses_id']}").content))

@@ -155,3 +155,22 @@ def test_access_log_and_listen_line(services, api):
     assert f"listening on http://127.0.0.1:{services.port}" in text
     line = next(line for line in text.splitlines() if marker in line)
     assert f"GET {marker} 404" in line and "ms tenant=" in line and "tenant=-" not in line, line
+
+
+def test_work_limits_at_submission(api):
+    """Defect 5: a simulation over the work budget is refused at submission (413, with what to lower), by the
+    same estimate the simulator checks; more pins than the bound are a 422 before each is validated; an old
+    body with ``seed`` (defect 8: the parameter is gone) is still accepted."""
+    r = api.post("/v1/meshes", files={"file": ("t.obj", TETRA, "application/octet-stream")})
+    mesh_id = r.json()["id"]
+    r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh_id,
+                                   "params": {"frames": 2000, "substeps": 400, "iterations": 50}})
+    assert error_of(r.status_code, r.json(), 413) == "limit_exceeded"
+    assert "simulation work" in r.json()["error"]["message"] and "lower frames" in r.json()["error"]["message"]
+    r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh_id,
+                                   "params": {"pins": [{"box": [0, 0, 0, 1, 1, 1]}] * 300}})
+    assert error_of(r.status_code, r.json(), 422) == "invalid_parameter"
+    assert "at most 256 pins" in r.json()["error"]["message"]
+    r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh_id, "params": {"frames": 3, "seed": 7}})
+    assert r.status_code == 202, r.text
+    assert "seed" not in r.json()["params"]["params"]
