@@ -82,7 +82,7 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         f"fitted {r['frames']} frames x {r['vertices']} vertices with {r['curves']} curves, "
         f"{r['segments']} segments",
         f"rms {r['rms']:.4g} (rel {r['rel_rms']:.3g})  max {r['max']:.4g} (rel {r['rel_max']:.3g})  "
-        f"KG {r['kg']:.3g}  spatial floor rel rms {r['floor_rel_rms']:.3g}",
+        f"KG {_fmt(r['kg'])}  spatial floor rel rms {r['floor_rel_rms']:.3g}",
         f"target rms={_fmt(target.get('rms'))} max={_fmt(target.get('max'))}: "
         + ("met" if met else "fixed segments" if met is None else "NOT met")
         + (" (the curves' spatial floor is above the target)" if r.get("floor_exceeds_target") else ""),

@@ -74,9 +74,18 @@ def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreD
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
     item = _cached(clip_id, tenant, store, cache)
-    info = json.loads(json.dumps(item.clip.info(), default=_jsonable))
+    info = _finite(json.loads(json.dumps(item.clip.info(), default=_jsonable)))
     info.setdefault("looping", bool(item.clip.looping))
     return clip_out(row, info)
+
+
+def _finite(value):  # noqa: ANN001, ANN202
+    """``value`` with NaN/inf floats as None: clips stored before containers refused them still answer JSON."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
 def _jsonable(value):  # noqa: ANN001, ANN202
