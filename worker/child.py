@@ -79,7 +79,9 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
     from .stages import STAGES
 
     settings = Settings.model_validate_json(settings_json)
-    workdir = Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))
+    workdir = Path(job["workdir"]) if job.get("workdir") else \
+        Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))
+    workdir.mkdir(parents=True, exist_ok=True)
     last = [0.0]
 
     def progress(fraction: float, stage: str) -> None:

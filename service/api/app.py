@@ -9,6 +9,7 @@ from fastapi import FastAPI
 
 from ..settings import Settings
 from ..store.context import Store
+from ..store.scratch import clean_stale
 from .cache import ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
@@ -28,6 +29,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         own = app.state.store is None
+        clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:
             app.state.store = Store.open(settings)
         yield

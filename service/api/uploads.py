@@ -12,6 +12,7 @@ from fastapi import Request
 from python_multipart.exceptions import MultipartParseError
 from python_multipart.multipart import MultipartParser, parse_options_header
 
+from ..store.scratch import prefix
 from .errors import ApiError
 
 FORM_OVERHEAD = 64 * 1024  # boundaries, part headers and small extra fields
@@ -82,7 +83,7 @@ class _FilePart:
         _, params = parse_options_header(self.headers.get(b"content-disposition", b""))
         if _text(params.get(b"name", b"")) == self.field and self.upload is None:
             filename = os.path.basename(_text(params.get(b"filename", b"upload")).replace("\\", "/"))
-            fd, path = tempfile.mkstemp(dir=self.tmp_dir, prefix="upload-")
+            fd, path = tempfile.mkstemp(dir=self.tmp_dir, prefix=prefix("upload"))
             self.fh = os.fdopen(fd, "wb")
             self.upload = Upload(Path(path), filename or "upload", 0)
 
