@@ -24,10 +24,13 @@ DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malf
                 401: "missing or invalid API key", 404: "not found (or another tenant's)",
                 413: "over a configured limit", 415: "wrong content type",
                 409: "conflict with the resource's state", 422: "invalid input or parameters",
-                501: "stage not available in this build", 503: "a dependency (database, blobs) is unavailable"}
+                501: "stage not available in this build", 503: "a dependency (database, blobs) is unavailable",
+                431: "request headers over PDEANIM_MAX_HEADER_BYTES"}
+ANY_ROUTE = (413, 431)  # the request guard answers these on every route (headers, or a body over the JSON limit)
 
 
 def responses(*statuses: int) -> dict[int | str, dict]:
-    """OpenAPI ``responses`` for the error statuses a route may answer, all with the one error shape."""
+    """OpenAPI ``responses`` for the error statuses a route may answer (plus those every route may answer),
+    all with the one error shape."""
     return {s: ({"description": DESCRIPTIONS[s]} if s == 304 else
-                {"model": ErrorOut, "description": DESCRIPTIONS[s]}) for s in statuses}
+                {"model": ErrorOut, "description": DESCRIPTIONS[s]}) for s in sorted({*statuses, *ANY_ROUTE})}

@@ -16,7 +16,8 @@ from ...store.queue import FINAL
 from ..access import owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
-from ..schemas import ErrorBody, JobOut, JobRequest, JobResult
+from ..jobtypes import CyclicJob, FitJob, JobBody, SimulateJob, job_options
+from ..schemas import ErrorBody, JobOut, JobResult
 
 router = APIRouter(tags=["jobs"])
 
@@ -30,7 +31,8 @@ def job_out(job: Job) -> JobOut:
                   created_at=job.created_at, started_at=job.started_at, finished_at=job.finished_at)
 
 
-def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  # noqa: ANN001
+def _inputs(req: SimulateJob | FitJob | CyclicJob, tenant: str,
+            session) -> tuple[str, str | None]:  # noqa: ANN001
     if req.kind == "fit":
         if not req.poses_id and not req.mesh_id:
             raise ApiError(422, "invalid_parameter", "a fit job needs poses_id (or mesh_id to fit its latest poses)")
@@ -41,9 +43,7 @@ def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  #
         if req.mesh_id and req.mesh_id != poses.mesh_id:
             raise ApiError(422, "invalid_parameter", f"poses {poses.id} belong to mesh {poses.mesh_id}")
         return poses.mesh_id, poses.id
-    if not req.mesh_id:
-        raise ApiError(422, "invalid_parameter", f"a {req.kind} job needs mesh_id")
-    if req.poses_id:
+    if (req.model_extra or {}).get("poses_id") is not None:
         raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no poses_id")
     return owned(session, Mesh, req.mesh_id, tenant, "mesh").id, None
 
@@ -58,23 +58,15 @@ def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN
     return poses
 
 
-def _merged_params(req: JobRequest) -> dict:
-    """``params`` plus parameters given flat next to ``kind``; a key given both ways is a 422."""
-    flat = dict(req.model_extra or {})
-    both = sorted(set(flat) & set(req.params))
-    if both:
-        raise ApiError(422, "invalid_parameter", f"parameters given both flat and in params: {', '.join(both)}")
-    return {**req.params, **flat}
-
-
 @router.post("/v1/jobs", status_code=202, operation_id="createJob", response_model=JobOut,
-             responses=responses(401, 404, 413, 422, 501))
-def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: StoreDep,
+             responses=responses(400, 401, 404, 413, 415, 422, 501))
+def create_job(req: JobBody, tenant: TenantDep, session: SessionDep, store: StoreDep,
                response: Response) -> JobOut:
     """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""
     mesh_id, poses_id = _inputs(req, tenant, session)
     try:
-        spec = normalize_request(req.kind, _merged_params(req), req.then_fit, req.fit)
+        fit = req.fit.model_dump(exclude_unset=True) if getattr(req, "fit", None) is not None else None
+        spec = normalize_request(req.kind, job_options(req), getattr(req, "then_fit", False), fit)
     except StageUnavailable as exc:
         raise ApiError(501, "not_implemented", str(exc)) from exc
     frames = spec["params"].get("frames")
