@@ -46,9 +46,7 @@ async def upload_mesh(request: Request, response: Response, tenant: TenantDep, s
         upload.path.unlink(missing_ok=True)
     row = Mesh(tenant_id=tenant, filename=upload.filename[:255], blob_key=key, n_vertices=stats["vertices"],
                n_faces=stats["faces"], stats=stats)
-    with store.sessions() as session:
-        session.add(row)
-        session.commit()
+    await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop
     response.headers["Location"] = f"/v1/meshes/{row.id}"
     return mesh_out(row)
 

@@ -51,6 +51,11 @@ def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float):  # noqa: 
     return poses
 
 
+def _owned_mesh(store: Store, mesh_id: str, tenant: str) -> Mesh:
+    with store.sessions() as session:
+        return owned(session, Mesh, mesh_id, tenant, "mesh")
+
+
 def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float) -> tuple[str, int]:
     from pdeanim.poses import poses_to_bytes
 
@@ -66,8 +71,7 @@ async def upload_poses(mesh_id: str, request: Request, response: Response, tenan
                        ) -> PosesOut:
     """Upload poses of this mesh: a .npz with ``vertices`` (F,V,3) (optional ``faces``, ``times``) or an
     animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
-    with store.sessions() as session:
-        mesh = owned(session, Mesh, mesh_id, tenant, "mesh")
+    mesh = await run_in_threadpool(_owned_mesh, store, mesh_id, tenant)
     settings = store.settings
     upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
     try:
@@ -76,9 +80,7 @@ async def upload_poses(mesh_id: str, request: Request, response: Response, tenan
         upload.path.unlink(missing_ok=True)
     row = PosesRecord(tenant_id=tenant, mesh_id=mesh_id, source="upload", blob_key=key, n_frames=frames,
                       n_vertices=mesh.n_vertices, meta={"filename": upload.filename[:255]})
-    with store.sessions() as session:
-        session.add(row)
-        session.commit()
+    await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop
     response.headers["Location"] = f"/v1/poses/{row.id}"
     return poses_out(row)
 
