@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
-from ..errors import InputError, PdeanimError
+from ..errors import InputError, ParameterError, PdeanimError
 
 COMMANDS = [f"{__name__}.{name}" for name in ("simulate", "fit", "frame", "export", "cyclic")]
 
@@ -27,6 +29,17 @@ def build_parser(extra_commands: Sequence[str] = ()) -> argparse.ArgumentParser:
     return parser
 
 
+def check_output_directory(out: str | None) -> None:
+    """ParameterError unless ``--out``'s directory exists and is writable: checked before any work is done."""
+    if not out:
+        return
+    parent = Path(out).expanduser().parent
+    if not parent.is_dir():
+        raise ParameterError(f"--out {out!r}: directory {str(parent)!r} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise ParameterError(f"--out {out!r}: directory {str(parent)!r} is not writable")
+
+
 def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> int:
     """Entry point: parse, run the sub-command, and turn library errors into a message and exit code 2."""
     parser = build_parser(extra_commands)
@@ -35,6 +48,7 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> i
         parser.print_help()
         return 2
     try:
+        check_output_directory(getattr(args, "out", None))
         return int(args.func(args) or 0)
     except InputError as exc:
         print(f"pdeanim {args.command}: error: {exc}", file=sys.stderr)

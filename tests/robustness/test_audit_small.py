@@ -53,3 +53,17 @@ def test_obj_with_overflowing_coordinates(tmp_path):
     with pytest.raises(MeshInputError, match="overflow|too large|non-finite") as info:
         load_mesh(path).stats()
     assert "flat" not in str(info.value)
+
+
+@pytest.mark.parametrize("argv", [["fit", "{poses}"], ["frame", "{clip}", "--t", "0"], ["export", "{clip}"],
+                                  ["simulate", "{mesh}"], ["cyclic", "{mesh}"]])
+def test_out_into_missing_directory_is_checked_first(tmp_path, capsys, argv):
+    """`--out` into a missing directory: exit 2 naming the directory, checked before the input is even read
+    (the inputs here do not exist, and the error is still about --out)."""
+    from pdeanim.cli import main
+
+    names = {"poses": tmp_path / "p.npz", "clip": tmp_path / "c.clip", "mesh": tmp_path / "m.obj"}
+    args = [a.format(**names) for a in argv] + ["--out", str(tmp_path / "absent_dir" / "out.glb")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "absent_dir" in err and "Traceback" not in err, err
