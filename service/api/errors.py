@@ -32,12 +32,21 @@ def error_body(code: str, message: str) -> dict:
     return {"error": {"code": code, "message": message}}
 
 
+def _leaf_routes(routes: list) -> list:
+    """Routes with included routers expanded (FastAPI wraps each include; this app uses no prefixes)."""
+    out = []
+    for route in routes:
+        inner = getattr(route, "original_router", None)
+        out += _leaf_routes(inner.routes) if inner is not None else [route]
+    return out
+
+
 def allowed_methods(request: Request) -> list[str]:
     """Every method some route answers on this path (Starlette's 405 names only the first route's)."""
     from starlette.routing import Match
 
     methods: set[str] = set()
-    for route in request.app.router.routes:
+    for route in _leaf_routes(request.app.router.routes):
         match, _ = route.matches(request.scope)
         if match != Match.NONE and getattr(route, "methods", None):
             methods |= set(route.methods)
@@ -54,11 +63,15 @@ def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
 
 
 def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
-    parts = []
-    for err in exc.errors()[:5]:
+    parts, errors = [], exc.errors()
+    for err in errors[:5]:
         loc = ".".join(str(p) for p in err.get("loc", ()))
         parts.append(f"{loc}: {err.get('msg', 'invalid')}")
-    return JSONResponse(error_body("validation_error", "; ".join(parts) or "invalid request"), 422)
+    # a job's options (body.<kind>.params / .fit) keep the code they had before they were typed
+    options = errors and all(tuple(e.get("loc", ()))[:1] == ("body",) and len(e["loc"]) >= 3
+                             and e["loc"][2] in ("params", "fit") for e in errors)
+    code = "invalid_parameter" if options else "validation_error"
+    return JSONResponse(error_body(code, "; ".join(parts) or "invalid request"), 422)
 
 
 def _input(_: Request, exc: InputError) -> JSONResponse:
