@@ -34,3 +34,13 @@ def responses(*statuses: int) -> dict[int | str, dict]:
     all with the one error shape."""
     return {s: ({"description": DESCRIPTIONS[s]} if s == 304 else
                 {"model": ErrorOut, "description": DESCRIPTIONS[s]}) for s in sorted({*statuses, *ANY_ROUTE})}
+
+
+def created(status: int, what: str, links: dict[str, tuple[str, str]]) -> dict[int | str, dict]:
+    """OpenAPI for a 201/202 answer: its ``Location`` header, and links from the new id to the operations
+    that take it (``links``: name -> (operationId, path parameter)), so clients and fuzzers can follow them."""
+    return {status: {"description": f"the new {what}; Location is its path",
+                     "headers": {"Location": {"description": f"path of the new {what}", "required": True,
+                                              "schema": {"type": "string"}}},
+                     "links": {name: {"operationId": op, "parameters": {param: "$response.body#/id"}}
+                               for name, (op, param) in links.items()}}}

@@ -26,8 +26,19 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     doc = json.loads(openapi_text())
     ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
     assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
-                   "getJob", "getClip", "getClipCoefficients", "getClipFrame", "getClipAnimation"}
+                   "getJob", "getClip", "getClipCoefficients", "getClipFrame", "getClipAnimation",
+                   "listMeshes", "listPoses", "listClips", "listJobs", "deleteMesh", "deleteClip", "cancelJob"}
     assert "HTTPValidationError" not in doc["components"]["schemas"]
+    # typed job bodies: a union discriminated on kind, option models generated from the library's dataclasses
+    body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert set(body["discriminator"]["mapping"]) == {"simulate", "fit", "cyclic"}
+    schemas = doc["components"]["schemas"]
+    assert {"frames", "young", "target_tets"} <= set(schemas["SceneParams"]["properties"])
+    assert {"segments", "target_rel_rms"} <= set(schemas["FitOptions"]["properties"])
+    assert {"mode", "n_curves", "amplitude"} <= set(schemas["CyclicOptions"]["properties"])
+    for path, methods in doc["paths"].items():  # every route documents what the request guard may answer
+        for method, op in methods.items():
+            assert {"413", "431"} <= set(op["responses"]), (method, path)
 
 
 @pytest.mark.skipif(shutil.which("docker-compose") is None, reason="docker-compose is not installed")

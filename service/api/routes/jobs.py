@@ -13,7 +13,7 @@ from ...jobspec import StageUnavailable, normalize_request
 from ...store.context import Store
 from ...store.models import Job, Mesh, PosesRecord
 from ...store.queue import FINAL
-from ..access import owned, responses
+from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
 from ..jobtypes import CyclicJob, FitJob, JobBody, SimulateJob, job_options
@@ -59,7 +59,8 @@ def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN
 
 
 @router.post("/v1/jobs", status_code=202, operation_id="createJob", response_model=JobOut,
-             responses=responses(400, 401, 404, 413, 415, 422, 501))
+             responses={**responses(400, 401, 404, 413, 415, 422, 501), **created(202, "job", {
+                 "GetJob": ("getJob", "job_id"), "CancelJob": ("cancelJob", "job_id")})})
 def create_job(req: JobBody, tenant: TenantDep, session: SessionDep, store: StoreDep,
                response: Response) -> JobOut:
     """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""

@@ -8,7 +8,7 @@ from starlette.concurrency import run_in_threadpool
 
 from ...settings import Settings
 from ...store.models import ClipRecord, Mesh
-from ..access import owned, responses
+from ..access import created, owned, responses
 from ..deps import SessionDep, SettingsDep, StoreDep, TenantDep
 from ..errors import ApiError
 from ..httpcache import IMMUTABLE, REVALIDATE, immutable_response
@@ -34,7 +34,9 @@ def _ingest(upload: Upload, settings: Settings) -> dict:
 
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
-             openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 413, 415, 422))
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422), **created(201, "mesh", {
+                 "GetMesh": ("getMesh", "mesh_id"), "UploadPoses": ("uploadPoses", "mesh_id"),
+                 "GetTopology": ("getMeshTopology", "mesh_id"), "DeleteMesh": ("deleteMesh", "mesh_id")})})
 async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:
     """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
     settings = store.settings

@@ -12,7 +12,7 @@ from pdeanim.errors import PosesInputError
 from ...settings import Settings
 from ...store.context import Store
 from ...store.models import Mesh, PosesRecord
-from ..access import owned, responses
+from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..schemas import PosesOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
@@ -64,7 +64,8 @@ def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float) -> tuple[
 
 
 @router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses", response_model=PosesOut,
-             openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 404, 413, 415, 422))
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 404, 413, 415, 422),
+                                                  **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
 async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
                        store: StoreDep,
                        fps: float = Query(30.0, gt=0, le=1000, description="sampling rate for animated GLB")
