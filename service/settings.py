@@ -7,10 +7,14 @@ Embedded default: SQLite and a blob directory under ``./pdeanim-data``. Scale-ou
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+MIN_JOB_MEMORY = 2 * 1024**3
+"""The default limit never goes below this: the libraries a job imports reserve about 1 GiB of address space."""
 
 
 class Settings(BaseSettings):
@@ -41,8 +45,19 @@ class Settings(BaseSettings):
     backoff_max_seconds: float = Field(300.0, ge=0)
     poll_seconds: float = Field(0.5, gt=0, description="worker idle poll interval")
     shutdown_grace_seconds: float = Field(20.0, ge=0, description="on SIGTERM, time to finish the attempt")
-    job_memory_bytes: int = Field(0, ge=0, description="RLIMIT_AS of a job's child process; 0 = unlimited")
+    job_memory_bytes: int = Field(0, ge=0, description="RLIMIT_AS of a job's child process; 0 = "
+                                  "job_memory_fraction of the machine's memory")
+    job_memory_fraction: float = Field(0.5, ge=0, le=1, description="default job memory limit as a fraction of "
+                                       "the machine's physical memory (at least 2 GiB); 0 = unlimited")
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
+
+    def job_memory_limit(self) -> int:
+        """Bytes of address space a job's process may use (0: unlimited): job_memory_bytes when set, else
+        job_memory_fraction of the physical memory, so one job cannot take the machine down."""
+        if self.job_memory_bytes or not self.job_memory_fraction:
+            return self.job_memory_bytes
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        return max(int(self.job_memory_fraction * physical), MIN_JOB_MEMORY)
 
     def resolved_data_dir(self) -> Path:
         """The data directory as an absolute path (created on demand)."""

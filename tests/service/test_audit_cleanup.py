@@ -74,6 +74,19 @@ def descendants(pid: int, depth: int = 99) -> list[int]:
     return out
 
 
+def address_space_limit(pid: int) -> int:
+    """The soft RLIMIT_AS of ``pid`` in bytes (0 when unlimited)."""
+    try:
+        text = Path(f"/proc/{pid}/limits").read_text()
+    except OSError:
+        return 0  # gone already
+    for line in text.splitlines():
+        if line.startswith("Max address space"):
+            soft = line.split()[3]
+            return 0 if soft == "unlimited" else int(soft)
+    raise AssertionError(f"no address space line for {pid}")
+
+
 def test_killed_attempt_and_worker_leave_no_work_dirs(svc, tmp_path, data_dir):
     svc.start_server()
     worker = svc.start_worker()
@@ -89,7 +102,17 @@ def test_killed_attempt_and_worker_leave_no_work_dirs(svc, tmp_path, data_dir):
         first = wait_for(work_dirs, what="the first attempt's work directory")
         wait_for(lambda: api.get(f"/v1/jobs/{job['id']}").json()["state"] == "running", what="running")
         # the attempt's process runs below the worker's forkserver: kill it (and what it started), not the worker
-        for pid in set(descendants(worker.pid)) - set(descendants(worker.pid, depth=1)):
+        def attempt_limits() -> dict[int, int]:
+            procs = set(descendants(worker.pid)) - set(descendants(worker.pid, depth=1))
+            limits = {pid: address_space_limit(pid) for pid in procs}
+            return limits if limits and all(limits.values()) else {}
+
+        # defect 6: with no memory setting, the job still runs under a limit (half the machine's memory)
+        limits = wait_for(attempt_limits, what="a memory limit on the attempt's process")
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        assert all(lim <= max(physical // 2, 2 * 1024**3) for lim in limits.values()), limits
+        attempt = set(limits)
+        for pid in attempt:
             os.kill(pid, signal.SIGKILL)
         wait_for(lambda: not (first & work_dirs()), what="the killed attempt's work directory removed")
         second = wait_for(lambda: work_dirs() - first, what="the retry's work directory")
