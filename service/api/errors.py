@@ -67,9 +67,9 @@ def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
     for err in errors[:5]:
         loc = ".".join(str(p) for p in err.get("loc", ()))
         parts.append(f"{loc}: {err.get('msg', 'invalid')}")
-    # a job's options (body.<kind>.params / .fit) keep the code they had before they were typed
-    options = errors and all(tuple(e.get("loc", ()))[:1] == ("body",) and len(e["loc"]) >= 3
-                             and e["loc"][2] in ("params", "fit") for e in errors)
+    # fields of a job body of a known kind (body.<kind>.…) keep the code they had before bodies were typed;
+    # a body that is not JSON, not an object or of an unknown kind stays a validation_error
+    options = errors and all(tuple(e.get("loc", ()))[:1] == ("body",) and len(e["loc"]) >= 3 for e in errors)
     code = "invalid_parameter" if options else "validation_error"
     return JSONResponse(error_body(code, "; ".join(parts) or "invalid request"), 422)
 
