@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..clip import load_clip_file
 from ..gltf.clipexport import clip_animation_glb
+from ..progress import cli_progress
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,13 +20,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="FILE.glb", help="output GLB path")
     p.add_argument("--quantize", action="store_true",
                    help="store positions as 16-bit integers (KHR_mesh_quantization), about 40%% smaller")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Load the clip, sample it and write the GLB; prints what was written."""
     clip = load_clip_file(args.clip)
-    glb = clip_animation_glb(clip, args.fps, quantize=args.quantize)
+    progress = cli_progress("export", args.quiet)
+    try:
+        glb = clip_animation_glb(clip, args.fps, quantize=args.quantize, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
     out = Path(args.out)
     out.write_bytes(glb)
     print(f"wrote {out} ({len(glb)} bytes, {clip.n_vertices} vertices, {len(clip.frame_times)} source frames, "

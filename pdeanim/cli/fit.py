@@ -30,6 +30,7 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
     p.add_argument("--pictures", metavar="DIR",
                    help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
@@ -38,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from ..clip import write_clip_file
     from ..model.fitclip import FitOptions, fit_poses
     from ..poses import load_poses
+    from ..progress import cli_progress
 
     if not args.fps > 0:
         raise ParameterError(f"--fps must be > 0, got {args.fps}")
@@ -47,7 +49,12 @@ def run(args: argparse.Namespace) -> int:
                          max_segments=args.max_segments)
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps)
-    parts = fit_poses(poses, options)
+    progress = cli_progress("fit", args.quiet)
+    try:
+        parts = fit_poses(poses, options, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
     write_clip_file(args.out, parts)
     print(summary_text(parts.report, time.perf_counter() - start, args.out))
     if args.pictures:

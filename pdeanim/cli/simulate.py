@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, help="solver threads (default 1)")
     p.add_argument("--merge-seams", action="store_true", help="merge duplicate vertices before simulating")
     p.add_argument("--cache-dir", help="directory caching tetrahedralizations")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
@@ -126,19 +126,19 @@ def run(args: argparse.Namespace) -> int:
     """Load, simulate, save and print a one-screen summary."""
     from ..mesh.io import load_mesh
     from ..poses import save_poses
+    from ..progress import cli_progress
     from ..sim.simulate import simulate_mesh
 
     scene = scene_from_args(args)
     mesh = load_mesh(args.mesh, merge_seams=args.merge_seams)
 
-    def report(fraction: float, stage: str) -> None:
-        print(f"\r{stage:<24} {100 * fraction:5.1f}%", end="", file=sys.stderr, flush=True)
-
-    tty = sys.stderr.isatty()
-    poses = simulate_mesh(mesh, scene, progress=report if tty else None,
-                          cache_dir=Path(args.cache_dir) if args.cache_dir else None)
-    if tty:
-        print(file=sys.stderr)
+    progress = cli_progress("simulate", args.quiet)
+    try:
+        poses = simulate_mesh(mesh, scene, progress=progress,
+                              cache_dir=Path(args.cache_dir) if args.cache_dir else None)
+    finally:
+        if progress is not None:
+            progress.close()
     save_poses(args.out, poses)
     moved = np.linalg.norm(poses.vertices - poses.vertices[:1], axis=2).max()
     m = poses.meta

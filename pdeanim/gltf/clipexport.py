@@ -8,9 +8,11 @@ import numpy as np
 
 from ..clip import Clip
 from ..errors import LimitError, ParameterError
+from ..progress import Progress
 from .write import animation_glb, frame_glb
 
 DEFAULT_MAX_FRAMES = 10_000
+EVALUATE_CHUNK = 64  # frames evaluated per call when exporting (between progress reports)
 
 
 def clip_duration(clip: Clip) -> float:
@@ -35,18 +37,27 @@ def export_times(duration: float, fps: float, max_frames: int = DEFAULT_MAX_FRAM
 
 
 def clip_animation_glb(clip: Clip, fps: float = 30.0, *, quantize: bool = False,
-                       max_frames: int = DEFAULT_MAX_FRAMES) -> bytes:
+                       max_frames: int = DEFAULT_MAX_FRAMES, progress: Progress | None = None) -> bytes:
     """The clip as an animated GLB: frames evaluated at ``fps`` over its duration, last frame included; for a
-    looping clip the last key is the first frame exactly, so playback wraps without a seam."""
+    looping clip the last key is the first frame exactly, so playback wraps without a seam. Frames are
+    evaluated in chunks so ``progress`` hears about long exports."""
     duration = clip_duration(clip)
     seconds = export_times(duration, fps, max_frames)
     t = seconds / duration if duration > 0 else seconds
-    frames = np.asarray(clip.evaluate(t), np.float32).reshape(len(t), -1, 3)
+    frames = np.empty((len(t), clip.n_vertices, 3), np.float32)
+    for lo in range(0, len(t), EVALUATE_CHUNK):
+        hi = min(lo + EVALUATE_CHUNK, len(t))
+        frames[lo:hi] = np.asarray(clip.evaluate(t[lo:hi]), np.float32).reshape(hi - lo, -1, 3)
+        if progress is not None:
+            progress(0.9 * hi / len(t), f"evaluate {hi}/{len(t)}")
     loop = bool(clip.looping) and len(t) > 1
     if loop:
         frames[-1] = frames[0]  # period 1 in t: the end of the cycle is its start
     names = [f"t{x:.4f}" for x in t]
-    return animation_glb(frames, seconds, clip.faces, quantize=quantize, loop=loop, names=names)
+    glb = animation_glb(frames, seconds, clip.faces, quantize=quantize, loop=loop, names=names)
+    if progress is not None:
+        progress(1.0, "write GLB")
+    return glb
 
 
 def clip_frame_glb(clip: Clip, t: float) -> bytes:
