@@ -191,7 +191,9 @@ def test_bad_requests_share_the_error_shape(api, fish):
     assert_error(api.post("/v1/jobs", json={"kind": "cyclic"}), 422, "invalid_parameter")
     assert_error(api.post("/v1/jobs", json={"kind": "cyclic", "mesh_id": "mesh_nope"}), 404, "not_found")
     assert_error(api.get("/v1/nowhere"), 404, "not_found")
-    assert_error(api.delete(f"/v1/meshes/{fish['id']}"), 405, "method_not_allowed")
+    r = api.put(f"/v1/meshes/{fish['id']}")  # DELETE is a route now (lifecycle); PUT is not
+    assert_error(r, 405, "method_not_allowed")
+    assert r.headers["allow"] == "DELETE, GET"  # every method of the path, not only the first route's
     assert_error(api.get("/v1/clips/clip_nope/frame", params={"t": 0.5}), 404, "not_found")
 
 
