@@ -150,16 +150,21 @@ def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None)
     return make_poses(data["vertices"], data.get("faces"), data.get("times"), {"source": "npz"}, limits)
 
 
-def load_poses(path: str | Path, fps: float = DEFAULT_FPS, limits: PoseLimits | None = None) -> Poses:
-    """Read poses from a .npz or an animated .glb/.gltf (sampled at ``fps``)."""
+def load_poses(path: str | Path, fps: float = DEFAULT_FPS, limits: PoseLimits | None = None,
+               animation: int | str | None = None) -> Poses:
+    """Read poses from a .npz or an animated .glb/.gltf (sampled at ``fps``; ``animation`` by name or index,
+    default the first; ``meta["animation"]`` says which was used)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".npz":
+        if animation is not None:
+            raise PosesInputError(f"an animation ({animation!r}) can only be chosen in glTF input, "
+                                  f"not in {path.name}")
         return load_poses_npz(path, limits)
     if suffix in (".glb", ".gltf"):
         from .gltf.read import read_animated_poses  # glTF reading lives with the glTF code
 
-        return read_animated_poses(path, fps=fps, limits=limits)
+        return read_animated_poses(path, fps=fps, limits=limits, animation=animation)
     raise PosesInputError(f"unsupported poses file type {suffix!r}: use .npz, .glb or .gltf")
 
 

@@ -27,6 +27,8 @@ def register(subparsers) -> None:  # noqa: ANN001
                         "rigid motion plus a residual")
     p.add_argument("--loop", action="store_true", help="make the clip loop (last frame flows into the first)")
     p.add_argument("--fps", type=float, default=30.0, help="sampling rate for glTF input")
+    p.add_argument("--animation", metavar="NAME", help="glTF input: the animation to fit, by name or index "
+                                                         "(default: the first; the summary says which was used)")
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
     p.add_argument("--pictures", metavar="DIR",
                    help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
@@ -48,7 +50,10 @@ def run(args: argparse.Namespace) -> int:
                          param_mode=args.param, motion=args.motion, loop=args.loop,
                          max_segments=args.max_segments)
     start = time.perf_counter()
-    poses = load_poses(args.poses, fps=args.fps)
+    poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
+    used = (poses.meta or {}).get("animation")
+    if isinstance(used, dict):
+        print(f"animation: {used.get('name') or '(unnamed)'} (index {used.get('index')})")
     progress = cli_progress("fit", args.quiet)
     try:
         parts = fit_poses(poses, options, progress=progress)

@@ -51,6 +51,8 @@ class PosesOut(BaseModel):
     frames: int
     vertices: int
     job_id: str | None = None
+    animation: dict[str, Any] | None = Field(None, description='glTF uploads: the animation sampled, '
+                                             '{"index": 0, "name": "Walk"}')
     created_at: float
 
 

@@ -4,16 +4,19 @@ unreferenced), cancel queued and running jobs, long-poll a job, Location headers
 from __future__ import annotations
 
 import concurrent.futures
+import io
 import json
+import os
 import subprocess
 import time
 
 import httpx
+import numpy as np
 import pytest
 
 from service.store.context import Store
 
-from .harness import PDEANIM, Services, client, make_key, process_env, wait_job
+from .harness import PDEANIM, ROOT, Services, client, make_key, process_env, wait_job
 
 pytestmark = pytest.mark.slow
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
@@ -242,3 +245,70 @@ def test_keys_list_and_revoke(services, api):
     assert row["revoked_at"] is not None
     assert keys("revoke", row["id"]).returncode == 0  # already revoked: says so, still succeeds
     assert api.get("/v1/meshes").status_code == 200  # other keys unaffected
+
+
+CLI_ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def two_animation_glb(verts, faces) -> bytes:
+    """An animated GLB with two animations, "Idle" (index 0) and "Swim" (index 1; the same channels)."""
+    import struct
+
+    from pdeanim.gltf.write import animation_glb
+
+    glb = animation_glb(verts, np.arange(len(verts)) / 30.0, faces)
+    (json_len,) = struct.unpack_from("<I", glb, 12)
+    doc = json.loads(glb[20:20 + json_len])
+    doc["animations"] = [{**doc["animations"][0], "name": "Idle"}, {**doc["animations"][0], "name": "Swim"}]
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = glb[20 + json_len:]
+    body = struct.pack("<I", len(text)) + b"JSON" + text + rest
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+@pytest.fixture(scope="module")
+def morph(data_dir):
+    """A closed morphing sphere (AnimatedMorphSphere's used vertices) as OBJ bytes, frames and faces."""
+    d = np.load(data_dir / "AnimatedMorphSphere.npz")
+    used = np.unique(d["faces"])
+    remap = np.full(len(d["vertices"][0]), -1)
+    remap[used] = np.arange(len(used))
+    verts, faces = d["vertices"][:8, used], remap[d["faces"]]
+    obj = "".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in verts[0]) + "".join(
+        f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+    return obj.encode(), verts, faces
+
+
+def test_gltf_upload_chooses_the_animation_and_says_which(api, morph):
+    obj, verts, faces = morph
+    glb = two_animation_glb(verts, faces)
+    mesh = upload(api, "sphere.obj", obj).json()
+    path = f"/v1/meshes/{mesh['id']}/poses"
+    first = upload(api, "two.glb", glb, path)
+    assert first.status_code == 201 and first.json()["animation"] == {"index": 0, "name": "Idle"}, first.text
+    swim = upload(api, "two.glb", glb, path + "?animation=Swim")
+    assert swim.status_code == 201 and swim.json()["animation"] == {"index": 1, "name": "Swim"}, swim.text
+    meta = api.get(f"/v1/poses/{swim.json()['id']}", headers={"Accept": "application/json"}).json()
+    assert meta["animation"]["name"] == "Swim"
+    assert upload(api, "two.glb", glb, path + "?animation=1").json()["animation"]["index"] == 1
+    err = upload(api, "two.glb", glb, path + "?animation=Walk")
+    assert err.status_code == 422 and "Idle" in err.json()["error"]["message"], err.text
+    buf = io.BytesIO()
+    np.savez(buf, vertices=verts)
+    err = upload(api, "p.npz", buf.getvalue(), path + "?animation=Swim")
+    assert err.status_code == 422 and "glTF" in err.json()["error"]["message"], err.text
+
+
+def test_cli_fit_takes_animation_by_name(morph, tmp_path):
+    _, verts, faces = morph
+    (tmp_path / "two.glb").write_bytes(two_animation_glb(verts, faces))
+    out = subprocess.run(PDEANIM + ["fit", str(tmp_path / "two.glb"), "--animation", "Swim", "--segments", "1",
+                                    "--out", str(tmp_path / "swim.clip"), "--quiet"],
+                         capture_output=True, text=True, timeout=300, cwd=tmp_path, env=CLI_ENV)
+    assert out.returncode == 0, out.stderr
+    assert "animation: Swim (index 1)" in out.stdout and (tmp_path / "swim.clip").stat().st_size > 0
+    bad = subprocess.run(PDEANIM + ["fit", str(tmp_path / "two.glb"), "--animation", "Walk", "--segments", "1",
+                                    "--out", str(tmp_path / "walk.clip"), "--quiet"],
+                         capture_output=True, text=True, timeout=300, cwd=tmp_path, env=CLI_ENV)
+    assert bad.returncode == 2 and "Walk" in bad.stderr, bad.stderr
