@@ -38,7 +38,7 @@ class SceneParams:
     duration: float | None = None
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     damping: float = 1.0
-    young: float = 1e6
+    young: float | None = None  # None: chosen from the mesh's size (pdeanim.sim.simulate.auto_young)
     poisson: float = 0.3
     density: float = 1000.0
     pins: list[dict] = field(default_factory=list)
@@ -110,7 +110,8 @@ class SceneParams:
             (number(self.fps) and 0 < self.fps <= 10_000, "fps must be in (0, 10000]"),
             (self.duration is None or (number(self.duration) and self.duration > 0), "duration must be > 0"),
             (number(self.damping) and self.damping >= 0, "damping must be >= 0 (1/s)"),
-            (number(self.young) and self.young > 0, "young (Young's modulus, Pa) must be > 0"),
+            (self.young is None or (number(self.young) and self.young > 0),
+             "young (Young's modulus, Pa) must be > 0, or null to choose it from the mesh's size"),
             (number(self.poisson) and 0 <= self.poisson < 0.5, "poisson must be in [0, 0.5)"),
             (number(self.density) and self.density > 0, "density must be > 0"),
             (isinstance(self.target_tets, int) and 50 <= self.target_tets <= 2_000_000,
