@@ -25,9 +25,9 @@ def test_default_material_sags_visibly_and_stably_at_any_scale(height):
     assert poses.meta["young_auto"] and np.all(np.isfinite(poses.vertices))
     top = mesh.points[:, 1] > 0.99 * height
     sag = (height - poses.vertices[:, top, 1].mean(axis=1)).max() / height
-    # the auto modulus aims at a 5% static strain at the base, about 2.5% of the height at the top; dynamic
-    # overshoot can double it: 0.3%..15% is visible and bounded at every scale
-    assert 0.003 < sag < 0.15, sag
+    # the auto modulus aims at a 2% static strain at the base; the top's largest sag measured 1.4-1.9% of the
+    # height at these three scales: 0.5%..5% (about 3x either way) is visible and bounded at every scale
+    assert 0.005 < sag < 0.05, sag
 
 
 def test_binding_substep_cap_is_reported():
