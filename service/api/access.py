@@ -24,9 +24,10 @@ DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malf
                 401: "missing or invalid API key", 404: "not found (or another tenant's)",
                 413: "over a configured limit", 415: "wrong content type",
                 409: "conflict with the resource's state", 422: "invalid input or parameters",
-                501: "stage not available in this build", 503: "a dependency (database, blobs) is unavailable",
+                501: "stage not available in this build",
+                503: "a dependency (database, blobs) is unavailable",
                 431: "request headers over PDEANIM_MAX_HEADER_BYTES"}
-ANY_ROUTE = (413, 431)  # the request guard answers these on every route (headers, or a body over the JSON limit)
+ANY_ROUTE = (413, 431)  # the request guard may answer these on any route (headers; body over the JSON limit)
 
 
 def responses(*statuses: int) -> dict[int | str, dict]:
@@ -38,7 +39,7 @@ def responses(*statuses: int) -> dict[int | str, dict]:
 
 def created(status: int, what: str, links: dict[str, tuple[str, str]]) -> dict[int | str, dict]:
     """OpenAPI for a 201/202 answer: its ``Location`` header, and links from the new id to the operations
-    that take it (``links``: name -> (operationId, path parameter)), so clients and fuzzers can follow them."""
+    that take it (``links``: name -> (operationId, path parameter)), for clients and fuzzers to follow."""
     return {status: {"description": f"the new {what}; Location is its path",
                      "headers": {"Location": {"description": f"path of the new {what}", "required": True,
                                               "schema": {"type": "string"}}},

@@ -70,7 +70,7 @@ def _import(path: str) -> type:
 
 
 def options_model(kind: str) -> type[BaseModel]:
-    """The options model of ``kind``, generated from its dataclass (a free-form object if the stage is absent)."""
+    """The options model of ``kind``, generated from its dataclass (free-form if the stage is absent)."""
     name = MODEL_NAMES[kind]
     try:
         cls = options_class(kind)
@@ -99,9 +99,10 @@ class _JobBase(BaseModel):
 class SimulateJob(_JobBase):
     """Simulate the mesh's motion (scene parameters), optionally fitting a clip in the same job."""
 
-    model_config = ConfigDict(extra="allow", json_schema_extra={"description": __doc__ + " " + FLAT, "examples": [
-        {"kind": "simulate", "mesh_id": "mesh_0123", "params": {"frames": 60}, "then_fit": True,
-         "fit": {"target_rel_rms": 0.002}}]})
+    model_config = ConfigDict(extra="allow", json_schema_extra={
+        "description": __doc__ + " " + FLAT, "examples": [
+            {"kind": "simulate", "mesh_id": "mesh_0123", "params": {"frames": 60}, "then_fit": True,
+             "fit": {"target_rel_rms": 0.002}}]})
 
     kind: Literal["simulate"]
     mesh_id: str = Field(max_length=64, description="the mesh to simulate")
@@ -113,12 +114,13 @@ class SimulateJob(_JobBase):
 class FitJob(_JobBase):
     """Fit a clip to poses: ``poses_id``, or ``mesh_id`` alone to fit the mesh's latest poses."""
 
-    model_config = ConfigDict(extra="allow", json_schema_extra={"description": __doc__ + " " + FLAT, "examples": [
-        {"kind": "fit", "poses_id": "poses_0123", "params": {"segments": 4}},
-        {"kind": "fit", "mesh_id": "mesh_0123", "target_rel_rms": 0.003}]})
+    model_config = ConfigDict(extra="allow", json_schema_extra={
+        "description": __doc__ + " " + FLAT, "examples": [
+            {"kind": "fit", "poses_id": "poses_0123", "params": {"segments": 4}},
+            {"kind": "fit", "mesh_id": "mesh_0123", "target_rel_rms": 0.003}]})
 
     kind: Literal["fit"]
-    poses_id: str | None = Field(None, max_length=64, description="the poses to fit (default: the mesh's latest)")
+    poses_id: str | None = Field(None, max_length=64, description="the poses to fit (default: the mesh's)")
     mesh_id: str | None = Field(None, max_length=64, description="fit this mesh's latest poses; or a check")
     params: FitOptionsModel = Field(default_factory=FitOptionsModel)  # type: ignore[valid-type]
 
@@ -126,8 +128,9 @@ class FitJob(_JobBase):
 class CyclicJob(_JobBase):
     """Make a looping swim clip of the mesh from a preset and its overrides."""
 
-    model_config = ConfigDict(extra="allow", json_schema_extra={"description": __doc__ + " " + FLAT, "examples": [
-        {"kind": "cyclic", "mesh_id": "mesh_0123", "params": {"mode": "eel", "frames": 24}}]})
+    model_config = ConfigDict(extra="allow", json_schema_extra={
+        "description": __doc__ + " " + FLAT, "examples": [
+            {"kind": "cyclic", "mesh_id": "mesh_0123", "params": {"mode": "eel", "frames": 24}}]})
 
     kind: Literal["cyclic"]
     mesh_id: str = Field(max_length=64, description="the mesh to animate")
@@ -151,7 +154,8 @@ def job_options(req: SimulateJob | FitJob | CyclicJob) -> dict[str, Any]:
     flat = dict(req.model_extra or {})
     both = sorted(set(flat) & set(given))
     if both:
-        raise ApiError(422, "invalid_parameter", f"parameters given both flat and in params: {', '.join(both)}")
+        raise ApiError(422, "invalid_parameter",
+                       f"parameters given both flat and in params: {', '.join(both)}")
     if flat:
         try:
             flat = MODELS[req.kind].model_validate(flat).model_dump(exclude_unset=True)

@@ -36,8 +36,8 @@ def decode_cursor(cursor: str) -> tuple[float, str]:
     try:
         raw = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4))
         created_at, row_id = json.loads(raw)
-        if (isinstance(created_at, int | float) and not isinstance(created_at, bool) and math.isfinite(created_at)
-                and isinstance(row_id, str)):
+        number = isinstance(created_at, int | float) and not isinstance(created_at, bool)
+        if number and math.isfinite(created_at) and isinstance(row_id, str):
             return float(created_at), row_id
     except (binascii.Error, ValueError, TypeError, UnicodeDecodeError):
         pass
@@ -46,7 +46,7 @@ def decode_cursor(cursor: str) -> tuple[float, str]:
 
 def page(session: Session, query: Select, model: Any, limit: int, cursor: str | None,
          out: Callable[[Any], T]) -> tuple[list[T], str | None]:
-    """One page of ``query`` (rows of ``model``) after ``cursor``, and the cursor of the next page (or None)."""
+    """One page of ``query`` (rows of ``model``) after ``cursor``, and the next page's cursor (or None)."""
     if cursor:
         created_at, row_id = decode_cursor(cursor)
         query = query.where(or_(model.created_at < created_at,

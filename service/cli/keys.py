@@ -1,4 +1,4 @@
-"""``pdeanim keys create|list|revoke``: make API keys for a tenant, list them, and revoke one by id or prefix."""
+"""``pdeanim keys create|list|revoke``: make API keys for a tenant, list them, revoke one by id or prefix."""
 
 from __future__ import annotations
 
@@ -16,12 +16,13 @@ def register(subparsers) -> None:  # noqa: ANN001
     sub = p.add_subparsers(dest="keys_command", required=True)
     create = sub.add_parser("create", help="print a new API key for TENANT")
     create.add_argument("--tenant", required=True, help="tenant name (created if it does not exist)")
-    listing = sub.add_parser("list", help="list API keys (id, prefix, tenant, created, revoked); never the keys")
+    listing = sub.add_parser("list", help="list API keys (id, prefix, tenant, created, revoked), never keys")
     listing.add_argument("--tenant", help="only this tenant's keys")
     listing.add_argument("--json", action="store_true", help="one JSON document instead of a table")
     revoke = sub.add_parser("revoke", help="revoke a key: its requests get 401 from then on")
     revoke.add_argument("key", metavar="KEY_ID_OR_PREFIX",
-                        help=f"the key's id (key_...), its shown prefix (>= {MIN_PREFIX} characters), or the key")
+                        help=f"the key's id (key_...), its listed prefix (>= {MIN_PREFIX} characters), "
+                             "or the key itself")
     p.set_defaults(func=run)
 
 
@@ -34,7 +35,8 @@ def _list(session, args: argparse.Namespace) -> int:  # noqa: ANN001
 
     from service.store.models import ApiKey, Tenant
 
-    query = select(ApiKey, Tenant.name).join(Tenant, Tenant.id == ApiKey.tenant_id).order_by(ApiKey.created_at)
+    query = (select(ApiKey, Tenant.name).join(Tenant, Tenant.id == ApiKey.tenant_id)
+             .order_by(ApiKey.created_at))
     if args.tenant:
         query = query.where(Tenant.name == args.tenant)
     rows = [{"id": k.id, "prefix": k.prefix, "tenant": name, "created_at": k.created_at,
@@ -59,8 +61,9 @@ def _revoke(session, args: argparse.Namespace) -> int:  # noqa: ANN001
     if len(needle) < MIN_PREFIX:
         print(f"error: give the key id or at least {MIN_PREFIX} characters of its prefix", file=sys.stderr)
         return 2
-    found = session.scalars(select(ApiKey).where(or_(ApiKey.id == needle, ApiKey.key_hash == hash_key(needle),
-                                                      ApiKey.prefix.startswith(needle, autoescape=True)))).all()
+    match = or_(ApiKey.id == needle, ApiKey.key_hash == hash_key(needle),
+                ApiKey.prefix.startswith(needle, autoescape=True))
+    found = session.scalars(select(ApiKey).where(match)).all()
     if not found:
         print(f"error: no API key matches {needle!r} (see `pdeanim keys list`)", file=sys.stderr)
         return 2
@@ -88,8 +91,8 @@ def run(args: argparse.Namespace) -> int:
 
     store = Store.open(Settings(), run_migrations=True)
     try:
-        # one write transaction from the start (BEGIN IMMEDIATE on SQLite): a read that later writes would fail
-        # with "database is locked" when the running service committed in between
+        # one write transaction from the start (BEGIN IMMEDIATE on SQLite): a read that later writes would
+        # fail with "database is locked" when the running service committed in between
         with Session(store.engine.execution_options(immediate=True)) as session:
             if args.keys_command == "list":
                 return _list(session, args)

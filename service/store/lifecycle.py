@@ -45,7 +45,8 @@ def _write_session(store: Store) -> Session:
 
 
 def _delete(session: Session, model: type, condition) -> int:  # noqa: ANN001 - a SQL expression
-    return session.execute(delete(model).where(condition).execution_options(synchronize_session=False)).rowcount
+    stmt = delete(model).where(condition).execution_options(synchronize_session=False)
+    return session.execute(stmt).rowcount
 
 
 def _tet_keys(jobs: list[Job]) -> set[str]:
@@ -74,12 +75,13 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
         poses_ids = select(PosesRecord.id).where(PosesRecord.mesh_id == mesh_id)
         clips = session.scalars(select(ClipRecord).where(ClipRecord.mesh_id == mesh_id)).all()
         poses = session.scalars(select(PosesRecord).where(PosesRecord.mesh_id == mesh_id)).all()
-        jobs = session.scalars(select(Job).where(or_(Job.mesh_id == mesh_id, Job.poses_id.in_(poses_ids)))).all()
+        of_mesh = or_(Job.mesh_id == mesh_id, Job.poses_id.in_(poses_ids))
+        jobs = session.scalars(select(Job).where(of_mesh)).all()
         keys = {mesh.blob_key} | {p.blob_key for p in poses} | _tet_keys(jobs)
         keys |= {c.topology_key for c in clips} | {c.coefficients_key for c in clips}
         out.clip_ids = [c.id for c in clips]
         out.clips = _delete(session, ClipRecord, ClipRecord.mesh_id == mesh_id)
-        out.jobs = _delete(session, Job, or_(Job.mesh_id == mesh_id, Job.poses_id.in_(poses_ids)))
+        out.jobs = _delete(session, Job, of_mesh)
         out.poses = _delete(session, PosesRecord, PosesRecord.mesh_id == mesh_id)
         out.meshes = _delete(session, Mesh, Mesh.id == mesh_id)
     out.blobs_removed = release_blobs(store, keys)
@@ -106,7 +108,8 @@ def referenced(session: Session, key: str) -> bool:
         return session.execute(select(exists().where(Job.result["tet_cache_key"].as_string() == cache_key))
                                ).scalar()
     checks = [exists().where(Mesh.blob_key == key), exists().where(PosesRecord.blob_key == key),
-              exists().where(ClipRecord.topology_key == key), exists().where(ClipRecord.coefficients_key == key)]
+              exists().where(ClipRecord.topology_key == key),
+              exists().where(ClipRecord.coefficients_key == key)]
     return any(session.execute(select(check)).scalar() for check in checks)
 
 

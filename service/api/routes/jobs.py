@@ -93,11 +93,13 @@ def _load(store: Store, job_id: str, tenant: str) -> JobOut:
         return job_out(owned(session, Job, job_id, tenant, "job"))
 
 
-@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut, responses=responses(401, 404, 422))
-async def get_job(job_id: str, tenant: TenantDep, store: StoreDep,
-                  wait: float = Query(0.0, ge=0, le=3600, description="long poll: wait up to this many seconds "
-                                      "(capped by PDEANIM_MAX_WAIT_SECONDS) for the job to change state or "
-                                      "finish; 0 answers at once")) -> JobOut:
+WAIT = Query(0.0, ge=0, le=3600, description="long poll: wait up to this many seconds (capped by "
+             "PDEANIM_MAX_WAIT_SECONDS) for the job to change state or finish; 0 answers at once")
+
+
+@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut,
+            responses=responses(401, 404, 422))
+async def get_job(job_id: str, tenant: TenantDep, store: StoreDep, wait: float = WAIT) -> JobOut:
     """State (queued, running, succeeded, failed, cancelled), progress 0..1, stage, error and result ids;
     with ``wait``, answers as soon as the state changes (or at the end of the wait, unchanged)."""
     job = await run_in_threadpool(_load, store, job_id, tenant)

@@ -68,7 +68,8 @@ def list_clips(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, curso
                ) -> ClipPage:
     """The tenant's clips, newest first; filter by mesh, poses and kind."""
     query = select(ClipRecord).where(ClipRecord.tenant_id == tenant)
-    for column, value in ((ClipRecord.mesh_id, mesh_id), (ClipRecord.poses_id, poses_id), (ClipRecord.kind, kind)):
+    filters = ((ClipRecord.mesh_id, mesh_id), (ClipRecord.poses_id, poses_id), (ClipRecord.kind, kind))
+    for column, value in filters:
         if value is not None:
             query = query.where(column == value)
     items, nxt = page(session, query, ClipRecord, limit, cursor, lambda row: clip_out(row, {}))

@@ -34,7 +34,8 @@ def _ingest(upload: Upload, settings: Settings) -> dict:
 
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
-             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422), **created(201, "mesh", {
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422),
+                                                  **created(201, "mesh", {
                  "GetMesh": ("getMesh", "mesh_id"), "UploadPoses": ("uploadPoses", "mesh_id"),
                  "GetTopology": ("getMeshTopology", "mesh_id"), "DeleteMesh": ("deleteMesh", "mesh_id")})})
 async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:

@@ -73,15 +73,16 @@ def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,
     return store.blobs.put(poses_to_bytes(poses)), poses.n_frames, meta
 
 
-@router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses", response_model=PosesOut,
-             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 404, 413, 415, 422),
-                                                  **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
+@router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses",
+             response_model=PosesOut, openapi_extra=UPLOAD_BODY,
+             responses={**responses(400, 401, 404, 413, 415, 422),
+                        **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
 async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
                        store: StoreDep,
                        fps: float = Query(30.0, gt=0, le=1000, description="sampling rate for animated GLB"),
                        animation: str | None = Query(None, min_length=1, max_length=200, description=(
-                           "glTF: the animation to sample, by name or index (default: the first); the answer's "
-                           "animation field says which was used"))) -> PosesOut:
+                           "glTF: the animation to sample, by name or index (default: the first); the "
+                           "answer's animation field says which was used"))) -> PosesOut:
     """Upload poses of this mesh: a .npz with ``vertices`` (F,V,3) (optional ``faces``, ``times``) or an
     animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
     mesh = await run_in_threadpool(_owned_mesh, store, mesh_id, tenant)
