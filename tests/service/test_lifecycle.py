@@ -1,5 +1,6 @@
-"""Lifecycle through real HTTP: list with cursor pages and filters, delete a mesh or a clip (blobs removed once
-unreferenced), cancel queued and running jobs, long-poll a job, Location headers, ``pdeanim keys list/revoke``."""
+"""Lifecycle through real HTTP: list with cursor pages and filters, delete a mesh or a clip (blobs removed
+once unreferenced), cancel queued and running jobs, long-poll a job, Location headers, ``pdeanim keys
+list/revoke``, and choosing the animation of a glTF upload (API and ``pdeanim fit --animation``)."""
 
 from __future__ import annotations
 
@@ -26,7 +27,8 @@ OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n
 
 @pytest.fixture(scope="module")
 def services(module_backend, tmp_path_factory):
-    svc = Services(module_backend, tmp_path_factory.mktemp("svc"), env_extra={"PDEANIM_MAX_WAIT_SECONDS": "20"})
+    svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
+                   env_extra={"PDEANIM_MAX_WAIT_SECONDS": "20"})
     svc.start_server()
     svc.start_worker()
     yield svc
@@ -108,7 +110,8 @@ def test_jobs_and_poses_lists_filter(api, services, data_dir):
     assert job["id"] not in {j["id"] for j in every_page(api, "/v1/jobs", kind="fit")}
     clips = every_page(api, "/v1/clips", mesh_id=fish["id"])
     assert [c["id"] for c in clips] == [job["result"]["clip_id"]]
-    assert [c["id"] for c in every_page(api, "/v1/clips", kind=clips[0]["kind"], mesh_id=fish["id"])] == [clips[0]["id"]]
+    same_kind = every_page(api, "/v1/clips", kind=clips[0]["kind"], mesh_id=fish["id"])
+    assert [c["id"] for c in same_kind] == [clips[0]["id"]]
     assert every_page(api, "/v1/clips", kind="nope", mesh_id=fish["id"]) == []
     assert api.get("/v1/jobs", params={"state": "bogus"}).status_code == 422
     assert every_page(api, "/v1/poses", mesh_id=fish["id"]) == []
@@ -158,8 +161,9 @@ def test_delete_clip_keeps_blobs_another_clip_uses(api, services, store, data_di
     assert r.status_code == 200 and r.json()["clips"] == 1 and r.json()["blobs_removed"] == 0, r.text
     assert api.get(f"/v1/clips/{one}").status_code == 404
     assert api.get(f"/v1/clips/{two}/frame", params={"t": 0.25}).status_code == 200
-    assert api.delete(f"/v1/clips/{two}").json()["blobs_removed"] in (1, 2)  # topology: shared with fish clips
-    assert not any(_blob_exists(store, k) for k in keys)  # of other tests when they ran
+    # the topology blob is shared with fish clips of other tests when they ran
+    assert api.delete(f"/v1/clips/{two}").json()["blobs_removed"] in (1, 2)
+    assert not any(_blob_exists(store, k) for k in keys)
     assert api.get(f"/v1/meshes/{mesh['id']}").status_code == 200
 
 
@@ -181,7 +185,8 @@ def test_cancel_running_job_stops_its_worker_and_long_poll_sees_changes(api, ser
     assert api.get(f"/v1/jobs/{job['id']}", params={"wait": 15}).json()["state"] == "cancelled"
     assert time.monotonic() - started < 5  # a finished job answers at once
     # the worker stops the attempt at its next heartbeat (lease 3 s: every second) and takes the next job
-    nxt = cyclic_clip(api, services, upload(api, "f.obj", (data_dir / "fish_eel.obj").read_bytes()).json()["id"])
+    fish = upload(api, "f.obj", (data_dir / "fish_eel.obj").read_bytes()).json()
+    nxt = cyclic_clip(api, services, fish["id"])
     assert nxt["state"] == "succeeded"
     final = api.get(f"/v1/jobs/{job['id']}").json()
     assert final["state"] == "cancelled" and final["result"].get("poses_id") is None, final
@@ -190,12 +195,14 @@ def test_cancel_running_job_stops_its_worker_and_long_poll_sees_changes(api, ser
 
 def test_cancel_queued_job_and_finished_job(api, services, data_dir):
     mesh = upload(api, "spot.obj", (data_dir / "spot.obj").read_bytes()).json()
-    blocker = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": LONG_SIM}).json()
+    blocker = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
+                                         "params": LONG_SIM}).json()
     queued = api.post("/v1/jobs", json={"kind": "cyclic", "mesh_id": mesh["id"], "params": CYCLIC}).json()
     r = api.post(f"/v1/jobs/{queued['id']}/cancel")
     assert r.status_code == 200 and r.json()["state"] == "cancelled", r.text
     assert api.post(f"/v1/jobs/{blocker['id']}/cancel").json()["state"] == "cancelled"
-    done = cyclic_clip(api, services, upload(api, "f.obj", (data_dir / "fish_eel.obj").read_bytes()).json()["id"])
+    fish = upload(api, "f.obj", (data_dir / "fish_eel.obj").read_bytes()).json()
+    done = cyclic_clip(api, services, fish["id"])
     assert api.get(f"/v1/jobs/{queued['id']}").json()["attempt"] == 0  # never claimed
     r = api.post(f"/v1/jobs/{done['id']}/cancel")
     assert r.status_code == 409 and r.json()["error"]["code"] == "conflict"
@@ -204,7 +211,8 @@ def test_cancel_queued_job_and_finished_job(api, services, data_dir):
 
 def test_long_poll_is_bounded_and_does_not_block_other_requests(api, services, data_dir):
     mesh = upload(api, "spot.obj", (data_dir / "spot.obj").read_bytes()).json()
-    blocker = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": LONG_SIM}).json()
+    blocker = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
+                                         "params": LONG_SIM}).json()
     queued = api.post("/v1/jobs", json={"kind": "cyclic", "mesh_id": mesh["id"], "params": CYCLIC}).json()
     with concurrent.futures.ThreadPoolExecutor(8) as pool:
         started = time.monotonic()
@@ -303,12 +311,11 @@ def test_gltf_upload_chooses_the_animation_and_says_which(api, morph):
 def test_cli_fit_takes_animation_by_name(morph, tmp_path):
     _, verts, faces = morph
     (tmp_path / "two.glb").write_bytes(two_animation_glb(verts, faces))
-    out = subprocess.run(PDEANIM + ["fit", str(tmp_path / "two.glb"), "--animation", "Swim", "--segments", "1",
-                                    "--out", str(tmp_path / "swim.clip"), "--quiet"],
+    fit = PDEANIM + ["fit", str(tmp_path / "two.glb"), "--segments", "1", "--quiet"]
+    out = subprocess.run(fit + ["--animation", "Swim", "--out", str(tmp_path / "swim.clip")],
                          capture_output=True, text=True, timeout=300, cwd=tmp_path, env=CLI_ENV)
     assert out.returncode == 0, out.stderr
     assert "animation: Swim (index 1)" in out.stdout and (tmp_path / "swim.clip").stat().st_size > 0
-    bad = subprocess.run(PDEANIM + ["fit", str(tmp_path / "two.glb"), "--animation", "Walk", "--segments", "1",
-                                    "--out", str(tmp_path / "walk.clip"), "--quiet"],
+    bad = subprocess.run(fit + ["--animation", "Walk", "--out", str(tmp_path / "walk.clip")],
                          capture_output=True, text=True, timeout=300, cwd=tmp_path, env=CLI_ENV)
     assert bad.returncode == 2 and "Walk" in bad.stderr, bad.stderr

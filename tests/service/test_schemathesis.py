@@ -54,18 +54,20 @@ def seed(services: Services, key: str) -> dict[str, str]:
     worker.send_signal(signal.SIGTERM)
     worker.wait(60)
     assert job["state"] == "succeeded", (job, services.logs())
-    return {"FUZZ_MESH_ID": mesh["id"], "FUZZ_POSES_ID": poses["id"], "FUZZ_CLIP_ID": job["result"]["clip_id"],
-            "FUZZ_JOB_ID": job["id"]}
+    return {"FUZZ_MESH_ID": mesh["id"], "FUZZ_POSES_ID": poses["id"],
+            "FUZZ_CLIP_ID": job["result"]["clip_id"], "FUZZ_JOB_ID": job["id"]}
 
 
 def test_schemathesis_finds_no_server_error_and_no_undocumented_status(services, tmp_path):
     key = make_key(services.backend, "fuzz")
-    cmd = [sys.executable, "-m", "schemathesis.cli", "--config-file", str(ROOT / "tests/service/schemathesis.toml"),
-           "run", str(ROOT / "openapi/openapi.json"), "--url", services.url, "-H", f"Authorization: Bearer {key}",
+    cmd = [sys.executable, "-m", "schemathesis.cli", "--config-file",
+           str(ROOT / "tests/service/schemathesis.toml"), "run", str(ROOT / "openapi/openapi.json"),
+           "--url", services.url, "-H", f"Authorization: Bearer {key}",
            "--checks", "all", "--max-examples", "25", "--workers", "2", "--max-time", str(BUDGET_SECONDS),
            "--seed", "20261126", "--generation-database", "none", "--no-color"]
     env = {**os.environ, **seed(services, key)}
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=BUDGET_SECONDS * 4, cwd=tmp_path, env=env)
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=BUDGET_SECONDS * 4, cwd=tmp_path,
+                         env=env)
     report = out.stdout + out.stderr
     generated = re.search(r"(\d+) generated", report)
     assert out.returncode == 0, report[-12000:] + "\n" + services.logs()[-4000:]

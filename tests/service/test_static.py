@@ -27,7 +27,8 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
     assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
                    "getJob", "getClip", "getClipCoefficients", "getClipFrame", "getClipAnimation",
-                   "listMeshes", "listPoses", "listClips", "listJobs", "deleteMesh", "deleteClip", "cancelJob"}
+                   "listMeshes", "listPoses", "listClips", "listJobs", "deleteMesh", "deleteClip",
+                   "cancelJob"}
     assert "HTTPValidationError" not in doc["components"]["schemas"]
     # typed job bodies: a union discriminated on kind, option models generated from the library's dataclasses
     body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
