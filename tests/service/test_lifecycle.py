@@ -319,3 +319,22 @@ def test_cli_fit_takes_animation_by_name(morph, tmp_path):
     bad = subprocess.run(fit + ["--animation", "Walk", "--out", str(tmp_path / "walk.clip")],
                          capture_output=True, text=True, timeout=300, cwd=tmp_path, env=CLI_ENV)
     assert bad.returncode == 2 and "Walk" in bad.stderr, bad.stderr
+
+
+def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store, data_dir):
+    """A clip stored before metrics were made finite (report with inf) lists with null (pydantic writes
+    non-finite floats as null), not a 500."""
+    from service.store.models import ClipRecord, Mesh
+
+    mesh = upload(api, "old.obj", OBJ + b"# old clip\n").json()
+    with store.sessions() as s:
+        tenant = s.get(Mesh, mesh["id"]).tenant_id
+        s.add(ClipRecord(id="clip_old_inf", tenant_id=tenant, mesh_id=mesh["id"], kind="dynamic-pde",
+                         topology_key="t", coefficients_key="c", topology_id="x" * 64,
+                         report={"rel_rms": float("inf"), "errors": {"kg": float("nan")}, "sizes": {"a": 1}}))
+        s.commit()
+    r = api.get("/v1/clips", params={"mesh_id": mesh["id"]})
+    assert r.status_code == 200, r.text
+    (item,) = r.json()["items"]
+    assert item["errors"] == {"rel_rms": None, "kg": None} and item["sizes"] == {"a": 1}
+    assert api.delete("/v1/clips/clip_old_inf").status_code == 200
