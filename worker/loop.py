@@ -134,6 +134,16 @@ class Worker:
             queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
         elif outcome.status == "stopped":
             queue.release(job.id, job.attempt)
+        elif outcome.status == "lost" and self._state(job.id) in ("cancelled", None):
+            log.info("job %s was cancelled or deleted; attempt %d stopped", job.id, job.attempt)
+
+    def _state(self, job_id: str) -> str | None:
+        """The job's state now (None once its row is deleted)."""
+        from service.store.models import Job
+
+        with self.store.sessions() as session:
+            job = session.get(Job, job_id)
+            return None if job is None else job.state
 
 
 def main(settings: Settings | None = None) -> int:
