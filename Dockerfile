@@ -4,11 +4,12 @@ FROM python:3.11-slim-bookworm
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PIP_NO_CACHE_DIR=1 PDEANIM_DATA_DIR=/data
 RUN apt-get update && apt-get install -y --no-install-recommends libgomp1 && rm -rf /var/lib/apt/lists/*
 WORKDIR /app
-COPY pyproject.toml README.md alembic.ini ./
+COPY pyproject.toml README.md alembic.ini requirements.lock ./
+RUN pip install -r requirements.lock
 COPY pdeanim ./pdeanim
 COPY service ./service
 COPY worker ./worker
-RUN pip install . && useradd --create-home --uid 1000 pdeanim && mkdir -p /data && chown pdeanim /data
+RUN pip install --no-deps . && useradd --create-home --uid 1000 pdeanim && mkdir -p /data && chown pdeanim /data
 USER pdeanim
 EXPOSE 8000
 CMD ["pdeanim", "serve", "--host", "0.0.0.0", "--port", "8000", "--no-migrate"]

@@ -53,7 +53,11 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
                        "nbytes": len(raw)}
         chunks.append(raw + b"\0" * (_pad8(len(raw)) - len(raw)))
         offset += _pad8(len(raw))
-    meta = json.dumps({**header, "arrays": table}, separators=(",", ":"), sort_keys=True).encode()
+    try:
+        meta = json.dumps({**header, "arrays": table}, separators=(",", ":"), sort_keys=True,
+                          allow_nan=False).encode()
+    except ValueError as exc:
+        raise ValueError(f"container header must not hold NaN or infinity (use null): {exc}") from exc
     meta += b" " * (_pad8(len(meta)) - len(meta))
     return _PREFIX.pack(MAGIC, VERSION, len(meta)) + meta + b"".join(chunks)
 

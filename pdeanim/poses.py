@@ -7,13 +7,13 @@ On disk a POSES.npz holds ``vertices`` (F, V, 3) float32, ``faces`` (T, 3) int32
 from __future__ import annotations
 
 import io
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .errors import LimitError, PosesInputError
+from .npzread import ArrayHeader, read_npz
 
 DEFAULT_FPS = 30.0
 
@@ -25,6 +25,7 @@ class PoseLimits:
     max_frames: int = 10_000
     max_vertices: int = 2_000_000
     max_values: int = 400_000_000  # frames * vertices * 3
+    max_bytes: int = 2 * 1024**3  # all arrays of a .npz once inflated
 
 
 @dataclass
@@ -87,8 +88,8 @@ def validate_pose_arrays(vertices: np.ndarray, faces: np.ndarray, times: np.ndar
         raise LimitError("vertex count", n_verts, limits.max_vertices, "PDEANIM_MAX_VERTICES")
     if vertices.size > limits.max_values:
         raise LimitError("frames x vertices x 3", vertices.size, limits.max_values)
-    if not np.issubdtype(vertices.dtype, np.number):
-        raise PosesInputError(f"vertices must be numeric, got dtype {vertices.dtype}")
+    if vertices.dtype.kind not in "fiu":
+        raise PosesInputError(f"vertices must be real numbers, got dtype {vertices.dtype}")
     if not np.all(np.isfinite(vertices)):
         bad = np.argwhere(~np.isfinite(vertices))[0]
         raise PosesInputError(f"vertices contain NaN or infinite values (first at frame {bad[0]}, vertex {bad[1]})")
@@ -101,29 +102,52 @@ def validate_pose_arrays(vertices: np.ndarray, faces: np.ndarray, times: np.ndar
             raise PosesInputError(f"face indices must lie in [0, {n_verts}), found {faces.min()}..{faces.max()}")
     if times.shape != (n_frames,):
         raise PosesInputError(f"times must have shape ({n_frames},), got {times.shape}")
+    if times.dtype.kind not in "fiu":
+        raise PosesInputError(f"times must be real numbers, got dtype {times.dtype}")
     if not np.all(np.isfinite(times)):
         raise PosesInputError("times contain NaN or infinite values")
     if n_frames > 1 and not np.all(np.diff(times) > 0):
         raise PosesInputError("times must be strictly increasing")
 
 
+def check_npz_headers(headers: dict[str, ArrayHeader], limits: PoseLimits) -> None:
+    """Refuse a POSES.npz from its npy headers alone (before inflating): shapes, dtypes and limits."""
+    if "vertices" not in headers:
+        raise PosesInputError("poses .npz has no 'vertices' array")
+    kinds = {"vertices": "fiu", "faces": "iu", "times": "fiu"}
+    for name, head in headers.items():
+        if head.dtype.kind not in kinds[name]:
+            raise PosesInputError(f"{name} must be {'integers' if name == 'faces' else 'real numbers'}, "
+                                  f"got dtype {head.dtype}")
+    v = headers["vertices"].shape
+    if len(v) not in (2, 3) or v[-1] != 3:
+        raise PosesInputError(f"vertices must have shape (F, V, 3), got {v}")
+    frames, verts = (1, v[0]) if len(v) == 2 else v[:2]
+    if frames > limits.max_frames:
+        raise LimitError("frame count", frames, limits.max_frames, "PDEANIM_MAX_FRAMES")
+    if verts > limits.max_vertices:
+        raise LimitError("vertex count", verts, limits.max_vertices, "PDEANIM_MAX_VERTICES")
+    if headers["vertices"].count > limits.max_values:
+        raise LimitError("frames x vertices x 3", headers["vertices"].count, limits.max_values)
+    if "times" in headers and headers["times"].count > limits.max_frames:
+        raise LimitError("times count", headers["times"].count, limits.max_frames, "PDEANIM_MAX_FRAMES")
+    if "faces" in headers and headers["faces"].count > limits.max_values:
+        raise LimitError("faces x 3", headers["faces"].count, limits.max_values)
+    total = sum(head.nbytes for head in headers.values())
+    if total > limits.max_bytes:
+        raise LimitError("inflated size of the .npz arrays in bytes", total, limits.max_bytes,
+                         "PDEANIM_MAX_POSE_BYTES")
+
+
 def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None) -> Poses:
-    """Read a POSES.npz (path or bytes): ``vertices`` (F,V,3), ``faces`` (T,3), optional ``times`` (F,)."""
-    try:
-        fh = io.BytesIO(source) if isinstance(source, bytes | bytearray) else open(source, "rb")
-        with fh, np.load(fh, allow_pickle=False) as data:
-            if "vertices" not in data.files:
-                raise PosesInputError(f"poses .npz has no 'vertices' array (found {sorted(data.files)})")
-            vertices = data["vertices"]
-            faces = data["faces"] if "faces" in data.files else None
-            times = data["times"] if "times" in data.files else None
-    except PosesInputError:
-        raise
-    except (ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise PosesInputError(f"not a valid .npz file of poses ({type(exc).__name__}: {exc})") from exc
-    except OSError as exc:
-        raise PosesInputError(f"cannot read poses .npz: {exc}") from exc
-    return make_poses(vertices, faces, times, {"source": "npz"}, limits)
+    """Read a POSES.npz (path or bytes): ``vertices`` (F,V,3), ``faces`` (T,3), optional ``times`` (F,).
+
+    Headers are checked against ``limits`` before any array is inflated (bounded memory on hostile files).
+    """
+    limits = limits or PoseLimits()
+    data = read_npz(source, ("vertices", "faces", "times"), lambda h: check_npz_headers(h, limits),
+                    PosesInputError)
+    return make_poses(data["vertices"], data.get("faces"), data.get("times"), {"source": "npz"}, limits)
 
 
 def save_poses(path: str | Path, poses: Poses) -> None:

@@ -9,6 +9,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
+from importlib.resources import files
 from pathlib import Path
 
 import httpx
@@ -17,7 +18,7 @@ from .launcher import Launcher
 from .settings import Settings
 from .store.tenants import issue_key
 
-SAMPLE_MESH = Path(__file__).resolve().parents[1] / "tests" / "data" / "spot.obj"
+SAMPLE_MESH = Path(str(files("pdeanim.data") / "spot.obj"))  # package data: the demo runs without a checkout
 SCENE = {"frames": 60, "target_tets": 1500}
 FIT = {"target_rel_rms": 0.002}
 

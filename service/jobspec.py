@@ -33,10 +33,15 @@ def options_class(kind: str) -> type:
 
 
 def normalize(kind: str, params: dict[str, Any] | None) -> dict[str, Any]:
-    """Validate options of ``kind`` (ParameterError on unknown/bad keys) and return them with defaults."""
+    """Validate options of ``kind`` (ParameterError on unknown/bad keys, LimitError when the work the options ask
+    for is over the budget the worker enforces) and return them with defaults."""
     if params is not None and not isinstance(params, dict):
         raise ParameterError(f"{kind} parameters must be a JSON object")
-    return options_class(kind).from_dict(dict(params or {})).to_dict()
+    options = options_class(kind).from_dict(dict(params or {}))
+    check_work = getattr(options, "check_work", None)
+    if check_work is not None:
+        check_work()  # the same estimate the worker checks (pdeanim.sim.scene.SceneParams.work)
+    return options.to_dict()
 
 
 def normalize_request(kind: str, params: dict[str, Any], then_fit: bool, fit: dict[str, Any] | None) -> dict:

@@ -7,10 +7,14 @@ Embedded default: SQLite and a blob directory under ``./pdeanim-data``. Scale-ou
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+MIN_JOB_MEMORY = 2 * 1024**3
+"""The default limit never goes below this: the libraries a job imports reserve about 1 GiB of address space."""
 
 
 class Settings(BaseSettings):
@@ -33,6 +37,10 @@ class Settings(BaseSettings):
     max_vertices: int = Field(500_000, gt=0)
     max_faces: int = Field(1_000_000, gt=0)
     max_frames: int = Field(2_000, gt=0)
+    max_pose_bytes: int = Field(1024**3, gt=0, description="inflated size of an uploaded poses .npz's arrays")
+    max_json_bytes: int = Field(1024**2, gt=0, description="largest non-upload request body (job requests)")
+    max_header_bytes: int = Field(32 * 1024, gt=0, description="largest total size of a request's headers")
+    access_log: bool = Field(True, description="one log line per request (logger pdeanim.access, level INFO)")
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
     cors_origins: str = Field("", description="comma-separated origins allowed by CORS (``*`` for any); "
                               "empty = CORS off")
@@ -40,6 +48,7 @@ class Settings(BaseSettings):
                                    description="encoded frame GLBs kept per API process (LRU by (clip, t)); 0 = off")
     key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long without "
                                      "a database query (a revoked key stops working within it); 0 = always ask")
+    max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
     max_attempts: int = Field(3, ge=1, description="attempts before a job fails for good")
@@ -47,7 +56,10 @@ class Settings(BaseSettings):
     backoff_max_seconds: float = Field(300.0, ge=0)
     poll_seconds: float = Field(0.5, gt=0, description="worker idle poll interval")
     shutdown_grace_seconds: float = Field(20.0, ge=0, description="on SIGTERM, time to finish the attempt")
-    job_memory_bytes: int = Field(0, ge=0, description="RLIMIT_AS of a job's child process; 0 = unlimited")
+    job_memory_bytes: int = Field(0, ge=0, description="RLIMIT_AS of a job's child process; 0 = "
+                                  "job_memory_fraction of the machine's memory")
+    job_memory_fraction: float = Field(0.5, ge=0, le=1, description="default job memory limit as a fraction of "
+                                       "the machine's physical memory (at least 2 GiB); 0 = unlimited")
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
     job_nice: int = Field(10, ge=0, le=19, description="nice increment of a job's process (the API keeps "
                           "its latency while jobs run); 0 = same priority")
@@ -57,6 +69,14 @@ class Settings(BaseSettings):
     def cors_origin_list(self) -> list[str]:
         """The allowed CORS origins (scheme://host[:port], no trailing slash); empty when CORS is off."""
         return [o.strip().rstrip("/") for o in self.cors_origins.split(",") if o.strip()]
+
+    def job_memory_limit(self) -> int:
+        """Bytes of address space a job's process may use (0: unlimited): job_memory_bytes when set, else
+        job_memory_fraction of the physical memory, so one job cannot take the machine down."""
+        if self.job_memory_bytes or not self.job_memory_fraction:
+            return self.job_memory_bytes
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        return max(int(self.job_memory_fraction * physical), MIN_JOB_MEMORY)
 
     def resolved_data_dir(self) -> Path:
         """The data directory as an absolute path (created on demand)."""

@@ -102,7 +102,10 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
 
     settings = Settings.model_validate_json(settings_json)
     lower_priority(settings.job_nice, settings.job_cpu_shares)
-    workdir = Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))
+    memory = settings.job_memory_limit()
+    workdir = Path(job["workdir"]) if job.get("workdir") else \
+        Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))
+    workdir.mkdir(parents=True, exist_ok=True)
     last = [0.0]
 
     def progress(fraction: float, stage: str) -> None:
@@ -113,16 +116,18 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
 
     try:
         blobs = open_blob_store(settings)
-        if settings.job_memory_bytes:
+        if memory:
             _warm_blas()  # BLAS allocates its buffers now: under the limit it may hang instead of failing
-            resource.setrlimit(resource.RLIMIT_AS, (settings.job_memory_bytes, resource.RLIM_INFINITY))
+            resource.setrlimit(resource.RLIMIT_AS, (memory, resource.RLIM_INFINITY))
         result = STAGES[job["kind"]](job, blobs, settings, progress, workdir,
                                      partial=lambda part: conn.send(("partial", part)))
         conn.send(("done", result))
     except InputError as exc:
         conn.send(("error", exc.code, str(exc), False))
     except MemoryError:
-        conn.send(("error", "out_of_memory", f"out of memory (limit {settings.job_memory_bytes} bytes)", True))
+        conn.send(("error", "out_of_memory", f"the job needs more memory than its limit of {memory / 2**30:.2f} GiB "
+                   "(PDEANIM_JOB_MEMORY_BYTES or PDEANIM_JOB_MEMORY_FRACTION): lower frames, target_tets or the "
+                   "poses' size, or raise the limit", True))
     except Exception as exc:  # noqa: BLE001 - unexpected: reported for a retry
         traceback.print_exc()
         conn.send(("error", type(exc).__name__, f"{type(exc).__name__}: {exc}", True))

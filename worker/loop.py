@@ -18,6 +18,7 @@ from service.settings import Settings
 from service.store.context import Store
 from service.store.models import ClipRecord, Mesh, PosesRecord
 from service.store.queue import Claimed
+from service.store.scratch import clean_stale, prefix, remove
 
 from .attempt import run_attempt
 from .child import Outcome, child_context
@@ -53,6 +54,7 @@ class Worker:
     def run(self, max_jobs: int | None = None, exit_when_idle: bool = False) -> int:
         """Loop until stopped (or ``max_jobs`` handled / queue empty when asked); returns the exit code."""
         log.info("worker %s started", self.id)
+        clean_stale(self.settings.tmp_dir())
         errors = 0
         while not self.stop_requested.is_set():
             try:
@@ -108,10 +110,16 @@ class Worker:
         """Run one claimed attempt and record its outcome (fenced)."""
         log.info("job %s (%s) attempt %d", job.id, job.kind, job.attempt)
         started = time.monotonic()
-        outcome = run_attempt(self.ctx, self.store.queue, job, self._payload(job), self.settings.model_dump_json(),
-                              self._should_stop, self.settings.job_timeout_seconds,
-                              lambda part: self.store.queue.store_partial(job.id, job.attempt,
-                                                                          result_writer(job, part)))
+        # the parent owns the attempt's work directory, so it is removed however the child ends
+        workdir = self.settings.tmp_dir() / f"{prefix('work')}{job.id}-{job.attempt}"
+        try:
+            outcome = run_attempt(self.ctx, self.store.queue, job, {**self._payload(job), "workdir": str(workdir)},
+                                  self.settings.model_dump_json(), self._should_stop,
+                                  self.settings.job_timeout_seconds,
+                                  lambda part: self.store.queue.store_partial(job.id, job.attempt,
+                                                                              result_writer(job, part)))
+        finally:
+            remove(workdir)
         self._record(job, outcome)
         log.info("job %s attempt %d: %s %s (%.2fs)", job.id, job.attempt, outcome.status, outcome.code,
                  time.monotonic() - started)
@@ -131,6 +139,16 @@ class Worker:
             queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
         elif outcome.status == "stopped":
             queue.release(job.id, job.attempt)
+        elif outcome.status == "lost" and self._state(job.id) in ("cancelled", None):
+            log.info("job %s was cancelled or deleted; attempt %d stopped", job.id, job.attempt)
+
+    def _state(self, job_id: str) -> str | None:
+        """The job's state now (None once its row is deleted)."""
+        from service.store.models import Job
+
+        with self.store.sessions() as session:
+            job = session.get(Job, job_id)
+            return None if job is None else job.state
 
 
 def main(settings: Settings | None = None) -> int:

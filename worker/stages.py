@@ -35,8 +35,11 @@ def _store_clip(parts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict
             "report": report}
 
 
-def _fit(poses, options: dict, blobs: BlobStore, progress: Progress) -> dict:  # noqa: ANN001
+def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int) -> dict:  # noqa: ANN001
+    from pdeanim.model.budget import check_fit_memory
     from pdeanim.model.fitclip import FitOptions, fit_poses
+
+    check_fit_memory(poses.n_frames, poses.n_vertices, memory)  # refused now, not after minutes of work
 
     def labelled(fraction: float, stage: str) -> None:
         progress(fraction, stage if stage.startswith("fit") else f"fit: {stage}")
@@ -59,6 +62,10 @@ def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Prog
     share = SIMULATE_SHARE if spec.get("then_fit") else 1.0
     mesh = _mesh(job, blobs, settings)
     scene = SceneParams.from_dict(spec["params"])
+    if spec.get("then_fit"):
+        from pdeanim.model.budget import check_fit_memory
+
+        check_fit_memory(scene.frames, len(mesh.vertices), settings.job_memory_limit())  # before simulating
     progress(0.0, "tetrahedralize")
     tet_dir = workdir / "tets"
     tet_key = shared_tets(mesh, scene.target_tets, blobs, tet_dir, workdir)
@@ -71,7 +78,8 @@ def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Prog
     if spec.get("then_fit"):
         if partial is not None:
             partial({**out, "next_stage": "fit"})
-        out["clip"] = _fit(poses, spec["fit"], blobs, sub_progress(progress, share, 1.0))
+        out["clip"] = _fit(poses, spec["fit"], blobs, sub_progress(progress, share, 1.0),
+                           settings.job_memory_limit())
     return out
 
 
@@ -80,9 +88,10 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
     """Stored poses -> clip."""
     from pdeanim.poses import PoseLimits, load_poses_npz
 
-    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices)
+    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
+                        max_bytes=settings.max_pose_bytes)
     poses = load_poses_npz(blobs.get(job["poses"]["blob_key"]), limits)
-    return {"clip": _fit(poses, job["params"]["params"], blobs, progress)}
+    return {"clip": _fit(poses, job["params"]["params"], blobs, progress, settings.job_memory_limit())}
 
 
 def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,

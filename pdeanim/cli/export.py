@@ -11,6 +11,7 @@ from ..clip import load_clip_file
 from ..errors import InputError
 from ..gltf.clipexport import clip_animation_glb
 from ..gltf.compact import PackOptions
+from ..progress import cli_progress
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -41,6 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "frame's normals)")
     # --quantize was an opt-in flag before quantising became the default: still accepted, hidden
     p.add_argument("--quantize", dest="quantize", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
@@ -60,7 +62,12 @@ def run(args: argparse.Namespace) -> int:
         for note in layout.notes:
             print(f"note: {note}")
     options = PackOptions(args.quantize, args.compress, args.position_bits, args.normals)
-    glb = clip_animation_glb(clip, args.fps, options=options, layout=layout)
+    progress = cli_progress("export", args.quiet)
+    try:
+        glb = clip_animation_glb(clip, args.fps, options=options, layout=layout, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
     out = Path(args.out)
     out.write_bytes(glb)
     packing = [w for w, on in (("quantised", args.quantize), ("meshopt", args.compress)) if on]

@@ -27,9 +27,12 @@ def register(subparsers) -> None:  # noqa: ANN001
                         "rigid motion plus a residual")
     p.add_argument("--loop", action="store_true", help="make the clip loop (last frame flows into the first)")
     p.add_argument("--fps", type=float, default=30.0, help="sampling rate for glTF input")
+    p.add_argument("--animation", metavar="NAME", help="glTF input: the animation to fit, by name or index "
+                                                         "(default: the first; the summary says which was used)")
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
     p.add_argument("--pictures", metavar="DIR",
                    help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
@@ -38,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from ..clip import write_clip_file
     from ..model.fitclip import FitOptions, fit_poses
     from ..posefiles import load_poses
+    from ..progress import cli_progress
 
     if not args.fps > 0:
         raise ParameterError(f"--fps must be > 0, got {args.fps}")
@@ -46,8 +50,16 @@ def run(args: argparse.Namespace) -> int:
                          param_mode=args.param, motion=args.motion, loop=args.loop,
                          max_segments=args.max_segments)
     start = time.perf_counter()
-    poses = load_poses(args.poses, fps=args.fps)
-    parts = fit_poses(poses, options)
+    poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
+    used = (poses.meta or {}).get("animation")
+    if isinstance(used, dict):
+        print(f"animation: {used.get('name') or '(unnamed)'} (index {used.get('index')})")
+    progress = cli_progress("fit", args.quiet)
+    try:
+        parts = fit_poses(poses, options, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
     write_clip_file(args.out, parts)
     print(summary_text(parts.report, time.perf_counter() - start, args.out))
     if args.pictures:
@@ -82,7 +94,7 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         f"fitted {r['frames']} frames x {r['vertices']} vertices with {r['curves']} curves, "
         f"{r['segments']} segments",
         f"rms {r['rms']:.4g} (rel {r['rel_rms']:.3g})  max {r['max']:.4g} (rel {r['rel_max']:.3g})  "
-        f"KG {r['kg']:.3g}  spatial floor rel rms {r['floor_rel_rms']:.3g}",
+        f"KG {_fmt(r['kg'])}  spatial floor rel rms {r['floor_rel_rms']:.3g}",
         f"target rms={_fmt(target.get('rms'))} max={_fmt(target.get('max'))}: "
         + ("met" if met else "fixed segments" if met is None else "NOT met")
         + (" (the curves' spatial floor is above the target)" if r.get("floor_exceeds_target") else ""),

@@ -38,7 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", help="JSON file of scene parameters (flags given here override it)")
     p.add_argument("--gravity", help="X,Y,Z in m/s^2 (default 0,-9.81,0)")
     p.add_argument("--damping", type=float, help="velocity damping in 1/s (default 1)")
-    p.add_argument("--young", type=float, help="Young's modulus in Pa (default 1e6)")
+    p.add_argument("--young", type=float, help="Young's modulus in Pa (default: from the mesh's size, so gravity "
+                   "compresses it by about 2%%: visible, stable motion whatever the units)")
     p.add_argument("--poisson", type=float, help="Poisson ratio in [0, 0.5) (default 0.3)")
     p.add_argument("--density", type=float, help="kg/m^3 (default 1000)")
     p.add_argument("--pin-box", action="append", default=[], metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")
@@ -64,6 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, help="solver threads (default 1)")
     p.add_argument("--merge-seams", action="store_true", help="merge duplicate vertices before simulating")
     p.add_argument("--cache-dir", help="directory caching tetrahedralizations")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
@@ -137,24 +139,27 @@ def run(args: argparse.Namespace) -> int:
     """Load, simulate, save and print a one-screen summary."""
     from ..mesh.io import load_mesh
     from ..poses import save_poses
+    from ..progress import cli_progress
     from ..sim.simulate import simulate_mesh
 
     scene = scene_from_args(args)
     mesh = load_mesh(args.mesh, merge_seams=args.merge_seams)
 
-    def report(fraction: float, stage: str) -> None:
-        print(f"\r{stage:<24} {100 * fraction:5.1f}%", end="", file=sys.stderr, flush=True)
-
-    tty = sys.stderr.isatty()
-    poses = simulate_mesh(mesh, scene, progress=report if tty else None,
-                          cache_dir=Path(args.cache_dir) if args.cache_dir else None)
-    if tty:
-        print(file=sys.stderr)
+    progress = cli_progress("simulate", args.quiet)
+    try:
+        poses = simulate_mesh(mesh, scene, progress=progress,
+                              cache_dir=Path(args.cache_dir) if args.cache_dir else None)
+    finally:
+        if progress is not None:
+            progress.close()
     save_poses(args.out, poses)
     moved = np.linalg.norm(poses.vertices - poses.vertices[:1], axis=2).max()
     m = poses.meta
     print(f"wrote {args.out}: {poses.n_frames} frames x {poses.n_vertices} vertices, {m['tets']} tets, "
           f"{m['substeps']} substeps/frame{' (capped)' if m['substeps_capped'] else ''}, "
           f"tetrahedralize {m['tetrahedralize_seconds']} s, simulate {m['seconds']} s, "
-          f"max displacement {moved:.4g} (bbox diagonal {mesh.diagonal():.4g})")
+          f"max displacement {moved:.4g} (bbox diagonal {mesh.diagonal():.4g}), young {m['young']:.4g} Pa"
+          f"{' (from the mesh size)' if m['young_auto'] else ''}")
+    for warning in m.get("warnings", []):
+        print(f"pdeanim simulate: warning: {warning}", file=sys.stderr)
     return 0

@@ -12,11 +12,13 @@ import numpy as np
 
 from ..clip import Clip
 from ..errors import LimitError, ParameterError
+from ..progress import Progress
 from .compact import PackOptions, layout_animation_glb, layout_frame_glb
 from .layout import Layout, plain_layout
 from .write import _check_times, _key_plan, animation_glb, frame_glb
 
 DEFAULT_MAX_FRAMES = 10_000
+EVALUATE_CHUNK = 64  # frames evaluated per call when exporting (between progress reports)
 
 
 def clip_duration(clip: Clip) -> float:
@@ -111,27 +113,38 @@ def estimate_export(clip: Clip, fps: float, max_frames: int = DEFAULT_MAX_FRAMES
 
 
 def clip_animation_glb(clip: Clip, fps: float = 30.0, *, options: PackOptions | None = None,
-                       layout: Layout | None = None, max_frames: int = DEFAULT_MAX_FRAMES) -> bytes:
+                       layout: Layout | None = None, max_frames: int = DEFAULT_MAX_FRAMES,
+                       progress: Progress | None = None) -> bytes:
     """The clip as an animated GLB: frames evaluated at ``fps`` over its duration, last frame included; for a
     looping clip the last key is the first frame exactly, so playback wraps without a seam. ``options``
     default to quantised + meshopt-compressed with per-frame normal deltas; ``layout`` (default plain)
-    keeps a source mesh's look. ``PackOptions(quantize=False, compress=False)`` writes plain float32."""
+    keeps a source mesh's look. ``PackOptions(quantize=False, compress=False)`` writes plain float32. Frames are evaluated in chunks so
+    ``progress`` hears about long exports."""
     opts = options or PackOptions()
     duration = clip_duration(clip)
     seconds = export_times(duration, fps, max_frames)
     t = seconds / duration if duration > 0 else seconds
-    frames = np.asarray(clip.evaluate(t), np.float32).reshape(len(t), -1, 3)
+    frames = np.empty((len(t), clip.n_vertices, 3), np.float32)
+    for lo in range(0, len(t), EVALUATE_CHUNK):
+        hi = min(lo + EVALUATE_CHUNK, len(t))
+        frames[lo:hi] = np.asarray(clip.evaluate(t[lo:hi]), np.float32).reshape(hi - lo, -1, 3)
+        if progress is not None:
+            progress(0.9 * hi / len(t), f"evaluate {hi}/{len(t)}")
     loop = bool(clip.looping) and len(t) > 1
     if loop:
         frames[-1] = frames[0]  # period 1 in t: the end of the cycle is its start
     names = [f"t{x:.4f}" for x in t]
     if layout is None and not opts.quantize and not opts.compress:
-        return animation_glb(frames, seconds, clip.faces, loop=loop, names=names, normals=opts.normals)
-    lay = layout or plain_layout(clip.faces, clip.n_vertices)
-    t32 = _check_times(seconds, len(frames))
-    key_times, key_target, n_targets = _key_plan(frames, t32, loop)
-    return layout_animation_glb(lay, frames, key_times, key_target, n_targets, options=opts,
-                                names=names[:n_targets], loop=loop)
+        glb = animation_glb(frames, seconds, clip.faces, loop=loop, names=names, normals=opts.normals)
+    else:
+        lay = layout or plain_layout(clip.faces, clip.n_vertices)
+        t32 = _check_times(seconds, len(frames))
+        key_times, key_target, n_targets = _key_plan(frames, t32, loop)
+        glb = layout_animation_glb(lay, frames, key_times, key_target, n_targets, options=opts,
+                                   names=names[:n_targets], loop=loop)
+    if progress is not None:
+        progress(1.0, "write GLB")
+    return glb
 
 
 def clip_frame_glb(clip: Clip, t: float, layout: Layout | None = None) -> bytes:

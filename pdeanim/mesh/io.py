@@ -218,6 +218,10 @@ def geometry_arrays(loaded: object, name: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces, np.int64).reshape(-1, 3)
 
 
+MAX_ABS_COORDINATE = 1e15
+"""Larger coordinates overflow float32 poses once squared (areas, norms) or cubed (volumes)."""
+
+
 def validate_arrays(vertices: np.ndarray, faces: np.ndarray, name: str, limits: MeshLimits) -> None:
     """Raise MeshInputError naming the first problem, or LimitError for a configured limit."""
     if vertices.ndim != 2 or vertices.shape[1] != 3 or len(vertices) == 0:
@@ -231,6 +235,10 @@ def validate_arrays(vertices: np.ndarray, faces: np.ndarray, name: str, limits: 
     if not np.all(np.isfinite(vertices)):
         first = int(np.argwhere(~np.isfinite(vertices))[0, 0])
         raise MeshInputError(f"{name!r} has NaN or infinite coordinates (first at vertex {first})")
+    biggest = float(np.abs(vertices).max())
+    if biggest > MAX_ABS_COORDINATE:
+        raise MeshInputError(f"{name!r} has coordinates up to {biggest:.3g}, over {MAX_ABS_COORDINATE:.0e}: sizes, "
+                             "areas and float32 poses would overflow (non-finite); rescale the mesh")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshInputError(f"{name!r} has face indices out of range: {faces.min()}..{faces.max()} "
                              f"for {len(vertices)} vertices")

@@ -9,6 +9,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -32,13 +34,16 @@ def kg_error(original: np.ndarray, approx: np.ndarray) -> float:
     return float(100.0 * num / den) if den > 0 else (0.0 if num == 0 else float("inf"))
 
 
-def error_summary(original: np.ndarray, approx: np.ndarray, diagonal: float | None = None) -> dict[str, float]:
-    """rms, max, rel_rms, rel_max (to the first frame's bbox diagonal) and kg of (F, V, 3) sequences."""
+def error_summary(original: np.ndarray, approx: np.ndarray,
+                  diagonal: float | None = None) -> dict[str, float | None]:
+    """rms, max, rel_rms, rel_max (to the first frame's bbox diagonal) and kg of (F, V, 3) sequences; a value
+    that is undefined (e.g. kg when every vertex sits at one point) is None, so reports stay valid JSON."""
     d = distances(original, approx)
     diag = bbox_diagonal(np.asarray(original)[0]) if diagonal is None else float(diagonal)
     rms, mx = float(np.sqrt(np.mean(d * d))), float(d.max()) if d.size else 0.0
-    return {"rms": rms, "max": mx, "rel_rms": rms / diag, "rel_max": mx / diag,
-            "kg": kg_error(original, approx), "diagonal": diag}
+    out = {"rms": rms, "max": mx, "rel_rms": rms / diag if diag else math.inf, "rel_max": mx / diag if diag else
+           math.inf, "kg": kg_error(original, approx), "diagonal": diag}
+    return {k: v if math.isfinite(v) else None for k, v in out.items()}
 
 
 def paper_errors(original: np.ndarray, approx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,9 +1,9 @@
 """Reduce a large surface before tetrahedralization.
 
-trimesh's quadric decimation is used when its backend (fast-simplification) is installed; it is not a
-dependency, so the fallback snaps vertices to a uniform grid and keeps one vertex per cell: crude for
-rendering but enough for a simulation cage, since fTetWild accepts the non-manifold soup clustering can leave
-and rebuilds a clean volume.
+trimesh's quadric decimation with its backend fast-simplification (a dependency): it keeps a clean manifold
+surface, which fTetWild tetrahedralizes several times faster than a clustered soup. The fallback, for builds
+without it, snaps vertices to a uniform grid and keeps one vertex per cell: crude for rendering but enough for
+a simulation cage, since fTetWild accepts the non-manifold soup clustering can leave and rebuilds a volume.
 """
 
 from __future__ import annotations

@@ -5,8 +5,9 @@ Regions (for pins and drivers) are dicts with one of
 ``{"plane": [px, py, pz, nx, ny, nz]}`` (the side (x - p) . n <= 0), plus ``"relative": true`` to give points
 as fractions of the rest bounding box. A driver is ``{"region": REGION, "keyframes": [{"t": 0..1,
 "rotate": [ax, ay, az, degrees], "translate": [x, y, z]}, ...], "center": [x, y, z] (default: region centroid)}``
-with t normalised over the clip; rotations are slerped and translations lerped between keyframes. ``seed`` is
-recorded with the job; the solver has no randomness (the same mesh, tets and parameters give the same poses).
+with t normalised over the clip; rotations are slerped and translations lerped between keyframes. The solver has
+no randomness (the same mesh, tets and parameters give the same poses), so there is no ``seed``: one given by an
+older client is accepted and ignored.
 """
 
 from __future__ import annotations
@@ -14,9 +15,18 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields
 
-from ..errors import ParameterError
+from ..errors import LimitError, ParameterError
 
 REGION_KINDS = ("indices", "box", "plane")
+MAX_REGIONS = 256
+"""At most this many pins and this many drivers: regions are tested against every tet point."""
+MAX_KEYFRAMES = 1000
+MAX_INDICES = 2_000_000
+MAX_TET_SWEEPS = 5e9
+"""Refuse a simulation needing more than this many tet updates (frames x substeps x iterations x tets): about a
+quarter of an hour single-threaded at the measured ~0.17 us per tet and sweep."""
+IGNORED_KEYS = ("seed",)
+"""Keys older clients sent that no longer mean anything; accepted (if well-typed) and dropped."""
 
 
 @dataclass
@@ -28,7 +38,7 @@ class SceneParams:
     duration: float | None = None
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     damping: float = 1.0
-    young: float = 1e6
+    young: float | None = None  # None: chosen from the mesh's size (pdeanim.sim.simulate.auto_young)
     poisson: float = 0.3
     density: float = 1000.0
     pins: list[dict] = field(default_factory=list)
@@ -39,7 +49,6 @@ class SceneParams:
     max_substeps: int = 400
     iterations: int = 1
     threads: int = 1
-    seed: int = 0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -48,6 +57,10 @@ class SceneParams:
     def from_dict(cls, d: dict | None) -> SceneParams:
         """Build from a JSON-like dict; ParameterError names unknown keys and bad values."""
         d = dict(d or {})
+        for key in IGNORED_KEYS:
+            if key in d and not (isinstance(d[key], int) and not isinstance(d[key], bool)):
+                raise ParameterError(f"{key} must be an integer (it is ignored: the simulation is deterministic)")
+            d.pop(key, None)
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -62,6 +75,25 @@ class SceneParams:
         out = asdict(self)
         out["gravity"] = list(self.gravity)
         return out
+
+    def work(self, substeps: int | None = None) -> float:
+        """Tet updates the simulation may need: (frames - 1) x substeps x iterations x target_tets, with
+        ``substeps`` the actual count, or the most the scene allows (explicit substeps, else max_substeps).
+
+        The API checks this bound at submission and the simulator checks it with the substeps it chose (never
+        more than the bound), so a job accepted at submission is never refused later for its work."""
+        steps = substeps or self.substeps or self.max_substeps
+        return float(max(self.frames - 1, 0)) * steps * self.iterations * self.target_tets
+
+    def check_work(self, substeps: int | None = None) -> None:
+        """LimitError (HTTP 413) naming what to lower when :meth:`work` is over MAX_TET_SWEEPS."""
+        work = self.work(substeps)
+        if work > MAX_TET_SWEEPS:
+            bound = "" if substeps or self.substeps else ", with substeps up to max_substeps"
+            exc = LimitError(f"simulation work (frames x substeps x iterations x target_tets{bound})", int(work),
+                             int(MAX_TET_SWEEPS))
+            exc.args = (f"{exc}: lower frames, substeps or max_substeps, iterations or target_tets",)
+            raise exc
 
     def frame_times(self):
         """(frames,) float64 seconds of the output frames, from 0."""
@@ -78,7 +110,8 @@ class SceneParams:
             (number(self.fps) and 0 < self.fps <= 10_000, "fps must be in (0, 10000]"),
             (self.duration is None or (number(self.duration) and self.duration > 0), "duration must be > 0"),
             (number(self.damping) and self.damping >= 0, "damping must be >= 0 (1/s)"),
-            (number(self.young) and self.young > 0, "young (Young's modulus, Pa) must be > 0"),
+            (self.young is None or (number(self.young) and self.young > 0),
+             "young (Young's modulus, Pa) must be > 0, or null to choose it from the mesh's size"),
             (number(self.poisson) and 0 <= self.poisson < 0.5, "poisson must be in [0, 0.5)"),
             (number(self.density) and self.density > 0, "density must be > 0"),
             (isinstance(self.target_tets, int) and 50 <= self.target_tets <= 2_000_000,
@@ -88,12 +121,14 @@ class SceneParams:
             (isinstance(self.max_substeps, int) and 1 <= self.max_substeps <= 10_000, "max_substeps in [1, 10000]"),
             (isinstance(self.iterations, int) and 1 <= self.iterations <= 100, "iterations must be in [1, 100]"),
             (isinstance(self.threads, int) and 1 <= self.threads <= 256, "threads must be in [1, 256]"),
-            (isinstance(self.seed, int), "seed must be an integer"),
             (isinstance(self.pins, list) and isinstance(self.drivers, list), "pins and drivers must be lists"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ParameterError(message)
+        if len(self.pins) > MAX_REGIONS or len(self.drivers) > MAX_REGIONS:
+            raise ParameterError(f"at most {MAX_REGIONS} pins and {MAX_REGIONS} drivers, got {len(self.pins)} "
+                                 f"pins and {len(self.drivers)} drivers (merge regions: a box or plane covers many)")
         for region in self.pins:
             validate_region(region, "pin")
         for driver in self.drivers:
@@ -126,6 +161,8 @@ def validate_region(region: object, what: str) -> None:
     kind = kinds[0]
     if kind == "indices":
         idx = region["indices"]
+        if isinstance(idx, list) and len(idx) > MAX_INDICES:
+            raise ParameterError(f"{what} indices: at most {MAX_INDICES}, got {len(idx)}")
         if not isinstance(idx, list) or not idx or not all(isinstance(i, int) and i >= 0 for i in idx):
             raise ParameterError(f"{what} indices must be a non-empty list of vertex indices >= 0")
     elif kind == "box":
@@ -151,8 +188,8 @@ def validate_driver(driver: object) -> None:
     if "center" in driver:
         vector(driver["center"], 3, "driver center")
     keys = driver["keyframes"]
-    if not isinstance(keys, list) or not keys:
-        raise ParameterError("driver keyframes must be a non-empty list")
+    if not isinstance(keys, list) or not keys or len(keys) > MAX_KEYFRAMES:
+        raise ParameterError(f"driver keyframes must be a non-empty list of at most {MAX_KEYFRAMES}")
     times = []
     for key in keys:
         if not isinstance(key, dict) or set(key) - {"t", "rotate", "translate"} or not number(key.get("t")):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LimitError, ParameterError
+from ..errors import ParameterError
 from ..mesh.io import SurfaceMesh
 from ..poses import Poses, make_poses
 from ..progress import Progress, sub_progress
@@ -16,7 +16,7 @@ from ..records import library_versions
 from . import kernels
 from .drivers import build_kinematics
 from .embedding import Embedding, embed_vertices
-from .scene import SceneParams
+from .scene import MAX_TET_SWEEPS, SceneParams
 from .tetmesh import TetMesh
 from .tetra import TetParams, tetrahedralize
 from .xpbd import Ground, Material, SimModel, build_model, project_ground, rest_state, step
@@ -27,11 +27,31 @@ COURANT = 0.22
 Measured on the cantilever test: at this ratio the settled XPBD deflection is within 5% of a static linear FEM
 solve on the same tets, at every resolution; larger steps make XPBD softer as the mesh is refined."""
 
-MAX_TET_SWEEPS = 5e9
-"""Refuse a simulation needing more than this many tet updates (frames x substeps x iterations x tets): about a
-quarter of an hour single-threaded at the measured ~0.17 us per tet and sweep."""
+__all__ = ["MAX_TET_SWEEPS", "SceneParams", "simulate_mesh", "simulate_tets", "auto_substeps"]
 
-__all__ = ["SceneParams", "simulate_mesh", "simulate_tets", "auto_substeps"]
+
+AUTO_STRAIN = 0.02
+"""With ``young`` unset, Young's modulus is chosen so that gravity compresses the body by about this strain
+(E = density x |g| x height / strain): a visible sag and wobble whatever the mesh's units, where a fixed
+modulus leaves a 0.15-unit mesh nearly rigid (and capped at max_substeps) and a 15-unit one jelly. Measured
+on spot scaled to a 0.15 diagonal (benchmarks/sim_scale_defaults.py): 5% let its thin legs buckle (the top
+fell to 63% of its height); 2% sags it 6% and settles, with 241 substeps per frame."""
+
+
+def auto_young(scene: SceneParams, points: np.ndarray) -> float:
+    """Young's modulus (Pa) for ``scene`` on a body with rest points (N, 3): see AUTO_STRAIN."""
+    gravity = np.asarray(scene.gravity, np.float64)
+    g = float(np.linalg.norm(gravity))
+    extent = np.ptp(points, axis=0)
+    height = float(np.ptp(points @ (gravity / g))) if g > 0 else float(np.linalg.norm(extent))
+    height = height if height > 0 else float(np.linalg.norm(extent)) or 1.0
+    return float(scene.density * (g if g > 0 else 9.81) * height / AUTO_STRAIN)
+
+
+def scene_material(scene: SceneParams, points: np.ndarray) -> Material:
+    """The scene's material, with Young's modulus from :func:`auto_young` when the scene leaves it unset."""
+    young = scene.young if scene.young is not None else auto_young(scene, points)
+    return Material(young, scene.poisson, scene.density, scene.damping)
 
 
 def characteristic_length(tets: TetMesh) -> float:
@@ -39,12 +59,17 @@ def characteristic_length(tets: TetMesh) -> float:
     return float(np.percentile((6.0 * math.sqrt(2.0) * tets.volumes()) ** (1.0 / 3.0), 5))
 
 
-def auto_substeps(tets: TetMesh, material: Material, frame_dt: float, cap: int) -> tuple[int, bool]:
-    """(substeps per frame, capped?) that resolve the material's fastest waves on this mesh."""
+def needed_substeps(tets: TetMesh, material: Material, frame_dt: float) -> int:
+    """Substeps per frame that resolve the material's fastest waves on this mesh (the COURANT rule)."""
     mu, lam = material.lame()
     wave_speed = math.sqrt((lam + 2.0 * mu) / material.density)
     dt_max = COURANT * characteristic_length(tets) / wave_speed
-    need = max(1, math.ceil(frame_dt / dt_max))
+    return max(1, math.ceil(frame_dt / dt_max))
+
+
+def auto_substeps(tets: TetMesh, material: Material, frame_dt: float, cap: int) -> tuple[int, bool]:
+    """(substeps per frame, capped?) that resolve the material's fastest waves on this mesh."""
+    need = needed_substeps(tets, material, frame_dt)
     return min(need, cap), need > cap
 
 
@@ -53,7 +78,7 @@ def build_scene_model(tets: TetMesh, vertices: np.ndarray, scene: SceneParams) -
     embedding = embed_vertices(tets, vertices)
     times = scene.frame_times()
     kin = build_kinematics(scene.pins, scene.drivers, tets.points, embedding, len(vertices), float(times[-1]))
-    material = Material(scene.young, scene.poisson, scene.density, scene.damping)
+    material = scene_material(scene, tets.points)
     ground = scene_ground(scene, tets.points)
     model = build_model(tets, material, scene.gravity, kin.fixed, kin if len(kin.fixed) else None, ground,
                         scene.iterations)
@@ -83,13 +108,12 @@ def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene:
     model, embedding = build_scene_model(tets, np.asarray(vertices, np.float64), scene)
     times = scene.frame_times()
     frame_dt = float(times[1] - times[0]) if len(times) > 1 else 1.0 / scene.fps
-    material = Material(scene.young, scene.poisson, scene.density, scene.damping)
+    material = scene_material(scene, tets.points)
     substeps, capped = (scene.substeps, False) if scene.substeps else \
         auto_substeps(tets, material, frame_dt, scene.max_substeps)
+    needed = needed_substeps(tets, material, frame_dt)
     dt = frame_dt / substeps
-    work = float(len(times) - 1) * substeps * scene.iterations * tets.n_tets
-    if work > MAX_TET_SWEEPS:
-        raise LimitError("simulation work (frames x substeps x iterations x tets)", int(work), int(MAX_TET_SWEEPS))
+    scene.check_work(substeps)  # the same bound the API checked at submission, with the actual substeps
     kernels.set_threads(scene.threads)
     state, spare = rest_state(model), rest_state(model)
     frames = np.empty((len(times), len(vertices), 3), np.float32)
@@ -102,8 +126,13 @@ def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene:
             raise ParameterError(f"simulation became non-finite at frame {f}: reduce the step or the stiffness")
         frames[f] = surface_positions(model, embedding, state.x)
         report(f / (len(times) - 1), f"simulate {f}/{len(times) - 1}")
+    warnings = [] if not capped else [
+        f"the substep cap binds: the material needs {needed} substeps per frame, max_substeps is "
+        f"{scene.max_substeps}, so the motion is stiffer and more damped than the material; raise max_substeps "
+        "or lower young"]
     meta = {"source": "simulate", "scene": scene.to_dict(), "tets": tets.n_tets, "tet_points": tets.n_points,
-            "substeps": substeps, "substeps_capped": capped, "dt": dt, "colors": model.elements.n_colors,
+            "young": material.young, "young_auto": scene.young is None, "substeps": substeps,
+            "substeps_capped": capped, "substeps_needed": needed, "warnings": warnings, "dt": dt, "colors": model.elements.n_colors,
             "backend": model.backend, "ground": None if model.ground is None else
             {"point": list(model.ground.point), "normal": list(model.ground.normal), "friction": model.ground.friction},
             "seconds": round(time.perf_counter() - started, 3), "versions": library_versions()}

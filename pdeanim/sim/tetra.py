@@ -27,6 +27,14 @@ from .tetmesh import TetMesh, clean_tet_mesh
 TETS_PER_EDGE_CUBE = 10.0
 """Measured on spot.obj with fTetWild: about 10 tets per ideal-edge-length cube of enclosed volume."""
 TIMEOUT_S = 600
+FACES_PER_TET = 2.0
+"""Surface faces kept for fTetWild per target tet. A mesh of N tets has O(N^(2/3)) boundary faces, so finer
+surface detail is lost in the tets anyway and only costs fTetWild time and memory: on a 41k-vertex sphere,
+quadric decimation to this budget brings tetrahedralization at 3000 tets to a few seconds
+(benchmarks/tetrahedralize_large.py)."""
+MIN_SURFACE_FACES = 2000
+DECIMATION = "quadric-budget-1"
+"""Changes whenever the surface handed to fTetWild changes for the same input, so cached tets are not mixed."""
 
 
 @dataclass(frozen=True)
@@ -53,18 +61,31 @@ def enclosed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     return vol if 1e-6 * box < vol <= box else 0.5 * box
 
 
+def surface_budget(target_tets: int, max_faces: int) -> int:
+    """Faces of the surface given to fTetWild: FACES_PER_TET per target tet, within [MIN_SURFACE_FACES,
+    max_faces]; any accepted mesh is decimated to this first, so tetrahedralization time and memory depend on
+    the tet budget, not on the mesh's resolution."""
+    return int(min(max_faces, max(MIN_SURFACE_FACES, FACES_PER_TET * target_tets)))
+
+
 def edge_length_for(volume: float, target_tets: int) -> float:
     """Ideal edge length that gives about ``target_tets`` tets in ``volume`` (the measured rule above)."""
     return (TETS_PER_EDGE_CUBE * volume / target_tets) ** (1.0 / 3.0)
 
 
 def cache_key(mesh: SurfaceMesh, params: TetParams) -> str:
-    """Hex key of (mesh content, parameters, pytetwild version, and the decimation method with its library
-    version when the surface is large enough to be decimated) under which a result is cached."""
-    reduced = decimation_method() if len(mesh.faces) > params.max_surface_faces else None
+    """Hex key of (mesh content, parameters, pytetwild version, the surface-budget rule, and the decimation
+    method with its library version when the surface is decimated) under which a result is cached."""
+    budget = surface_budget(params.target_tets, params.max_surface_faces)
+    reduced = decimation_method() if len(mesh.faces) > budget else None
     blob = json.dumps({"mesh": mesh.content_hash, "params": asdict(params), "pytetwild": version("pytetwild"),
-                       "decimation": reduced}, sort_keys=True)
+                       "decimation": DECIMATION, "decimation_method": reduced}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def tet_surface(mesh: SurfaceMesh, params: TetParams) -> tuple[np.ndarray, np.ndarray]:
+    """The surface handed to fTetWild: ``mesh`` decimated to :func:`surface_budget` faces when larger."""
+    return decimate(mesh.vertices, mesh.faces, surface_budget(params.target_tets, params.max_surface_faces))
 
 
 def tetrahedralize(mesh: SurfaceMesh, params: TetParams | None = None, cache_dir: Path | None = None,
@@ -75,7 +96,7 @@ def tetrahedralize(mesh: SurfaceMesh, params: TetParams | None = None, cache_dir
     if cached is not None and cached.is_file():
         with np.load(cached, allow_pickle=False) as data:
             return TetMesh(data["points"], data["tets"])
-    vertices, faces = decimate(mesh.vertices, mesh.faces, params.max_surface_faces)
+    vertices, faces = tet_surface(mesh, params)
     used = vertices[np.unique(faces)]  # vertices no face uses must not make a flat surface look solid
     diagonal = float(np.linalg.norm(np.ptp(used, axis=0)))
     if float(np.ptp(used, axis=0).min()) <= 1e-6 * diagonal:
@@ -110,6 +131,8 @@ def run_tetwild(vertices: np.ndarray, faces: np.ndarray, edge_fac: float, thread
             raise TetrahedralizationError(f"fTetWild took longer than {TIMEOUT_S} s") from exc
         if proc.returncode != 0 or not dst.is_file():
             tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:]
+            if "bad_alloc" in (proc.stderr or ""):
+                raise TetrahedralizationError("fTetWild ran out of memory (the job's memory limit): lower target_tets")
             how = f"crashed with signal {-proc.returncode}" if proc.returncode < 0 else f"exited {proc.returncode}"
             raise TetrahedralizationError(f"fTetWild {how} on this surface (non-manifold or degenerate input?)"
                                           + (f": {tail[0][:300]}" if tail else ""))

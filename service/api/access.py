@@ -22,12 +22,27 @@ def owned(session: Session, model: type[T], row_id: str, tenant_id: str, what: s
 
 DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malformed request",
                 401: "missing or invalid API key", 404: "not found (or another tenant's)",
-                409: "conflict: not ready yet (e.g. an export job still running)",
+                409: "conflict with the resource's state (e.g. an export job still running, a finished job)",
                 413: "over a configured limit", 415: "wrong content type",
-                422: "invalid input or parameters", 501: "stage not available in this build"}
+                422: "invalid input or parameters",
+                501: "stage not available in this build",
+                503: "a dependency (database, blobs) is unavailable",
+                431: "request headers over PDEANIM_MAX_HEADER_BYTES"}
+ANY_ROUTE = (413, 431)  # the request guard may answer these on any route (headers; body over the JSON limit)
 
 
 def responses(*statuses: int) -> dict[int | str, dict]:
-    """OpenAPI ``responses`` for the error statuses a route may answer, all with the one error shape."""
+    """OpenAPI ``responses`` for the error statuses a route may answer (plus those every route may answer),
+    all with the one error shape."""
     return {s: ({"description": DESCRIPTIONS[s]} if s == 304 else
-                {"model": ErrorOut, "description": DESCRIPTIONS[s]}) for s in statuses}
+                {"model": ErrorOut, "description": DESCRIPTIONS[s]}) for s in sorted({*statuses, *ANY_ROUTE})}
+
+
+def created(status: int, what: str, links: dict[str, tuple[str, str]]) -> dict[int | str, dict]:
+    """OpenAPI for a 201/202 answer: its ``Location`` header, and links from the new id to the operations
+    that take it (``links``: name -> (operationId, path parameter)), for clients and fuzzers to follow."""
+    return {status: {"description": f"the new {what}; Location is its path",
+                     "headers": {"Location": {"description": f"path of the new {what}", "required": True,
+                                              "schema": {"type": "string"}}},
+                     "links": {name: {"operationId": op, "parameters": {param: "$response.body#/id"}}
+                               for name, (op, param) in links.items()}}}

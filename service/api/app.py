@@ -9,12 +9,14 @@ from fastapi import FastAPI
 
 from ..settings import Settings
 from ..store.context import Store
+from ..store.scratch import clean_stale
 from .cache import BodyCache, ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
+from .guard import RequestGuard
 from .memory import keep_freed_memory
 from .middleware import install_http_middleware
-from .routes import clips, health, jobs, meshes, poses
+from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 
 API_VERSION = "1.0.0"
@@ -31,6 +33,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         keep_freed_memory()
         own = app.state.store is None
+        clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:
             app.state.store = Store.open(settings)
         yield
@@ -44,7 +47,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.frame_cache = BodyCache(settings.frame_cache_bytes)
     app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
     install_error_handlers(app)
-    for module in (health, meshes, poses, jobs, clips):
+    app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,
+                       max_json_bytes=settings.max_json_bytes, log_access=settings.access_log)
+    for module in (health, meshes, poses, jobs, clips, lifecycle):
         app.include_router(module.router)
     install_pages(app)
     install_http_middleware(app, settings)

@@ -56,6 +56,11 @@ class ClipCache:
                 self._items.popitem(last=False)
         return item
 
+    def evict(self, clip_id: str) -> None:
+        """Forget a clip (deleted), so this process answers 404 for it from now on."""
+        with self._lock:
+            self._items.pop(clip_id, None)
+
     def __len__(self) -> int:
         return len(self._items)
 

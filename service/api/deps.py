@@ -95,6 +95,7 @@ async def get_tenant(creds: Annotated[HTTPAuthorizationCredentials | None, Depen
         tenant = await run_in_threadpool(cache.lookup, creds.credentials, request.app.state.store)
     if tenant is None:
         raise ApiError(401, "unauthorized", "invalid API key", challenge)
+    request.state.tenant = tenant  # for the access log line
     return tenant
 
 

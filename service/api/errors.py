@@ -32,18 +32,46 @@ def error_body(code: str, message: str) -> dict:
     return {"error": {"code": code, "message": message}}
 
 
-def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+def _leaf_routes(routes: list) -> list:
+    """Routes with included routers expanded (FastAPI wraps each include; this app uses no prefixes)."""
+    out = []
+    for route in routes:
+        inner = getattr(route, "original_router", None)
+        out += _leaf_routes(inner.routes) if inner is not None else [route]
+    return out
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route answers on this path (Starlette's 405 names only the first route's)."""
+    from starlette.routing import Match
+
+    methods: set[str] = set()
+    for route in _leaf_routes(request.app.router.routes):
+        match, _ = route.matches(request.scope)
+        if match != Match.NONE and getattr(route, "methods", None):
+            methods |= set(route.methods)
+    return sorted(methods)
+
+
+def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
     code = getattr(exc, "code", None) or STATUS_CODES.get(exc.status_code, f"http_{exc.status_code}")
     message = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
-    return JSONResponse(error_body(code, message), exc.status_code, headers=getattr(exc, "headers", None))
+    headers = dict(getattr(exc, "headers", None) or {})
+    if exc.status_code == 405:
+        headers["Allow"] = ", ".join(allowed_methods(request)) or headers.get("Allow", "")
+    return JSONResponse(error_body(code, message), exc.status_code, headers=headers or None)
 
 
 def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
-    parts = []
-    for err in exc.errors()[:5]:
+    parts, errors = [], exc.errors()
+    for err in errors[:5]:
         loc = ".".join(str(p) for p in err.get("loc", ()))
         parts.append(f"{loc}: {err.get('msg', 'invalid')}")
-    return JSONResponse(error_body("validation_error", "; ".join(parts) or "invalid request"), 422)
+    # fields of a job body of a known kind (body.<kind>.…) keep the code they had before bodies were typed;
+    # a body that is not JSON, not an object or of an unknown kind stays a validation_error
+    options = errors and all(tuple(e.get("loc", ()))[:1] == ("body",) and len(e["loc"]) >= 3 for e in errors)
+    code = "invalid_parameter" if options else "validation_error"
+    return JSONResponse(error_body(code, "; ".join(parts) or "invalid request"), 422)
 
 
 def _input(_: Request, exc: InputError) -> JSONResponse:

@@ -51,6 +51,8 @@ class PosesOut(BaseModel):
     frames: int
     vertices: int
     job_id: str | None = None
+    animation: dict[str, Any] | None = Field(None, description='glTF uploads: the animation sampled, '
+                                             '{"index": 0, "name": "Walk"}')
     created_at: float
 
 
@@ -96,7 +98,7 @@ class JobOut(BaseModel):
 
     id: str
     kind: str
-    state: Literal["queued", "running", "succeeded", "failed"]
+    state: Literal["queued", "running", "succeeded", "failed", "cancelled"]
     progress: float = Field(description="0..1")
     stage: str = Field(description='e.g. "simulate 40/100"')
     error: ErrorBody | None = None

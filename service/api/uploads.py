@@ -12,6 +12,7 @@ from fastapi import Request
 from python_multipart.exceptions import MultipartParseError
 from python_multipart.multipart import MultipartParser, parse_options_header
 
+from ..store.scratch import prefix
 from .errors import ApiError
 
 FORM_OVERHEAD = 64 * 1024  # boundaries, part headers and small extra fields
@@ -31,6 +32,14 @@ class Upload:
     size: int
 
 
+def _text(raw: bytes) -> str:
+    """A multipart parameter as text: UTF-8 (what browsers and curl send), else Latin-1 (never fails)."""
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
 def _too_large(limit: int) -> ApiError:
     return ApiError(413, "payload_too_large", f"upload is larger than the limit of {limit} bytes "
                                               "(setting PDEANIM_MAX_UPLOAD_BYTES)")
@@ -41,7 +50,7 @@ class _FilePart:
 
     def __init__(self, field: str, tmp_dir: Path, limit: int):
         self.field, self.tmp_dir, self.limit = field, tmp_dir, limit
-        self.headers: dict[str, str] = {}
+        self.headers: dict[bytes, bytes] = {}
         self._name = self._value = b""
         self.fh = None
         self.upload: Upload | None = None
@@ -65,16 +74,16 @@ class _FilePart:
         self._value += data[start:end]
 
     def hend(self) -> None:
-        """A header is complete."""
-        self.headers[self._name.decode("latin-1").lower()] = self._value.decode("utf-8", "replace")
+        """A header is complete (kept as bytes: names and filenames are UTF-8, not Latin-1, in practice)."""
+        self.headers[self._name.lower()] = self._value
         self._name = self._value = b""
 
     def headers_done(self) -> None:
         """Headers complete: open the temp file if this is the wanted field."""
-        _, params = parse_options_header(self.headers.get("content-disposition", ""))
-        if params.get(b"name", b"").decode() == self.field and self.upload is None:
-            filename = os.path.basename(params.get(b"filename", b"upload").decode("utf-8", "replace"))
-            fd, path = tempfile.mkstemp(dir=self.tmp_dir, prefix="upload-")
+        _, params = parse_options_header(self.headers.get(b"content-disposition", b""))
+        if _text(params.get(b"name", b"")) == self.field and self.upload is None:
+            filename = os.path.basename(_text(params.get(b"filename", b"upload")).replace("\\", "/"))
+            fd, path = tempfile.mkstemp(dir=self.tmp_dir, prefix=prefix("upload"))
             self.fh = os.fdopen(fd, "wb")
             self.upload = Upload(Path(path), filename or "upload", 0)
 

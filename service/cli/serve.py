@@ -7,6 +7,7 @@ import argparse
 import os
 import signal
 import subprocess
+import sys
 
 from service.cli import CONSOLE
 
@@ -26,7 +27,8 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--no-migrate", action="store_true",
                    help="do not run migrations first (scale-out: a `serve --migrate-only` step runs them)")
     p.add_argument("--migrate-only", action="store_true", help="run the database migrations and exit")
-    p.add_argument("--log-level", default="warning")
+    p.add_argument("--log-level", default="info",
+                   help="info (default) logs where it listens and one access line per request; warning: quiet")
     p.set_defaults(func=run)
 
 
@@ -49,6 +51,20 @@ def _stop(procs: list[subprocess.Popen]) -> None:
             proc.kill()
 
 
+def log_config(level: str) -> dict:
+    """uvicorn's logging config plus the pdeanim loggers (access lines, errors) on stderr, in every process."""
+    from copy import deepcopy
+
+    from uvicorn.config import LOGGING_CONFIG
+
+    config = deepcopy(LOGGING_CONFIG)
+    config["formatters"]["pdeanim"] = {"format": "%(asctime)s %(levelname)s %(name)s: %(message)s"}
+    config["handlers"]["pdeanim"] = {"class": "logging.StreamHandler", "formatter": "pdeanim",
+                                     "stream": "ext://sys.stderr"}
+    config["loggers"]["pdeanim"] = {"handlers": ["pdeanim"], "level": level.upper(), "propagate": False}
+    return config
+
+
 def run(args: argparse.Namespace) -> int:
     """Migrate (unless --no-migrate), start the job workers asked for, then serve until interrupted."""
     import uvicorn
@@ -62,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     if args.migrate_only:
         print("pdeanim serve: database is at the newest schema")
         return 0
+    print(f"pdeanim serve: listening on http://{args.host}:{args.port} (data {settings.resolved_data_dir()}, "
+          f"{args.workers} HTTP worker(s), {max(args.with_workers, 0)} job worker(s))", file=sys.stderr, flush=True)
     workers = [subprocess.Popen(WORKER_CMD) for _ in range(max(args.with_workers, 0))]
     # uvicorn re-raises SIGTERM/SIGINT after its graceful shutdown; with these handlers in place the
     # re-raised signal lands here instead of killing the process, so the workers are stopped and we exit 0.
@@ -69,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(sig, lambda *_: None)
     try:
         uvicorn.run("service.api.app:app_from_environment", factory=True, host=args.host, port=args.port,
-                    workers=args.workers or default_http_workers(), log_level=args.log_level, access_log=False)
+                    workers=args.workers or default_http_workers(), log_level=args.log_level, access_log=False,
+                    log_config=log_config(args.log_level))
     finally:
         _stop(workers)
     return 0

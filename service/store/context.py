@@ -50,6 +50,12 @@ class Store:
             status["blobs"] = f"error: {type(exc).__name__}: {str(exc)[:200]}"
         return status
 
+    def save(self, row: object) -> None:
+        """Insert ``row`` in its own short transaction (blocking: call it from a thread in async code)."""
+        with self.sessions() as session:
+            session.add(row)
+            session.commit()
+
     def close(self) -> None:
         """Release pooled connections."""
         self.engine.dispose()

@@ -57,6 +57,11 @@ class Mesh(Base):
     stats: Mapped[dict[str, Any]] = mapped_column(JSON)
     created_at: Mapped[float] = mapped_column(Float, default=time.time)
 
+    __table_args__ = (
+        Index("ix_meshes_list", "tenant_id", "created_at", "id"),
+        Index("ix_meshes_blob_key", "blob_key"),
+    )
+
 
 class PosesRecord(Base):
     """Frames of a mesh (POSES.npz blob), uploaded or simulated by a job."""
@@ -72,6 +77,11 @@ class PosesRecord(Base):
     n_vertices: Mapped[int] = mapped_column(Integer)
     meta: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[float] = mapped_column(Float, default=time.time)
+
+    __table_args__ = (
+        Index("ix_poses_list", "tenant_id", "created_at", "id"),
+        Index("ix_poses_blob_key", "blob_key"),
+    )
 
 
 class ClipRecord(Base):
@@ -90,6 +100,12 @@ class ClipRecord(Base):
     report: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[float] = mapped_column(Float, default=time.time)
 
+    __table_args__ = (
+        Index("ix_clips_list", "tenant_id", "created_at", "id"),
+        Index("ix_clips_topology_key", "topology_key"),
+        Index("ix_clips_coefficients_key", "coefficients_key"),
+    )
+
 
 class Job(Base):
     """A queued unit of work and its attempts (see service.store.queue)."""
@@ -98,7 +114,7 @@ class Job(Base):
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("job"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)
     kind: Mapped[str] = mapped_column(String(20))
-    state: Mapped[str] = mapped_column(String(20), default="queued")  # queued|running|succeeded|failed
+    state: Mapped[str] = mapped_column(String(20), default="queued")  # queued|running|succeeded|failed|cancelled
     mesh_id: Mapped[str | None] = mapped_column(ForeignKey("meshes.id"), nullable=True)
     poses_id: Mapped[str | None] = mapped_column(ForeignKey("poses.id"), nullable=True)
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)  # the whole validated request
@@ -121,4 +137,6 @@ class Job(Base):
     __table_args__ = (
         Index("ix_jobs_claim", "state", "run_after"),
         Index("ix_jobs_lease", "state", "lease_expires"),
+        Index("ix_jobs_list", "tenant_id", "created_at", "id"),
+        Index("ix_jobs_mesh_id", "mesh_id"),
     )

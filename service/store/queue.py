@@ -18,7 +18,9 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from .models import Job
 
-STATES = ("queued", "running", "succeeded", "failed")
+STATES = ("queued", "running", "succeeded", "failed", "cancelled")
+ACTIVE = ("queued", "running")
+FINAL = ("succeeded", "failed", "cancelled")
 
 
 @dataclass(frozen=True)
@@ -135,6 +137,17 @@ class JobQueue:
         """Give a running job back to the queue without counting a failure (worker shutting down)."""
         return self._fenced(job_id, attempt, state="queued", lease_expires=None, worker_id=None,
                             run_after=time.time(), stage="queued (released by a stopping worker)")
+
+    def cancel(self, job_ids: list[str]) -> int:
+        """Cancel queued or running jobs at once: a queued one is never claimed; a running attempt's next
+        fenced write (heartbeat or progress) fails, so its worker stops it. Returns how many changed."""
+        if not job_ids:
+            return 0
+        stmt = (update(Job).where(Job.id.in_(job_ids), Job.state.in_(ACTIVE))
+                .values(state="cancelled", stage="cancelled", lease_expires=None, finished_at=time.time())
+                .execution_options(synchronize_session=False))
+        with self._write() as session, session.begin():
+            return session.execute(stmt).rowcount
 
     def reap(self, limit: int = 100) -> int:
         """Return running jobs whose lease expired to the queue (or fail them past max attempts)."""

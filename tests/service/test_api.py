@@ -195,7 +195,9 @@ def test_bad_requests_share_the_error_shape(api, fish):
     assert_error(api.post("/v1/jobs", json={"kind": "cyclic"}), 422, "invalid_parameter")
     assert_error(api.post("/v1/jobs", json={"kind": "cyclic", "mesh_id": "mesh_nope"}), 404, "not_found")
     assert_error(api.get("/v1/nowhere"), 404, "not_found")
-    assert_error(api.delete(f"/v1/meshes/{fish['id']}"), 405, "method_not_allowed")
+    r = api.put(f"/v1/meshes/{fish['id']}")  # DELETE is a route now (lifecycle); PUT is not
+    assert_error(r, 405, "method_not_allowed")
+    assert r.headers["allow"] == "DELETE, GET"  # every method of the path, not only the first route's
     assert_error(api.get("/v1/clips/clip_nope/frame", params={"t": 0.5}), 404, "not_found")
 
 
@@ -220,7 +222,7 @@ def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, service
     r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE, "then_fit": True,
                                    "fit": {"target_rel_rms": 0.005}})
     assert r.status_code == 202, r.text
-    assert r.json()["params"]["params"]["seed"] == 0  # the record keeps every parameter, seed included
+    assert r.json()["params"]["params"]["max_substeps"] == 400  # the record keeps every parameter, defaults too
     job = wait_job(api, r.json()["id"], timeout=600)
     assert job["state"] == "succeeded", (job, services.logs())
     poses = np.load(io.BytesIO(api.get(f"/v1/poses/{job['result']['poses_id']}").content))

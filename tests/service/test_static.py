@@ -29,8 +29,19 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
     assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
                    "getJob", "getClip", "getClipCoefficients", "getClipTopology", "getClipFrame",
-                   "getClipAnimation", "getExport"}
+                   "getClipAnimation", "getExport", "listMeshes", "listPoses", "listClips", "listJobs",
+                   "deleteMesh", "deleteClip", "cancelJob"}
     assert "HTTPValidationError" not in doc["components"]["schemas"]
+    # typed job bodies: a union discriminated on kind, option models generated from the library's dataclasses
+    body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert set(body["discriminator"]["mapping"]) == {"simulate", "fit", "cyclic"}
+    schemas = doc["components"]["schemas"]
+    assert {"frames", "young", "target_tets"} <= set(schemas["SceneParams"]["properties"])
+    assert {"segments", "target_rel_rms"} <= set(schemas["FitOptions"]["properties"])
+    assert {"mode", "n_curves", "amplitude"} <= set(schemas["CyclicOptions"]["properties"])
+    for path, methods in doc["paths"].items():  # every route documents what the request guard may answer
+        for method, op in methods.items():
+            assert {"413", "431"} <= set(op["responses"]), (method, path)
 
 
 def test_docker_compose_file_is_valid():

@@ -5,6 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
+from ..access import responses
 from ..deps import StoreDep
 from ..errors import ApiError
 from ..schemas import ErrorOut, Health
@@ -13,7 +14,8 @@ router = APIRouter(tags=["health"])
 
 
 @router.get("/healthz", operation_id="healthz", response_model=Health,
-            responses={503: {"model": ErrorOut, "description": "database or blob store unreachable"}})
+            responses={503: {"model": ErrorOut, "description": "database or blob store unreachable"},
+                       **responses()})
 def healthz(store: StoreDep) -> JSONResponse:
     """200 when the database (with the jobs table) and the blob store answer, else 503 in the one error shape
     with each failing part's reason in the message."""

@@ -3,15 +3,22 @@ download an export job's GLB."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Request, Response
+import asyncio
+import time
+
+from fastapi import APIRouter, Query, Request, Response
 from sqlalchemy import select
+from starlette.concurrency import run_in_threadpool
 
 from ...jobspec import StageUnavailable, normalize_request
+from ...store.context import Store
 from ...store.models import ClipRecord, Job, Mesh, PosesRecord
-from ..access import owned, responses
+from ...store.queue import FINAL
+from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
-from ..schemas import ErrorBody, JobOut, JobRequest, JobResult
+from ..jobtypes import CyclicJob, ExportJob, FitJob, JobBody, SimulateJob, job_options
+from ..schemas import ErrorBody, JobOut, JobResult
 
 router = APIRouter(tags=["jobs"])
 
@@ -25,18 +32,18 @@ def job_out(job: Job) -> JobOut:
                   created_at=job.created_at, started_at=job.started_at, finished_at=job.finished_at)
 
 
-def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  # noqa: ANN001
-    if req.clip_id is not None and req.kind != "export":
-        raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no clip_id")
+def _inputs(req: SimulateJob | FitJob | CyclicJob | ExportJob, tenant: str,
+            session) -> tuple[str, str | None]:  # noqa: ANN001
     if req.kind == "export":
-        if not req.clip_id:
-            raise ApiError(422, "invalid_parameter", "an export job needs clip_id")
-        if req.poses_id or req.then_fit or req.fit is not None:
+        extra = req.model_extra or {}
+        if any(extra.get(k) not in (None, False) for k in ("poses_id", "then_fit", "fit")):
             raise ApiError(422, "invalid_parameter", "an export job takes clip_id and export options only")
         clip = owned(session, ClipRecord, req.clip_id, tenant, "clip")
         if req.mesh_id and req.mesh_id != clip.mesh_id:
             raise ApiError(422, "invalid_parameter", f"clip {clip.id} belongs to mesh {clip.mesh_id}")
         return clip.mesh_id, None
+    if (req.model_extra or {}).get("clip_id") is not None:
+        raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no clip_id")
     if req.kind == "fit":
         if not req.poses_id and not req.mesh_id:
             raise ApiError(422, "invalid_parameter", "a fit job needs poses_id (or mesh_id to fit its latest poses)")
@@ -47,9 +54,7 @@ def _inputs(req: JobRequest, tenant: str, session) -> tuple[str, str | None]:  #
         if req.mesh_id and req.mesh_id != poses.mesh_id:
             raise ApiError(422, "invalid_parameter", f"poses {poses.id} belong to mesh {poses.mesh_id}")
         return poses.mesh_id, poses.id
-    if not req.mesh_id:
-        raise ApiError(422, "invalid_parameter", f"a {req.kind} job needs mesh_id")
-    if req.poses_id:
+    if (req.model_extra or {}).get("poses_id") is not None:
         raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no poses_id")
     return owned(session, Mesh, req.mesh_id, tenant, "mesh").id, None
 
@@ -64,22 +69,16 @@ def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN
     return poses
 
 
-def _merged_params(req: JobRequest) -> dict:
-    """``params`` plus parameters given flat next to ``kind``; a key given both ways is a 422."""
-    flat = dict(req.model_extra or {})
-    both = sorted(set(flat) & set(req.params))
-    if both:
-        raise ApiError(422, "invalid_parameter", f"parameters given both flat and in params: {', '.join(both)}")
-    return {**req.params, **flat}
-
-
 @router.post("/v1/jobs", status_code=202, operation_id="createJob", response_model=JobOut,
-             responses=responses(401, 404, 413, 422, 501))
-def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: StoreDep) -> JobOut:
+             responses={**responses(400, 401, 404, 413, 415, 422, 501), **created(202, "job", {
+                 "GetJob": ("getJob", "job_id"), "CancelJob": ("cancelJob", "job_id")})})
+def create_job(req: JobBody, tenant: TenantDep, session: SessionDep, store: StoreDep,
+               response: Response) -> JobOut:
     """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""
     mesh_id, poses_id = _inputs(req, tenant, session)
     try:
-        spec = normalize_request(req.kind, _merged_params(req), req.then_fit, req.fit)
+        fit = req.fit.model_dump(exclude_unset=True) if getattr(req, "fit", None) is not None else None
+        spec = normalize_request(req.kind, job_options(req), getattr(req, "then_fit", False), fit)
     except StageUnavailable as exc:
         raise ApiError(501, "not_implemented", str(exc)) from exc
     if req.kind == "export":
@@ -98,13 +97,49 @@ def create_job(req: JobRequest, tenant: TenantDep, session: SessionDep, store: S
     job = store.queue.enqueue(session, tenant_id=tenant, kind=req.kind, params=spec, mesh_id=mesh_id,
                               poses_id=poses_id)
     session.commit()
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
     return job_out(job)
 
 
-@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut, responses=responses(401, 404, 422))
-def get_job(job_id: str, tenant: TenantDep, session: SessionDep) -> JobOut:
-    """State (queued, running, succeeded, failed), progress 0..1, stage, error and result ids."""
-    return job_out(owned(session, Job, job_id, tenant, "job"))
+WAIT_INTERVAL = 0.25  # seconds between the server-side state checks of a long poll
+
+
+def _load(store: Store, job_id: str, tenant: str) -> JobOut:
+    with store.sessions() as session:  # a short session per check: no connection is held while waiting
+        return job_out(owned(session, Job, job_id, tenant, "job"))
+
+
+WAIT = Query(0.0, ge=0, le=3600, description="long poll: wait up to this many seconds (capped by "
+             "PDEANIM_MAX_WAIT_SECONDS) for the job to change state or finish; 0 answers at once")
+
+
+@router.get("/v1/jobs/{job_id}", operation_id="getJob", response_model=JobOut,
+            responses=responses(401, 404, 422))
+async def get_job(job_id: str, tenant: TenantDep, store: StoreDep, wait: float = WAIT) -> JobOut:
+    """State (queued, running, succeeded, failed, cancelled), progress 0..1, stage, error and result ids;
+    with ``wait``, answers as soon as the state changes (or at the end of the wait, unchanged)."""
+    job = await run_in_threadpool(_load, store, job_id, tenant)
+    deadline = time.monotonic() + min(wait, store.settings.max_wait_seconds)
+    first = job.state
+    while job.state == first and job.state not in FINAL and (left := deadline - time.monotonic()) > 0:
+        await asyncio.sleep(min(WAIT_INTERVAL, left))
+        job = await run_in_threadpool(_load, store, job_id, tenant)
+    return job
+
+
+@router.post("/v1/jobs/{job_id}/cancel", operation_id="cancelJob", response_model=JobOut,
+             responses=responses(401, 404, 409, 422))
+def cancel_job(job_id: str, tenant: TenantDep, store: StoreDep) -> JobOut:
+    """Cancel a queued job at once, or a running one (its worker stops it at the next heartbeat); cancelling
+    a cancelled job is a no-op; 409 for a job that already succeeded or failed."""
+    job = _load(store, job_id, tenant)
+    if job.state in ("succeeded", "failed"):
+        raise ApiError(409, "conflict", f"job {job_id} already {job.state}")
+    store.queue.cancel([job_id])
+    job = _load(store, job_id, tenant)
+    if job.state in ("succeeded", "failed"):  # it finished between the check and the cancel
+        raise ApiError(409, "conflict", f"job {job_id} already {job.state}")
+    return job
 
 
 @router.get("/v1/exports/{job_id}", operation_id="getExport", response_class=Response,

@@ -7,7 +7,7 @@ from starlette.concurrency import run_in_threadpool
 
 from ...settings import Settings
 from ...store.models import ClipRecord, Mesh
-from ..access import owned, responses
+from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
 from ..httpcache import immutable_response
@@ -33,8 +33,11 @@ def _ingest(upload: Upload, settings: Settings) -> dict:
 
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
-             openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 413, 415, 422))
-async def upload_mesh(request: Request, tenant: TenantDep, store: StoreDep) -> MeshOut:
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422),
+                                                  **created(201, "mesh", {
+                 "GetMesh": ("getMesh", "mesh_id"), "UploadPoses": ("uploadPoses", "mesh_id"),
+                 "GetTopology": ("getMeshTopology", "mesh_id"), "DeleteMesh": ("deleteMesh", "mesh_id")})})
+async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:
     """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
     settings = store.settings
     upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
@@ -45,9 +48,8 @@ async def upload_mesh(request: Request, tenant: TenantDep, store: StoreDep) -> M
         upload.path.unlink(missing_ok=True)
     row = Mesh(tenant_id=tenant, filename=upload.filename[:255], blob_key=key, n_vertices=stats["vertices"],
                n_faces=stats["faces"], stats=stats)
-    with store.sessions() as session:
-        session.add(row)
-        session.commit()
+    await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop
+    response.headers["Location"] = f"/v1/meshes/{row.id}"
     return mesh_out(row)
 
 

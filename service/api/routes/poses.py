@@ -12,7 +12,7 @@ from pdeanim.errors import PosesInputError
 from ...settings import Settings
 from ...store.context import Store
 from ...store.models import Mesh, PosesRecord
-from ..access import owned, responses
+from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..httpcache import immutable_response
 from ..schemas import PosesOut
@@ -24,21 +24,26 @@ router = APIRouter(tags=["poses"])
 def poses_out(row: PosesRecord) -> PosesOut:
     """Wire form of a poses row."""
     return PosesOut(id=row.id, mesh_id=row.mesh_id, source=row.source, frames=row.n_frames,
-                    vertices=row.n_vertices, job_id=row.job_id, created_at=row.created_at)
+                    vertices=row.n_vertices, job_id=row.job_id, created_at=row.created_at,
+                    animation=(row.meta or {}).get("animation"))
 
 
-def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float):  # noqa: ANN202 - pdeanim Poses
+def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,  # noqa: ANN202 - pdeanim Poses
+                animation: str | None = None):
     from pdeanim.poses import PoseLimits, load_poses_npz, make_poses
 
     settings: Settings = store.settings
-    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices)
+    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
+                        max_bytes=settings.max_pose_bytes)
     suffix = Path(upload.filename).suffix.lower()
     if suffix == ".npz":
-        poses = load_poses_npz(upload.path.read_bytes(), limits)
+        if animation is not None:
+            raise PosesInputError("animation applies to glTF uploads only; this is a .npz")
+        poses = load_poses_npz(upload.path, limits)
     elif suffix in (".glb", ".gltf"):
         from pdeanim.gltf.read import read_animated_poses
 
-        poses = read_animated_poses(upload.path, fps=fps, limits=limits)
+        poses = read_animated_poses(upload.path, fps=fps, limits=limits, animation=animation)
     else:
         raise PosesInputError(f"unsupported poses file type {suffix or upload.filename!r}: use .npz or .glb")
     if poses.n_vertices != mesh.n_vertices:
@@ -51,33 +56,47 @@ def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float):  # noqa: 
     return poses
 
 
-def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float) -> tuple[str, int]:
+def _owned_mesh(store: Store, mesh_id: str, tenant: str) -> Mesh:
+    with store.sessions() as session:
+        return owned(session, Mesh, mesh_id, tenant, "mesh")
+
+
+def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,
+                 animation: str | None) -> tuple[str, int, dict]:
+    """The poses' blob key, frame count and the row's meta (with the glTF animation used, if any)."""
     from pdeanim.poses import poses_to_bytes
 
-    poses = _read_poses(upload, mesh, store, fps)
-    return store.blobs.put(poses_to_bytes(poses)), poses.n_frames
+    poses = _read_poses(upload, mesh, store, fps, animation)
+    meta: dict = {"filename": upload.filename[:255]}
+    used = (poses.meta or {}).get("animation")
+    if isinstance(used, dict):
+        meta["animation"] = {"index": used.get("index"), "name": used.get("name")}
+    return store.blobs.put(poses_to_bytes(poses)), poses.n_frames, meta
 
 
-@router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses", response_model=PosesOut,
-             openapi_extra=UPLOAD_BODY, responses=responses(400, 401, 404, 413, 415, 422))
-async def upload_poses(mesh_id: str, request: Request, tenant: TenantDep, store: StoreDep,
-                       fps: float = Query(30.0, gt=0, le=1000, description="sampling rate for animated GLB")
-                       ) -> PosesOut:
+@router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses",
+             response_model=PosesOut, openapi_extra=UPLOAD_BODY,
+             responses={**responses(400, 401, 404, 413, 415, 422),
+                        **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
+async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
+                       store: StoreDep,
+                       fps: float = Query(30.0, gt=0, le=1000, description="sampling rate for animated GLB"),
+                       animation: str | None = Query(None, min_length=1, max_length=200, description=(
+                           "glTF: the animation to sample, by name or index (default: the first); the "
+                           "answer's animation field says which was used"))) -> PosesOut:
     """Upload poses of this mesh: a .npz with ``vertices`` (F,V,3) (optional ``faces``, ``times``) or an
     animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
-    with store.sessions() as session:
-        mesh = owned(session, Mesh, mesh_id, tenant, "mesh")
+    mesh = await run_in_threadpool(_owned_mesh, store, mesh_id, tenant)
     settings = store.settings
     upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
     try:
-        key, frames = await run_in_threadpool(_store_poses, upload, mesh, store, fps)
+        key, frames, meta = await run_in_threadpool(_store_poses, upload, mesh, store, fps, animation)
     finally:
         upload.path.unlink(missing_ok=True)
     row = PosesRecord(tenant_id=tenant, mesh_id=mesh_id, source="upload", blob_key=key, n_frames=frames,
-                      n_vertices=mesh.n_vertices, meta={"filename": upload.filename[:255]})
-    with store.sessions() as session:
-        session.add(row)
-        session.commit()
+                      n_vertices=mesh.n_vertices, meta=meta)
+    await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop
+    response.headers["Location"] = f"/v1/poses/{row.id}"
     return poses_out(row)
 
 

@@ -1,0 +1,47 @@
+"""Tetrahedralization time of large meshes at the default tet budget (3000 tets), uncached.
+
+Meshes: trimesh icospheres subdivided 6 and 7 times (40,962 and 163,842 vertices) with 2% radial noise, like
+a scan. Each mesh is decimated to the tet budget's surface (``pdeanim.sim.tetra.surface_budget``) and handed
+to fTetWild in a child process, as ``pdeanim simulate`` and the worker do. Prints the median of several runs
+and the load average (the machine may be shared).
+Run: .venv/bin/python benchmarks/tetrahedralize_large.py [--runs N]
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+import trimesh
+
+from pdeanim.mesh.io import SurfaceMesh
+from pdeanim.sim.tetra import TetParams, surface_budget, tetrahedralize
+
+
+def noisy_sphere(subdivisions: int) -> SurfaceMesh:
+    m = trimesh.creation.icosphere(subdivisions)
+    scale = 1 + 0.02 * np.random.default_rng(0).standard_normal(len(m.vertices))
+    return SurfaceMesh(np.asarray(m.vertices) * scale[:, None], np.asarray(m.faces, np.int64))
+
+
+def main(runs: int) -> None:
+    params = TetParams(target_tets=3000)
+    print(f"target tets {params.target_tets}, surface budget {surface_budget(3000, params.max_surface_faces)} "
+          f"faces, fTetWild threads {params.threads}")
+    for sub in (6, 7):
+        mesh = noisy_sphere(sub)
+        seconds, tets = [], []
+        for _ in range(runs):
+            started = time.perf_counter()
+            result = tetrahedralize(mesh, params)  # no cache_dir: every run tetrahedralizes
+            seconds.append(time.perf_counter() - started)
+            tets.append(result.n_tets)
+        print(f"{len(mesh.vertices):>7} vertices {len(mesh.faces):>7} faces: median {statistics.median(seconds):.2f} s "
+              f"(runs {', '.join(f'{s:.2f}' for s in seconds)}), tets {tets}, load {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[sys.argv.index("--runs") + 1]) if "--runs" in sys.argv else 3)

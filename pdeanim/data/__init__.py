@@ -1,0 +1,1 @@
+"""Sample data shipped with the package (see LICENSES.md): the demo mesh."""

@@ -1,0 +1,128 @@
+"""Deleting a mesh (with its poses, clips and jobs) or a clip, and then the blobs nothing references any more.
+
+Blobs are content-addressed and shared between rows and tenants (the same file uploaded twice is one blob;
+tets are shared by mesh hash), so a blob is removed only when no row of any tenant still names it. Rows go
+first, in one transaction; blobs after the commit, each after a reference check.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+from sqlalchemy import delete, exists, or_, select
+from sqlalchemy.orm import Session
+
+from .context import Store
+from .models import ClipRecord, Job, Mesh, PosesRecord
+from .queue import ACTIVE
+
+log = logging.getLogger("pdeanim.api")
+TETS_PREFIX = "tets-"  # blob key prefix of shared tets (worker.tetcache.BLOB_PREFIX)
+
+
+@dataclass
+class Deleted:
+    """What a deletion removed: row counts, cancelled jobs, removed blob keys and clip ids (to evict)."""
+
+    meshes: int = 0
+    poses: int = 0
+    clips: int = 0
+    jobs: int = 0
+    cancelled_jobs: int = 0
+    blobs_removed: int = 0
+    clip_ids: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict[str, int]:
+        """The counts, for the API answer."""
+        return {"meshes": self.meshes, "poses": self.poses, "clips": self.clips, "jobs": self.jobs,
+                "cancelled_jobs": self.cancelled_jobs, "blobs_removed": self.blobs_removed}
+
+
+def _write_session(store: Store) -> Session:
+    # a transaction that starts by writing (BEGIN IMMEDIATE on SQLite) waits for the lock instead of failing
+    return Session(store.engine.execution_options(immediate=True), expire_on_commit=False)
+
+
+def _delete(session: Session, model: type, condition) -> int:  # noqa: ANN001 - a SQL expression
+    stmt = delete(model).where(condition).execution_options(synchronize_session=False)
+    return session.execute(stmt).rowcount
+
+
+def _tet_keys(jobs: list[Job]) -> set[str]:
+    keys = set()
+    for job in jobs:
+        key = (job.result or {}).get("tet_cache_key")
+        if isinstance(key, str) and key:
+            keys.add(TETS_PREFIX + key)
+    return keys
+
+
+def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
+    """Delete a tenant's mesh with its poses, clips and jobs (running jobs cancelled first, so their workers
+    stop at the next heartbeat), then the blobs left unreferenced. None if the mesh is not the tenant's."""
+    out = Deleted()
+    with store.sessions() as session:
+        mesh = session.get(Mesh, mesh_id)
+        if mesh is None or mesh.tenant_id != tenant_id:
+            return None
+        active = session.scalars(select(Job.id).where(Job.mesh_id == mesh_id, Job.state.in_(ACTIVE))).all()
+    out.cancelled_jobs = store.queue.cancel(list(active))
+    with _write_session(store) as session, session.begin():
+        mesh = session.get(Mesh, mesh_id)
+        if mesh is None:
+            return None  # deleted meanwhile by a concurrent request
+        poses_ids = select(PosesRecord.id).where(PosesRecord.mesh_id == mesh_id)
+        clips = session.scalars(select(ClipRecord).where(ClipRecord.mesh_id == mesh_id)).all()
+        poses = session.scalars(select(PosesRecord).where(PosesRecord.mesh_id == mesh_id)).all()
+        of_mesh = or_(Job.mesh_id == mesh_id, Job.poses_id.in_(poses_ids))
+        jobs = session.scalars(select(Job).where(of_mesh)).all()
+        keys = {mesh.blob_key} | {p.blob_key for p in poses} | _tet_keys(jobs)
+        keys |= {c.topology_key for c in clips} | {c.coefficients_key for c in clips}
+        out.clip_ids = [c.id for c in clips]
+        out.clips = _delete(session, ClipRecord, ClipRecord.mesh_id == mesh_id)
+        out.jobs = _delete(session, Job, of_mesh)
+        out.poses = _delete(session, PosesRecord, PosesRecord.mesh_id == mesh_id)
+        out.meshes = _delete(session, Mesh, Mesh.id == mesh_id)
+    out.blobs_removed = release_blobs(store, keys)
+    return out
+
+
+def delete_clip(store: Store, clip_id: str, tenant_id: str) -> Deleted | None:
+    """Delete a tenant's clip, then its blobs if no other clip uses them. None if not the tenant's."""
+    out = Deleted(clip_ids=[clip_id])
+    with _write_session(store) as session, session.begin():
+        clip = session.get(ClipRecord, clip_id)
+        if clip is None or clip.tenant_id != tenant_id:
+            return None
+        keys = {clip.topology_key, clip.coefficients_key}
+        out.clips = _delete(session, ClipRecord, ClipRecord.id == clip_id)
+    out.blobs_removed = release_blobs(store, keys)
+    return out
+
+
+def referenced(session: Session, key: str) -> bool:
+    """Whether any row of any tenant still names blob ``key``."""
+    if key.startswith(TETS_PREFIX):
+        cache_key = key.removeprefix(TETS_PREFIX)
+        return session.execute(select(exists().where(Job.result["tet_cache_key"].as_string() == cache_key))
+                               ).scalar()
+    checks = [exists().where(Mesh.blob_key == key), exists().where(PosesRecord.blob_key == key),
+              exists().where(ClipRecord.topology_key == key),
+              exists().where(ClipRecord.coefficients_key == key)]
+    return any(session.execute(select(check)).scalar() for check in checks)
+
+
+def release_blobs(store: Store, keys: set[str]) -> int:
+    """Remove each blob of ``keys`` that no row references any more; returns how many were removed."""
+    removed = 0
+    for key in sorted(keys):
+        with store.sessions() as session:
+            if referenced(session, key):
+                continue
+        try:
+            store.blobs.delete(key)
+            removed += 1
+        except Exception:  # noqa: BLE001 - an orphan blob wastes space but breaks nothing
+            log.warning("could not remove unreferenced blob %s", key, exc_info=True)
+    return removed

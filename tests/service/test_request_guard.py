@@ -1,0 +1,53 @@
+"""The request guard on a real uvicorn server (in this process, with one fault-injecting route): an unexpected
+error answers a 500 in the one error shape and the keep-alive connection stays open for the next request."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import threading
+import time
+
+import pytest
+import uvicorn
+
+from service.api.app import create_app
+from service.settings import Settings
+
+from .conftest import free_port
+
+
+@pytest.fixture
+def server(tmp_path):
+    app = create_app(Settings(data_dir=tmp_path / "data"))
+
+    @app.get("/boom", include_in_schema=False)
+    def boom() -> dict:  # the injected fault
+        raise RuntimeError("injected")
+
+    port = free_port()
+    srv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="critical"))
+    thread = threading.Thread(target=srv.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 60
+    while not srv.started and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert srv.started
+    yield port
+    srv.should_exit = True
+    thread.join(30)
+
+
+def test_unexpected_error_keeps_the_connection(server):
+    conn = http.client.HTTPConnection("127.0.0.1", server, timeout=30)
+    conn.request("GET", "/boom")
+    sock = conn.sock
+    r = conn.getresponse()
+    body = json.loads(r.read())
+    assert r.status == 500 and body == {"error": {"code": "internal", "message": "internal error (RuntimeError)"}}
+    assert not r.will_close
+    conn.request("GET", "/openapi.json")
+    assert conn.sock is sock, "the server closed the connection after the 500"
+    r = conn.getresponse()
+    assert r.status == 200 and json.loads(r.read())["info"]["title"] == "pdeanim"
+    conn.close()
