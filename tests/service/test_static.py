@@ -34,7 +34,7 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
     assert "HTTPValidationError" not in doc["components"]["schemas"]
     # typed job bodies: a union discriminated on kind, option models generated from the library's dataclasses
     body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
-    assert set(body["discriminator"]["mapping"]) == {"simulate", "fit", "cyclic"}
+    assert set(body["discriminator"]["mapping"]) == {"simulate", "fit", "cyclic", "export"}
     schemas = doc["components"]["schemas"]
     assert {"frames", "young", "target_tets"} <= set(schemas["SceneParams"]["properties"])
     assert {"segments", "target_rel_rms"} <= set(schemas["FitOptions"]["properties"])
