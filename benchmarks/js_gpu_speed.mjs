@@ -1,7 +1,8 @@
 // GPU playback speed of the JavaScript client in headless Chromium (SwiftShader, software WebGL 2): median
 // frame time (render + 1-pixel read-back) of a 50k-vertex clip as a plain mesh, on the GPU (in the vertex
 // shader, in an evaluation pass, with rest normals) and on the CPU, with the JavaScript per frame. Clips
-// come from benchmarks/js_eval_clips.py --50k (made when missing). Run: node benchmarks/js_gpu_speed.mjs [DIR]
+// come from benchmarks/js_eval_clips.py --50k (made when missing).
+// Run: node benchmarks/js_gpu_speed.mjs [DIR]
 
 import { execFileSync, spawn } from 'node:child_process';
 import { createServer } from 'node:http';
