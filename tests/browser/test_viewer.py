@@ -182,6 +182,7 @@ def test_viewer_page_needs_no_key_and_sends_none(services):
     r = client(services, None).get("/viewer")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     assert r.headers["referrer-policy"] == "no-referrer" and "importmap" in r.text
+    assert "default-src 'self'" in r.headers["content-security-policy"]
     for path in ("/static/viewer/viewer.js", "/static/viewer/pdeanim/index.js",
                  "/static/vendor/three/three.module.js"):
         assert client(services, None).get(path).status_code == 200, path
