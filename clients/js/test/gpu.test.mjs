@@ -455,7 +455,11 @@ test('with a renderer the clip is evaluated in a pass before drawing, once per t
   player.setTime(0.3);
   mesh.onBeforeRender(renderer, null, null, mesh.geometry, mesh.material, null);
   mesh.onBeforeRender(renderer, null, null, mesh.geometry, mesh.material, null); // same t: no second pass
-  assert.deepEqual(calls, [['target', 'pass'], ['render', 1], ['target', 'outer']]);
+  assert.deepEqual(calls, [
+    ['target', 'pass'],
+    ['render', 1],
+    ['target', 'outer'],
+  ]);
   player.setTime(0.6);
   mesh.onBeforeShadow(renderer, null, null, null, mesh.geometry, mesh.material, null);
   assert.equal(calls.length, 6);
@@ -465,5 +469,8 @@ test('with a renderer the clip is evaluated in a pass before drawing, once per t
   assert.equal(calls.length, 6);
   player.detach();
   assert.equal(mesh.onBeforeRender, ownHook);
-  assert.equal(attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { renderer, normals: 'rest' }).pass, false);
+  assert.equal(
+    attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { renderer, normals: 'rest' }).pass,
+    false,
+  );
 });
