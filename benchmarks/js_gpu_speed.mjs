@@ -1,7 +1,8 @@
 // GPU playback speed of the JavaScript client in headless Chromium (SwiftShader, software WebGL 2): median
-// frame time (render + 1-pixel read-back) of a 50k-vertex clip as a plain mesh, evaluated in the vertex
-// shader (normals 'frame' and 'rest') and on the CPU, with the JavaScript per frame. Clips come from
-// benchmarks/js_eval_clips.py (made when missing). Run: node benchmarks/js_gpu_speed.mjs [CLIPDIR]
+// frame time (render + 1-pixel read-back) of a 50k-vertex clip as a plain mesh, on the GPU (in the vertex
+// shader, in an evaluation pass, with rest normals) and on the CPU, with the JavaScript per frame. Clips
+// come from benchmarks/js_eval_clips.py --50k (made when missing).
+// Run: node benchmarks/js_gpu_speed.mjs [DIR]
 
 import { execFileSync, spawn } from 'node:child_process';
 import { createServer } from 'node:http';
@@ -59,8 +60,16 @@ async function measure(name) {
   const url = `http://127.0.0.1:${server.address().port}/page.html?clip=${name}&frames=60`;
   const browser = spawn(
     chromium,
-    ['--headless=new', '--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
-      '--disable-gpu-sandbox', '--no-first-run', `--user-data-dir=${profile}`, url],
+    [
+      '--headless=new',
+      '--no-sandbox',
+      '--use-angle=swiftshader',
+      '--enable-unsafe-swiftshader',
+      '--disable-gpu-sandbox',
+      '--no-first-run',
+      `--user-data-dir=${profile}`,
+      url,
+    ],
     { stdio: 'ignore' },
   );
   try {
@@ -74,14 +83,20 @@ async function measure(name) {
   }
 }
 
-const load = () => loadavg().map((x) => x.toFixed(2)).join(' ');
+const load = () =>
+  loadavg()
+    .map((x) => x.toFixed(2))
+    .join(' ');
 console.log(`${cpus().length} CPUs, load average ${load()} (shared machine)`);
 for (const name of NAMES) {
   const r = await measure(name);
   if (r.error) throw new Error(r.error);
   const f = (x) => `${x.frameMs.toFixed(1)} ms/frame (JS ${x.jsMs.toFixed(2)} ms)`;
   console.log(`${name}: ${r.vertices} vertices, ${r.renderer}`);
-  console.log(`  plain mesh ${f(r.plain)}; GPU normals 'frame' ${f(r.gpu_frame)}; GPU normals 'rest' ` +
-    `${f(r.gpu_rest)}; CPU path ${f(r.cpu)}`);
+  console.log(`  plain mesh ${f(r.plain)}; CPU path ${f(r.cpu)}`);
+  console.log(
+    `  GPU in the vertex shader ${f(r.gpu_vertex)}; GPU evaluation pass ${f(r.gpu_pass)}; ` +
+      `GPU with rest normals ${f(r.gpu_rest)}`,
+  );
 }
 console.log(`load average after: ${load()}`);

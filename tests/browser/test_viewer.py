@@ -182,6 +182,18 @@ def test_viewer_page_needs_no_key_and_sends_none(services):
     r = client(services, None).get("/viewer")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     assert r.headers["referrer-policy"] == "no-referrer" and "importmap" in r.text
+    assert "default-src 'self'" in r.headers["content-security-policy"]
     for path in ("/static/viewer/viewer.js", "/static/viewer/pdeanim/index.js",
                  "/static/vendor/three/three.module.js"):
         assert client(services, None).get(path).status_code == 200, path
+
+
+def test_docs_render_with_no_other_host_reachable(services):
+    """/docs and /redoc render the API's title in Chromium while every request to another host is refused."""
+    proc = subprocess.run(["node", str(HERE / "docs_check.mjs"), services.url], cwd=HERE, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    for page in ("/docs", "/redoc"):
+        assert "pdeanim" in result[page]["title"], result
+        assert result[page]["outside"] == [], result

@@ -7,13 +7,19 @@ import {
   FloatType,
   Matrix3,
   Matrix4,
+  Mesh,
   MeshDepthMaterial,
   MeshDistanceMaterial,
   NearestFilter,
+  OrthographicCamera,
+  PlaneGeometry,
   RGBAFormat,
+  Scene,
+  ShaderMaterial,
+  WebGLRenderTarget,
 } from 'three';
 import { createEvaluator } from './clip.js';
-import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from './gpu.js';
+import { frameNormals, glslHeader, glslPassMain, gpuLayout, meshAttributes, timeUniforms } from './gpu.js';
 
 const MAP_ATTRIBUTES = ['_pdeanim_vertex', '_PDEANIM_VERTEX'];
 
@@ -134,7 +140,9 @@ export function clipResources(clip, options = {}) {
   const textures = Object.fromEntries(Object.entries(layout.textures).map(([k, t]) => [k, dataTexture(t)]));
   let lastT = null;
   let last = null;
-  return {
+  let pass = null;
+  let passT = null;
+  const res = {
     clip,
     layout,
     textures,
@@ -147,17 +155,88 @@ export function clipResources(clip, options = {}) {
         last = timeUniforms(layout, t);
         lastT = t;
         if (textures.curve) textures.curve.needsUpdate = true;
+        if (pass) {
+          pass.uniforms.pdeSeg.value = last.seg;
+          pass.uniforms.pdeSinWt.value = last.sw;
+          pass.uniforms.pdeCosWt.value = last.cw;
+        }
       }
       return last;
     },
+    /** The evaluation pass's output texture (created on first use). */
+    positionTexture() {
+      if (!pass) pass = makePass(layout, textures, last);
+      return pass.target.texture;
+    },
+    /** Evaluate every clip vertex into the position texture, once per distinct t (nested render). */
+    runPass(renderer) {
+      if (!pass || passT === lastT) return;
+      passT = lastT;
+      const target = renderer.getRenderTarget();
+      const xr = renderer.xr.enabled;
+      renderer.xr.enabled = false;
+      renderer.setRenderTarget(pass.target);
+      renderer.render(pass.scene, pass.camera);
+      renderer.setRenderTarget(target);
+      renderer.xr.enabled = xr;
+    },
+    dispose() {
+      for (const tex of Object.values(textures)) tex.dispose();
+      if (pass) {
+        pass.target.dispose();
+        pass.material.dispose();
+        pass.quad.geometry.dispose();
+      }
+    },
   };
+  return res;
+}
+
+/** The evaluation pass: a full-screen quad whose fragments evaluate one clip vertex each. */
+function makePass(layout, textures, current) {
+  const uniforms = {
+    pdeSeg: { value: current?.seg ?? 0 },
+    pdeSinWt: { value: current?.sw ?? 0 },
+    pdeCosWt: { value: current?.cw ?? 1 },
+    pdeCurves: { value: layout.nCurves },
+    pdeVertices: { value: layout.nVertices },
+    pdeVertexTex: { value: textures.vertex },
+    pdeFieldTex: { value: textures.field ?? null },
+    pdeKnotTex: { value: textures.knot ?? null },
+    pdeCurveTex: { value: textures.curve ?? null },
+    pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
+    pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
+    pdeRotate: { value: Boolean(layout.rotate) },
+  };
+  const material = new ShaderMaterial({
+    uniforms,
+    vertexShader: 'void main() { gl_Position = vec4(position.xy, 0.0, 1.0); }',
+    fragmentShader: `${glslHeader(layout, { stage: 'fragment' })}\n${glslPassMain()}`,
+    depthTest: false,
+    depthWrite: false,
+  });
+  const quad = new Mesh(new PlaneGeometry(2, 2), material);
+  quad.frustumCulled = false;
+  const scene = new Scene();
+  scene.add(quad);
+  const height = Math.max(1, Math.ceil(layout.nVertices / layout.width));
+  const target = new WebGLRenderTarget(layout.width, height, {
+    type: FloatType,
+    format: RGBAFormat,
+    minFilter: NearestFilter,
+    magFilter: NearestFilter,
+    depthBuffer: false,
+    generateMipmaps: false,
+  });
+  return { uniforms, material, quad, scene, camera: new OrthographicCamera(), target };
 }
 
 /**
  * Play a decoded clip on mesh (a THREE.Mesh whose vertices are the clip's, or mapped to them by
  * options.vertexMap / a _pdeanim_vertex attribute). Returns a player: setTime(t), useGPU(bool), detach().
  * options: {gpu = true, vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip coordinates to
- * the mesh's local frame; default identity), renderer (its maxTextureSize bounds the data textures),
+ * the mesh's local frame; default identity), renderer (its maxTextureSize bounds the data textures; with
+ * float render targets the clip is evaluated in a pass before drawing), pass (force that either way),
  * textureWidth = 4096, maxTextureSize = renderer's or 4096, shadows = true,
  * frustumCulled = false, gpuMode = 'auto' | 'fields' | 'coefficients' (see gpuLayout), normals = 'frame'
  * (turned with each vertex's triangle: right lighting, 3 evaluations per vertex) | 'rest' (kept as they are:
@@ -165,6 +244,10 @@ export function clipResources(clip, options = {}) {
  */
 export function attachClip(mesh, clip, options = {}) {
   const { gpu = true, shadows = true, frustumCulled = false, normals = 'frame' } = options;
+  // the evaluation pass needs float render targets: used when the renderer is given and has them
+  const pass =
+    options.pass ??
+    Boolean(options.renderer?.extensions?.has?.('EXT_color_buffer_float') && normals === 'frame');
   if (normals !== 'frame' && normals !== 'rest') throw new RangeError(`normals must be 'frame' or 'rest'`);
   const res = options.resources ?? clipResources(clip, options);
   res.owned++;
@@ -213,12 +296,13 @@ export function attachClip(mesh, clip, options = {}) {
     pdeVertexTex: { value: textures.vertex },
     pdeKnotTex: { value: textures.knot ?? null },
     pdeCurveTex: { value: textures.curve ?? null },
+    pdePosTex: { value: pass ? res.positionTexture() : null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
     pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
     pdeRotate: { value: Boolean(layout.rotate) },
   };
-  const header = glslHeader(layout, { normals });
-  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}`;
+  const header = glslHeader(layout, { normals, pass });
+  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}:${pass}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;
@@ -240,6 +324,22 @@ export function attachClip(mesh, clip, options = {}) {
   if (shadows) {
     mesh.customDepthMaterial = patch(new MeshDepthMaterial());
     mesh.customDistanceMaterial = patch(new MeshDistanceMaterial());
+  }
+  const hooks = [mesh.onBeforeRender, mesh.onBeforeShadow];
+  if (pass) {
+    // evaluate the clip's vertices before this mesh (or its shadow) is drawn: once per t for all meshes
+    const before = hooks[0];
+    mesh.onBeforeRender = function (renderer, ...rest) {
+      if (onGPU) res.runPass(renderer);
+      return before.call(this, renderer, ...rest);
+    };
+    if (hooks[1]) {
+      const shadow = hooks[1];
+      mesh.onBeforeShadow = function (renderer, ...rest) {
+        if (onGPU) res.runPass(renderer);
+        return shadow.call(this, renderer, ...rest);
+      };
+    }
   }
   const originalCulled = mesh.frustumCulled;
   mesh.frustumCulled = frustumCulled;
@@ -284,6 +384,9 @@ export function attachClip(mesh, clip, options = {}) {
     vertexMap,
     attributes: attrs,
     mesh,
+    /** Whether the clip's vertices are evaluated in a pass before drawing (else in the vertex shader). */
+    pass,
+    resources: res,
     /** Why the GPU path is unavailable (null when it is available). */
     gpuUnavailableReason: gpuReason,
     get gpu() {
@@ -331,7 +434,8 @@ export function attachClip(mesh, clip, options = {}) {
       geometry.deleteAttribute('pdeVertex');
       geometry.deleteAttribute('pdeNormalFrame');
       for (const m of [patched, mesh.customDepthMaterial].flat()) m?.dispose?.();
-      if (--res.owned === 0) for (const tex of Object.values(textures)) tex.dispose();
+      [mesh.onBeforeRender, mesh.onBeforeShadow] = hooks;
+      if (--res.owned === 0) res.dispose();
     },
   };
   player.useGPU(onGPU);

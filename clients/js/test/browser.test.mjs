@@ -102,6 +102,7 @@ test(
         }),
       ]);
       assert.deepEqual(r.errors, []);
+      assert.deepEqual(r.passes, [false, false, true, true]); // both GPU variants ran
       assert.equal(r.cases.length, CASES.length + 1); // + one transformed multi-mesh scene
       for (const c of r.cases) {
         // same mesh, same lighting: only rasterisation at silhouettes may differ (positions agree to ~1e-7

@@ -432,3 +432,45 @@ test('normals of a transformed mesh are the clip-space normals turned into its f
   // as in the clip-space test above: one triangle's frame against the ring average on a 42-vertex sphere
   assert.ok(sum / nrm.count > 0.97, `mean cos ${sum / nrm.count}`);
 });
+
+test('with a renderer the clip is evaluated in a pass before drawing, once per t', () => {
+  const clip = loadCase(man.cases.find((x) => x.motion === 'rigid' && x.looping));
+  const calls = [];
+  const renderer = {
+    capabilities: { maxTextureSize: 4096 },
+    extensions: { has: (name) => name === 'EXT_color_buffer_float' },
+    xr: { enabled: false },
+    getRenderTarget: () => 'outer',
+    setRenderTarget: (target) => calls.push(['target', target === 'outer' ? 'outer' : 'pass']),
+    render: (scene) => calls.push(['render', scene.children.length]),
+  };
+  const mesh = meshOf(clip, THREE.MeshStandardMaterial);
+  const ownHook = mesh.onBeforeRender;
+  const player = attachClip(mesh, clip, { renderer });
+  assert.equal(player.pass, true);
+  assert.ok(player.uniforms.pdePosTex.value.isTexture);
+  const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
+  mesh.material.onBeforeCompile(shader, null);
+  assert.match(shader.vertexShader, /#define PDEANIM_PASS/);
+  player.setTime(0.3);
+  mesh.onBeforeRender(renderer, null, null, mesh.geometry, mesh.material, null);
+  mesh.onBeforeRender(renderer, null, null, mesh.geometry, mesh.material, null); // same t: no second pass
+  assert.deepEqual(calls, [
+    ['target', 'pass'],
+    ['render', 1],
+    ['target', 'outer'],
+  ]);
+  player.setTime(0.6);
+  mesh.onBeforeShadow(renderer, null, null, null, mesh.geometry, mesh.material, null);
+  assert.equal(calls.length, 6);
+  player.useGPU(false); // the CPU path needs no pass
+  player.setTime(0.9);
+  mesh.onBeforeRender(renderer, null, null, mesh.geometry, mesh.material, null);
+  assert.equal(calls.length, 6);
+  player.detach();
+  assert.equal(mesh.onBeforeRender, ownHook);
+  assert.equal(
+    attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { renderer, normals: 'rest' }).pass,
+    false,
+  );
+});

@@ -19,8 +19,14 @@ export interface AttachOptions {
   gpuMode?: 'auto' | 'fields' | 'coefficients';
   /** Shared layout/textures/evaluator (from clipResources) when several meshes play one clip. */
   resources?: ClipResources;
-  /** The renderer: its capabilities.maxTextureSize bounds the data textures (else 4096 is assumed). */
-  renderer?: { capabilities?: { maxTextureSize?: number } };
+  /**
+   * The renderer: its capabilities.maxTextureSize bounds the data textures (else 4096 is assumed), and with
+   * float render targets (EXT_color_buffer_float) the clip is evaluated in a pass before drawing.
+   */
+  renderer?: { capabilities?: { maxTextureSize?: number }; extensions?: { has(name: string): boolean } };
+  /** Evaluate in a pass (one evaluation per clip vertex, 3 texture reads per mesh vertex); default: when
+   * the renderer is given and supports float render targets, with normals 'frame'. */
+  pass?: boolean;
   /** Data texture width in texels (default 4096). */
   textureWidth?: number;
   /** Largest texture height the renderer allows (default 4096); larger clips fall back to the CPU. */
@@ -52,6 +58,9 @@ export interface ClipPlayer {
   readonly gpu: boolean;
   readonly time: number;
   readonly mesh: Mesh;
+  /** Whether the clip is evaluated in a pass before drawing (else in the vertex shader). */
+  readonly pass: boolean;
+  readonly resources: ClipResources;
   /** Show the clip at normalised time t (evaluated: the clip's CPU positions at t, if already known). */
   setTime(t: number, evaluated?: Float32Array | null): ClipPlayer;
   /** Switch GPU evaluation on or off (CPU fallback); returns whether the GPU is used. */

@@ -13,6 +13,13 @@ from starlette.types import Scope
 
 STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
 STATIC_CACHE = "no-cache"  # revalidate (ETag / Last-Modified): files change when the service is upgraded
+# The pages load and call nothing but this service (ReDoc's bundle would fetch its logo from a CDN): inline
+# scripts and styles are the pages' own (import map, Swagger UI's start-up, styled-components).
+CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 'unsafe-inline'; "
+       "img-src 'self' data: blob:; font-src 'self' data:; worker-src 'self' blob:; connect-src 'self'; "
+       "frame-ancestors 'none'; base-uri 'self'")
+PAGE_HEADERS = {"Cache-Control": STATIC_CACHE, "Content-Security-Policy": CSP,
+                "Referrer-Policy": "no-referrer"}
 
 router = APIRouter(include_in_schema=False)
 
@@ -34,27 +41,31 @@ def _root(request: Request) -> str:
 def swagger_ui(request: Request) -> HTMLResponse:
     """Swagger UI on the app's OpenAPI document, from the vendored swagger-ui-dist."""
     root = _root(request)
-    return get_swagger_ui_html(openapi_url=f"{root}{request.app.openapi_url}", title="pdeanim API",
+    page = get_swagger_ui_html(openapi_url=f"{root}{request.app.openapi_url}", title="pdeanim API",
                                swagger_js_url=f"{root}/static/vendor/swagger-ui/swagger-ui-bundle.js",
                                swagger_css_url=f"{root}/static/vendor/swagger-ui/swagger-ui.css",
                                swagger_favicon_url=f"{root}/static/vendor/swagger-ui/favicon-32x32.png")
+    page.headers.update(PAGE_HEADERS)
+    return page
 
 
 @router.get("/redoc")
 def redoc(request: Request) -> HTMLResponse:
     """ReDoc on the app's OpenAPI document, from the vendored redoc bundle (no web fonts)."""
     root = _root(request)
-    return get_redoc_html(openapi_url=f"{root}{request.app.openapi_url}", title="pdeanim API",
+    page = get_redoc_html(openapi_url=f"{root}{request.app.openapi_url}", title="pdeanim API",
                           redoc_js_url=f"{root}/static/vendor/redoc/redoc.standalone.js",
                           redoc_favicon_url=f"{root}/static/vendor/swagger-ui/favicon-32x32.png",
                           with_google_fonts=False)
+    page.headers.update(PAGE_HEADERS)
+    return page
 
 
 @router.get("/viewer")
 def viewer(request: Request) -> HTMLResponse:
     """The clip viewer page; it reads ``#clip=ID&key=KEY`` (the fragment never reaches the server)."""
     html = (STATIC_DIR / "viewer" / "index.html").read_text().replace("{{ROOT}}", _root(request))
-    return HTMLResponse(html, headers={"Cache-Control": STATIC_CACHE, "Referrer-Policy": "no-referrer"})
+    return HTMLResponse(html, headers=PAGE_HEADERS)
 
 
 def install_pages(app: FastAPI) -> None:

@@ -280,9 +280,24 @@ export function frameNormals(clipPositions, attrs, restNormals, out) {
   return out;
 }
 
+/**
+ * GLSL main() of the evaluation pass: one fragment per clip vertex (row-major in a texture of layout.width
+ * columns) writes its position; the mesh shaders (compiled with pass: true) then read three positions per
+ * vertex instead of evaluating them.
+ */
+export function glslPassMain() {
+  return `void main() {
+  int v = (int(gl_FragCoord.y) << PDEANIM_WIDTH_SHIFT) + int(gl_FragCoord.x);
+  gl_FragColor = v < pdeVertices ? vec4(pdeEval(v), 1.0) : vec4(0.0);
+}
+`;
+}
+
 /** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
-export function glslHeader(layout, { normals = 'frame' } = {}) {
+export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass = false } = {}) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
+  if (stage === 'vertex') defs.push('#define PDEANIM_VERTEX_STAGE');
+  if (pass) defs.push('#define PDEANIM_PASS');
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
@@ -290,8 +305,13 @@ export function glslHeader(layout, { normals = 'frame' } = {}) {
   defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
   defs.push(`#define PDEANIM_WIDTH_MASK ${layout.width - 1}`);
   return `${defs.join('\n')}
+#ifdef PDEANIM_VERTEX_STAGE
 in vec3 pdeVertex;
 in vec3 pdeNormalFrame;
+#endif
+#ifdef PDEANIM_PASS
+uniform highp sampler2D pdePosTex;
+#endif
 uniform highp sampler2D pdeVertexTex;
 uniform bool pdeEnabled;
 uniform int pdeSeg;
@@ -366,17 +386,26 @@ vec3 pdeEval(int v) {
   return a.xyz + ca * pdeAxis + cl * pdeBend;
 }
 #endif
+#ifdef PDEANIM_VERTEX_STAGE
+// a clip vertex's position: read from the pass's texture, or evaluated here
+vec3 pdeAt(int v) {
+#ifdef PDEANIM_PASS
+  return pdeFetch(pdePosTex, v).xyz;
+#else
+  return pdeEval(v);
+#endif
+}
 void pdeCompute() {
   int v = int(pdeVertex.x + 0.5);
   int va = int(pdeVertex.y + 0.5);
   int vb = int(pdeVertex.z + 0.5);
-  vec3 p = pdeEval(v);
+  vec3 p = pdeAt(v);
   pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
 #ifndef PDEANIM_REST_NORMALS
   if (va != v) {
-    vec3 e1 = pdeEval(va) - p;
-    vec3 e2 = pdeEval(vb) - p;
+    vec3 e1 = pdeAt(va) - p;
+    vec3 e2 = pdeAt(vb) - p;
     vec3 t1 = normalize(e1);
     vec3 n = normalize(cross(e1, e2));
     pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
@@ -384,5 +413,6 @@ void pdeCompute() {
   }
 #endif
 }
+#endif
 `;
 }
