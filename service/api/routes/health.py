@@ -13,8 +13,8 @@ router = APIRouter(tags=["health"])
 
 
 @router.get("/healthz", operation_id="healthz", response_model=Health,
-            responses={503: {"model": Health, "description": "database or blob store unreachable"},
-                       **responses()})
+            responses={**responses(),
+                       503: {"model": Health, "description": "database or blob store unreachable"}})
 def healthz(store: StoreDep) -> JSONResponse:
     """200 when the database (with the jobs table) and the blob store answer, else 503 with the reasons."""
     status = store.check()
