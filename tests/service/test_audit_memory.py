@@ -1,6 +1,6 @@
-"""Audit defect 6 (memory): a fit whose estimated memory is over the job's memory limit is refused with a clear
-message at submission (413), and by the worker at once (one attempt, no retries) when only the worker's machine
-is too small, instead of running for minutes into the limit."""
+"""Audit defect 6 (memory): a fit whose estimated memory is over the job's memory limit is refused with a
+clear message at submission (413), and by the worker at once (one attempt, no retries) when only the
+worker's machine is too small, instead of running for minutes into the limit."""
 
 from __future__ import annotations
 

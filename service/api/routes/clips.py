@@ -80,7 +80,8 @@ def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreD
 
 
 def _finite(value):  # noqa: ANN001, ANN202
-    """``value`` with NaN/inf floats as None: clips stored before containers refused them still answer JSON."""
+    """``value`` with NaN/inf floats as None: clips stored before containers refused them still answer
+    JSON."""
     if isinstance(value, dict):
         return {k: _finite(v) for k, v in value.items()}
     if isinstance(value, list):
