@@ -321,9 +321,11 @@ def test_cli_fit_takes_animation_by_name(morph, tmp_path):
     assert bad.returncode == 2 and "Walk" in bad.stderr, bad.stderr
 
 
-def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store, data_dir):
+def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store):
     """A clip stored before metrics were made finite (report with inf) lists with null (pydantic writes
     non-finite floats as null), not a 500."""
+    if store.engine.dialect.name != "sqlite":
+        pytest.skip("PostgreSQL's json type refuses Infinity: such rows exist on SQLite only")
     from service.store.models import ClipRecord, Mesh
 
     mesh = upload(api, "old.obj", OBJ + b"# old clip\n").json()
