@@ -30,8 +30,9 @@ def main() -> None:
         moved = float(np.linalg.norm(poses.vertices - poses.vertices[:1], axis=2).max())
         m = poses.meta
         print(f"diagonal {diagonal:>6}: young {m.get('young', m['scene'].get('young'))!s:>10}, substeps "
-              f"{m['substeps']}{' (capped)' if m['substeps_capped'] else ''}, {seconds:.1f} s, max displacement "
-              f"{100 * moved / diagonal:.2f}% of the diagonal, finite {bool(np.isfinite(poses.vertices).all())}, "
+              f"{m['substeps']}{' (capped)' if m['substeps_capped'] else ''}, {seconds:.1f} s, "
+              f"max displacement {100 * moved / diagonal:.2f}% of the diagonal, "
+              f"finite {bool(np.isfinite(poses.vertices).all())}, "
               f"load {os.getloadavg()}", flush=True)
 
 

@@ -29,7 +29,8 @@ def noisy_sphere(subdivisions: int) -> SurfaceMesh:
 
 def main(runs: int) -> None:
     params = TetParams(target_tets=3000)
-    print(f"target tets {params.target_tets}, surface budget {surface_budget(3000, params.max_surface_faces)} "
+    budget = surface_budget(params.target_tets, params.max_surface_faces)
+    print(f"target tets {params.target_tets}, surface budget {budget} "
           f"faces, fTetWild threads {params.threads}")
     for sub in (6, 7):
         mesh = noisy_sphere(sub)
@@ -39,7 +40,8 @@ def main(runs: int) -> None:
             result = tetrahedralize(mesh, params)  # no cache_dir: every run tetrahedralizes
             seconds.append(time.perf_counter() - started)
             tets.append(result.n_tets)
-        print(f"{len(mesh.vertices):>7} vertices {len(mesh.faces):>7} faces: median {statistics.median(seconds):.2f} s "
+        print(f"{len(mesh.vertices):>7} vertices {len(mesh.faces):>7} faces: "
+              f"median {statistics.median(seconds):.2f} s "
               f"(runs {', '.join(f'{s:.2f}' for s in seconds)}), tets {tets}, load {os.getloadavg()}")
 
 

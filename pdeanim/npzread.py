@@ -1,6 +1,7 @@
-"""Read named arrays from an untrusted .npz with bounded memory: every member's zip entry and npy header (shape,
-dtype) is checked against the caller's limits before any array data is inflated, so a small compressed file
-cannot make the reader allocate gigabytes, and malformed archives become one clear InputError."""
+"""Read named arrays from an untrusted .npz with bounded memory: every member's zip entry and npy header
+(shape, dtype) is checked against the caller's limits before any array data is inflated, so a small
+compressed file cannot make the reader allocate gigabytes, and malformed archives become one clear
+InputError."""
 
 from __future__ import annotations
 

@@ -9,8 +9,8 @@ from collections.abc import Callable
 from typing import TextIO
 
 Progress = Callable[[float, str], None]
-"""A callback ``progress(fraction, stage)``: fraction in [0, 1] of the whole call, stage e.g. "simulate
-40/100"."""
+"""A callback ``progress(fraction, stage)``: fraction in [0, 1] of the whole call, stage e.g.
+"simulate 40/100"."""
 
 
 def no_progress(fraction: float, stage: str) -> None:
@@ -30,8 +30,9 @@ def sub_progress(progress: Progress | None, start: float, stop: float) -> Progre
 
 
 class StderrProgress:
-    """A ``Progress`` for the command line: a redrawn status line on a terminal (at most 5 per second), or on
-    a pipe or log file one line every ``log_every`` seconds (so short runs stay quiet). ``close()`` ends it."""
+    """A ``Progress`` for the command line: a redrawn status line on a terminal (at most 5 per second), or
+    on a pipe or log file one line every ``log_every`` seconds (so short runs stay quiet); ``close()`` ends
+    it."""
 
     def __init__(self, command: str, stream: TextIO | None = None, log_every: float = 5.0):
         self.command, self.stream = command, stream or sys.stderr
@@ -48,7 +49,8 @@ class StderrProgress:
         if fraction >= 1.0 and not self.drawn:
             return  # finished before the first report was due: nothing to say
         self.last = now
-        text = f"{self.command}: {stage} {100 * min(max(fraction, 0.0), 1.0):5.1f}% ({now - self.started:.0f} s)"
+        percent = 100 * min(max(fraction, 0.0), 1.0)
+        text = f"{self.command}: {stage} {percent:5.1f}% ({now - self.started:.0f} s)"
         if self.tty:
             self.stream.write(f"\r{text:<72}")
         else:

@@ -66,8 +66,10 @@ def write() -> None:
     base = closure(runtime)
     base.pop("pdeanim", None)
     extra = {k: v for k, v in closure(dev).items() if k not in base and k != "pdeanim"}
-    RUNTIME.write_text(render(base, "Exact versions of pdeanim's runtime dependencies (pyproject.toml has ranges)."))
-    DEV.write_text(render(extra, "The dev extra's exact versions, on top of requirements.lock.", RUNTIME.name))
+    RUNTIME.write_text(render(base, "Exact versions of pdeanim's runtime dependencies "
+                                    "(pyproject.toml has ranges)."))
+    DEV.write_text(render(extra, "The dev extra's exact versions, on top of requirements.lock.",
+                          RUNTIME.name))
     print(f"lock: {len(base)} runtime and {len(extra)} dev pins written to {RUNTIME.name} and {DEV.name}")
 
 

@@ -33,8 +33,8 @@ def options_class(kind: str) -> type:
 
 
 def normalize(kind: str, params: dict[str, Any] | None) -> dict[str, Any]:
-    """Validate options of ``kind`` (ParameterError on unknown/bad keys, LimitError when the work the options ask
-    for is over the budget the worker enforces) and return them with defaults."""
+    """Validate options of ``kind`` (ParameterError on unknown/bad keys, LimitError when the work the
+    options ask for is over the budget the worker enforces) and return them with defaults."""
     if params is not None and not isinstance(params, dict):
         raise ParameterError(f"{kind} parameters must be a JSON object")
     options = options_class(kind).from_dict(dict(params or {}))

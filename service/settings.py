@@ -14,7 +14,8 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 MIN_JOB_MEMORY = 2 * 1024**3
-"""The default limit never goes below this: the libraries a job imports reserve about 1 GiB of address space."""
+"""The default limit never goes below this: the libraries a job imports reserve about 1 GiB of address
+space."""
 
 
 class Settings(BaseSettings):
@@ -58,8 +59,8 @@ class Settings(BaseSettings):
     shutdown_grace_seconds: float = Field(20.0, ge=0, description="on SIGTERM, time to finish the attempt")
     job_memory_bytes: int = Field(0, ge=0, description="RLIMIT_AS of a job's child process; 0 = "
                                   "job_memory_fraction of the machine's memory")
-    job_memory_fraction: float = Field(0.5, ge=0, le=1, description="default job memory limit as a fraction of "
-                                       "the machine's physical memory (at least 2 GiB); 0 = unlimited")
+    job_memory_fraction: float = Field(0.5, ge=0, le=1, description="default job memory limit as a fraction "
+                                       "of the machine's physical memory (at least 2 GiB); 0 = unlimited")
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
     job_nice: int = Field(10, ge=0, le=19, description="nice increment of a job's process (the API keeps "
                           "its latency while jobs run); 0 = same priority")

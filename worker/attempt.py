@@ -48,11 +48,11 @@ def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json
 
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=child_main, args=(child, payload, settings_json, os.getpid()), daemon=True)
-    proc.start()
-    child.close()
     beat = Heartbeat(queue, job)
-    beat.start()
+    beat.start()  # before the child starts: the first start boots the forkserver, slow on a loaded machine
     try:
+        proc.start()
+        child.close()
         stored: dict = {}
         outcome = _pump(proc, parent, queue, job, beat, should_stop, time.monotonic() + timeout,
                         _partial_sink(on_partial, stored, beat))
@@ -62,9 +62,10 @@ def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json
         return outcome
     finally:
         beat.done.set()
-        if proc.is_alive():
-            proc.kill()
-        proc.join(5)
+        if proc.pid is not None:
+            if proc.is_alive():
+                proc.kill()
+            proc.join(5)
         parent.close()
 
 

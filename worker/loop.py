@@ -113,7 +113,8 @@ class Worker:
         # the parent owns the attempt's work directory, so it is removed however the child ends
         workdir = self.settings.tmp_dir() / f"{prefix('work')}{job.id}-{job.attempt}"
         try:
-            outcome = run_attempt(self.ctx, self.store.queue, job, {**self._payload(job), "workdir": str(workdir)},
+            payload = {**self._payload(job), "workdir": str(workdir)}
+            outcome = run_attempt(self.ctx, self.store.queue, job, payload,
                                   self.settings.model_dump_json(), self._should_stop,
                                   self.settings.job_timeout_seconds,
                                   lambda part: self.store.queue.store_partial(job.id, job.attempt,

@@ -38,8 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", help="JSON file of scene parameters (flags given here override it)")
     p.add_argument("--gravity", help="X,Y,Z in m/s^2 (default 0,-9.81,0)")
     p.add_argument("--damping", type=float, help="velocity damping in 1/s (default 1)")
-    p.add_argument("--young", type=float, help="Young's modulus in Pa (default: from the mesh's size, so gravity "
-                   "compresses it by about 2%%: visible, stable motion whatever the units)")
+    p.add_argument("--young", type=float, help="Young's modulus in Pa (default: from the mesh's size, so "
+                   "gravity compresses it by about 2%%: visible, stable motion whatever the units)")
     p.add_argument("--poisson", type=float, help="Poisson ratio in [0, 0.5) (default 0.3)")
     p.add_argument("--density", type=float, help="kg/m^3 (default 1000)")
     p.add_argument("--pin-box", action="append", default=[], metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")

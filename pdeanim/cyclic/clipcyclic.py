@@ -65,8 +65,8 @@ class CyclicClip:
         self.bend = params.bend_axis(frame.lateral, frame.up)
 
     def displacement(self, t: float | np.ndarray) -> np.ndarray:
-        """Displacement (K, V, 3) float64 at clip times t (K,) (one cycle per unit of t, so t is reduced modulo
-        1 first: a huge t would otherwise overflow the phase and give NaN)."""
+        """Displacement (K, V, 3) float64 at clip times t (K,) (one cycle per unit of t, so t is reduced
+        modulo 1 first: a huge t would otherwise overflow the phase and give NaN)."""
         sec = np.mod(np.asarray(t, dtype=np.float64).reshape(-1), 1.0) * self.params.period
         return body_displacement(self.params, self.s, self.rel, self.dxds, self.frame.axis, self.bend,
                                  sec, self.frame.length)
@@ -106,7 +106,8 @@ class CyclicClip:
     def spine_at(self, t: float, samples: int = 201) -> np.ndarray:
         """The moving spine at clip time t: (samples, 3) float64 (rest spine + lateral wave)."""
         s = np.linspace(0.0, 1.0, samples)
-        delta, _ = lateral_wave(self.params, s, np.array([np.mod(t, 1.0) * self.params.period]), self.frame.length)
+        phase = np.array([np.mod(t, 1.0) * self.params.period])
+        delta, _ = lateral_wave(self.params, s, phase, self.frame.length)
         return self.spine.at(s) + delta[0][:, None] * self.bend
 
     def info(self) -> dict[str, Any]:

@@ -237,8 +237,8 @@ def validate_arrays(vertices: np.ndarray, faces: np.ndarray, name: str, limits: 
         raise MeshInputError(f"{name!r} has NaN or infinite coordinates (first at vertex {first})")
     biggest = float(np.abs(vertices).max())
     if biggest > MAX_ABS_COORDINATE:
-        raise MeshInputError(f"{name!r} has coordinates up to {biggest:.3g}, over {MAX_ABS_COORDINATE:.0e}: sizes, "
-                             "areas and float32 poses would overflow (non-finite); rescale the mesh")
+        raise MeshInputError(f"{name!r} has coordinates up to {biggest:.3g}, over {MAX_ABS_COORDINATE:.0e}: "
+                             "sizes, areas and float32 poses would overflow (non-finite); rescale the mesh")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshInputError(f"{name!r} has face indices out of range: {faces.min()}..{faces.max()} "
                              f"for {len(vertices)} vertices")

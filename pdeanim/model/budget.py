@@ -1,13 +1,13 @@
-"""Memory a fit needs, estimated before fitting so work that cannot fit is refused at once with a clear message
-instead of running for minutes into the memory limit."""
+"""Memory a fit needs, estimated before fitting so work that cannot fit is refused at once with a clear
+message instead of running for minutes into the memory limit."""
 
 from __future__ import annotations
 
 from ..errors import LimitError
 
 FIT_BYTES_PER_FRAME_VERTEX = 300
-"""Peak memory of ``fit_poses`` grows with frames x vertices: measured 205-229 bytes each (icospheres of 10k and
-41k vertices, 100-400 frames, peak RSS over the start), rounded up for headroom."""
+"""Peak memory of ``fit_poses`` grows with frames x vertices: measured 205-229 bytes each (icospheres of 10k
+and 41k vertices, 100-400 frames, peak RSS over the start), rounded up for headroom."""
 FIT_BASE_BYTES = 512 * 1024**2  # the interpreter, numpy/scipy/numba and the poses themselves at small sizes
 
 

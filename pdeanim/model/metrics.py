@@ -41,8 +41,9 @@ def error_summary(original: np.ndarray, approx: np.ndarray,
     d = distances(original, approx)
     diag = bbox_diagonal(np.asarray(original)[0]) if diagonal is None else float(diagonal)
     rms, mx = float(np.sqrt(np.mean(d * d))), float(d.max()) if d.size else 0.0
-    out = {"rms": rms, "max": mx, "rel_rms": rms / diag if diag else math.inf, "rel_max": mx / diag if diag else
-           math.inf, "kg": kg_error(original, approx), "diagonal": diag}
+    rel_rms, rel_max = (rms / diag, mx / diag) if diag else (math.inf, math.inf)
+    out = {"rms": rms, "max": mx, "rel_rms": rel_rms, "rel_max": rel_max, "kg": kg_error(original, approx),
+           "diagonal": diag}
     return {k: v if math.isfinite(v) else None for k, v in out.items()}
 
 

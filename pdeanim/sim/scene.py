@@ -5,9 +5,9 @@ Regions (for pins and drivers) are dicts with one of
 ``{"plane": [px, py, pz, nx, ny, nz]}`` (the side (x - p) . n <= 0), plus ``"relative": true`` to give points
 as fractions of the rest bounding box. A driver is ``{"region": REGION, "keyframes": [{"t": 0..1,
 "rotate": [ax, ay, az, degrees], "translate": [x, y, z]}, ...], "center": [x, y, z] (default: region centroid)}``
-with t normalised over the clip; rotations are slerped and translations lerped between keyframes. The solver has
-no randomness (the same mesh, tets and parameters give the same poses), so there is no ``seed``: one given by an
-older client is accepted and ignored.
+with t normalised over the clip; rotations are slerped and translations lerped between keyframes. The solver
+has no randomness (the same mesh, tets and parameters give the same poses), so there is no ``seed``: one given
+by an older client is accepted and ignored.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ MAX_REGIONS = 256
 MAX_KEYFRAMES = 1000
 MAX_INDICES = 2_000_000
 MAX_TET_SWEEPS = 5e9
-"""Refuse a simulation needing more than this many tet updates (frames x substeps x iterations x tets): about a
-quarter of an hour single-threaded at the measured ~0.17 us per tet and sweep."""
+"""Refuse a simulation needing more than this many tet updates (frames x substeps x iterations x tets): about
+a quarter of an hour single-threaded at the measured ~0.17 us per tet and sweep."""
 IGNORED_KEYS = ("seed",)
 """Keys older clients sent that no longer mean anything; accepted (if well-typed) and dropped."""
 
@@ -59,7 +59,8 @@ class SceneParams:
         d = dict(d or {})
         for key in IGNORED_KEYS:
             if key in d and not (isinstance(d[key], int) and not isinstance(d[key], bool)):
-                raise ParameterError(f"{key} must be an integer (it is ignored: the simulation is deterministic)")
+                raise ParameterError(f"{key} must be an integer (it is ignored: the simulation is "
+                                     "deterministic)")
             d.pop(key, None)
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
@@ -90,8 +91,8 @@ class SceneParams:
         work = self.work(substeps)
         if work > MAX_TET_SWEEPS:
             bound = "" if substeps or self.substeps else ", with substeps up to max_substeps"
-            exc = LimitError(f"simulation work (frames x substeps x iterations x target_tets{bound})", int(work),
-                             int(MAX_TET_SWEEPS))
+            exc = LimitError(f"simulation work (frames x substeps x iterations x target_tets{bound})",
+                             int(work), int(MAX_TET_SWEEPS))
             exc.args = (f"{exc}: lower frames, substeps or max_substeps, iterations or target_tets",)
             raise exc
 
@@ -127,8 +128,9 @@ class SceneParams:
             if not ok:
                 raise ParameterError(message)
         if len(self.pins) > MAX_REGIONS or len(self.drivers) > MAX_REGIONS:
-            raise ParameterError(f"at most {MAX_REGIONS} pins and {MAX_REGIONS} drivers, got {len(self.pins)} "
-                                 f"pins and {len(self.drivers)} drivers (merge regions: a box or plane covers many)")
+            raise ParameterError(f"at most {MAX_REGIONS} pins and {MAX_REGIONS} drivers, got "
+                                 f"{len(self.pins)} pins and {len(self.drivers)} drivers (merge regions: a box "
+                                 "or plane covers many)")
         for region in self.pins:
             validate_region(region, "pin")
         for driver in self.drivers:

@@ -128,11 +128,12 @@ def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene:
         report(f / (len(times) - 1), f"simulate {f}/{len(times) - 1}")
     warnings = [] if not capped else [
         f"the substep cap binds: the material needs {needed} substeps per frame, max_substeps is "
-        f"{scene.max_substeps}, so the motion is stiffer and more damped than the material; raise max_substeps "
-        "or lower young"]
+        f"{scene.max_substeps}, so the motion is stiffer and more damped than the material; raise "
+        "max_substeps or lower young"]
     meta = {"source": "simulate", "scene": scene.to_dict(), "tets": tets.n_tets, "tet_points": tets.n_points,
             "young": material.young, "young_auto": scene.young is None, "substeps": substeps,
-            "substeps_capped": capped, "substeps_needed": needed, "warnings": warnings, "dt": dt, "colors": model.elements.n_colors,
+            "substeps_capped": capped, "substeps_needed": needed, "warnings": warnings, "dt": dt,
+            "colors": model.elements.n_colors,
             "backend": model.backend, "ground": None if model.ground is None else
             {"point": list(model.ground.point), "normal": list(model.ground.normal), "friction": model.ground.friction},
             "seconds": round(time.perf_counter() - started, 3), "versions": library_versions()}

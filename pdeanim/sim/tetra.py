@@ -34,7 +34,8 @@ quadric decimation to this budget brings tetrahedralization at 3000 tets to a fe
 (benchmarks/tetrahedralize_large.py)."""
 MIN_SURFACE_FACES = 2000
 DECIMATION = "quadric-budget-1"
-"""Changes whenever the surface handed to fTetWild changes for the same input, so cached tets are not mixed."""
+"""Changes whenever the surface handed to fTetWild changes for the same input, so cached tets are not
+mixed."""
 
 
 @dataclass(frozen=True)
@@ -132,7 +133,8 @@ def run_tetwild(vertices: np.ndarray, faces: np.ndarray, edge_fac: float, thread
         if proc.returncode != 0 or not dst.is_file():
             tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:]
             if "bad_alloc" in (proc.stderr or ""):
-                raise TetrahedralizationError("fTetWild ran out of memory (the job's memory limit): lower target_tets")
+                raise TetrahedralizationError("fTetWild ran out of memory (the job's memory limit): lower "
+                                              "target_tets")
             how = f"crashed with signal {-proc.returncode}" if proc.returncode < 0 else f"exited {proc.returncode}"
             raise TetrahedralizationError(f"fTetWild {how} on this surface (non-manifold or degenerate input?)"
                                           + (f": {tail[0][:300]}" if tail else ""))

@@ -28,7 +28,9 @@ DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malf
                 501: "stage not available in this build",
                 503: "a dependency (database, blobs) is unavailable",
                 431: "request headers over PDEANIM_MAX_HEADER_BYTES"}
-ANY_ROUTE = (413, 431)  # the request guard may answer these on any route (headers; body over the JSON limit)
+# the request guard may answer 413/431 on any route (headers; body over the JSON limit); every /v1 route reads
+# the database (the API key at least), so each may answer 503 while the database is unreachable
+ANY_ROUTE = (413, 431, 503)
 
 
 def responses(*statuses: int) -> dict[int | str, dict]:

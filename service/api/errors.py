@@ -78,6 +78,17 @@ def _input(_: Request, exc: InputError) -> JSONResponse:
     return JSONResponse(error_body(exc.code, str(exc)), int(getattr(exc, "status", 422)))
 
 
+RETRY_AFTER_SECONDS = 5
+
+
+def _unavailable(_: Request, exc: Exception) -> JSONResponse:
+    """The database cannot be reached or stayed locked: 503 with Retry-After, not a 500 (nothing is wrong with
+    the request; the same request later may succeed)."""
+    log.warning("database unavailable: %s", str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__)
+    return JSONResponse(error_body("unavailable", "the database is unavailable; retry later"), 503,
+                        headers={"Retry-After": str(RETRY_AFTER_SECONDS)})
+
+
 def _unexpected(_: Request, exc: Exception) -> JSONResponse:
     log.exception("unhandled error", exc_info=exc)
     return JSONResponse(error_body("internal", f"internal error ({type(exc).__name__})"), 500)
@@ -88,4 +99,8 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(StarletteHTTPException, _http)
     app.add_exception_handler(RequestValidationError, _validation)
     app.add_exception_handler(InputError, _input)
+    from sqlalchemy.exc import InterfaceError, OperationalError
+
+    app.add_exception_handler(OperationalError, _unavailable)
+    app.add_exception_handler(InterfaceError, _unavailable)
     app.add_exception_handler(Exception, _unexpected)

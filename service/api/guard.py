@@ -19,15 +19,16 @@ Scope = dict[str, Any]
 
 async def _send_error(send, status: int, code: str, message: str) -> None:  # noqa: ANN001
     body = json.dumps(error_body(code, message)).encode()
-    await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    await send({"type": "http.response.start", "status": status, "headers": headers})
     await send({"type": "http.response.body", "body": body})
 
 
 class RequestGuard:
     """Pure ASGI middleware (no per-request task or body copy): limits, last-resort errors, access log."""
 
-    def __init__(self, app, max_header_bytes: int, max_json_bytes: int, log_access: bool = True):  # noqa: ANN001
+    def __init__(self, app, max_header_bytes: int, max_json_bytes: int,  # noqa: ANN001
+                 log_access: bool = True):
         self.app, self.max_header_bytes, self.max_json_bytes = app, max_header_bytes, max_json_bytes
         self.log_access = log_access
 
@@ -82,8 +83,9 @@ class RequestGuard:
         return any(k == b"content-type" and v[:19].lower() == b"multipart/form-data" for k, v in headers)
 
     def _counted(self, scope: Scope, receive):  # noqa: ANN001, ANN205
-        """``receive`` that raises a 413 ApiError once a non-multipart body passes the JSON limit (an HTTP error,
-        so the framework's body reader passes it on to the error handlers instead of calling it a 400)."""
+        """``receive`` that raises a 413 ApiError once a non-multipart body passes the JSON limit (an HTTP
+        error, so the framework's body reader passes it on to the error handlers instead of calling it a
+        400)."""
         if self._is_multipart(scope["headers"]) or scope["method"] in ("GET", "HEAD", "OPTIONS"):
             return receive
         seen = [0]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, Field
 
 
 class ErrorBody(BaseModel):
@@ -54,31 +54,6 @@ class PosesOut(BaseModel):
     animation: dict[str, Any] | None = Field(None, description='glTF uploads: the animation sampled, '
                                              '{"index": 0, "name": "Walk"}')
     created_at: float
-
-
-class JobRequest(BaseModel):
-    """A job. ``simulate``: mesh_id + params (scene parameters), optionally then_fit + fit (fit options);
-    ``fit``: poses_id (or mesh_id: its latest poses) + params (fit options); ``cyclic``: mesh_id + params
-    (cyclic options); ``export``: clip_id + params (fps, quantize, compress, position_bits, normals), the
-    animation GLB built by a worker (download it from ``result.export_url``). Parameters may also be given
-    flat, next to ``kind`` (``{"kind": "fit", "mesh_id": ..., "segments": 4}``); they are merged into
-    ``params``."""
-
-    model_config = ConfigDict(extra="allow", json_schema_extra={"examples": [
-        {"kind": "simulate", "mesh_id": "mesh_...", "params": {"frames": 60}, "then_fit": True,
-         "fit": {"target_rel_rms": 0.002}},
-        {"kind": "fit", "poses_id": "poses_...", "params": {"segments": 4}},
-        {"kind": "cyclic", "mesh_id": "mesh_...", "params": {"mode": "eel"}},
-        {"kind": "fit", "mesh_id": "mesh_...", "target_rel_rms": 0.003},
-        {"kind": "export", "clip_id": "clip_...", "fps": 60}]})
-
-    kind: Literal["simulate", "fit", "cyclic", "export"]
-    mesh_id: str | None = Field(None, description="required for simulate and cyclic; optional check for fit")
-    clip_id: str | None = Field(None, description="export: the clip to write as an animation GLB")
-    poses_id: str | None = Field(None, description="fit: the poses to fit (default: the mesh's latest poses)")
-    params: dict[str, Any] = Field(default_factory=dict, description="options of the job's kind")
-    then_fit: bool = Field(False, description="simulate only: fit the simulated poses in the same job")
-    fit: dict[str, Any] | None = Field(None, description="fit options when then_fit is true")
 
 
 class JobResult(BaseModel):

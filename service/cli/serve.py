@@ -28,7 +28,7 @@ def register(subparsers) -> None:  # noqa: ANN001
                    help="do not run migrations first (scale-out: a `serve --migrate-only` step runs them)")
     p.add_argument("--migrate-only", action="store_true", help="run the database migrations and exit")
     p.add_argument("--log-level", default="info",
-                   help="info (default) logs where it listens and one access line per request; warning: quiet")
+                   help="info (default): where it listens and one access line per request; warning: quiet")
     p.set_defaults(func=run)
 
 
@@ -52,7 +52,8 @@ def _stop(procs: list[subprocess.Popen]) -> None:
 
 
 def log_config(level: str) -> dict:
-    """uvicorn's logging config plus the pdeanim loggers (access lines, errors) on stderr, in every process."""
+    """uvicorn's logging config plus the pdeanim loggers (access lines, errors) on stderr, in every
+    process."""
     from copy import deepcopy
 
     from uvicorn.config import LOGGING_CONFIG
@@ -79,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
         print("pdeanim serve: database is at the newest schema")
         return 0
     print(f"pdeanim serve: listening on http://{args.host}:{args.port} (data {settings.resolved_data_dir()}, "
-          f"{args.workers} HTTP worker(s), {max(args.with_workers, 0)} job worker(s))", file=sys.stderr, flush=True)
+          f"{args.workers} HTTP worker(s), {max(args.with_workers, 0)} job worker(s))", file=sys.stderr,
+          flush=True)
     workers = [subprocess.Popen(WORKER_CMD) for _ in range(max(args.with_workers, 0))]
     # uvicorn re-raises SIGTERM/SIGINT after its graceful shutdown; with these handlers in place the
     # re-raised signal lands here instead of killing the process, so the workers are stopped and we exit 0.

@@ -23,8 +23,8 @@ def test_dependencies_are_compatible_ranges():
 
 
 def test_lock_files_cover_pyproject():
-    proc = subprocess.run([sys.executable, str(ROOT / "script" / "lockfile.py"), "check"], capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run([sys.executable, str(ROOT / "script" / "lockfile.py"), "check"],
+                          capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     runtime = (ROOT / "requirements.lock").read_text()
     assert "numpy==" in runtime and "pytest==" not in runtime  # the image gets no test tools

@@ -1,5 +1,5 @@
-"""Audit defect 4: non-finite metrics never reach JSON. A clip whose KG error is undefined (every vertex at one
-point, so the KG denominator is 0) reports it as null, and containers refuse NaN/inf in their headers."""
+"""Audit defect 4: non-finite metrics never reach JSON. A clip whose KG error is undefined (every vertex at
+one point, so the KG denominator is 0) reports it as null, and containers refuse NaN/inf in their headers."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Audit defects 1, 3 and 8 (complex poses): hostile .npz poses are refused with a clear InputError, from their
-npy headers alone (bounded memory), never with a MemoryError, NotImplementedError or RuntimeError."""
+"""Audit defects 1, 3 and 8 (complex poses): hostile .npz poses are refused with a clear InputError, from
+their npy headers alone (bounded memory), never with a MemoryError, NotImplementedError or RuntimeError."""
 
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ def zeros_bomb(shape: tuple[int, ...], dtype: str = "<f4") -> bytes:
     header = io.BytesIO()
     np.lib.format.write_array_header_1_0(header, {"descr": dtype, "fortran_order": False, "shape": shape})
     out = io.BytesIO()
-    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as zf, zf.open("vertices.npy", "w", force_zip64=True) as m:
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as zf, \
+            zf.open("vertices.npy", "w", force_zip64=True) as m:
         m.write(header.getvalue())
         chunk = bytes(1 << 22)
         left = int(np.prod(shape)) * np.dtype(dtype).itemsize
@@ -49,7 +50,8 @@ def declared_only(shape: tuple[int, ...]) -> bytes:
 def patch_local_and_central(blob: bytes, offset_in_header: int, fmt: str, value: int) -> bytes:
     """Overwrite a field of every local (PK\\3\\4) and central (PK\\1\\2) zip header."""
     data = bytearray(blob)
-    for sig, extra in ((b"PK\x03\x04", 0), (b"PK\x01\x02", 2)):  # central headers have 'version made by' first
+    # central headers have 'version made by' first, so their fields sit 2 bytes later
+    for sig, extra in ((b"PK\x03\x04", 0), (b"PK\x01\x02", 2)):
         pos = data.find(sig)
         while pos >= 0:
             struct.pack_into(fmt, data, pos + offset_in_header + extra, value)

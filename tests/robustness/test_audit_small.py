@@ -15,9 +15,8 @@ from pdeanim.mesh.io import load_mesh
 def cyclic_clip(data_dir):
     from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
 
-    parts = make_cyclic_clip(load_mesh(data_dir / "fish_eel.obj"),
-                             CyclicOptions.from_dict({"mode": "eel", "frames": 12, "n_curves": 21, "points": 24,
-                                                      "modes": 4}))
+    options = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
+    parts = make_cyclic_clip(load_mesh(data_dir / "fish_eel.obj"), CyclicOptions.from_dict(options))
     return load_clip(parts.topology, parts.coefficients)
 
 
@@ -70,8 +69,8 @@ def test_out_into_missing_directory_is_checked_first(tmp_path, capsys, argv):
 
 
 def test_demo_mesh_ships_in_the_wheel(tmp_path):
-    """`pdeanim demo` needs no checkout: its sample mesh (with its license line) is package data, and the demo's
-    default points at the installed copy."""
+    """`pdeanim demo` needs no checkout: its sample mesh (with its license line) is package data, and the
+    demo's default points at the installed copy."""
     import subprocess
     import sys
     import zipfile

@@ -1,6 +1,6 @@
-"""Audit defect 7: scratch left by killed processes is removed. A SIGKILLed upload's temp file goes when the API
-starts again; a killed attempt's work directory goes right after the attempt; a SIGKILLed worker's goes when a
-worker starts again. Real processes, real signals."""
+"""Audit defect 7: scratch left by killed processes is removed. A SIGKILLed upload's temp file goes when the
+API starts again; a killed attempt's work directory goes right after the attempt; a SIGKILLed worker's goes
+when a worker starts again. Real processes, real signals."""
 
 from __future__ import annotations
 
@@ -92,7 +92,8 @@ def test_killed_attempt_and_worker_leave_no_work_dirs(svc, tmp_path, data_dir):
     worker = svc.start_worker()
     tmp = tmp_path / "data" / "tmp"
     with client(svc, make_key(svc.backend, "t")) as api:
-        mesh = api.post("/v1/meshes", files={"file": ("spot.obj", (data_dir / "spot.obj").read_bytes())}).json()
+        spot = (data_dir / "spot.obj").read_bytes()
+        mesh = api.post("/v1/meshes", files={"file": ("spot.obj", spot)}).json()
         job = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
                                          "params": {"frames": 2000, "target_tets": 2000}}).json()
 
@@ -101,7 +102,8 @@ def test_killed_attempt_and_worker_leave_no_work_dirs(svc, tmp_path, data_dir):
 
         first = wait_for(work_dirs, what="the first attempt's work directory")
         wait_for(lambda: api.get(f"/v1/jobs/{job['id']}").json()["state"] == "running", what="running")
-        # the attempt's process runs below the worker's forkserver: kill it (and what it started), not the worker
+        # the attempt's process runs below the worker's forkserver: kill it (and what it started), not
+        # the worker
         def attempt_limits() -> dict[int, int]:
             procs = set(descendants(worker.pid)) - set(descendants(worker.pid, depth=1))
             limits = {pid: address_space_limit(pid) for pid in procs}
@@ -120,6 +122,6 @@ def test_killed_attempt_and_worker_leave_no_work_dirs(svc, tmp_path, data_dir):
         for pid in [worker.pid, *below]:
             os.kill(pid, signal.SIGKILL)
         worker.wait(30)
-        assert second & work_dirs(), "the killed worker left no work directory: the test does not reproduce it"
+        assert second & work_dirs(), "the killed worker left no work directory: not reproduced"
         svc.start_worker()
         wait_for(lambda: not (second & work_dirs()), what="the dead worker's work directory removed at start")

@@ -50,8 +50,10 @@ class Raw:
         self.key = key
         self.sock = None
 
-    def request(self, method: str, path: str, body: bytes = b"", headers: dict | None = None) -> tuple[int, dict]:
-        self.conn.request(method, path, body=body, headers={"Authorization": f"Bearer {self.key}", **(headers or {})})
+    def request(self, method: str, path: str, body: bytes = b"",
+                headers: dict | None = None) -> tuple[int, dict]:
+        auth = {"Authorization": f"Bearer {self.key}"}
+        self.conn.request(method, path, body=body, headers={**auth, **(headers or {})})
         if self.sock is None:
             self.sock = self.conn.sock
         assert self.conn.sock is self.sock, "the server closed the keep-alive connection"
@@ -62,12 +64,14 @@ class Raw:
 
     def upload(self, path: str, filename: bytes, data: bytes, extra: dict[bytes, bytes] | None = None):
         boundary = uuid.uuid4().hex.encode()
-        parts = [b"--" + boundary + b"\r\nContent-Disposition: form-data; name=\"" + name + b"\"\r\n\r\n" + value
-                 + b"\r\n" for name, value in (extra or {}).items()]
-        parts.append(b"--" + boundary + b"\r\nContent-Disposition: form-data; name=\"file\"; filename=\"" + filename
+        disposition = b"\r\nContent-Disposition: form-data; name=\""
+        parts = [b"--" + boundary + disposition + name + b"\"\r\n\r\n" + value + b"\r\n"
+                 for name, value in (extra or {}).items()]
+        parts.append(b"--" + boundary + disposition + b"file\"; filename=\"" + filename
                      + b"\"\r\nContent-Type: application/octet-stream\r\n\r\n" + data + b"\r\n")
         body = b"".join(parts) + b"--" + boundary + b"--\r\n"
-        return self.request("POST", path, body, {"Content-Type": "multipart/form-data; boundary=" + boundary.decode()})
+        ctype = "multipart/form-data; boundary=" + boundary.decode()
+        return self.request("POST", path, body, {"Content-Type": ctype})
 
     def close(self) -> None:
         self.conn.close()
@@ -122,8 +126,8 @@ def test_poses_reproducers_answer_4xx(raw):
 
 
 def test_json_body_and_header_limits(api):
-    """Defect 5: a job body over PDEANIM_MAX_JSON_BYTES (declared or chunked) is a 413 before it is parsed, and
-    headers over PDEANIM_MAX_HEADER_BYTES are a 431."""
+    """Defect 5: a job body over PDEANIM_MAX_JSON_BYTES (declared or chunked) is a 413 before it is parsed,
+    and headers over PDEANIM_MAX_HEADER_BYTES are a 431."""
     boxes = [{"box": [0, 0, 0, 1, 1, 1]}] * 100_000
     body = json.dumps({"kind": "simulate", "mesh_id": "mesh_x", "params": {"pins": boxes}}).encode()
     r = api.post("/v1/jobs", content=body, headers={"Content-Type": "application/json"})
@@ -166,12 +170,14 @@ def test_work_limits_at_submission(api):
     r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh_id,
                                    "params": {"frames": 2000, "substeps": 400, "iterations": 50}})
     assert error_of(r.status_code, r.json(), 413) == "limit_exceeded"
-    assert "simulation work" in r.json()["error"]["message"] and "lower frames" in r.json()["error"]["message"]
+    message = r.json()["error"]["message"]
+    assert "simulation work" in message and "lower frames" in message
     r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh_id,
                                    "params": {"pins": [{"box": [0, 0, 0, 1, 1, 1]}] * 300}})
     assert error_of(r.status_code, r.json(), 422) == "invalid_parameter"
     assert "at most 256 pins" in r.json()["error"]["message"]
-    r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh_id, "params": {"frames": 3, "seed": 7}})
+    old_body = {"kind": "simulate", "mesh_id": mesh_id, "params": {"frames": 3, "seed": 7}}
+    r = api.post("/v1/jobs", json=old_body)
     assert r.status_code == 202, r.text
     assert "seed" not in r.json()["params"]["params"]
 
@@ -185,7 +191,8 @@ def test_upload_waiting_on_the_database_does_not_stall_other_requests(services, 
     from pathlib import Path
 
     mesh_id = api.post("/v1/meshes", files={"file": ("t.obj", TETRA)}).json()["id"]
-    db = sqlite3.connect(Path(services.backend.env["PDEANIM_DATA_DIR"]) / "pdeanim.sqlite3", isolation_level=None)
+    path = Path(services.backend.env["PDEANIM_DATA_DIR"]) / "pdeanim.sqlite3"
+    db = sqlite3.connect(path, isolation_level=None)
     db.execute("BEGIN IMMEDIATE")  # the write lock: the upload's INSERT waits (busy timeout 30 s)
     results: list = []
     uploader = threading.Thread(target=lambda: results.append(

@@ -321,9 +321,11 @@ def test_cli_fit_takes_animation_by_name(morph, tmp_path):
     assert bad.returncode == 2 and "Walk" in bad.stderr, bad.stderr
 
 
-def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store, data_dir):
+def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store):
     """A clip stored before metrics were made finite (report with inf) lists with null (pydantic writes
     non-finite floats as null), not a 500."""
+    if store.engine.dialect.name != "sqlite":
+        pytest.skip("PostgreSQL's json type refuses Infinity: such rows exist on SQLite only")
     from service.store.models import ClipRecord, Mesh
 
     mesh = upload(api, "old.obj", OBJ + b"# old clip\n").json()
@@ -338,3 +340,25 @@ def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store,
     (item,) = r.json()["items"]
     assert item["errors"] == {"rel_rms": None, "kg": None} and item["sizes"] == {"a": 1}
     assert api.delete("/v1/clips/clip_old_inf").status_code == 200
+
+
+def test_database_outage_answers_503_with_retry_after(backend, tmp_path):
+    """PostgreSQL's database dropped under a running server: every route answers 503 in the error shape
+    (the documented status, with Retry-After), never a 500."""
+    if backend.name != "postgres":
+        pytest.skip("the outage is injected by dropping the PostgreSQL database")
+    from .conftest import _admin
+
+    svc = Services(backend, tmp_path)
+    svc.start_server()
+    try:
+        with client(svc, make_key(backend, "outage")) as api:
+            assert api.get("/v1/meshes").status_code == 200  # the key is now verified (and cached)
+            name = backend.env["PDEANIM_DATABASE_URL"].rsplit("/", 1)[1]
+            _admin(f"DROP DATABASE {name} WITH (FORCE)")
+            for r in (api.get("/v1/meshes"), api.get("/v1/jobs/job_x"), api.post("/v1/jobs/job_x/cancel")):
+                assert r.status_code == 503, r.text
+                assert r.json()["error"]["code"] == "unavailable" and r.headers["retry-after"] == "5"
+            assert httpx.get(svc.url + "/healthz", timeout=30).status_code == 503
+    finally:
+        svc.stop()

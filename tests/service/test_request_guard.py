@@ -44,7 +44,8 @@ def test_unexpected_error_keeps_the_connection(server):
     sock = conn.sock
     r = conn.getresponse()
     body = json.loads(r.read())
-    assert r.status == 500 and body == {"error": {"code": "internal", "message": "internal error (RuntimeError)"}}
+    assert r.status == 500
+    assert body == {"error": {"code": "internal", "message": "internal error (RuntimeError)"}}
     assert not r.will_close
     conn.request("GET", "/openapi.json")
     assert conn.sock is sock, "the server closed the connection after the 500"

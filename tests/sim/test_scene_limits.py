@@ -14,7 +14,8 @@ def test_work_bound_is_an_upper_bound_of_the_simulated_work():
     scene = SceneParams(frames=1000, max_substeps=400, target_tets=12_000)
     scene.check_work()
     assert all(scene.work(s) <= scene.work() for s in (1, 57, 400))
-    assert SceneParams(frames=2000, target_tets=3000).work() <= MAX_TET_SWEEPS  # the defaults fit at max frames
+    # the defaults fit at the service's largest frame count
+    assert SceneParams(frames=2000, target_tets=3000).work() <= MAX_TET_SWEEPS
 
 
 def test_work_over_budget_names_what_to_lower():

@@ -14,8 +14,8 @@ router = APIRouter(tags=["health"])
 
 
 @router.get("/healthz", operation_id="healthz", response_model=Health,
-            responses={503: {"model": ErrorOut, "description": "database or blob store unreachable"},
-                       **responses()})
+            responses={**responses(),
+                       503: {"model": ErrorOut, "description": "database or blob store unreachable"}})
 def healthz(store: StoreDep) -> JSONResponse:
     """200 when the database (with the jobs table) and the blob store answer, else 503 in the one error shape
     with each failing part's reason in the message."""

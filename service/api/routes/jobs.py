@@ -59,6 +59,18 @@ def _inputs(req: SimulateJob | FitJob | CyclicJob | ExportJob, tenant: str,
     return owned(session, Mesh, req.mesh_id, tenant, "mesh").id, None
 
 
+def _check_fit_memory(session, spec: dict, mesh_id: str, poses_id: str | None,  # noqa: ANN001
+                      limit: int) -> None:
+    """413 now when the fit this job will run cannot fit the job memory limit (the worker checks it again)."""
+    from pdeanim.model.budget import check_fit_memory
+
+    if poses_id is not None:
+        poses = session.get(PosesRecord, poses_id)
+        check_fit_memory(poses.n_frames, poses.n_vertices, limit)
+    elif spec.get("then_fit"):
+        check_fit_memory(int(spec["params"]["frames"]), session.get(Mesh, mesh_id).n_vertices, limit)
+
+
 def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN001
     """The newest poses of ``mesh`` (uploaded or simulated) for a fit job that names only the mesh."""
     poses = session.scalars(select(PosesRecord).where(PosesRecord.mesh_id == mesh.id, PosesRecord.tenant_id == tenant)
@@ -91,6 +103,7 @@ def create_job(req: JobBody, tenant: TenantDep, session: SessionDep, store: Stor
         from pdeanim.errors import LimitError
 
         raise LimitError("frames", frames, store.settings.max_frames, "PDEANIM_MAX_FRAMES")
+    _check_fit_memory(session, spec, mesh_id, poses_id, store.settings.job_memory_limit())
     # end the read transaction first: on SQLite (WAL) a read transaction that later writes fails at once with
     # "database is locked" when a worker committed in between; a transaction that starts by writing waits
     session.commit()
