@@ -4,7 +4,9 @@ Meshes: trimesh icospheres subdivided 6 and 7 times (40,962 and 163,842 vertices
 a scan. Each mesh is decimated to the tet budget's surface (``pdeanim.sim.tetra.surface_budget``) and handed
 to fTetWild in a child process, as ``pdeanim simulate`` and the worker do. Prints the median of several runs
 and the load average (the machine may be shared).
-Run: .venv/bin/python benchmarks/tetrahedralize_large.py [--runs N]
+``--before`` measures the former pipeline for comparison in the same conditions: vertex clustering (no
+quadric decimation) to a fixed 20,000-face budget.
+Run: .venv/bin/python benchmarks/tetrahedralize_large.py [--runs N] [--before]
 """
 
 from __future__ import annotations
@@ -18,7 +20,19 @@ import numpy as np
 import trimesh
 
 from pdeanim.mesh.io import SurfaceMesh
+from pdeanim.sim import decimate as decimation
+from pdeanim.sim import tetra
 from pdeanim.sim.tetra import TetParams, surface_budget, tetrahedralize
+
+
+def former_surface(mesh: SurfaceMesh, params: TetParams) -> tuple[np.ndarray, np.ndarray]:
+    """The surface the former pipeline handed to fTetWild: clustered to at most max_surface_faces."""
+    quadric = decimation.quadric_decimate
+    decimation.quadric_decimate = lambda *args: None
+    try:
+        return decimation.decimate(mesh.vertices, mesh.faces, params.max_surface_faces)
+    finally:
+        decimation.quadric_decimate = quadric
 
 
 def noisy_sphere(subdivisions: int) -> SurfaceMesh:
@@ -46,4 +60,7 @@ def main(runs: int) -> None:
 
 
 if __name__ == "__main__":
+    if "--before" in sys.argv:
+        tetra.tet_surface = former_surface
+        print("FORMER pipeline (clustering to 20,000 faces)")
     main(int(sys.argv[sys.argv.index("--runs") + 1]) if "--runs" in sys.argv else 3)
