@@ -2,13 +2,14 @@
 // the per-curve table (time pairs, rigid rotations) the shader reads, on dynamic-PDE clips with thousands of
 // curves. Median of 3 runs of 2000 pseudo-random t (each run's median per call), after a JIT warm-up; also
 // the cost when t moves within a frame but maps to the same segment and tau (a paused or clamped clip).
-// Run: node benchmarks/js_table_speed.mjs CLIP [CLIP...]   (CLIP files written by the Python library)
+// Run: node benchmarks/js_table_speed.mjs CLIP [CLIP...]   (CLIP: a .clip file written by the Python library, or
+// TOPOLOGY,COEFFICIENTS: the two part files, e.g. the service's blobs)
 
 import { readFileSync } from 'node:fs';
 import { cpus, loadavg } from 'node:os';
 import { basename } from 'node:path';
 import { performance } from 'node:perf_hooks';
-import { decodeClipFile } from '../clients/js/src/index.js';
+import { decodeClip, decodeClipFile } from '../clients/js/src/index.js';
 import { gpuLayout, timeUniforms } from '../clients/js/src/gpu.js';
 
 const load = () =>
@@ -26,7 +27,11 @@ if (process.argv.length < 3) {
 }
 console.log(`node ${process.version}, ${cpus().length} CPUs, load average ${load()} (shared machine)`);
 for (const path of process.argv.slice(2)) {
-  const clip = decodeClipFile(readFileSync(path));
+  const parts = path.split(',');
+  const clip =
+    parts.length === 2
+      ? decodeClip(readFileSync(parts[0]), readFileSync(parts[1]))
+      : decodeClipFile(readFileSync(path));
   if (clip.kind !== 'dynamic-pde') continue;
   const layout = gpuLayout(clip, { mode: 'coefficients' }); // the table does not depend on the mode
   const ts = Array.from({ length: 2000 }, () => rand() * 1.2 - 0.1);
@@ -48,7 +53,7 @@ for (const path of process.argv.slice(2)) {
     same.push(performance.now() - a);
   }
   console.log(
-    `${basename(path)}: ${clip.nVertices} vertices, ${clip.nCurves} curves, ${clip.nSegments} segments, ` +
+    `${parts.map((x) => basename(x).slice(0, 12)).join(',')}: ${clip.nVertices} vertices, ${clip.nCurves} curves, ${clip.nSegments} segments, ` +
       `${clip.motion}${clip.looping ? ', looping' : ''}`,
   );
   const each = runs.map((x) => x.toFixed(4)).join(', ');
