@@ -158,9 +158,9 @@ export function rigidTimePair(tau, mu, out, o = 0) {
 
 /**
  * Segment index and local time of t on boundaries bounds (S+1,): looping clips wrap t into [0, 1),
- * others clamp it; returns [segment, tau, wrapped t].
+ * others clamp it; returns [segment, tau, wrapped t] (written into out when given: no allocation).
  */
-export function locate(bounds, t, looping) {
+export function locate(bounds, t, looping, out = [0, 0, 0]) {
   const tw = looping ? t - Math.floor(t) : Math.min(Math.max(t, 0), 1);
   const S = bounds.length - 1;
   let lo = 0;
@@ -174,5 +174,8 @@ export function locate(bounds, t, looping) {
   const t0 = bounds[seg];
   const t1 = bounds[seg + 1];
   const tau = Math.min(Math.max((tw - t0) / (t1 > t0 ? t1 - t0 : 1), 0), 1);
-  return [seg, tau, tw];
+  out[0] = seg;
+  out[1] = tau;
+  out[2] = tw;
+  return out;
 }

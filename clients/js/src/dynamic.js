@@ -219,6 +219,32 @@ export class DynamicEvaluator {
     for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = curveOf[v] * 3 + w;
     this.mu = new Float64Array(S * C * 3); // signed time constants
     for (let i = 0; i < this.mu.length; i++) this.mu[i] = (family[i] >= 2 ? -1 : 1) * m[i];
+    // per segment its distinct time constants (fitted clips have a few hundred at most, most items linear):
+    // muUnique[muStart[s]..muStart[s+1]) and per item the index muIndex into them, so a frame evaluates
+    // each distinct time pair once and gathers the C * 3 pairs from them
+    this.muIndex = new Int32Array(S * C * 3);
+    const unique = [];
+    this.muStart = new Int32Array(S + 1);
+    let widest = 1;
+    for (let s = 0; s < S; s++) {
+      const seen = new Map();
+      for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
+        let k = seen.get(this.mu[i]);
+        if (k === undefined) {
+          k = seen.size;
+          seen.set(this.mu[i], k);
+          unique.push(this.mu[i]);
+        }
+        this.muIndex[i] = k;
+      }
+      this.muStart[s + 1] = unique.length;
+      widest = Math.max(widest, seen.size);
+    }
+    this.muUnique = Float64Array.from(unique);
+    this.uPhi0 = new Float64Array(widest); // the distinct pairs of the current segment
+    this.uPhi1 = new Float64Array(widest);
+    this.loc = [0, 0, 0]; // segment, tau, wrapped t of the last locate()
+    this.rigidLoc = [0, 0, 0];
     this.base = vertexBase(clip);
     this.phi0 = new Float64Array(C * 3);
     this.phi1 = new Float64Array(C * 3);
@@ -237,18 +263,38 @@ export class DynamicEvaluator {
    */
   prepare(t) {
     if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
-    const clip = this.clip;
-    const [s, tau, tw] = locate(clip.segmentT, t, clip.looping);
-    const { phi0, phi1, pair } = this;
+    const s = this.locate(t)[0];
+    this.segmentState();
+    const { phi0, phi1, uPhi0, uPhi1, muIndex } = this;
     const n = phi0.length;
-    const mo = s * n;
-    for (let i = 0; i < n; i++) {
-      timePair(tau, this.mu[mo + i], pair);
-      phi0[i] = pair[0];
-      phi1[i] = pair[1];
+    for (let i = 0, j = s * n; i < n; i++, j++) {
+      const k = muIndex[j];
+      phi0[i] = uPhi0[k];
+      phi1[i] = uPhi1[k];
     }
-    if (clip.rigid) this._rigidAt(tw);
     return s;
+  }
+
+  /** Segment, local time and wrapped time of t into this.loc (no allocation); returns this.loc. */
+  locate(t) {
+    const clip = this.clip;
+    return locate(clip.segmentT, t, clip.looping, this.loc);
+  }
+
+  /**
+   * The state of this.loc that does not depend on the item: the distinct time pairs of the segment
+   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]) and, for rigid clips, rot and trans.
+   */
+  segmentState() {
+    const s = this.loc[0];
+    const tau = this.loc[1];
+    const { pair, muUnique, uPhi0, uPhi1 } = this;
+    for (let k = 0, j = this.muStart[s]; j < this.muStart[s + 1]; k++, j++) {
+      timePair(tau, muUnique[j], pair);
+      uPhi0[k] = pair[0];
+      uPhi1[k] = pair[1];
+    }
+    if (this.clip.rigid) this._rigidAt(this.loc[2]);
   }
 
   /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
@@ -288,7 +334,9 @@ export class DynamicEvaluator {
   _rigidAt(tw) {
     const rg = this.clip.rigid;
     const C = this.clip.nCurves;
-    const [s, tau] = locate(rg.segmentT, tw, false);
+    const rl = locate(rg.segmentT, tw, false, this.rigidLoc);
+    const s = rl[0];
+    const tau = rl[1];
     const pr = this.pair;
     const pt = this.pair2;
     for (let c = 0; c < C; c++) {

@@ -474,3 +474,52 @@ test('with a renderer the clip is evaluated in a pass before drawing, once per t
     false,
   );
 });
+
+test('the per-curve table equals every item time pair and is rewritten only when the state moves', () => {
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde')) {
+    const clip = loadCase(c);
+    const ev = createEvaluator(clip);
+    const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
+    const ref = createEvaluator(clip);
+    const C = clip.nCurves;
+    const K = layout.curveTexels * 4;
+    const d = layout.textures.curve.data;
+    let prev = null;
+    for (const t of [...c.t, ...c.t.map((x) => x + 1)]) {
+      const u = timeUniforms(layout, t);
+      ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
+      const s = ref.prepare(t); // the per-item evaluation (float64), rounded to float32 like the texture
+      assert.equal(u.seg, s);
+      for (let cw = 0; cw < C * 3; cw++) {
+        const o = Math.floor(cw / 3) * K + (cw % 3);
+        assert.equal(d[o], Math.fround(ref.phi0[cw]), `${c.name} t = ${t}`);
+        assert.equal(d[o + 4], Math.fround(ref.phi1[cw]), `${c.name} t = ${t}`);
+      }
+      if (layout.rigid) {
+        for (let k = 0; k < C; k++) {
+          for (let i = 0; i < 3; i++) {
+            assert.equal(d[k * K + 8 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
+            assert.equal(d[k * K + 11 + i * 4], Math.fround(ref.trans[k * 3 + i]));
+          }
+        }
+      }
+      const loc = ref.locate(t);
+      const key = `${loc[0]} ${loc[1]} ${layout.rigid ? loc[2] : ''}`;
+      assert.equal(u.changed, key !== prev, `${c.name} t = ${t}`);
+      prev = key;
+    }
+  }
+});
+
+test('a t with the same segment and local time uploads nothing', () => {
+  const c = man.cases.find((x) => x.name === 'fit-displacement-chord');
+  const clip = loadCase(c);
+  const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
+  player.setTime(1.5);
+  const version = player.textures.curve.version;
+  player.setTime(2.5); // past the end of a clip that does not loop: clamped to the same state
+  assert.equal(player.textures.curve.version, version);
+  player.setTime(0.5);
+  assert.ok(player.textures.curve.version > version);
+  player.detach();
+});

@@ -45,6 +45,9 @@ export interface TimeUniforms {
   /** sin and cos of the swim phase (cyclic clips). */
   sw: number;
   cw: number;
+  /** Whether the curve table was rewritten (false when t maps to the same segment and local time as the
+   * previous call): upload it only then. */
+  changed: boolean;
 }
 
 export interface MeshAttributes {
@@ -59,7 +62,7 @@ export declare function gpuLayout(
   options?: { width?: number; mode?: 'auto' | 'fields' | 'coefficients'; fieldsBudget?: number;
     evaluator?: Evaluator | null },
 ): GpuLayout;
-/** The uniforms at t; also rewrites layout.textures.curve.data (upload it afterwards). */
+/** The uniforms at t; also rewrites layout.textures.curve.data when it changes (upload it then). */
 export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
 export declare function meshAttributes(mesh: {
   vertexMap: ArrayLike<number>;

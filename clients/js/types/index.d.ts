@@ -187,11 +187,12 @@ export declare function rigidTimePair(
   out: Float64Array | number[],
   o?: number,
 ): typeof out;
-/** [segment, tau, wrapped t] of t on the boundaries. */
+/** [segment, tau, wrapped t] of t on the boundaries (written into out when given). */
 export declare function locate(
   bounds: ArrayLike<number>,
   t: number,
   looping: boolean,
+  out?: number[],
 ): [number, number, number];
 
 /** Area-weighted vertex normals. */

@@ -115,36 +115,56 @@ function cyclicLayout(clip, width) {
 
 /**
  * The state at t: returns the uniforms {seg, sw, cw} (segment of the dynamic clip; sin and cos of the swim
- * phase of a cyclic one) and rewrites the per-curve table layout.textures.curve.data (dynamic clips; upload
- * it after this call).
+ * phase of a cyclic one) and `changed`: whether the per-curve table layout.textures.curve.data was rewritten
+ * (dynamic clips; upload it only then). The table is left as it is when t maps to the same segment, local
+ * time (and rigid time) as at the previous call; otherwise each distinct time constant of the segment is
+ * evaluated once (fitted clips have a few hundred, most items are linear) and the C x 3 pairs are gathered.
  */
 export function timeUniforms(layout, t) {
   if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
   const clip = layout.clip;
   if (clip.kind === 'cyclic-spine') {
     const wt = 2 * Math.PI * clip.swim.frequency * (t * clip.period);
-    return { seg: 0, sw: Math.sin(wt), cw: Math.cos(wt) };
+    return { seg: 0, sw: Math.sin(wt), cw: Math.cos(wt), changed: true };
   }
   const ev = layout.evaluator;
-  const seg = ev.prepare(t);
+  const loc = ev.locate(t);
+  const seg = loc[0];
+  const last = layout.tableAt ?? (layout.tableAt = [-1, NaN, NaN]);
+  if (seg === last[0] && loc[1] === last[1] && (!layout.rigid || loc[2] === last[2])) {
+    return { seg, sw: 0, cw: 0, changed: false };
+  }
+  last[0] = seg;
+  last[1] = loc[1];
+  last[2] = loc[2];
+  ev.segmentState();
+  const { uPhi0, uPhi1, muIndex } = ev;
   const d = layout.textures.curve.data;
   const K = layout.curveTexels * 4;
-  for (let c = 0; c < layout.nCurves; c++) {
-    const o = c * K;
-    for (let w = 0; w < 3; w++) {
-      d[o + w] = ev.phi0[c * 3 + w];
-      d[o + 4 + w] = ev.phi1[c * 3 + w];
-    }
-    if (layout.rigid) {
+  const C = layout.nCurves;
+  for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K, j += 3) {
+    const kx = muIndex[j];
+    const ky = muIndex[j + 1];
+    const kz = muIndex[j + 2];
+    d[o] = uPhi0[kx];
+    d[o + 1] = uPhi0[ky];
+    d[o + 2] = uPhi0[kz];
+    d[o + 4] = uPhi1[kx];
+    d[o + 5] = uPhi1[ky];
+    d[o + 6] = uPhi1[kz];
+  }
+  if (layout.rigid) {
+    const { rot, trans } = ev;
+    for (let c = 0, o = 0; c < C; c++, o += K) {
       for (let i = 0; i < 3; i++) {
-        d[o + 8 + i * 4] = ev.rot[c * 9 + i * 3];
-        d[o + 9 + i * 4] = ev.rot[c * 9 + i * 3 + 1];
-        d[o + 10 + i * 4] = ev.rot[c * 9 + i * 3 + 2];
-        d[o + 11 + i * 4] = ev.trans[c * 3 + i];
+        d[o + 8 + i * 4] = rot[c * 9 + i * 3];
+        d[o + 9 + i * 4] = rot[c * 9 + i * 3 + 1];
+        d[o + 10 + i * 4] = rot[c * 9 + i * 3 + 2];
+        d[o + 11 + i * 4] = trans[c * 3 + i];
       }
     }
   }
-  return { seg, sw: 0, cw: 0 };
+  return { seg, sw: 0, cw: 0, changed: true };
 }
 
 /**

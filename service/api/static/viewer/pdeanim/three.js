@@ -142,6 +142,7 @@ export function clipResources(clip, options = {}) {
   let last = null;
   let pass = null;
   let passT = null;
+  let version = 0; // bumped whenever the clip's state (table or uniforms) changes: the pass reruns then
   const res = {
     clip,
     layout,
@@ -149,12 +150,18 @@ export function clipResources(clip, options = {}) {
     gpuReason,
     evaluator,
     owned: 0,
-    /** The uniforms at t, and the per-curve table rewritten and marked for upload (once per distinct t). */
+    /**
+     * The uniforms at t, and the per-curve table rewritten and marked for upload (once per distinct t, and
+     * only when t moved to another segment or local time).
+     */
     frame(t) {
       if (t !== lastT) {
         last = timeUniforms(layout, t);
         lastT = t;
-        if (textures.curve) textures.curve.needsUpdate = true;
+        if (last.changed) {
+          version++;
+          if (textures.curve) textures.curve.needsUpdate = true;
+        }
         if (pass) {
           pass.uniforms.pdeSeg.value = last.seg;
           pass.uniforms.pdeSinWt.value = last.sw;
@@ -170,8 +177,8 @@ export function clipResources(clip, options = {}) {
     },
     /** Evaluate every clip vertex into the position texture, once per distinct t (nested render). */
     runPass(renderer) {
-      if (!pass || passT === lastT) return;
-      passT = lastT;
+      if (!pass || passT === version) return;
+      passT = version;
       const target = renderer.getRenderTarget();
       const xr = renderer.xr.enabled;
       renderer.xr.enabled = false;
