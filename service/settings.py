@@ -29,10 +29,11 @@ class Settings(BaseSettings):
     max_faces: int = Field(1_000_000, gt=0)
     max_frames: int = Field(2_000, gt=0)
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
-    frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0,
-                                   description="encoded frame GLBs kept per API process (LRU by (clip, t)); 0 = off")
-    key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long without "
-                                     "a database query (a revoked key stops working within it); 0 = always ask")
+    frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0, description="encoded frame and animation GLBs "
+                                   "kept per API process (LRU by (clip, t) and (clip, fps)); 0 = off")
+    key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long "
+                                     "without a database query (a revoked key stops working within it); "
+                                     "0 = always ask")
 
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
     max_attempts: int = Field(3, ge=1, description="attempts before a job fails for good")
@@ -44,8 +45,8 @@ class Settings(BaseSettings):
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
     job_nice: int = Field(10, ge=0, le=19, description="nice increment of a job's process (the API keeps "
                           "its latency while jobs run); 0 = same priority")
-    job_cpu_shares: int = Field(0, ge=0, description="cgroup v1 cpu.shares of the group `pdeanim-jobs` that job "
-                                "processes join where /sys/fs/cgroup/cpu is writable; 0 = no cgroup")
+    job_cpu_shares: int = Field(0, ge=0, description="cgroup v1 cpu.shares of the group `pdeanim-jobs` that "
+                                "job processes join where /sys/fs/cgroup/cpu is writable; 0 = no cgroup")
 
     def resolved_data_dir(self) -> Path:
         """The data directory as an absolute path (created on demand)."""

@@ -69,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(sig, lambda *_: None)
     try:
         uvicorn.run("service.api.app:app_from_environment", factory=True, host=args.host, port=args.port,
-                    workers=args.workers or default_http_workers(), log_level=args.log_level, access_log=False)
+                    workers=args.workers or default_http_workers(), log_level=args.log_level,
+                    access_log=False)
     finally:
         _stop(workers)
     return 0
