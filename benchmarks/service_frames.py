@@ -107,7 +107,8 @@ def swaying_poses(vertices: np.ndarray, faces: np.ndarray, seconds: float = SECO
 def fitted_clip(api: httpx.Client, n_vertices: int) -> dict:
     """Upload a mesh of about ``n_vertices`` and generated poses, fit them with a job; the clip's metadata."""
     vertices, faces = subdivided_spot(n_vertices)
-    mesh = check(api.post("/v1/meshes", files={"file": (f"spot_{n_vertices}.obj", obj_bytes(vertices, faces))}))
+    obj = obj_bytes(vertices, faces)
+    mesh = check(api.post("/v1/meshes", files={"file": (f"spot_{n_vertices}.obj", obj)}))
     poses = check(api.post(f"/v1/meshes/{mesh['id']}/poses",
                            files={"file": ("poses.npz", swaying_poses(vertices, faces))}))
     job = check(api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses["id"],
@@ -168,7 +169,8 @@ def wrk(url_path: str, key: str, grid: int, seconds: float, connections: int, sc
     r = json.loads(line.removeprefix("BENCH "))
     if r["errors"] or not r["requests"]:
         raise RuntimeError(f"wrk saw {r['errors']} errors / {r['requests']} requests on {url_path}:\n{out}")
-    return {"rps": r["requests"] / (r["us"] / 1e6), "p50_ms": r["p50_us"] / 1000, "p99_ms": r["p99_us"] / 1000}
+    return {"rps": r["requests"] / (r["us"] / 1e6), "p50_ms": r["p50_us"] / 1000,
+            "p99_ms": r["p99_us"] / 1000}
 
 
 class Services:
@@ -232,7 +234,8 @@ def busy_jobs(api: httpx.Client, poses_id: str, n: int = 10) -> list[str]:
     for i in range(n):
         if i % 2 == 0:
             body = {"kind": "simulate", "mesh_id": mesh_id, "then_fit": True,
-                    "params": {"frames": 400, "target_tets": 3000, "seed": i}, "fit": {"target_rel_rms": 0.001}}
+                    "params": {"frames": 400, "target_tets": 3000, "seed": i},
+                    "fit": {"target_rel_rms": 0.001}}
         else:
             body = {"kind": "fit", "poses_id": poses_id, "params": {"segments": 12 + i}}
         ids.append(check(api.post("/v1/jobs", json=body))["id"])
@@ -272,8 +275,10 @@ def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, 
             samples["project"].append(wrk(f"{services.url}/v1/clips/{clip['id']}/frame?t=", key, g,
                                           args.seconds, args.connections, script))
             loads.append(os.getloadavg()[0])
-        med = {who: {k: statistics.median(s[k] for s in runs) for k in runs[0]} for who, runs in samples.items()}
-        row = {"label": label, "t": mode, **{f"{who}_{k}": round(v, 2) for who, m in med.items() for k, v in m.items()},
+        med = {who: {k: statistics.median(s[k] for s in runs) for k in runs[0]}
+               for who, runs in samples.items()}
+        row = {"label": label, "t": mode,
+               **{f"{who}_{k}": round(v, 2) for who, m in med.items() for k, v in m.items()},
                "ratio": round(statistics.median(p["rps"] / b["rps"] for p, b in
                                                 zip(samples["project"], samples["bare"], strict=True)), 3),
                "load1": round(statistics.median(loads), 2), "rounds": args.rounds}
@@ -335,8 +340,8 @@ def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
 
 def table(rows: list[dict]) -> str:
     """The README table of the rows."""
-    out = ["| load | t per request | `pdeanim serve` requests/s | p50 | p99 | bare app requests/s | p50 | p99 "
-           "| ratio | load avg |", "|---|---|---|---|---|---|---|---|---|---|"]
+    out = ["| load | t per request | `pdeanim serve` requests/s | p50 | p99 | bare app requests/s | p50 "
+           "| p99 | ratio | load avg |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         out.append(f"| {r['label']} | {r['t']} | {r['project_rps']:.0f} | {r['project_p50_ms']:.1f} ms "
                    f"| {r['project_p99_ms']:.1f} ms | {r['bare_rps']:.0f} | {r['bare_p50_ms']:.1f} ms "
@@ -367,15 +372,16 @@ def main() -> int:
                 clip = fitted_clip(api, 20_000)
                 anim_clip = fitted_clip(api, 15_000)
                 body = len(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5}).content)
-                print(f"frame clip {clip['id']}: {clip['info']['n_vertices']} vertices, {clip['segments']} segments,"
-                      f" frame GLB {body:,} B", flush=True)
+                print(f"frame clip {clip['id']}: {clip['info']['n_vertices']} vertices, "
+                      f"{clip['segments']} segments, frame GLB {body:,} B", flush=True)
                 services.start_bare(body)
                 anim = animation_ms(api, anim_clip["id"])
                 print(f"animation GLB over HTTP, {anim_clip['info']['n_vertices']} vertices, {FPS} fps over "
                       f"{SECONDS_OF_CLIP:g} s: {anim}", flush=True)
-                print(f"in process, 20k-vertex frame and 15k-vertex animation: "
-                      f"{in_process_ms(Path(tmp), clip['id'], 'frame') | in_process_ms(Path(tmp), anim_clip['id'], 'animation')}"
-                      f" (load {os.getloadavg()[0]:.1f})", flush=True)
+                here = in_process_ms(Path(tmp), clip["id"], "frame")
+                here |= in_process_ms(Path(tmp), anim_clip["id"], "animation")
+                print(f"in process, 20k-vertex frame and 15k-vertex animation: {here} "
+                      f"(load {os.getloadavg()[0]:.1f})", flush=True)
                 rows += measure(services, key, clip, args, script, "idle (1 job worker idle)")
                 if not args.skip_busy:
                     services.add_worker()

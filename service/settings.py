@@ -45,10 +45,11 @@ class Settings(BaseSettings):
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
     cors_origins: str = Field("", description="comma-separated origins allowed by CORS (``*`` for any); "
                               "empty = CORS off")
-    frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0,
-                                   description="encoded frame GLBs kept per API process (LRU by (clip, t)); 0 = off")
-    key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long without "
-                                     "a database query (a revoked key stops working within it); 0 = always ask")
+    frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0, description="encoded frame and animation GLBs "
+                                   "kept per API process (LRU by (clip, t) and (clip, fps)); 0 = off")
+    key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long "
+                                     "without a database query (a revoked key stops working within it); "
+                                     "0 = always ask")
     max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
@@ -64,8 +65,8 @@ class Settings(BaseSettings):
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
     job_nice: int = Field(10, ge=0, le=19, description="nice increment of a job's process (the API keeps "
                           "its latency while jobs run); 0 = same priority")
-    job_cpu_shares: int = Field(0, ge=0, description="cgroup v1 cpu.shares of the group `pdeanim-jobs` that job "
-                                "processes join where /sys/fs/cgroup/cpu is writable; 0 = no cgroup")
+    job_cpu_shares: int = Field(0, ge=0, description="cgroup v1 cpu.shares of the group `pdeanim-jobs` that "
+                                "job processes join where /sys/fs/cgroup/cpu is writable; 0 = no cgroup")
 
     def cors_origin_list(self) -> list[str]:
         """The allowed CORS origins (scheme://host[:port], no trailing slash); empty when CORS is off."""

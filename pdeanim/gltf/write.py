@@ -133,7 +133,7 @@ class FrameGlb:
         out[12:20] = np.frombuffer(struct.pack("<II", len(js), CHUNK_JSON), np.uint8)
         out[20:start - 8] = np.frombuffer(js, np.uint8)
         out[start - 8:start] = np.frombuffer(struct.pack("<II", len(self._binary), CHUNK_BIN), np.uint8)
-        out[start + self._tail:] = np.frombuffer(self._binary, np.uint8, offset=self._tail)  # indices, padding
+        out[start + self._tail:] = np.frombuffer(self._binary, np.uint8, offset=self._tail)  # indices etc.
         block = 12 * self.n_vertices
         pos = start + self._offsets["POSITION"]
         out[pos:pos + block].view(np.float32).reshape(-1, 3)[:] = p

@@ -89,7 +89,8 @@ def revoke(services: Services, key: str) -> None:
     store = Store.open(services.backend.settings())
     try:
         with store.sessions() as session:
-            session.execute(update(ApiKey).where(ApiKey.key_hash == hash_key(key)).values(revoked_at=time.time()))
+            session.execute(update(ApiKey).where(ApiKey.key_hash == hash_key(key))
+                            .values(revoked_at=time.time()))
             session.commit()
     finally:
         store.close()

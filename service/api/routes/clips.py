@@ -123,7 +123,8 @@ def get_clip_topology(clip_id: str, request: Request, tenant: TenantDep, session
 @router.get("/v1/clips/{clip_id}/frame", operation_id="getClipFrame", response_class=Response,
             responses={**GLB_RESPONSE, **responses(304, 401, 404, 422)})
 async def get_frame(clip_id: str, request: Request, tenant: TenantDep,
-                    t: float = Query(..., description="normalised time in [0, 1] (any t if looping)")) -> Response:
+                    t: float = Query(..., description="normalised time in [0, 1] (any t if looping)"),
+                    ) -> Response:
     """One evaluated frame at ``t`` as a GLB."""
     # The hot path of the service (see the README's performance section for the measurements behind it):
     # ``async def`` with async dependencies, so a repeated frame (encoded-frame LRU) or a 304 costs no
