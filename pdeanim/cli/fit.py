@@ -1,12 +1,21 @@
-"""``pdeanim fit POSES --out CLIP``: fit a dynamic-PDE clip to poses (.npz or animated .glb/.gltf)."""
+"""``pdeanim fit POSES --out CLIP``: fit a dynamic-PDE clip to poses (.npz or animated .glb/.gltf).
+
+Exit codes: 0 the target was met (or none was set, or ``--best-effort``); 3 the target was not met: the best
+clip found is still written and stderr says what was achieved against what was asked (and why the search
+stopped, e.g. the segment cap); 2 bad input; 1 other failures.
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 from ..errors import ParameterError
+
+EXIT_TARGET_NOT_MET = 3
+PROGRESS_INTERVAL_S = 2.0
 
 
 def register(subparsers) -> None:  # noqa: ANN001
@@ -28,6 +37,9 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--loop", action="store_true", help="make the clip loop (last frame flows into the first)")
     p.add_argument("--fps", type=float, default=30.0, help="sampling rate for glTF input")
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
+    p.add_argument("--best-effort", action="store_true",
+                   help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument("--pictures", metavar="DIR",
                    help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
     p.set_defaults(func=run)
@@ -36,7 +48,7 @@ def register(subparsers) -> None:  # noqa: ANN001
 def run(args: argparse.Namespace) -> int:
     """Load, fit, write the clip, print a short summary."""
     from ..clip import write_clip_file
-    from ..model.fitclip import FitOptions, fit_poses
+    from ..model.fitclip import FitOptions, fit_poses, target_shortfall
     from ..poses import load_poses
 
     if not args.fps > 0:
@@ -44,16 +56,39 @@ def run(args: argparse.Namespace) -> int:
     options = FitOptions(target_rms=args.target_rms, target_rel_rms=args.target_rel_rms,
                          target_max=args.target_max, target_rel_max=args.target_rel_max, segments=args.segments,
                          param_mode=args.param, motion=args.motion, loop=args.loop,
-                         max_segments=args.max_segments)
+                         max_segments=args.max_segments, best_effort=args.best_effort)
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps)
-    parts = fit_poses(poses, options)
+    progress = None if args.quiet else stderr_progress(start)
+    if progress:
+        progress(0.0, f"fit {poses.n_frames} frames x {poses.n_vertices} vertices")
+    parts = fit_poses(poses, options, progress=progress)
     write_clip_file(args.out, parts)
     print(summary_text(parts.report, time.perf_counter() - start, args.out))
     if args.pictures:
         for path in write_pictures(poses, parts, args.pictures, Path(args.out).stem).values():
             print(f"picture -> {path}")
+    shortfall = target_shortfall(parts.report)
+    if shortfall:
+        print(f"pdeanim fit: {shortfall} (the best clip found was written to {args.out})", file=sys.stderr)
+        return 0 if args.best_effort else EXIT_TARGET_NOT_MET
     return 0
+
+
+def stderr_progress(start: float, interval: float = PROGRESS_INTERVAL_S):  # noqa: ANN201 - a Progress
+    """A progress callback printing "fit: 42% segments 12: rms ..." lines to stderr, at most one per
+    ``interval`` seconds (stage changes other than the segment search always print)."""
+    last = {"t": -1e9, "stage": ""}
+
+    def report(fraction: float, stage: str) -> None:
+        now = time.perf_counter()
+        kind = stage.split(" ", 1)[0]
+        if now - last["t"] < interval and kind == last["stage"] and fraction < 1.0:
+            return
+        last["t"], last["stage"] = now, kind
+        print(f"fit: {100 * fraction:3.0f}% {now - start:6.1f} s  {stage}", file=sys.stderr, flush=True)
+
+    return report
 
 
 def write_pictures(poses, parts, out_dir: str, name: str) -> dict:  # noqa: ANN001
