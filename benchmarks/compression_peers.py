@@ -612,9 +612,9 @@ def run_sequence(seq: Path, args) -> list[dict]:  # noqa: ANN001
     try:
         steps = [("pca", lambda: method_pca(X, faces)), ("keyframes", lambda: method_keyframes(X, faces)),
                  ("gltfpack", lambda: method_gltfpack(X, faces, work, args.fit_timeout)),
-                 ("dembones", lambda: method_dembones(name, X, faces, args.cache) if args.dembones else []),
                  ("pde", lambda: method_pde(name, src, X, faces, work, args)),
-                 ("heldout", lambda: method_heldout(X, faces, args.heldout_target))]
+                 ("heldout", lambda: method_heldout(X, faces, args.heldout_target)),
+                 ("dembones", lambda: method_dembones(name, X, faces, args.cache) if args.dembones else [])]
         for method, fn in steps:
             if method not in args.methods:
                 continue

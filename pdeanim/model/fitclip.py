@@ -136,35 +136,38 @@ def default_curves(rest: np.ndarray, faces: np.ndarray, curve_points: int = 10) 
 class _Problem:
     """Padded data of one fit."""
 
-    X: np.ndarray  # (F, V, 3) float64 source positions
+    X: np.ndarray  # (F, V, 3) float32 source positions (the poses' own array: no float64 copy is kept)
     rest: np.ndarray  # (V, 3) float64 (float32 values)
     idx: np.ndarray
     mask: np.ndarray
     u: np.ndarray  # (C, 3, N)
-    values: np.ndarray  # (F, V, 3) what the curves fit (displacement, positions or rigid residual)
-    Y: np.ndarray  # (F, K, N) the same values as padded items
+    Y: np.ndarray  # (F, K, N) float64 what the curves fit (displacement, positions or rigid residual) as items
     t: np.ndarray  # (F,) normalised times
     rigid: RigidTracks | None = None
     slots: np.ndarray | None = None  # (V,) slot c * N + n of every vertex in the padded curves
 
 
 def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
-    X = np.asarray(poses.vertices, np.float64)
+    X = np.asarray(poses.vertices, np.float32)  # float64 copies of all frames are made only transiently
     times = np.asarray(poses.times, np.float64)
     if len(X) == 1:  # a single frame: a static clip over a unit time span
         X, times = np.concatenate([X, X]), np.array([times[0], times[0] + 1.0])
-    rest = X[0].copy()
+    rest = X[0].astype(np.float64)
     idx, mask = curves.padded()
-    u = curve_parameters(X[:, idx] if options.param_mode == "paper" else rest[idx], mask, options.param_mode)
+    u = curve_parameters(X[:, idx].astype(np.float64) if options.param_mode == "paper" else rest[idx], mask,
+                         options.param_mode)
     t = (times - times[0]) / (times[-1] - times[0])
     rigid = None
     if options.motion == "rigid":
-        rigid = fit_rigid(rest[idx], X[:, idx], mask, t, options.loop)
-        values = local_residual(X, rest, curves.curve_of_vertex(len(rest))[0], rigid, t)
+        X64 = X.astype(np.float64)
+        rigid = fit_rigid(rest[idx], X64[:, idx], mask, t, options.loop)
+        values = local_residual(X64, rest, curves.curve_of_vertex(len(rest))[0], rigid, t)
+        del X64
     else:
         values = X - rest if options.motion == "displacement" else X
-    return _Problem(X, rest, idx, mask, u, values, items_from_curves(values, idx, mask), t, rigid,
-                    vertex_slots(idx, mask, X.shape[1]))
+    Y = items_from_curves(values, idx, mask)
+    del values
+    return _Problem(X, rest, idx, mask, u, Y, t, rigid, vertex_slots(idx, mask, X.shape[1]))
 
 
 def _distances(p: _Problem, space: SpaceStage, time_: TimeStage) -> np.ndarray:
