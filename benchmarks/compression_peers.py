@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 from pdeanim.model.metrics import bbox_diagonal, error_summary  # noqa: E402
 
 PEERS_DIR = ROOT / "benchmarks" / "peers"
-ALL_METHODS = ("pde", "levers", "pca", "gltfpack", "dembones", "keyframes", "heldout")
+ALL_METHODS = ("pde", "levers", "pca", "gltfpack", "dembones", "keyframes", "heldout", "scaling")
 PDE_TARGETS = (("rel_rms", 1e-2), ("rel_rms", 3e-3), ("rel_rms", 1e-3), ("rel_max", 1e-2))
 SUMMARY_TARGETS = (1e-2, 3e-3, 1e-3)
 PCA_K = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
@@ -506,6 +506,39 @@ def method_heldout(X: np.ndarray, faces: np.ndarray, target: float) -> list[dict
     return rows
 
 
+# ----------------------------------------------------------------------------------------------- scaling
+
+def method_scaling(name: str, X: np.ndarray, faces: np.ndarray, work: Path, timeout: float) -> list[dict]:
+    """Fit time and peak memory against frames x vertices: ``pdeanim fit --segments 8`` (a fixed amount of
+    time-stage work per frame) on the first quarter, half and all frames, each in its own process."""
+    rows = []
+    F = len(X)
+    for frames in sorted({max(9, F // 4), max(9, F // 2), F}):
+        if frames > F:
+            continue
+        path = work / f"{name}-first{frames}.npz"
+        np.savez(path, vertices=X[:frames].astype(np.float32), faces=faces)
+        out = work / f"{name}-first{frames}.clip"
+        cmd = [sys.executable, "-c", CHILD, "fit", str(path), "--out", str(out), "--segments", "8", "--quiet"]
+        try:
+            p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            rows.append({"method": "scaling", "setting": f"{frames} frames", "failed": "timeout"})
+            continue
+        line = next((ln for ln in p.stderr.splitlines() if ln.startswith("BENCH ")), None)
+        if line is None:
+            rows.append({"method": "scaling", "setting": f"{frames} frames", "failed": p.stderr[-300:]})
+            continue
+        _, secs, kb = line.split()
+        fv = frames * X.shape[1]
+        rows.append({"method": "scaling", "setting": f"{frames} frames", "frames_x_vertices": fv,
+                     "fit_s": float(secs), "peak_mb": int(kb) / 1024.0,
+                     "us_per_frame_vertex": 1e6 * float(secs) / fv,
+                     "bytes_per_frame_vertex": int(kb) * 1024.0 / fv})
+        log(f"{name}: scaling {frames} frames: {float(secs):.1f} s, {int(kb) / 1024:.0f} MB")
+    return rows
+
+
 # ----------------------------------------------------------------------------------------------- report
 
 def best_under(rows: list[dict], method: str, target: float, key: str = "zstd_bytes") -> dict | None:
@@ -561,6 +594,11 @@ def full_table(name: str, rows: list[dict]) -> str:
     lines = [f"### {name}", "", "| method | setting | bytes | zstd | rel-RMS | rel-max | KG % | notes |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        if r.get("method") == "scaling" and "fit_s" in r:
+            lines.append(f"| scaling | {r['setting']} (--segments 8) | - | - | - | - | - | {r['fit_s']:.1f} s fit, "
+                         f"{r['peak_mb']:.0f} MB peak, {r['us_per_frame_vertex']:.2f} us and "
+                         f"{r['bytes_per_frame_vertex']:.0f} B per frame x vertex |")
+            continue
         if "rel_rms" not in r:
             lines.append(f"| {r['method']} | {r['setting']} | - | - | - | - | - | {r.get('failed', '')} |")
             continue
@@ -630,6 +668,7 @@ def run_sequence(seq: Path, args) -> list[dict]:  # noqa: ANN001
                  ("gltfpack", lambda: method_gltfpack(X, faces, work, args.fit_timeout)),
                  ("pde", lambda: method_pde(name, src, X, faces, work, args)),
                  ("heldout", lambda: method_heldout(X, faces, args.heldout_target)),
+                 ("scaling", lambda: method_scaling(name, X, faces, work, args.fit_timeout)),
                  ("dembones", lambda: method_dembones(name, X, faces, args.cache) if args.dembones else [])]
         for method, fn in steps:
             if method not in args.methods:
