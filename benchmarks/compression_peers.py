@@ -245,11 +245,12 @@ def lever_rows(parts, X: np.ndarray, faces: np.ndarray, setting: str) -> list[di
             note=f"knots zstd {knot_f32} -> {knot_eb} (integer steps per curve+coordinate so that rounding moves "
                  f"no vertex coordinate by more than {eps / base_err['diagonal']:.2g} of the diagonal, "
                  "deltas along time, zstd)"),
-        row("lever:m-sparse", setting, mf_sparse, base_zstd - mf_v1 + mf_sparse, base_err,
+        row("lever:m-sparse", setting, mf_sparse, base_zstd - mf_v1 + mf_sparse, evaluate(m=m_dq),
             note=f"m+family zstd {mf_v1} -> {mf_sparse} ({100 * nonlin.mean():.1f}% non-linear)"),
         row("lever:faces-meshopt", setting, faces_codec, base_zstd - faces_v1 + faces_codec, base_err,
             note=f"faces zstd {faces_v1} -> {faces_codec}"),
-        row("lever:rest+u16", setting, rest_q + u_q, base_zstd - rest_v1 - u_v1 + rest_q + u_q, base_err,
+        row("lever:rest+u16", setting, rest_q + u_q, base_zstd - rest_v1 - u_v1 + rest_q + u_q,
+            evaluate(rest=rest_dq, u=u_dq),
             note=f"rest+u zstd {rest_v1 + u_v1} -> {rest_q + u_q}"),
     ]
     total = knot_eb + mf_sparse + faces_codec + rest_q + u_q + curves_v2 + fixed
