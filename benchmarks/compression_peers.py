@@ -728,9 +728,10 @@ def main(argv: list[str] | None = None) -> int:
             continue
         results[seq.stem] = run_sequence(seq, args)
         loads.append(os.getloadavg())
-        pareto_plot(seq.stem, results[seq.stem], args.out / f"pareto-{seq.stem}.png")
-        log(f"{seq.stem}: done; results so far in {args.out / 'results.json'}")
         (args.out / "results.json").write_text(json.dumps(results, indent=1, default=float))
+        log(f"{seq.stem}: done; results so far in {args.out / 'results.json'}")
+    for name, rows in results.items():
+        pareto_plot(name, rows, args.out / f"pareto-{name}.png")
     load = np.array(loads)
     head = (f"Compression peers, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} CPUs, "
             f"1-min load average {load[:, 0].min():.1f}..{load[:, 0].max():.1f} during the run "
