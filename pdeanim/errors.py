@@ -60,3 +60,10 @@ class TetrahedralizationError(InputError):
     """The mesh could not be turned into a usable tetrahedral mesh."""
 
     code = "tetrahedralization_failed"
+
+
+class TargetNotMetError(InputError):
+    """A fit ended above its error target (the request did not ask for best effort); retrying will not help."""
+
+    code = "target_not_met"
+    status = 422

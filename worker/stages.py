@@ -36,15 +36,22 @@ def _store_clip(parts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict
 
 
 def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int) -> dict:  # noqa: ANN001
+    """Fit and store the clip; a missed target fails the job (TargetNotMetError, not retried) unless the
+    options ask for ``best_effort``."""
+    from pdeanim.errors import TargetNotMetError
     from pdeanim.model.budget import check_fit_memory
-    from pdeanim.model.fitclip import FitOptions, fit_poses
+    from pdeanim.model.fitclip import FitOptions, fit_poses, target_shortfall
 
     check_fit_memory(poses.n_frames, poses.n_vertices, memory)  # refused now, not after minutes of work
 
     def labelled(fraction: float, stage: str) -> None:
         progress(fraction, stage if stage.startswith("fit") else f"fit: {stage}")
 
-    parts = fit_poses(poses, FitOptions.from_dict(options), progress=labelled)
+    fit_options = FitOptions.from_dict(options)
+    parts = fit_poses(poses, fit_options, progress=labelled)
+    shortfall = target_shortfall(parts.report)
+    if shortfall and not fit_options.best_effort:
+        raise TargetNotMetError(f"{shortfall} (ask for best_effort: true in the fit options to keep the clip)")
     return _store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
 
 

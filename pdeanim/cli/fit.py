@@ -1,12 +1,20 @@
-"""``pdeanim fit POSES --out CLIP``: fit a dynamic-PDE clip to poses (.npz or animated .glb/.gltf)."""
+"""``pdeanim fit POSES --out CLIP``: fit a dynamic-PDE clip to poses (.npz or animated .glb/.gltf).
+
+Exit codes: 0 the target was met (or none was set, or ``--best-effort``); 3 the target was not met: the best
+clip found is still written and stderr says what was achieved against what was asked (and why the search
+stopped, e.g. the segment cap); 2 bad input; 1 other failures.
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 from ..errors import ParameterError
+
+EXIT_TARGET_NOT_MET = 3
 
 
 def register(subparsers) -> None:  # noqa: ANN001
@@ -30,6 +38,8 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--animation", metavar="NAME", help="glTF input: the animation to fit, by name or index "
                                                          "(default: the first; the summary says which was used)")
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
+    p.add_argument("--best-effort", action="store_true",
+                   help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",
                    help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
@@ -39,7 +49,7 @@ def register(subparsers) -> None:  # noqa: ANN001
 def run(args: argparse.Namespace) -> int:
     """Load, fit, write the clip, print a short summary."""
     from ..clip import write_clip_file
-    from ..model.fitclip import FitOptions, fit_poses
+    from ..model.fitclip import FitOptions, fit_poses, target_shortfall
     from ..posefiles import load_poses
     from ..progress import cli_progress
 
@@ -48,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     options = FitOptions(target_rms=args.target_rms, target_rel_rms=args.target_rel_rms,
                          target_max=args.target_max, target_rel_max=args.target_rel_max, segments=args.segments,
                          param_mode=args.param, motion=args.motion, loop=args.loop,
-                         max_segments=args.max_segments)
+                         max_segments=args.max_segments, best_effort=args.best_effort)
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
     used = (poses.meta or {}).get("animation")
@@ -65,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
     if args.pictures:
         for path in write_pictures(poses, parts, args.pictures, Path(args.out).stem).values():
             print(f"picture -> {path}")
+    shortfall = target_shortfall(parts.report)
+    if shortfall:
+        print(f"pdeanim fit: {shortfall} (the best clip found was written to {args.out})", file=sys.stderr)
+        return 0 if args.best_effort else EXIT_TARGET_NOT_MET
     return 0
 
 

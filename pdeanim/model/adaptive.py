@@ -34,6 +34,8 @@ class AdaptiveResult:
     met: bool
     floor_exceeds_target: bool
     history: list[dict] = field(default_factory=list)
+    cap_reached: bool = False  # the search stopped at max_segments with the (floor-raised) target not met
+    unsplittable: bool = False  # the search stopped because every segment is a single frame interval
 
 
 def _frame_badness(d: np.ndarray, targets: Targets) -> tuple[np.ndarray, bool]:
@@ -80,6 +82,7 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
     """Refine segmentation until targets are met; ``distances(time)`` gives (F, V) model-to-data distances."""
     floor_targets, floor_high = _effective_targets(targets, floor_d)
     history: list[dict] = []
+    cap_reached = unsplittable = False
     while True:
         time = time_stage(space, segm, loop, refine_iters=SEARCH_REFINE)
         d = distances(time)
@@ -87,19 +90,35 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
         history.append({"segments": segm.n_segments, "rms": float(np.sqrt(np.mean(d * d))),
                         "max": float(d.max())})
         if progress:
-            progress(min(segm.n_segments / max(max_segments, 1), 1.0), f"segments {segm.n_segments}")
-        if met or segm.n_segments >= max_segments:
+            progress(min(segm.n_segments / max(max_segments, 1), 1.0),
+                     f"segments {segm.n_segments}: {_progress_errors(d, floor_targets)}")
+        if met:
+            break
+        if segm.n_segments >= max_segments:
+            cap_reached = True
             break
         n_split = max(1, min(segm.n_segments // 3, max_segments - segm.n_segments))
         new = _splits(segm, badness, n_split)
         if new.n_segments == segm.n_segments:
+            unsplittable = True
             break
         segm = new
     if met and not floor_high:
         time, d = _merge(space, time, d, floor_targets, distances, loop, history)
     time, d = _polish(space, time, d, distances, loop, floor_targets)
     _, met_real = _frame_badness(d, targets)
-    return AdaptiveResult(time, met_real, floor_high, history)
+    return AdaptiveResult(time, met_real, floor_high, history, cap_reached and not met_real,
+                          unsplittable and not met_real)
+
+
+def _progress_errors(d: np.ndarray, targets: Targets) -> str:
+    """"rms X (target Y), max ..." for a progress line."""
+    parts = []
+    if targets.rms is not None:
+        parts.append(f"rms {np.sqrt(np.mean(d * d)):.3g} (target {targets.rms:.3g})")
+    if targets.max is not None:
+        parts.append(f"max {d.max():.3g} (target {targets.max:.3g})")
+    return ", ".join(parts)
 
 
 MAX_MERGE_TRIES = 3

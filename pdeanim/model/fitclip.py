@@ -45,7 +45,9 @@ class FitOptions:
 
     target_rms / target_max : absolute per-vertex distance; target_rel_rms / target_rel_max : relative to
     the first frame's bounding-box diagonal. param_mode "chord" | "paper"; motion "displacement" |
-    "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last frame flows into the first); max_segments caps the adaptivity.
+    "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last
+    frame flows into the first); max_segments caps the adaptivity (reaching it is reported, never silent).
+    best_effort: a missed target is not an error (the CLI exits 0, a fit job succeeds with the best clip).
     """
 
     target_rms: float | None = None
@@ -58,6 +60,7 @@ class FitOptions:
     loop: bool = False
     max_segments: int = 64
     curve_points: int = 10
+    best_effort: bool = False
 
     def __post_init__(self) -> None:
         self.validate()
@@ -78,8 +81,9 @@ class FitOptions:
             raise ParameterError(f"param_mode must be one of {PARAM_MODES}, got {self.param_mode!r}")
         if self.motion not in MOTIONS:
             raise ParameterError(f"motion must be one of {MOTIONS}, got {self.motion!r}")
-        if not isinstance(self.loop, bool):
-            raise ParameterError(f"loop must be true or false, got {self.loop!r}")
+        for name in ("loop", "best_effort"):
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(f"{name} must be true or false, got {getattr(self, name)!r}")
         for name in ("max_segments", "curve_points"):
             v = getattr(self, name)
             if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 4096):
@@ -128,35 +132,38 @@ def default_curves(rest: np.ndarray, faces: np.ndarray, curve_points: int = 10) 
 class _Problem:
     """Padded data of one fit."""
 
-    X: np.ndarray  # (F, V, 3) float64 source positions
+    X: np.ndarray  # (F, V, 3) float32 source positions (the poses' own array: no float64 copy is kept)
     rest: np.ndarray  # (V, 3) float64 (float32 values)
     idx: np.ndarray
     mask: np.ndarray
     u: np.ndarray  # (C, 3, N)
-    values: np.ndarray  # (F, V, 3) what the curves fit (displacement, positions or rigid residual)
-    Y: np.ndarray  # (F, K, N) the same values as padded items
+    Y: np.ndarray  # (F, K, N) float64 what the curves fit (displacement, positions or rigid residual) as items
     t: np.ndarray  # (F,) normalised times
     rigid: RigidTracks | None = None
     slots: np.ndarray | None = None  # (V,) slot c * N + n of every vertex in the padded curves
 
 
 def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
-    X = np.asarray(poses.vertices, np.float64)
+    X = np.asarray(poses.vertices, np.float32)  # float64 copies of all frames are made only transiently
     times = np.asarray(poses.times, np.float64)
     if len(X) == 1:  # a single frame: a static clip over a unit time span
         X, times = np.concatenate([X, X]), np.array([times[0], times[0] + 1.0])
-    rest = X[0].copy()
+    rest = X[0].astype(np.float64)
     idx, mask = curves.padded()
-    u = curve_parameters(X[:, idx] if options.param_mode == "paper" else rest[idx], mask, options.param_mode)
+    u = curve_parameters(X[:, idx].astype(np.float64) if options.param_mode == "paper" else rest[idx], mask,
+                         options.param_mode)
     t = (times - times[0]) / (times[-1] - times[0])
     rigid = None
     if options.motion == "rigid":
-        rigid = fit_rigid(rest[idx], X[:, idx], mask, t, options.loop)
-        values = local_residual(X, rest, curves.curve_of_vertex(len(rest))[0], rigid, t)
+        X64 = X.astype(np.float64)
+        rigid = fit_rigid(rest[idx], X64[:, idx], mask, t, options.loop)
+        values = local_residual(X64, rest, curves.curve_of_vertex(len(rest))[0], rigid, t)
+        del X64
     else:
         values = X - rest if options.motion == "displacement" else X
-    return _Problem(X, rest, idx, mask, u, values, items_from_curves(values, idx, mask), t, rigid,
-                    vertex_slots(idx, mask, X.shape[1]))
+    Y = items_from_curves(values, idx, mask)
+    del values
+    return _Problem(X, rest, idx, mask, u, Y, t, rigid, vertex_slots(idx, mask, X.shape[1]))
 
 
 def _distances(p: _Problem, space: SpaceStage, time_: TimeStage) -> np.ndarray:
@@ -212,12 +219,14 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     if options.segments:
         segm = uniform_segmentation(p.t, options.segments)
         fitted, met, floor_high, history = time_stage(space, segm, options.loop), None, False, []
+        cap = unsplittable = False
     else:
         res = fit_adaptive(space, Segmentation(np.array([0, len(p.t) - 1]), p.t), sf.targets,
                            lambda ts: _distances(p, space, ts), sf.floor_d,
                            min(options.max_segments, len(p.t) - 1), options.loop,
                            sub_progress(progress, 0.1, 0.9))
         fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
+        cap, unsplittable = res.cap_reached, res.unsplittable
     t_time = time.perf_counter()
     report_progress(0.92, "encode")
     parts = _encode(p, sf.curves, space, fitted, options, poses)
@@ -227,6 +236,8 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     report = _report(p, approx, exact, sf.floor_d, fitted, sf.targets, met, floor_high, history, options,
                      sf.curves, sf.diag, poses)
     report["curve_points"] = sf.curve_points
+    report["segment_cap_reached"] = bool(cap)
+    report["every_frame_a_knot"] = bool(unsplittable)
     t_end = time.perf_counter()
     report["timings_s"] = {"curves_and_space": t_space - t_start, "time": t_time - t_space,
                            "encode_measure": t_end - t_time, "total": t_end - t_start}
@@ -234,6 +245,29 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
     report_progress(1.0, "done")
     return parts
+
+
+def target_shortfall(report: dict[str, Any]) -> str | None:
+    """None when the fit met its targets (or had none), else one line: what was achieved vs asked, and why
+    the search stopped (segment cap, spatial floor, every frame already a knot)."""
+    if report.get("target_met") is not False:
+        return None
+    t, diag = report.get("targets") or {}, float(report.get("diagonal") or 1.0)
+    asked, got = [], []
+    for key in ("rms", "max"):
+        if t.get(key) is not None:
+            asked.append(f"{key} {t[key]:.4g} (rel {t[key] / diag:.3g})")
+            got.append(f"{key} {report[key]:.4g} (rel {report[f'rel_{key}']:.3g})")
+    why = []
+    if report.get("segment_cap_reached"):
+        why.append(f"stopped at the segment cap ({report['segments']} segments; raise max_segments)")
+    if report.get("floor_exceeds_target"):
+        why.append(f"the curves' spatial floor (rel rms {report.get('floor_rel_rms', 0.0):.3g}) is above the "
+                   "target")
+    if report.get("every_frame_a_knot"):
+        why.append("every frame interval is already a segment")
+    return (f"target not met: achieved {', '.join(got)}; asked {', '.join(asked)}"
+            + (f"; {'; '.join(why)}" if why else ""))
 
 
 def _curve_point_ladder(start: int | None) -> list[int | None]:

@@ -84,3 +84,19 @@ def test_fixed_segments_fit(poses_file, tmp_path, capsys):
     assert main(["fit", str(poses_file), "--out", str(out), "--segments", "3", "--motion", "absolute"]) == 0
     assert load_clip_file(out).info()["n_segments"] == 3
     assert "segments" in capsys.readouterr().out
+
+
+def test_missed_target_exits_3_after_writing_the_best_clip(poses_file, tmp_path, capsys):
+    """A target the segment cap cannot reach: exit 3, the clip is still written, stderr says achieved vs asked
+    and that the cap stopped the search; --best-effort exits 0 with the same message."""
+    out = tmp_path / "capped.clip"
+    args = ["fit", str(poses_file), "--out", str(out), "--target-rel-rms", "1e-6", "--max-segments", "1"]
+    assert main(args) == 3
+    err = capsys.readouterr().err
+    assert "target not met" in err and "segment cap" in err and "rel 1e-06" in err
+    assert any(line.startswith("fit: ") and "%" in line for line in err.splitlines())  # progress (not --quiet)
+    info = load_clip_file(out).info()
+    assert info["n_segments"] == 1 and info["errors"]["target_met"] is False
+    assert main([*args, "--best-effort", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "target not met" in err and not any(line.startswith("fit: ") for line in err.splitlines())

@@ -309,3 +309,21 @@ def test_size_limit_is_enforced_while_streaming_without_content_length(api, serv
 def test_vertex_limit_gives_413(api, data_dir):
     err = assert_error(upload(api, "bob.obj", (data_dir / "bob.obj").read_bytes()), 413, "limit_exceeded")
     assert "PDEANIM_MAX_VERTICES" in err["message"]
+
+
+def test_fit_job_fails_on_a_missed_target_unless_best_effort(api, sphere, services):
+    """One segment cannot reach rel RMS 1e-6: the job fails with what was achieved vs asked (not retried);
+    with best_effort the same request succeeds and its clip says the target was not met."""
+    params = {"target_rel_rms": 1e-6, "max_segments": 1}
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"], "params": params})
+    assert r.status_code == 202, r.text
+    job = wait_job(api, r.json()["id"])
+    assert job["state"] == "failed" and job["attempt"] == 1, (job, services.logs())
+    assert job["error"]["code"] == "target_not_met"
+    assert "target not met" in job["error"]["message"] and "segment cap" in job["error"]["message"]
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"],
+                                   "params": {**params, "best_effort": True}})
+    job = wait_job(api, r.json()["id"])
+    assert job["state"] == "succeeded", (job, services.logs())
+    clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
+    assert clip["errors"]["target_met"] is False and clip["segments"] == 1
