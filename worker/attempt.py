@@ -46,10 +46,11 @@ def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json
     """Run one attempt in a child process and wait for its outcome (partial results go to ``on_partial``)."""
     import os
 
+    beat = Heartbeat(queue, job)
+    beat.start()  # before the child: its start may also start the forkserver, which preloads numpy, scipy and
+    # trimesh and can outlast a lease on a loaded machine (the job was then reaped while it was starting)
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=child_main, args=(child, payload, settings_json, os.getpid()), daemon=True)
-    beat = Heartbeat(queue, job)
-    beat.start()  # before the child starts: the first start boots the forkserver, slow on a loaded machine
     try:
         proc.start()
         child.close()
@@ -62,7 +63,8 @@ def run_attempt(ctx, queue: JobQueue, job: Claimed, payload: dict, settings_json
         return outcome
     finally:
         beat.done.set()
-        if proc.pid is not None:
+        child.close()
+        if proc.pid is not None:  # it started
             if proc.is_alive():
                 proc.kill()
             proc.join(5)
