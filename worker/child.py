@@ -126,7 +126,7 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
         conn.send(("error", exc.code, str(exc), False))
     except MemoryError:
         conn.send(("error", "out_of_memory", f"the job needs more memory than its limit of "
-                   f"{memory / 2**30:.2f} GiB (PDEANIM_JOB_MEMORY_BYTES or PDEANIM_JOB_MEMORY_FRACTION): lower "
+                   f"{memory / 2**30:.2f} GiB ({memory} bytes; PDEANIM_JOB_MEMORY_BYTES or PDEANIM_JOB_MEMORY_FRACTION): lower "
                    "frames, target_tets or the poses' size, or raise the limit", True))
     except Exception as exc:  # noqa: BLE001 - unexpected: reported for a retry
         traceback.print_exc()

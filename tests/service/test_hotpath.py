@@ -153,12 +153,14 @@ def _descendants(root: int, table: dict[int, tuple[int, int, str]]) -> list[int]
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process priorities from /proc")
 def test_the_job_process_runs_niced(api, services, data_dir):
     worker = services.workers[0].pid
+    base = _processes()[worker][1]  # the worker's own priority (the test run itself may be niced)
+    expected = min(19, base + JOB_NICE)
     mesh = api.post("/v1/meshes", files={"file": ("spot.obj", (data_dir / "spot.obj").read_bytes())}).json()
     job = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
                                      "params": {"frames": 40, "target_tets": 1500}}).json()
     seen: dict[int, int] = {}  # job process -> its nice value (set as the process starts its stage)
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and JOB_NICE not in seen.values():
+    while time.monotonic() < deadline and expected not in seen.values():
         table = _processes()
         for pid in _descendants(worker, table):
             ppid, nice, _ = table[pid]
@@ -167,8 +169,8 @@ def test_the_job_process_runs_niced(api, services, data_dir):
         if api.get(f"/v1/jobs/{job['id']}").json()["state"] in ("succeeded", "failed"):
             break
         time.sleep(0.05)
-    assert JOB_NICE in seen.values(), f"job processes seen: {seen} ({services.logs()})"
-    assert _processes()[worker][1] == 0  # the worker itself keeps its priority
+    assert expected in seen.values(), f"job processes seen: {seen} ({services.logs()})"
+    assert _processes()[worker][1] == base  # the worker itself keeps its priority
     assert wait_job(api, job["id"], 300)["state"] == "succeeded"
 
 

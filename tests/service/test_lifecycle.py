@@ -342,7 +342,7 @@ def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store)
     assert api.delete("/v1/clips/clip_old_inf").status_code == 200
 
 
-def test_database_outage_answers_503_with_retry_after(backend, tmp_path):
+def test_database_outage_answers_503_with_retry_after(backend, tmp_path, request):
     """PostgreSQL's database dropped under a running server: every route answers 503 in the error shape
     (the documented status, with Retry-After), never a 500."""
     if backend.name != "postgres":
@@ -355,7 +355,7 @@ def test_database_outage_answers_503_with_retry_after(backend, tmp_path):
         with client(svc, make_key(backend, "outage")) as api:
             assert api.get("/v1/meshes").status_code == 200  # the key is now verified (and cached)
             name = backend.env["PDEANIM_DATABASE_URL"].rsplit("/", 1)[1]
-            _admin(f"DROP DATABASE {name} WITH (FORCE)")
+            _admin(request.getfixturevalue("pg_server"), f"DROP DATABASE {name} WITH (FORCE)")
             for r in (api.get("/v1/meshes"), api.get("/v1/jobs/job_x"), api.post("/v1/jobs/job_x/cancel")):
                 assert r.status_code == 503, r.text
                 assert r.json()["error"]["code"] == "unavailable" and r.headers["retry-after"] == "5"

@@ -66,14 +66,15 @@ def test_large_surfaces_are_decimated_before_fTetWild(tmp_path):
 
 
 def test_cache_key_names_the_decimation_method_only_when_it_applies(spot_path, monkeypatch):
-    """Quadric decimation and vertex clustering give different surfaces, hence different tets: a large
-    surface's key changes with the method (injected here); a surface below the limit is never decimated and
-    keeps its key."""
+    """Quadric decimation and vertex clustering give different surfaces, hence different tets: a surface over
+    its budget (2 faces per target tet) gets a key that changes with the method (injected here); a surface
+    within the budget is never decimated and keeps its key."""
     import pdeanim.sim.tetra as tetra
 
     spot = load_mesh(spot_path)
-    small, large = TetParams(target_tets=800), TetParams(target_tets=800, max_surface_faces=1000)
-    assert len(spot.faces) > 1000
+    small, large = TetParams(target_tets=3000), TetParams(target_tets=800)
+    assert tetra.surface_budget(800, large.max_surface_faces) < len(spot.faces)
+    assert tetra.surface_budget(3000, small.max_surface_faces) >= len(spot.faces)
     keys = {}
     for method in ("vertex-clustering", "quadric fast-simplification 0.1"):
         monkeypatch.setattr(tetra, "decimation_method", lambda method=method: method)
