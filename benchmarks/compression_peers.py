@@ -16,7 +16,8 @@ folder, never copied into the repository):
   interpolation of the kept frames.
 
 Every method is scored with :func:`pdeanim.model.metrics.error_summary` (rel-RMS, rel-max to the first frame's
-bounding-box diagonal, Karni-Gotsman). "zstd" = every file/array zstd -19 (PyPI ``zstandard``), faces included.
+bounding-box diagonal, Karni-Gotsman). "zstd" = every file/array zstd -19 (PyPI ``zstandard``), faces
+included.
 Writes ``results.json``, ``table.md`` and one Pareto plot per sequence (zstd bytes vs rel-RMS, log-log) into
 ``--out``. Run ``python benchmarks/compression_peers.py --help``; see the README section "Compression
 benchmark".
@@ -69,7 +70,9 @@ def zstd_len(*blobs: bytes | np.ndarray) -> int:
     return sum(len(c.compress(b.tobytes() if isinstance(b, np.ndarray) else bytes(b))) for b in blobs)
 
 
-def quantise(a: np.ndarray, axis: tuple[int, ...] | int | None, bits: int = 16) -> tuple[np.ndarray, np.ndarray]:
+def quantise(
+    a: np.ndarray, axis: tuple[int, ...] | int | None, bits: int = 16
+) -> tuple[np.ndarray, np.ndarray]:
     """Uniform quantisation to unsigned ``bits`` with a [min, max] range over ``axis`` (kept dims):
     (codes uint16, dequantised float64). The ranges cost 2 float32 per kept element (counted by callers)."""
     a = np.asarray(a, np.float64)
@@ -116,8 +119,18 @@ survives exec), which made every fit of a small sequence look as large as this b
 
 def run_fit(seq: Path, out: Path, flag: str, value: float, timeout: float, extra: list[str]) -> dict:
     """``pdeanim fit`` in a child process: exit code, seconds, peak RSS (MB), stderr tail."""
-    cmd = [sys.executable, "-c", CHILD, "fit", str(seq), "--out", str(out), f"--target-{flag.replace('_', '-')}",
-           str(value), *extra]
+    cmd = [
+        sys.executable,
+        "-c",
+        CHILD,
+        "fit",
+        str(seq),
+        "--out",
+        str(out),
+        f"--target-{flag.replace('_', '-')}",
+        str(value),
+        *extra,
+    ]
     try:
         p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -189,7 +202,9 @@ def lever_rows(parts, X: np.ndarray, faces: np.ndarray, setting: str) -> list[di
     mask = np.packbits(nonlin.reshape(-1))
     kind = np.packbits((coef.family[0] % 2).reshape(-1).astype(np.uint8))  # space kind per curve + coordinate
     trig = np.packbits((coef.family[nonlin] >= 2).astype(np.uint8))
-    m16, m_dq = quantise(coef.m[nonlin], axis=None) if nonlin.any() else (np.zeros(0, np.uint16), coef.m[nonlin])
+    m16, m_dq = (
+        quantise(coef.m[nonlin], axis=None) if nonlin.any() else (np.zeros(0, np.uint16), coef.m[nonlin])
+    )
     faces_codec = meshopt_faces(faces, len(topo.rest))
     q_rest, rest_dq = quantise(topo.rest, axis=0)
     u_cols = np.asarray(ta["u"])
@@ -237,12 +252,32 @@ def lever_rows(parts, X: np.ndarray, faces: np.ndarray, setting: str) -> list[di
     share = {"knots": knot_f32, "m+family": mf_v1, "faces": faces_v1, "rest": rest_v1, "u": u_v1,
              "order+offsets": curves_v1}
     rows = [
-        row("lever:knots16", setting, knot_q, base_zstd - knot_f32 + knot_q, err_k,
-            note=f"knots zstd {knot_f32} -> {knot_q}", parts_zstd=share, nonlinear_fraction=float(nonlin.mean())),
-        row("lever:knots16+delta", setting, knot_qd, base_zstd - knot_f32 + knot_qd, err_k,
-            note=f"knots zstd {knot_f32} -> {knot_qd}"),
-        row("lever:knots-errbound", setting, knot_eb, base_zstd - knot_f32 + knot_eb, err_eb,
-            note=f"knots zstd {knot_f32} -> {knot_eb} (integer steps per curve+coordinate so that rounding moves "
+        row(
+            "lever:knots16",
+            setting,
+            knot_q,
+            base_zstd - knot_f32 + knot_q,
+            err_k,
+            note=f"knots zstd {knot_f32} -> {knot_q}",
+            parts_zstd=share,
+            nonlinear_fraction=float(nonlin.mean()),
+        ),
+        row(
+            "lever:knots16+delta",
+            setting,
+            knot_qd,
+            base_zstd - knot_f32 + knot_qd,
+            err_k,
+            note=f"knots zstd {knot_f32} -> {knot_qd}",
+        ),
+        row(
+            "lever:knots-errbound",
+            setting,
+            knot_eb,
+            base_zstd - knot_f32 + knot_eb,
+            err_eb,
+            note=f"knots zstd {knot_f32} -> {knot_eb} (integer steps per curve+coordinate so that rounding "
+                 f"moves "
                  f"no vertex coordinate by more than {eps / base_err['diagonal']:.2g} of the diagonal, "
                  "deltas along time, zstd)"),
         row("lever:m-sparse", setting, mf_sparse, base_zstd - mf_v1 + mf_sparse, evaluate(m=m_dq),
@@ -254,15 +289,24 @@ def lever_rows(parts, X: np.ndarray, faces: np.ndarray, setting: str) -> list[di
             note=f"rest+u zstd {rest_v1 + u_v1} -> {rest_q + u_q}"),
     ]
     total = knot_eb + mf_sparse + faces_codec + rest_q + u_q + curves_v2 + fixed
-    rows.append(row("pde v2 estimate", setting, total, total, err_all,
-                    note=f"all levers: knots (error-bounded) {knot_eb}, m/family {mf_sparse}, faces {faces_codec}, "
-                         f"rest {rest_q}, u {u_q}, curves {curves_v2}, rest of header {fixed}; "
-                         f"S+1={S1}, C={C}"))
+    rows.append(
+        row(
+            "pde v2 estimate",
+            setting,
+            total,
+            total,
+            err_all,
+            note=f"all levers: knots (error-bounded) {knot_eb}, m/family {mf_sparse}, faces {faces_codec}, "
+            f"rest {rest_q}, u {u_q}, curves {curves_v2}, rest of header {fixed}; "
+            f"S+1={S1}, C={C}",
+        )
+    )
     return rows
 
 
 ERRBOUND_SHARE = 0.2
-"""Error-bounded knot quantisation: the largest coordinate error rounding may cause, as a share of the target."""
+"""Error-bounded knot quantisation: the largest coordinate error rounding may cause, as a share of the
+target."""
 
 
 def target_abs(setting: str, err: dict) -> float:
@@ -347,7 +391,8 @@ def pca_ks(s: np.ndarray, F: int, V: int, diag: float, lo: float = 3e-4, hi: flo
 # ----------------------------------------------------------------------------------------------- gltfpack
 
 def match_vertices(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """Index into Y's vertices of the nearest trajectory of every source vertex (gltfpack welds and reorders)."""
+    """Index into Y's vertices of the nearest trajectory of every source vertex (gltfpack welds and
+    reorders)."""
     from scipy.spatial import cKDTree
 
     pick = np.unique(np.linspace(0, len(X) - 1, min(len(X), 8)).astype(int))
@@ -453,8 +498,16 @@ def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path) ->
         err_q = error_summary(X, skin(rest_dq, Wq, Rq, tr_dq))
         qs = [q_rest, w8, top.astype(np.uint8), q_quat, q_tr]
         ranges = (3 + 2 * B) * 8
-        rows.append(row("dembones q16+zstd", f"{b} bones", sum(a.nbytes for a in qs) + ranges + faces.size * 4,
-                        zstd_len(*qs) + ranges + fb, err_q, solve_s=sol["seconds"]))
+        rows.append(
+            row(
+                "dembones q16+zstd",
+                f"{b} bones",
+                sum(a.nbytes for a in qs) + ranges + faces.size * 4,
+                zstd_len(*qs) + ranges + fb,
+                err_q,
+                solve_s=sol["seconds"],
+            )
+        )
     return rows
 
 
@@ -491,7 +544,9 @@ def method_heldout(X: np.ndarray, faces: np.ndarray, target: float) -> list[dict
     keep = kept_frames(len(X), 4)
     out_idx = np.setdiff1d(np.arange(len(X)), keep)
     times = np.arange(len(X), dtype=np.float64)
-    lin = error_summary(X[out_idx], linear_interpolation(times[keep], X[keep], times[out_idx]), bbox_diagonal(X[0]))
+    lin = error_summary(
+        X[out_idx], linear_interpolation(times[keep], X[keep], times[out_idx]), bbox_diagonal(X[0])
+    )
     fit_target = float(min(target, 0.25 * lin["rel_rms"]))
     t = time.perf_counter()
     res = heldout_comparison(make_poses(X, faces), 4, FitOptions(target_rel_rms=fit_target, best_effort=True))
@@ -544,7 +599,11 @@ def method_scaling(name: str, X: np.ndarray, faces: np.ndarray, work: Path, time
 
 def best_under(rows: list[dict], method: str, target: float, key: str = "zstd_bytes") -> dict | None:
     """The smallest (by ``key``) row of ``method`` with rel-RMS <= target."""
-    ok = [r for r in rows if r.get("method") == method and "rel_rms" in r and key in r and r["rel_rms"] <= target]
+    ok = [
+        r
+        for r in rows
+        if r.get("method") == method and "rel_rms" in r and key in r and r["rel_rms"] <= target
+    ]
     return min(ok, key=lambda r: r[key]) if ok else None
 
 
@@ -554,17 +613,35 @@ def fmt_bytes(n: float | None) -> str:
 
 def summary_table(results: dict) -> str:
     """Markdown: per sequence and target, the smallest bytes (served / zstd) each method needs to reach it."""
-    methods = ["pde", "pde v2 estimate", "gltfpack", "pca f32", "pca q16+zstd", "dembones q16+zstd", "keyframes"]
-    lines = ["| sequence | target rel-RMS | " + " | ".join(methods) + " |",
-             "|---|---|" + "---|" * len(methods)]
+    methods = [
+        "pde",
+        "pde v2 estimate",
+        "gltfpack",
+        "pca f32",
+        "pca q16+zstd",
+        "dembones q16+zstd",
+        "keyframes",
+    ]
+    lines = [
+        "| sequence | target rel-RMS | " + " | ".join(methods) + " |",
+        "|---|---|" + "---|" * len(methods),
+    ]
     for name, rows in results.items():
         for tgt in SUMMARY_TARGETS:
             cells = []
             for m in methods:
                 b = best_under(rows, m, tgt)
                 if m.startswith("pde"):  # the project's row is the fit *for* that target
-                    b = next((r for r in rows if r.get("method") == m and r.get("setting") == f"rel_rms {tgt:g}"
-                              and "rel_rms" in r), None)
+                    b = next(
+                        (
+                            r
+                            for r in rows
+                            if r.get("method") == m
+                            and r.get("setting") == f"rel_rms {tgt:g}"
+                            and "rel_rms" in r
+                        ),
+                        None,
+                    )
                     if b is not None and b["rel_rms"] > tgt * (1 + 1e-9):
                         cells.append(f"missed: {b['rel_rms']:.2g} in {fmt_bytes(b['bytes'])}")
                         continue
@@ -576,8 +653,10 @@ def summary_table(results: dict) -> str:
 
 def heldout_table(results: dict) -> str:
     """Markdown: held-out rel-RMS / rel-max per sequence for the clip, linear and Catmull-Rom."""
-    lines = ["| sequence | kept / left out | pde fit (target on kept) | linear | Catmull-Rom | pde / linear |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        "| sequence | kept / left out | pde fit (target on kept) | linear | Catmull-Rom | pde / linear |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, rows in results.items():
         h = {r["setting"].split(" ")[0]: r for r in rows if r.get("method") == "heldout"}
         if not {"pde", "linear", "catmull-rom"} <= h.keys():
@@ -596,26 +675,36 @@ def full_table(name: str, rows: list[dict]) -> str:
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("method") == "scaling" and "fit_s" in r:
-            lines.append(f"| scaling | {r['setting']} (--segments 8) | - | - | - | - | - | {r['fit_s']:.1f} s fit, "
-                         f"{r['peak_mb']:.0f} MB peak, {r['us_per_frame_vertex']:.2f} us and "
-                         f"{r['bytes_per_frame_vertex']:.0f} B per frame x vertex |")
+            lines.append(
+                f"| scaling | {r['setting']} (--segments 8) | - | - | - | - | - | {r['fit_s']:.1f} s fit, "
+                f"{r['peak_mb']:.0f} MB peak, {r['us_per_frame_vertex']:.2f} us and "
+                f"{r['bytes_per_frame_vertex']:.0f} B per frame x vertex |"
+            )
             continue
         if "rel_rms" not in r:
             lines.append(f"| {r['method']} | {r['setting']} | - | - | - | - | - | {r.get('failed', '')} |")
             continue
         notes = []
-        for k, unit in (("fit_s", "s fit"), ("peak_mb", "MB peak"), ("solve_s", "s solve"), ("pack_s", "s pack")):
+        for k, unit in (
+            ("fit_s", "s fit"),
+            ("peak_mb", "MB peak"),
+            ("solve_s", "s solve"),
+            ("pack_s", "s pack"),
+        ):
             if r.get(k) is not None:
                 notes.append(f"{r[k]:.1f} {unit}")
         if "exit_code" in r:
             notes.append(f"exit {r['exit_code']}, {r.get('segments')} segments, {r.get('curves')} curves")
         for k in ("note", "kept", "fit_rel_rms_on_kept"):
             if k in r:
-                notes.append(f"{k}={r[k]:.3g}" if isinstance(r[k], float) else f"{k}={r[k]}" if k != "note"
-                             else r[k])
-        lines.append(f"| {r['method']} | {r['setting']} | {fmt_bytes(r.get('bytes'))} | "
-                     f"{fmt_bytes(r.get('zstd_bytes'))} | {r['rel_rms']:.3g} | {r['rel_max']:.3g} | {r['kg']:.3g} | "
-                     f"{'; '.join(notes)} |")
+                notes.append(
+                    f"{k}={r[k]:.3g}" if isinstance(r[k], float) else f"{k}={r[k]}" if k != "note" else r[k]
+                )
+        lines.append(
+            f"| {r['method']} | {r['setting']} | {fmt_bytes(r.get('bytes'))} | "
+            f"{fmt_bytes(r.get('zstd_bytes'))} | {r['rel_rms']:.3g} | {r['rel_max']:.3g} | {r['kg']:.3g} | "
+            f"{'; '.join(notes)} |"
+        )
     return "\n".join(lines)
 
 
@@ -657,8 +746,16 @@ def run_sequence(seq: Path, args) -> list[dict]:  # noqa: ANN001
     if args.max_frames and len(X) > args.max_frames:
         X = X[: args.max_frames]
     log(f"{name}: {X.shape[0]} frames x {X.shape[1]} vertices, {len(faces)} faces")
-    rows: list[dict] = [{"method": "raw", "setting": "float32 frames", "bytes": X.size * 4 + faces.size * 4,
-                         "rel_rms": 0.0, "rel_max": 0.0, "kg": 0.0}]  # (zstd -19 of all frames: minutes, skipped)
+    rows: list[dict] = [
+        {
+            "method": "raw",
+            "setting": "float32 frames",
+            "bytes": X.size * 4 + faces.size * 4,
+            "rel_rms": 0.0,
+            "rel_max": 0.0,
+            "kg": 0.0,
+        }
+    ]  # (zstd -19 of all frames: minutes, skipped)
     work = Path(tempfile.mkdtemp(prefix=f"peers-{name}-"))
     src = seq
     if args.max_frames:
@@ -693,10 +790,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", default=",".join(m for m in ALL_METHODS if m != "dembones"),
                     help=f"comma-separated subset of {','.join(ALL_METHODS)}")
     ap.add_argument("--dembones", action="store_true", help="also run Dem Bones (slow; results cached)")
-    ap.add_argument("--cache", type=Path, default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-                    / "pdeanim-bench", help="cache folder for Dem Bones results (outside the repository)")
-    ap.add_argument("--max-frames", type=int, help="use only the first N frames of each sequence (quick runs)")
-    ap.add_argument("--fit-timeout", type=float, default=1800.0, help="seconds per pdeanim fit / gltfpack run")
+    ap.add_argument(
+        "--cache",
+        type=Path,
+        default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pdeanim-bench",
+        help="cache folder for Dem Bones results (outside the repository)",
+    )
+    ap.add_argument(
+        "--max-frames", type=int, help="use only the first N frames of each sequence (quick runs)"
+    )
+    ap.add_argument(
+        "--fit-timeout", type=float, default=1800.0, help="seconds per pdeanim fit / gltfpack run"
+    )
     ap.add_argument("--max-segments", type=int, default=256, help="segment cap passed to pdeanim fit")
     ap.add_argument("--resume", action="store_true",
                     help="keep the sequences already in OUT/results.json and run only the others")
@@ -733,14 +838,22 @@ def main(argv: list[str] | None = None) -> int:
     for name, rows in results.items():
         pareto_plot(name, rows, args.out / f"pareto-{name}.png")
     load = np.array(loads)
-    head = (f"Compression peers, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} CPUs, "
-            f"1-min load average {load[:, 0].min():.1f}..{load[:, 0].max():.1f} during the run "
-            f"(shared machine), {time.perf_counter() - t0:.0f} s in all, peak RSS of this process "
-            f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
-    text = "\n\n".join([head, "Smallest bytes (served / zstd -19) that reach each rel-RMS target:",
-                        summary_table(results),
-                        "Held-out frames (fit from every 4th frame; rel-RMS / rel-max at the frames left out):",
-                        heldout_table(results), *[full_table(n, r) for n, r in results.items()]])
+    head = (
+        f"Compression peers, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} CPUs, "
+        f"1-min load average {load[:, 0].min():.1f}..{load[:, 0].max():.1f} during the run "
+        f"(shared machine), {time.perf_counter() - t0:.0f} s in all, peak RSS of this process "
+        f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
+    )
+    text = "\n\n".join(
+        [
+            head,
+            "Smallest bytes (served / zstd -19) that reach each rel-RMS target:",
+            summary_table(results),
+            "Held-out frames (fit from every 4th frame; rel-RMS / rel-max at the frames left out):",
+            heldout_table(results),
+            *[full_table(n, r) for n, r in results.items()],
+        ]
+    )
     (args.out / "table.md").write_text(text + "\n")
     print(text)
     return 0

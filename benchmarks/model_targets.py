@@ -23,11 +23,15 @@ TARGETS = (1e-2, 3e-3, 1e-3)
 
 def main() -> None:
     poses = load_poses(DATA)
-    print(f"AnimatedMorphSphere: {poses.n_frames} frames x {poses.n_vertices} vertices, raw float32 "
-          f"{poses.n_frames * poses.n_vertices * 12} bytes; fit s = median of 3 runs; load average "
-          f"{os.getloadavg()[0]:.1f}")
-    print(f"{'target':>8s} {'rel rms':>9s} {'rel max':>9s} {'rms':>9s} {'max':>9s} {'curves':>6s} {'segs':>5s} "
-          f"{'topo B':>8s} {'coef B':>8s} {'coef/raw':>9s} {'all/raw':>8s} {'fit s':>6s}")
+    print(
+        f"AnimatedMorphSphere: {poses.n_frames} frames x {poses.n_vertices} vertices, raw float32 "
+        f"{poses.n_frames * poses.n_vertices * 12} bytes; fit s = median of 3 runs; load average "
+        f"{os.getloadavg()[0]:.1f}"
+    )
+    print(
+        f"{'target':>8s} {'rel rms':>9s} {'rel max':>9s} {'rms':>9s} {'max':>9s} {'curves':>6s} {'segs':>5s} "
+        f"{'topo B':>8s} {'coef B':>8s} {'coef/raw':>9s} {'all/raw':>8s} {'fit s':>6s}"
+    )
     for target in TARGETS:
         runs = []
         for _ in range(3):  # deterministic: every run gives the same clip; the time is the median

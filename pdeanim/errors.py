@@ -63,7 +63,8 @@ class TetrahedralizationError(InputError):
 
 
 class TargetNotMetError(InputError):
-    """A fit ended above its error target (the request did not ask for best effort); retrying will not help."""
+    """A fit ended above its error target (the request did not ask for best effort); retrying will not
+    help."""
 
     code = "target_not_met"
     status = 422

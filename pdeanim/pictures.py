@@ -119,7 +119,9 @@ def simplify_for_picture(vertices: np.ndarray, faces: np.ndarray, error: np.ndar
         h *= 1.25
     n = int(cluster.max()) + 1
     count = np.bincount(cluster, minlength=n)[:, None]
-    verts = np.stack([np.bincount(cluster, vertices[:, c], n) for c in range(3)], axis=1) / np.maximum(count, 1)
+    verts = np.stack([np.bincount(cluster, vertices[:, c], n) for c in range(3)], axis=1) / np.maximum(
+        count, 1
+    )
     err = np.full(n, -np.inf)
     np.maximum.at(err, cluster, error)
     return verts, cf, err
@@ -177,17 +179,24 @@ def error_curve_png(per_frame_rms: np.ndarray, per_frame_max: np.ndarray, times:
     worst = int(mx.argmax())
     ax.axvline(t[worst], color="#c0392b", lw=0.8, ls=":")
     right = t[worst] > (t[0] + t[-1]) / 2  # keep the label inside the axes
-    ax.annotate(f"worst frame {worst}\nmax {mx[worst]:.3g}", (t[worst], mx[worst]), textcoords="offset points",
-                xytext=(-10 if right else 10, -30), ha="right" if right else "left", fontsize=8, color="#c0392b",
-                bbox={"boxstyle": "round,pad=0.3", "fc": "white", "ec": "#c0392b", "alpha": 0.9})
+    ax.annotate(
+        f"worst frame {worst}\nmax {mx[worst]:.3g}",
+        (t[worst], mx[worst]),
+        textcoords="offset points",
+        xytext=(-10 if right else 10, -30),
+        ha="right" if right else "left",
+        fontsize=8,
+        color="#c0392b",
+        bbox={"boxstyle": "round,pad=0.3", "fc": "white", "ec": "#c0392b", "alpha": 0.9},
+    )
     if rms.min() > 0 and mx.max() / rms.min() > 50:
         ax.set_yscale("log")
     else:
         ax.set_ylim(0, mx.max() * 1.15 if mx.max() > 0 else 1)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"error ({units})")
-    rel = (f"\nrelative to the bbox diagonal: RMS mean {rms.mean() / diagonal:.2e}, max {mx.max() / diagonal:.2e}"
-           if diagonal else "")
+    rel = (f"\nrelative to the bbox diagonal: RMS mean {rms.mean() / diagonal:.2e}, "
+           f"max {mx.max() / diagonal:.2e}" if diagonal else "")
     ax.set_title(f"{title}: RMS mean {rms.mean():.3g}, max {mx.max():.3g} {units}{rel}", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left" if right else "upper right", fontsize=8, framealpha=0.9)

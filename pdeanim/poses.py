@@ -92,14 +92,18 @@ def validate_pose_arrays(vertices: np.ndarray, faces: np.ndarray, times: np.ndar
         raise PosesInputError(f"vertices must be real numbers, got dtype {vertices.dtype}")
     if not np.all(np.isfinite(vertices)):
         bad = np.argwhere(~np.isfinite(vertices))[0]
-        raise PosesInputError(f"vertices contain NaN or infinite values (first at frame {bad[0]}, vertex {bad[1]})")
+        raise PosesInputError(
+            f"vertices contain NaN or infinite values (first at frame {bad[0]}, vertex {bad[1]})"
+        )
     if faces.ndim != 2 or (faces.size and faces.shape[1] != 3):
         raise PosesInputError(f"faces must have shape (T, 3), got {faces.shape}")
     if faces.size:
         if not np.issubdtype(faces.dtype, np.integer):
             raise PosesInputError(f"faces must be integer indices, got dtype {faces.dtype}")
         if faces.min() < 0 or faces.max() >= n_verts:
-            raise PosesInputError(f"face indices must lie in [0, {n_verts}), found {faces.min()}..{faces.max()}")
+            raise PosesInputError(
+                f"face indices must lie in [0, {n_verts}), found {faces.min()}..{faces.max()}"
+            )
     if times.shape != (n_frames,):
         raise PosesInputError(f"times must have shape ({n_frames},), got {times.shape}")
     if times.dtype.kind not in "fiu":

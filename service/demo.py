@@ -119,14 +119,26 @@ def _check(r: httpx.Response, what: str) -> httpx.Response:
 
 
 def _exercise(api: httpx.Client, mesh_path: Path, out_dir: Path) -> int:
-    r, t_up = _timed(lambda: _check(api.post("/v1/meshes", files={"file": (mesh_path.name, mesh_path.read_bytes())}),
-                                    "mesh upload"))
+    r, t_up = _timed(
+        lambda: _check(
+            api.post("/v1/meshes", files={"file": (mesh_path.name, mesh_path.read_bytes())}), "mesh upload"
+        )
+    )
     mesh = r.json()
-    print(f"  uploaded {mesh_path.name}: {mesh['vertices']} vertices, {mesh['faces']} faces, "
-          f"watertight={mesh['stats'].get('watertight')} ({t_up * 1000:.0f} ms)")
-    job = _check(api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE,
-                                             "then_fit": True, "fit": FIT}), "job submission").json()
-    print(f"  job {job['id']}: simulate {SCENE['frames']} frames, then fit to rel. RMS {FIT['target_rel_rms']}")
+    print(
+        f"  uploaded {mesh_path.name}: {mesh['vertices']} vertices, {mesh['faces']} faces, "
+        f"watertight={mesh['stats'].get('watertight')} ({t_up * 1000:.0f} ms)"
+    )
+    job = _check(
+        api.post(
+            "/v1/jobs",
+            json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE, "then_fit": True, "fit": FIT},
+        ),
+        "job submission",
+    ).json()
+    print(
+        f"  job {job['id']}: simulate {SCENE['frames']} frames, then fit to rel. RMS {FIT['target_rel_rms']}"
+    )
     started = time.monotonic()
     job, stages = _follow(api, job["id"])
     total = time.monotonic() - started
@@ -136,23 +148,34 @@ def _exercise(api: httpx.Client, mesh_path: Path, out_dir: Path) -> int:
     clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
     poses = _check(api.get(f"/v1/poses/{job['result']['poses_id']}"), "poses download").content
     coef = _check(api.get(f"/v1/clips/{clip['id']}/coefficients"), "coefficients").content
-    topo = _check(api.get(f"/v1/meshes/{mesh['id']}/topology", params={"clip_id": clip["id"]}), "topology").content
-    frame, t_frame = _timed(lambda: _check(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5}), "frame"))
-    lat = [_timed(lambda i=i: api.get(f"/v1/clips/{clip['id']}/frame", params={"t": (i + 0.5) / 20}))[1]
-           for i in range(20)]
-    anim, t_anim = _timed(lambda: _check(api.get(f"/v1/clips/{clip['id']}/animation", params={"fps": 30}),
-                                         "animation"))
+    topo = _check(
+        api.get(f"/v1/meshes/{mesh['id']}/topology", params={"clip_id": clip["id"]}), "topology"
+    ).content
+    frame, t_frame = _timed(
+        lambda: _check(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5}), "frame")
+    )
+    lat = [
+        _timed(lambda i=i: api.get(f"/v1/clips/{clip['id']}/frame", params={"t": (i + 0.5) / 20}))[1]
+        for i in range(20)
+    ]
+    anim, t_anim = _timed(
+        lambda: _check(api.get(f"/v1/clips/{clip['id']}/animation", params={"fps": 30}), "animation")
+    )
     (out_dir / "frame_t0.5.glb").write_bytes(frame.content)
     (out_dir / "animation.glb").write_bytes(anim.content)
     (out_dir / "poses.npz").write_bytes(poses)
     raw = clip["frames"] * mesh["vertices"] * 3 * 4
     err = clip["errors"]
-    print(f"  sizes:  raw float32 frames {raw:,} B | poses.npz {len(poses):,} B | topology {len(topo):,} B (once per mesh) | "
-          f"coefficients {len(coef):,} B ({len(coef) / raw:.2%} of raw) | frame GLB {len(frame.content):,} B | animation GLB {len(anim.content):,} B")
-    print(f"  fit:    {clip['segments']} time segments, {clip['curves']} curves; error rms {err.get('rms', 0):.4g}, "
-          f"max {err.get('max', 0):.4g}, rel. rms {err.get('rel_rms', 0):.3%} of the bbox diagonal")
+    print(f"  sizes:  raw float32 frames {raw:,} B | poses.npz {len(poses):,} B | topology {len(topo):,} B "
+          f"(once per mesh) | "
+          f"coefficients {len(coef):,} B ({len(coef) / raw:.2%} of raw) | frame GLB {len(frame.content):,} B "
+          f"| animation GLB {len(anim.content):,} B")
+    print(f"  fit:    {clip['segments']} time segments, {clip['curves']} curves; "
+          f"error rms {err.get('rms', 0):.4g}, max {err.get('max', 0):.4g}, "
+          f"rel. rms {err.get('rel_rms', 0):.3%} of the bbox diagonal")
     by_stage = ", ".join(f"{k} {v:.1f} s" for k, v in stages.items())
-    print(f"  timing: upload {t_up:.2f} s | job {total:.1f} s ({by_stage}) | first frame {t_frame * 1000:.0f} ms, "
-          f"cached frames median {sorted(lat)[10] * 1000:.1f} ms | animation {t_anim * 1000:.0f} ms")
+    print(f"  timing: upload {t_up:.2f} s | job {total:.1f} s ({by_stage}) | "
+          f"first frame {t_frame * 1000:.0f} ms, cached frames median {sorted(lat)[10] * 1000:.1f} ms | "
+          f"animation {t_anim * 1000:.0f} ms")
     print(f"  wrote {out_dir / 'frame_t0.5.glb'}, {out_dir / 'animation.glb'}, {out_dir / 'poses.npz'}")
     return 0

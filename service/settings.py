@@ -23,16 +23,23 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="PDEANIM_", extra="ignore")
 
-    data_dir: Path = Field(Path("pdeanim-data"), description="root of the embedded database, blobs and temp files")
+    data_dir: Path = Field(
+        Path("pdeanim-data"), description="root of the embedded database, blobs and temp files"
+    )
     database_url: str = Field("", description="SQLAlchemy URL; default sqlite:///DATA_DIR/pdeanim.sqlite3")
     blob_url: str = Field("", description="file:///path or s3://bucket/prefix; default file://DATA_DIR/blobs")
     s3_endpoint_url: str | None = Field(None, description="S3 endpoint for MinIO/moto; None = AWS")
     s3_region: str = "us-east-1"
 
-    max_export_fps: float = Field(120.0, gt=0, description="highest fps of an animation export (GLB); above: 422")
+    max_export_fps: float = Field(
+        120.0, gt=0, description="highest fps of an animation export (GLB); above: 422"
+    )
     max_sync_export_bytes: int = Field(
-        32 * 1024 * 1024, ge=0, description="GET /v1/clips/{id}/animation builds an export in the request only "
-        "while its sampled frames as raw float32 stay within this; larger ones need an export job")
+        32 * 1024 * 1024,
+        ge=0,
+        description="GET /v1/clips/{id}/animation builds an export in the request only "
+        "while its sampled frames as raw float32 stay within this; larger ones need an export job",
+    )
 
     max_upload_bytes: int = Field(50 * 1024 * 1024, gt=0)
     max_vertices: int = Field(500_000, gt=0)

@@ -90,7 +90,9 @@ def child_main(conn, job: dict[str, Any], settings_json: str, parent_pid: int) -
         try:
             conn.close()
         finally:
-            os._exit(code)  # skip interpreter teardown: nothing left to flush, and it can hang under RLIMIT_AS
+            os._exit(
+                code
+            )  # skip interpreter teardown: nothing left to flush, and it can hang under RLIMIT_AS
 
 
 def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
@@ -126,7 +128,8 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
         conn.send(("error", exc.code, str(exc), False))
     except MemoryError:
         conn.send(("error", "out_of_memory", f"the job needs more memory than its limit of "
-                   f"{memory / 2**30:.2f} GiB ({memory} bytes; PDEANIM_JOB_MEMORY_BYTES or PDEANIM_JOB_MEMORY_FRACTION): lower "
+                   f"{memory / 2**30:.2f} GiB ({memory} bytes; PDEANIM_JOB_MEMORY_BYTES or "
+                   f"PDEANIM_JOB_MEMORY_FRACTION): lower "
                    "frames, target_tets or the poses' size, or raise the limit", True))
     except Exception as exc:  # noqa: BLE001 - unexpected: reported for a retry
         traceback.print_exc()

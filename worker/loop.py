@@ -135,7 +135,9 @@ class Worker:
             kept = {k: v for k, v in outcome.partial.items() if k != "next_stage"}
             step = outcome.partial.get("next_stage", "next stage")
             message = f"{step} failed (the results before it are kept: {sorted(kept)}): {outcome.message}"
-            queue.fail(job.id, job.attempt, message, outcome.code, outcome.retry, {**kept, "failed_stage": step})
+            queue.fail(
+                job.id, job.attempt, message, outcome.code, outcome.retry, {**kept, "failed_stage": step}
+            )
         elif outcome.status == "error":
             queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
         elif outcome.status == "stopped":

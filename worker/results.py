@@ -37,9 +37,17 @@ def result_writer(job: Claimed, result: dict[str, Any]) -> Callable[[Session], d
             poses_id = ids["poses_id"] = _upsert_poses(session, job, result["poses"])
         if "clip" in result:
             c = result["clip"]
-            row = ClipRecord(tenant_id=job.tenant_id, mesh_id=job.mesh_id, poses_id=poses_id, job_id=job.id,
-                             kind=c["kind"], topology_key=c["topology_key"], coefficients_key=c["coefficients_key"],
-                             topology_id=c["topology_id"], report=c.get("report", {}))
+            row = ClipRecord(
+                tenant_id=job.tenant_id,
+                mesh_id=job.mesh_id,
+                poses_id=poses_id,
+                job_id=job.id,
+                kind=c["kind"],
+                topology_key=c["topology_key"],
+                coefficients_key=c["coefficients_key"],
+                topology_id=c["topology_id"],
+                report=c.get("report", {}),
+            )
             session.add(row)
             session.flush()
             ids["clip_id"] = row.id

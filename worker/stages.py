@@ -51,7 +51,9 @@ def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int
     parts = fit_poses(poses, fit_options, progress=labelled)
     shortfall = target_shortfall(parts.report)
     if shortfall and not fit_options.best_effort:
-        raise TargetNotMetError(f"{shortfall} (ask for best_effort: true in the fit options to keep the clip)")
+        raise TargetNotMetError(
+            f"{shortfall} (ask for best_effort: true in the fit options to keep the clip)"
+        )
     return _store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
 
 

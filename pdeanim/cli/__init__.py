@@ -20,7 +20,10 @@ def build_parser(extra_commands: Sequence[str] = ()) -> argparse.ArgumentParser:
     """The argument parser with the library's sub-commands plus the modules named in ``extra_commands``."""
     from .. import __version__
 
-    parser = argparse.ArgumentParser(prog="pdeanim", description="Deforming 3D meshes to compact dynamic-PDE coefficient clips, and back to frames.")
+    parser = argparse.ArgumentParser(
+        prog="pdeanim",
+        description="Deforming 3D meshes to compact dynamic-PDE coefficient clips, and back to frames.",
+    )
     parser.add_argument("--version", action="version", version=f"pdeanim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in [*COMMANDS, *extra_commands]:

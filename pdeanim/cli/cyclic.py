@@ -1,7 +1,8 @@
 """``pdeanim cyclic MESH --mode eel --out CLIP``: a loopable swim cycle of an elongated mesh.
 
 ``--mode walk`` or ``--mode run`` on a skinned glTF/GLB instead writes one skeletal walk/run cycle as poses
-(``--out POSES.npz``, to fit with ``pdeanim fit``) or as a looping morph-target animation (``--out FILE.glb``).
+(``--out POSES.npz``, to fit with ``pdeanim fit``) or as a looping morph-target animation (``--out
+FILE.glb``).
 """
 
 from __future__ import annotations
@@ -28,8 +29,11 @@ def _vec(text: str) -> list[float]:
 
 def register(subparsers: Any) -> None:
     """Add the ``cyclic`` sub-command."""
-    p = subparsers.add_parser("cyclic", help="a loopable swim cycle (PDE surface + spine wave) of an elongated mesh",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "cyclic",
+        help="a loopable swim cycle (PDE surface + spine wave) of an elongated mesh",
+        description=__doc__,
+    )
     p.add_argument("mesh", help="mesh file (OBJ, PLY, STL, OFF, GLB)")
     p.add_argument("--mode", default="eel", help="eel, trout, tropical, shark, dolphin (or anguilliform, "
                    "subcarangiform, carangiform, thunniform); walk or run for a skinned glTF")
@@ -45,12 +49,21 @@ def register(subparsers: Any) -> None:
         p.add_argument(f"--{name}", type=kind, help=f"override the preset's {name}")
     p.add_argument("--wave", choices=["standing", "travelling"], help="standing (paper Eq. 11) or travelling")
     p.add_argument("--radial", choices=["rotate", "translate"], help="how points follow the bent spine")
-    p.add_argument("--direction", choices=["lateral", "vertical"], help="side to side (fish) or up and down (dolphin)")
+    p.add_argument(
+        "--direction", choices=["lateral", "vertical"], help="side to side (fish) or up and down (dolphin)"
+    )
     p.add_argument("--plot", help="also write a PNG of the body, its spine and a few frames to this path")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="walk/run parameter (step_height, step_length, height_right, lift_left, hip_bob, ...)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="walk/run parameter (step_height, step_length, height_right, lift_left, hip_bob, ...)",
+    )
     for joint in ("hip", "right-foot", "left-foot"):
-        p.add_argument(f"--{joint}", help=f"walk/run: name of the {joint.replace('-', ' ')} joint (default: by name)")
+        p.add_argument(
+            f"--{joint}", help=f"walk/run: name of the {joint.replace('-', ' ')} joint (default: by name)"
+        )
     p.set_defaults(func=run)
 
 
@@ -70,21 +83,41 @@ def run(args: argparse.Namespace) -> int:
     if args.mode in GAITS:
         return run_gait(args)
 
-    over = {k: getattr(args, k) for k in [*SWIM_FLAGS, "wave", "radial", "direction"] if getattr(args, k) is not None}
-    options = CyclicOptions.from_dict({"mode": args.mode, "overrides": over, "n_curves": args.curves,
-                                       "points": args.points, "modes": args.modes, "frames": args.frames,
-                                       "head": args.head, "tail": args.tail, "lateral": args.lateral})
+    over = {
+        k: getattr(args, k)
+        for k in [*SWIM_FLAGS, "wave", "radial", "direction"]
+        if getattr(args, k) is not None
+    }
+    options = CyclicOptions.from_dict(
+        {
+            "mode": args.mode,
+            "overrides": over,
+            "n_curves": args.curves,
+            "points": args.points,
+            "modes": args.modes,
+            "frames": args.frames,
+            "head": args.head,
+            "tail": args.tail,
+            "lateral": args.lateral,
+        }
+    )
     mesh = _load(args.mesh)
     parts = make_cyclic_clip(mesh, options)
     write_clip_file(args.out, parts)
     r = parts.report
     d = r["rest_distance"]
     print(f"curves: {r['curves']} ({r['patches']} patches, {r['points']} points, {r['modes']} modes)")
-    print(f"bytes: coefficients {len(parts.coefficients)}, topology {len(parts.topology)}, "
-          f"mesh {r['mesh_bytes']}")
-    print(f"rest-pose distance to the PDE surface: mean {d['mean']:.4g} ({d['rel_mean']:.2e} of the diagonal), "
-          f"max {d['max']:.4g} ({d['rel_max']:.2e})")
-    print(f"swim: {r['swim']['mode']}, period {r['period']:.4g} s, {r['frames']} frames per cycle -> {args.out}")
+    print(
+        f"bytes: coefficients {len(parts.coefficients)}, topology {len(parts.topology)}, "
+        f"mesh {r['mesh_bytes']}"
+    )
+    print(
+        f"rest-pose distance to the PDE surface: mean {d['mean']:.4g} ({d['rel_mean']:.2e} of the diagonal), "
+        f"max {d['max']:.4g} ({d['rel_max']:.2e})"
+    )
+    print(
+        f"swim: {r['swim']['mode']}, period {r['period']:.4g} s, {r['frames']} frames per cycle -> {args.out}"
+    )
     if args.plot:
         _plot(args.plot, load_clip(parts.topology, parts.coefficients))
     return 0
@@ -116,9 +149,13 @@ def run_gait(args: argparse.Namespace) -> int:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParameterError(f"--set expects KEY=VALUE, got {item!r}")
-        over[key.strip()] = value.strip().lower() in ("1", "true", "yes") if key.strip() == "literal" else value
+        over[key.strip()] = (
+            value.strip().lower() in ("1", "true", "yes") if key.strip() == "literal" else value
+        )
     joints = {"hip": args.hip, "right_foot": args.right_foot, "left_foot": args.left_foot}
-    poses = step_cycle(load_skinned(args.mesh), StepParams.preset(args.mode, **over), frames=args.frames, **joints)
+    poses = step_cycle(
+        load_skinned(args.mesh), StepParams.preset(args.mode, **over), frames=args.frames, **joints
+    )
     if out.endswith(".npz"):
         save_poses(args.out, poses)
     else:

@@ -74,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
     look = f", look of {layout.source} source" if layout is not None and layout.source != "plain" else ""
     loop = ", looping" if clip.looping else ""
     packed = ", " + " + ".join(packing) if packing else ""
-    print(f"wrote {out} ({len(glb)} bytes, {clip.n_vertices} vertices, {len(clip.frame_times)} source frames, "
-          f"{args.fps:g} fps{loop}{packed}{look})")
+    print(
+        f"wrote {out} ({len(glb)} bytes, {clip.n_vertices} vertices, {len(clip.frame_times)} source frames, "
+        f"{args.fps:g} fps{loop}{packed}{look})"
+    )
     return 0

@@ -19,13 +19,20 @@ EXIT_TARGET_NOT_MET = 3
 
 def register(subparsers) -> None:  # noqa: ANN001
     """Add the ``fit`` sub-command."""
-    p = subparsers.add_parser("fit", help="fit a dynamic-PDE clip to poses",
-                              description="Fit curves of the mesh over time with the dynamic-PDE model.")
-    p.add_argument("poses", help="POSES.npz (vertices (F,V,3), faces, optional times) or an animated .glb/.gltf")
+    p = subparsers.add_parser(
+        "fit",
+        help="fit a dynamic-PDE clip to poses",
+        description="Fit curves of the mesh over time with the dynamic-PDE model.",
+    )
+    p.add_argument(
+        "poses", help="POSES.npz (vertices (F,V,3), faces, optional times) or an animated .glb/.gltf"
+    )
     p.add_argument("--out", required=True, help="output CLIP file")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--target-rms", type=float, help="absolute RMS distance target")
-    g.add_argument("--target-rel-rms", type=float, help="RMS target relative to the first frame's bbox diagonal")
+    g.add_argument(
+        "--target-rel-rms", type=float, help="RMS target relative to the first frame's bbox diagonal"
+    )
     g.add_argument("--target-max", type=float, help="absolute max distance target")
     g.add_argument("--target-rel-max", type=float, help="max target relative to the bbox diagonal")
     g.add_argument("--segments", type=int, help="fixed number of time segments")
@@ -35,8 +42,12 @@ def register(subparsers) -> None:  # noqa: ANN001
                         "rigid motion plus a residual")
     p.add_argument("--loop", action="store_true", help="make the clip loop (last frame flows into the first)")
     p.add_argument("--fps", type=float, default=30.0, help="sampling rate for glTF input")
-    p.add_argument("--animation", metavar="NAME", help="glTF input: the animation to fit, by name or index "
-                                                         "(default: the first; the summary says which was used)")
+    p.add_argument(
+        "--animation",
+        metavar="NAME",
+        help="glTF input: the animation to fit, by name or index "
+        "(default: the first; the summary says which was used)",
+    )
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
     p.add_argument("--best-effort", action="store_true",
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
@@ -55,10 +66,18 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.fps > 0:
         raise ParameterError(f"--fps must be > 0, got {args.fps}")
-    options = FitOptions(target_rms=args.target_rms, target_rel_rms=args.target_rel_rms,
-                         target_max=args.target_max, target_rel_max=args.target_rel_max, segments=args.segments,
-                         param_mode=args.param, motion=args.motion, loop=args.loop,
-                         max_segments=args.max_segments, best_effort=args.best_effort)
+    options = FitOptions(
+        target_rms=args.target_rms,
+        target_rel_rms=args.target_rel_rms,
+        target_max=args.target_max,
+        target_rel_max=args.target_rel_max,
+        segments=args.segments,
+        param_mode=args.param,
+        motion=args.motion,
+        loop=args.loop,
+        max_segments=args.max_segments,
+        best_effort=args.best_effort,
+    )
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
     used = (poses.meta or {}).get("animation")

@@ -128,7 +128,9 @@ def chunk_residual(y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray
     return np.moveaxis(best, 2, 0)
 
 
-def curve_floor(frames: np.ndarray, curves: CurveSet, motion: str = "displacement") -> tuple[np.ndarray, np.ndarray]:
+def curve_floor(
+    frames: np.ndarray, curves: CurveSet, motion: str = "displacement"
+) -> tuple[np.ndarray, np.ndarray]:
     """(C,) sum of squared errors and (C,) max error of every curve; curves need not cover every vertex.
 
     frames : (F, V, 3) float; the chord parameter comes from frame 0.
@@ -158,7 +160,8 @@ def bbox_diagonal(points: np.ndarray) -> float:
 
 
 def spatial_floor(frames: np.ndarray, curves: CurveSet, motion: str = "displacement") -> FloorReport:
-    """Floor of fitting frames (F, V, 3) frame by frame with the curves' space basis, for one motion variant."""
+    """Floor of fitting frames (F, V, 3) frame by frame with the curves' space basis, for one motion
+    variant."""
     if motion not in MOTIONS:
         raise ParameterError(f"motion must be one of {MOTIONS}, got {motion!r}")
     frames = np.asarray(frames, dtype=np.float64)

@@ -28,11 +28,22 @@ def encode_topology(faces: np.ndarray, rest: np.ndarray, vmap: VertexMap, n_patc
     """Topology part bytes: faces (T, 3) i32, rest (V, 3) f32, vertex_patch (V,) i32, vertex_uv (V, 2) f32,
     vertex_offset (V, 3) f32, curves (K, P, 3) f32; header with the body frame and surface settings."""
     patch, u = vmap.patch_u(n_patches)
-    header = {"part": "topology", "producer": KIND, "n_vertices": int(len(rest)), "n_patches": int(n_patches),
-              "frame": frame.to_dict(), "surface": surface_settings}
-    arrays = {"faces": np.asarray(faces, dtype=np.int32), "rest": np.asarray(rest, dtype=np.float32),
-              "vertex_patch": patch.astype(np.int32), "vertex_uv": np.stack([u, vmap.v], 1).astype(np.float32),
-              "vertex_offset": vmap.offset.astype(np.float32), "curves": np.asarray(curves, dtype=np.float32)}
+    header = {
+        "part": "topology",
+        "producer": KIND,
+        "n_vertices": int(len(rest)),
+        "n_patches": int(n_patches),
+        "frame": frame.to_dict(),
+        "surface": surface_settings,
+    }
+    arrays = {
+        "faces": np.asarray(faces, dtype=np.int32),
+        "rest": np.asarray(rest, dtype=np.float32),
+        "vertex_patch": patch.astype(np.int32),
+        "vertex_uv": np.stack([u, vmap.v], 1).astype(np.float32),
+        "vertex_offset": vmap.offset.astype(np.float32),
+        "curves": np.asarray(curves, dtype=np.float32),
+    }
     return container.pack(header, arrays)
 
 
@@ -79,7 +90,9 @@ class CyclicClip:
         out = (self.rest[None].astype(np.float64) + self.displacement(t)).astype(np.float32)
         return out[0] if scalar else out
 
-    def surface_frames(self, t: float | np.ndarray, n_s: int = 97, n_v: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    def surface_frames(
+        self, t: float | np.ndarray, n_s: int = 97, n_v: int = 32
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The PDE-surface representation itself: grid points (K, n_s n_v, 3) float32 at clip times t (K,)
         moving with the same spine wave, and the grid's faces (T, 3) int32 (the lighter alternative to the
         mesh; rebuilt from the boundary curves of the topology part)."""
@@ -112,10 +125,18 @@ class CyclicClip:
 
     def info(self) -> dict[str, Any]:
         """Frames, period, curves, patches, swim parameters (JSON-able)."""
-        return {"kind": self.kind, "looping": True, "vertices": self.n_vertices, "faces": int(len(self.faces)),
-                "frames": int(len(self.frame_times)), "duration": float(self.frame_times[-1]),
-                "period": self.params.period, "patches": self.spine.n_patches, "swim": self.params.to_dict(),
-                **self.extra}
+        return {
+            "kind": self.kind,
+            "looping": True,
+            "vertices": self.n_vertices,
+            "faces": int(len(self.faces)),
+            "frames": int(len(self.frame_times)),
+            "duration": float(self.frame_times[-1]),
+            "period": self.params.period,
+            "patches": self.spine.n_patches,
+            "swim": self.params.to_dict(),
+            **self.extra,
+        }
 
 
 def _need(arrays: dict[str, np.ndarray], names: tuple[str, ...], part: str) -> None:
@@ -145,7 +166,10 @@ def clip_from_parts(th: dict, ta: dict[str, np.ndarray], ch: dict, ca: dict[str,
             len(patch) and (patch.min() < 0 or patch.max() >= spine.n_patches)):
         raise ClipFormatError("cyclic-spine clip arrays do not fit together")
     s = (patch + u) / spine.n_patches
-    extra = {"curves": int(ta["curves"].shape[0]) if "curves" in ta else None, "surface": th.get("surface", {})}
+    extra = {
+        "curves": int(ta["curves"].shape[0]) if "curves" in ta else None,
+        "surface": th.get("surface", {}),
+    }
     return CyclicClip(ta["faces"], rest, s, spine, frame, params, frames, extra, ta.get("curves"))
 
 

@@ -118,7 +118,8 @@ def clip_animation_glb(clip: Clip, fps: float = 30.0, *, options: PackOptions | 
     """The clip as an animated GLB: frames evaluated at ``fps`` over its duration, last frame included; for a
     looping clip the last key is the first frame exactly, so playback wraps without a seam. ``options``
     default to quantised + meshopt-compressed with per-frame normal deltas; ``layout`` (default plain)
-    keeps a source mesh's look. ``PackOptions(quantize=False, compress=False)`` writes plain float32. Frames are evaluated in chunks so
+    keeps a source mesh's look. ``PackOptions(quantize=False, compress=False)`` writes plain float32. Frames
+    are evaluated in chunks so
     ``progress`` hears about long exports."""
     opts = options or PackOptions()
     duration = clip_duration(clip)

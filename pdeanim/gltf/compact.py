@@ -258,7 +258,8 @@ def _quantised_normals(normals: np.ndarray) -> np.ndarray:
 
 def _mesh_node(doc: dict, part: Part, grid: _Grid | None, name: str | None, own: bool) -> int:
     """The node that holds the part's mesh: the part's own node when pdeanim made it (``own``, a plain layout)
-    and it is a leaf without a transform, else a new child, so a source's node transforms stay as they were."""
+    and it is a leaf without a transform, else a new child, so a source's node transforms stay as they
+    were."""
     node = doc["nodes"][part.node]
     if grid is None:
         return part.node

@@ -38,7 +38,8 @@ def malformed_as(error: type[InputError]) -> Iterator[None]:
 
 
 class GltfDocument:
-    """The JSON of a glTF asset with its buffers loaded; ``error`` is the InputError class raised on defects."""
+    """The JSON of a glTF asset with its buffers loaded; ``error`` is the InputError class raised on
+    defects."""
 
     def __init__(self, doc: dict[str, Any], buffers: list[bytes], error: type[InputError] = PosesInputError):
         self.doc, self.buffers, self.error = doc, buffers, error
@@ -48,8 +49,10 @@ class GltfDocument:
             raise error(f"unsupported glTF version {version!r} (need 2.x)")
         blocked = sorted(set(doc.get("extensionsRequired", [])) & set(UNSUPPORTED_GEOMETRY))
         if blocked:
-            raise error(f"the glTF file needs {', '.join(blocked)} to decode its geometry, which pdeanim does "
-                        f"not read; export it without mesh compression")
+            raise error(
+                f"the glTF file needs {', '.join(blocked)} to decode its geometry, which pdeanim does "
+                f"not read; export it without mesh compression"
+            )
 
     def list(self, key: str) -> list[dict[str, Any]]:
         """A top-level array of the document (``nodes``, ``meshes``...), empty when absent."""
@@ -158,7 +161,9 @@ class GltfDocument:
         return out
 
 
-def _buffer_bytes(buf: dict, index: int, glb_bin: bytes | None, base: Path | None, error: type[InputError]) -> bytes:
+def _buffer_bytes(
+    buf: dict, index: int, glb_bin: bytes | None, base: Path | None, error: type[InputError]
+) -> bytes:
     uri = buf.get("uri")
     if uri is None:
         if index == 0 and glb_bin is not None:

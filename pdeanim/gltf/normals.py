@@ -58,7 +58,9 @@ def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return _finish(acc, p)
 
 
-def vertex_normals_frames(frames: np.ndarray, faces: np.ndarray, chunk_values: int = 30_000_000) -> np.ndarray:
+def vertex_normals_frames(
+    frames: np.ndarray, faces: np.ndarray, chunk_values: int = 30_000_000
+) -> np.ndarray:
     """Unit normals (K, V, 3) float32 of frames (K, V, 3): one sparse product per chunk of frames (chunks
     keep the float64 temporaries under about ``chunk_values`` numbers)."""
     p = np.asarray(frames)
@@ -145,9 +147,12 @@ class FaceNormals:
         if COMPILED:
             return
         corners = np.ascontiguousarray(f.T).reshape(-1)  # (3T,) all a, all b, all c
-        self._gather = (corners[None, :] + v * np.arange(3)[:, None]).reshape(-1).astype(np.intp)  # into (3V,)
-        self._incidence = sp.csr_matrix((np.ones(3 * t, np.float32), (f.ravel(), np.repeat(np.arange(t), 3))),
-                                        shape=(v, t))
+        self._gather = (
+            (corners[None, :] + v * np.arange(3)[:, None]).reshape(-1).astype(np.intp)
+        )  # into (3V,)
+        self._incidence = sp.csr_matrix(
+            (np.ones(3 * t, np.float32), (f.ravel(), np.repeat(np.arange(t), 3))), shape=(v, t)
+        )
 
     def __call__(self, positions: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Unit normals (V, 3) float32 of positions (V, 3), written into ``out`` when given."""

@@ -86,7 +86,10 @@ def frame_glb(positions: np.ndarray, faces: np.ndarray | None) -> bytes:
 def bounds(a: np.ndarray, axis: int = 0) -> dict[str, list[float]]:
     """Exact float32 ``min``/``max`` of float data along ``axis`` as JSON lists (a reduction along the
     contiguous axis of a (3, V) copy is about 30x faster than along axis 0 of (V, 3))."""
-    return {"min": [json_float(x) for x in a.min(axis=axis)], "max": [json_float(x) for x in a.max(axis=axis)]}
+    return {
+        "min": [json_float(x) for x in a.min(axis=axis)],
+        "max": [json_float(x) for x in a.max(axis=axis)],
+    }
 
 
 class FrameGlb:

@@ -52,7 +52,8 @@ class SurfaceMesh:
 
     @property
     def content_hash(self) -> str:
-        """sha256 of the vertex and face arrays (canonical dtypes), a cache key independent of the file format."""
+        """sha256 of the vertex and face arrays (canonical dtypes), a cache key independent of the file
+        format."""
         h = hashlib.sha256()
         h.update(np.ascontiguousarray(self.vertices, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(self.faces, dtype="<i8").tobytes())
@@ -123,7 +124,9 @@ def load_mesh(source: str | Path | bytes, *, filename: str | None = None, limits
         data = path.read_bytes()
         folder = path.parent
     if len(data) > limits.max_file_bytes:
-        raise LimitError("mesh file size in bytes", len(data), limits.max_file_bytes, "PDEANIM_MAX_MESH_BYTES")
+        raise LimitError(
+            "mesh file size in bytes", len(data), limits.max_file_bytes, "PDEANIM_MAX_MESH_BYTES"
+        )
     file_type = file_type_of(name)
     if len(data) == 0:
         raise MeshInputError(f"mesh file {name!r} is empty")
@@ -137,11 +140,15 @@ def file_type_of(name: str) -> str:
     """The trimesh file type for a file name, or MeshInputError for an unknown extension."""
     suffix = Path(name).suffix.lower()
     if suffix not in FORMATS:
-        raise MeshInputError(f"unsupported mesh file type {suffix or name!r}: use one of {', '.join(FORMATS)}")
+        raise MeshInputError(
+            f"unsupported mesh file type {suffix or name!r}: use one of {', '.join(FORMATS)}"
+        )
     return FORMATS[suffix]
 
 
-def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+def parse_mesh(
+    data: bytes, file_type: str, name: str, folder: Path | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Parse bytes with trimesh into raw (V, 3) float64 vertices and (T, 3) int64 faces (not yet validated).
 
     ``folder`` lets a .gltf on disk load its external buffers; bytes from an upload get no resolver.
@@ -165,9 +172,13 @@ def parse_mesh(data: bytes, file_type: str, name: str, folder: Path | None = Non
         raise
     except IndexError as exc:
         raise MeshInputError(f"{name!r} has face indices out of range ({exc})") from exc
-    except Exception as exc:  # trimesh raises many types (ValueError, KeyError, struct.error, ...) on bad files
-        raise MeshInputError(f"cannot parse {name!r} as {file_type.upper()}: the file is truncated, corrupt or "
-                             f"not in that format ({type(exc).__name__}: {exc})") from exc
+    except (
+        Exception
+    ) as exc:  # trimesh raises many types (ValueError, KeyError, struct.error, ...) on bad files
+        raise MeshInputError(
+            f"cannot parse {name!r} as {file_type.upper()}: the file is truncated, corrupt or "
+            f"not in that format ({type(exc).__name__}: {exc})"
+        ) from exc
     finally:
         logger.setLevel(level)
     return geometry_arrays(loaded, name)
@@ -198,7 +209,9 @@ def check_obj_indices(data: bytes, name: str) -> None:
     match = OBJ_ZERO_INDEX.search(data)
     if match is not None:
         line = data.count(b"\n", 0, match.start()) + 1
-        raise MeshInputError(f"{name!r} line {line}: face vertex index 0 (OBJ indices start at 1, or -1 from the end)")
+        raise MeshInputError(
+            f"{name!r} line {line}: face vertex index 0 (OBJ indices start at 1, or -1 from the end)"
+        )
 
 
 def geometry_arrays(loaded: object, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -208,10 +221,14 @@ def geometry_arrays(loaded: object, name: str) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh) and len(g.faces)]
         if not meshes:
-            raise MeshInputError(f"{name!r} contains no triangle mesh (empty, truncated or not in that format)")
+            raise MeshInputError(
+                f"{name!r} contains no triangle mesh (empty, truncated or not in that format)"
+            )
         offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
         vertices = np.concatenate([np.asarray(m.vertices, np.float64) for m in meshes])
-        faces = np.concatenate([np.asarray(m.faces, np.int64) + o for m, o in zip(meshes, offsets, strict=False)])
+        faces = np.concatenate(
+            [np.asarray(m.faces, np.int64) + o for m, o in zip(meshes, offsets, strict=False)]
+        )
         return vertices, faces
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshInputError(f"{name!r} contains no triangle mesh (found {type(loaded).__name__})")

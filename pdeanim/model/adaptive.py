@@ -62,7 +62,9 @@ def _splits(segm: Segmentation, badness: np.ndarray, n_split: int) -> Segmentati
     energy = np.bincount(seg, badness**2, minlength=segm.n_segments)
     splittable = np.diff(segm.bounds) >= 2
     score = np.where(splittable, energy, -np.inf)
-    chosen = [s for s in np.argsort(-score, kind="stable")[:n_split] if np.isfinite(score[s]) and score[s] > 0]
+    chosen = [
+        s for s in np.argsort(-score, kind="stable")[:n_split] if np.isfinite(score[s]) and score[s] > 0
+    ]
     new_bounds = list(segm.bounds)
     for s in chosen:
         lo, hi = int(segm.bounds[s]), int(segm.bounds[s + 1])

@@ -194,7 +194,9 @@ def space_to_paper(D: float, space_kind: str) -> np.ndarray:
     """M (4, 4) with balanced_k(u) = sum_b M[k, b] paper_b(u), exact closed form; D must be > 0."""
     D = float(D)
     if not D > 0:
-        raise ParameterError("the paper's space basis is degenerate at D = 0 (the balanced one is the cubics)")
+        raise ParameterError(
+            "the paper's space basis is degenerate at D = 0 (the balanced one is the cubics)"
+        )
     if space_kind == "D0":
         h = 0.5 * D
         cosh_, sinh_ = np.array([0.5 * math.exp(-h), 0.5 * math.exp(h), 0, 0]), np.array(

@@ -72,8 +72,9 @@ class FitOptions:
             if v is not None and not (isinstance(v, int | float) and not isinstance(v, bool)
                                       and np.isfinite(v) and v > 0):
                 raise ParameterError(f"{name} must be a positive number, got {v!r}")
-        if self.segments is not None and not (isinstance(self.segments, int) and not isinstance(self.segments, bool)
-                                              and self.segments >= 1):
+        if self.segments is not None and not (
+            isinstance(self.segments, int) and not isinstance(self.segments, bool) and self.segments >= 1
+        ):
             raise ParameterError(f"segments must be an integer >= 1, got {self.segments!r}")
         if self.segments is not None and self.has_targets:
             raise ParameterError("give either a fixed segment count or error targets, not both")
@@ -125,7 +126,9 @@ def default_curves(rest: np.ndarray, faces: np.ndarray, curve_points: int = 10) 
     """Curves of :func:`pdeanim.curves.extract.extract_curves` for the rest pose (V, 3) and faces (T, 3)."""
     from ..curves.extract import extract_curves
 
-    return extract_curves(np.asarray(rest, np.float64), faces if len(faces) else None, target_points=curve_points)
+    return extract_curves(
+        np.asarray(rest, np.float64), faces if len(faces) else None, target_points=curve_points
+    )
 
 
 @dataclass
@@ -137,7 +140,9 @@ class _Problem:
     idx: np.ndarray
     mask: np.ndarray
     u: np.ndarray  # (C, 3, N)
-    Y: np.ndarray  # (F, K, N) float64 what the curves fit (displacement, positions or rigid residual) as items
+    Y: (
+        np.ndarray
+    )  # (F, K, N) float64 what the curves fit (displacement, positions or rigid residual) as items
     t: np.ndarray  # (F,) normalised times
     rigid: RigidTracks | None = None
     slots: np.ndarray | None = None  # (V,) slot c * N + n of every vertex in the padded curves
@@ -189,7 +194,8 @@ class _SpaceFit:
 
 
 def _space_fit(poses: Poses, options: FitOptions, curves: CurveSet | None, progress: Progress) -> _SpaceFit:
-    """Curves + space stage; automatic curves get shorter until the spatial floor leaves room for the target."""
+    """Curves + space stage; automatic curves get shorter until the spatial floor leaves room for the
+    target."""
     auto = curves is None
     for cp in _curve_point_ladder(options.curve_points if auto else None):
         progress(0.02, f"curves {cp or 'given'}")
@@ -344,17 +350,32 @@ def _report(p, approx, exact, floor_d, fitted, targets, met, floor_high, history
     curve_max = np.zeros(curves.n_curves)
     np.maximum.at(curve_max, cid, d.max(0))
     floor_rms = float(np.sqrt(np.mean(floor_d * floor_d)))
-    met_now = bool((targets.rms is None or summary["rms"] <= targets.rms)
-                   and (targets.max is None or summary["max"] <= targets.max))
-    return {**summary, "frames": int(poses.n_frames), "vertices": int(X.shape[1]), "curves": curves.n_curves,
-            "segments": fitted.segm.n_segments, "segment_t": fitted.segm.segment_t.tolist(),
-            "segment_frames": fitted.segm.bounds.tolist(),
-            "per_frame_rms": np.sqrt(np.mean(d * d, axis=1)).tolist(), "per_frame_max": d.max(axis=1).tolist(),
-            "per_curve_rms": curve_rms.tolist(), "per_curve_max": curve_max.tolist(),
-            "floor_rms": floor_rms, "floor_rel_rms": floor_rms / diag,
-            "floor_max": float(floor_d.max()), "float32_vs_float64_max": float(np.abs(d - exact[: len(d)]).max()),
-            "targets": {"rms": targets.rms, "max": targets.max}, "target_met": met_now if met is not None else None,
-            "floor_exceeds_target": bool(floor_high), "adaptive_history": history, "options": options.to_dict()}
+    met_now = bool(
+        (targets.rms is None or summary["rms"] <= targets.rms)
+        and (targets.max is None or summary["max"] <= targets.max)
+    )
+    return {
+        **summary,
+        "frames": int(poses.n_frames),
+        "vertices": int(X.shape[1]),
+        "curves": curves.n_curves,
+        "segments": fitted.segm.n_segments,
+        "segment_t": fitted.segm.segment_t.tolist(),
+        "segment_frames": fitted.segm.bounds.tolist(),
+        "per_frame_rms": np.sqrt(np.mean(d * d, axis=1)).tolist(),
+        "per_frame_max": d.max(axis=1).tolist(),
+        "per_curve_rms": curve_rms.tolist(),
+        "per_curve_max": curve_max.tolist(),
+        "floor_rms": floor_rms,
+        "floor_rel_rms": floor_rms / diag,
+        "floor_max": float(floor_d.max()),
+        "float32_vs_float64_max": float(np.abs(d - exact[: len(d)]).max()),
+        "targets": {"rms": targets.rms, "max": targets.max},
+        "target_met": met_now if met is not None else None,
+        "floor_exceeds_target": bool(floor_high),
+        "adaptive_history": history,
+        "options": options.to_dict(),
+    }
 
 
 def curve_errors(poses: Poses, curves: CurveSet, options: FitOptions | None = None) -> dict[str, np.ndarray]:
@@ -371,4 +392,8 @@ def curve_errors(poses: Poses, curves: CurveSet, options: FitOptions | None = No
     cid, _ = curves.curve_of_vertex(p.X.shape[1])
     n_c = np.bincount(cid, minlength=curves.n_curves) * len(fd)
     floor_rms = np.sqrt(np.bincount(cid, (fd * fd).sum(0), minlength=curves.n_curves) / np.maximum(n_c, 1))
-    return {"rms": np.asarray(r["per_curve_rms"]), "max": np.asarray(r["per_curve_max"]), "floor_rms": floor_rms}
+    return {
+        "rms": np.asarray(r["per_curve_rms"]),
+        "max": np.asarray(r["per_curve_max"]),
+        "floor_rms": floor_rms,
+    }

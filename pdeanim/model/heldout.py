@@ -34,7 +34,9 @@ def linear_interpolation(times_kept: np.ndarray, frames_kept: np.ndarray, times:
     return (1.0 - w) * frames_kept[j] + w * frames_kept[j + 1]
 
 
-def catmull_rom_interpolation(times_kept: np.ndarray, frames_kept: np.ndarray, times: np.ndarray) -> np.ndarray:
+def catmull_rom_interpolation(
+    times_kept: np.ndarray, frames_kept: np.ndarray, times: np.ndarray
+) -> np.ndarray:
     """Centripetal-free (uniform-tangent) Catmull-Rom interpolation of frames (K, V, 3) at kept times onto
     times (M,): cubic Hermite with tangents from the neighbouring kept frames (one-sided at the ends)."""
     tk = np.asarray(times_kept, np.float64)
@@ -71,12 +73,23 @@ def heldout_comparison(poses: Poses, k: int, options: FitOptions | None = None,
     kept64 = poses.vertices[keep].astype(np.float64)
     lin = error_summary(truth, linear_interpolation(times[keep], kept64, times[out]), diag)
     cr = error_summary(truth, catmull_rom_interpolation(times[keep], kept64, times[out]), diag)
-    n_eq = int(np.clip((len(parts.coefficients) + len(parts.topology)) // (poses.n_vertices * 12), 2, len(keep)))
+    n_eq = int(
+        np.clip((len(parts.coefficients) + len(parts.topology)) // (poses.n_vertices * 12), 2, len(keep))
+    )
     eq = keep[np.unique(np.round(np.linspace(0, len(keep) - 1, n_eq)).astype(int))]
-    lin_eq = error_summary(truth, linear_interpolation(times[eq], poses.vertices[eq].astype(np.float64),
-                                                       times[out]), diag)
-    return {"k": int(k), "kept_frames": int(len(keep)), "heldout_frames": int(len(out)), "pde": pde,
-            "linear": lin, "catmull_rom": cr, "linear_equal_bytes": lin_eq, "linear_equal_bytes_frames": int(len(eq)),
-            "fit_report": {key: parts.report[key] for key in ("rel_rms", "segments", "curves", "target_met")},
-            "coefficients_bytes": len(parts.coefficients),
-            "kept_raw_bytes": int(len(keep) * poses.n_vertices * 12)}
+    lin_eq = error_summary(
+        truth, linear_interpolation(times[eq], poses.vertices[eq].astype(np.float64), times[out]), diag
+    )
+    return {
+        "k": int(k),
+        "kept_frames": int(len(keep)),
+        "heldout_frames": int(len(out)),
+        "pde": pde,
+        "linear": lin,
+        "catmull_rom": cr,
+        "linear_equal_bytes": lin_eq,
+        "linear_equal_bytes_frames": int(len(eq)),
+        "fit_report": {key: parts.report[key] for key in ("rel_rms", "segments", "curves", "target_met")},
+        "coefficients_bytes": len(parts.coefficients),
+        "kept_raw_bytes": int(len(keep) * poses.n_vertices * 12),
+    }

@@ -8,7 +8,8 @@ is chosen per item and segment: a coarse grid scored by the leave-one-out error 
 (so a constant is kept only where it predicts frames it did not see better than the linear pair; in-between
 frames are then not pulled toward the rest pose by a sinh pair fitted to a few frames), then a
 golden-section refinement with the knots fixed that must beat the current constant by a margin (a linear
-pair stays exactly linear unless bending it clearly pays), vectorised over all items, then a final knot solve. ``loop=True`` makes the knots
+pair stays exactly linear unless bending it clearly pays), vectorised over all items, then a final knot
+solve. ``loop=True`` makes the knots
 periodic (the last knot is the first) and restricts trig constants to multiples of 2 pi over the clip.
 """
 
@@ -34,7 +35,8 @@ MU_CAP_PER_INTERVAL = 1.0
 """|mu| of a segment is at most this times its number of frame intervals: the time pair then changes by a
 bounded factor between two frames, so frames between the fitted ones follow the neighbouring frames instead of
 an exponential boundary layer fitted to a few samples (measured: elephant-gallop fitted from every 4th frame
-went from 1.33x worse than linear interpolation at the left-out frames, max 0.30 of the diagonal, to equal)."""
+went from 1.33x worse than linear interpolation at the left-out frames, max 0.30 of the diagonal, to
+equal)."""
 
 
 def segment_pair(segm: Segmentation, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -218,7 +220,9 @@ def _free_fit_errors(b: np.ndarray, segm: Segmentation, grid: np.ndarray, loo: b
         B = np.moveaxis(b[:, fr], 1, 0).reshape(len(fr), -1)  # (n, K*4)
         energy = (B * B).sum(0).reshape(K, -1).sum(1)
         G = len(grid[s])
-        Qs, _ = np.linalg.qr(time_pair(np.broadcast_to(tau, (G, len(fr))), np.repeat(grid[s][:, None], len(fr), 1)))
+        Qs, _ = np.linalg.qr(
+            time_pair(np.broadcast_to(tau, (G, len(fr))), np.repeat(grid[s][:, None], len(fr), 1))
+        )
         for g in range(G):  # one thin product per constant (a stacked one wakes BLAS threads)
             cap = ((Qs[g].T @ B) ** 2).sum(0).reshape(K, -1).sum(1)
             out[g, :, s] = np.maximum(energy - cap, 0.0)
@@ -235,7 +239,9 @@ def _loo_errors(b: np.ndarray, segm: Segmentation, grid: np.ndarray) -> np.ndarr
         tau = (segm.t[fr] - t0) / (t1 - t0) if t1 > t0 else np.zeros(len(fr))
         B = np.moveaxis(b[:, fr], 1, 0).reshape(len(fr), -1)  # (n, K*4)
         G = len(grid[s])
-        Qs, _ = np.linalg.qr(time_pair(np.broadcast_to(tau, (G, len(fr))), np.repeat(grid[s][:, None], len(fr), 1)))
+        Qs, _ = np.linalg.qr(
+            time_pair(np.broadcast_to(tau, (G, len(fr))), np.repeat(grid[s][:, None], len(fr), 1))
+        )
         for g in range(G):
             Q = Qs[g]
             lev = np.einsum("na,na->n", Q, Q)
@@ -265,7 +271,8 @@ def _dot4(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def _fixed_knot_errors(quad: tuple[np.ndarray, ...], segm: Segmentation, mu: np.ndarray) -> np.ndarray:
-    """(K, S) residual energy per segment for constants mu (K, S) with the knots fixed (see _knot_quadratic)."""
+    """(K, S) residual energy per segment for constants mu (K, S) with the knots fixed (see
+    _knot_quadratic)."""
     p0, p1 = segment_pair(segm, mu)
     a00, a01x2, a11, b0x2, b1x2, bb = quad
     res = p0 * a00
@@ -307,7 +314,8 @@ def _refine(b, z, segm, mu, lo, hi, iters):
 
 
 LOOP_HARMONICS = 8
-"""Multiples k of 2 pi over the clip tried as trig constants in looping clips (m_s = 2 pi k * segment length)."""
+"""Multiples k of 2 pi over the clip tried as trig constants in looping clips (m_s = 2 pi k * segment
+length)."""
 
 
 def mu_caps(segm: Segmentation) -> np.ndarray:
@@ -344,7 +352,10 @@ def _brackets(mu: np.ndarray, grid: np.ndarray, loop: bool, cap: np.ndarray | No
     lo = ladder[np.clip(pos - 1, 0, len(ladder) - 1)]
     hi = ladder[np.minimum(pos + 1, len(ladder) - 1)]
     if cap is not None:
-        lo, hi = np.clip(lo, -np.minimum(cap, MU_TRIG_MAX), cap), np.clip(hi, -np.minimum(cap, MU_TRIG_MAX), cap)
+        lo, hi = (
+            np.clip(lo, -np.minimum(cap, MU_TRIG_MAX), cap),
+            np.clip(hi, -np.minimum(cap, MU_TRIG_MAX), cap),
+        )
     if loop:
         lo, hi = np.where(mu < 0, mu, lo), np.where(mu < 0, mu, hi)
     return lo, hi

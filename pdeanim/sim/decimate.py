@@ -24,7 +24,10 @@ def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, cell: float) -> tu
     label = label.reshape(-1)
     n = int(label.max()) + 1
     counts = np.bincount(label, minlength=n).astype(np.float64)
-    means = np.stack([np.bincount(label, vertices[:, d], minlength=n) for d in range(3)], axis=1) / counts[:, None]
+    means = (
+        np.stack([np.bincount(label, vertices[:, d], minlength=n) for d in range(3)], axis=1)
+        / counts[:, None]
+    )
     dist = np.linalg.norm(vertices - means[label], axis=1)
     order = np.lexsort((np.arange(len(label)), dist, label))  # per cell: nearest first, ties by index
     first = order[np.flatnonzero(np.r_[True, np.diff(label[order]) != 0])]
@@ -46,14 +49,18 @@ def decimation_method() -> str:
         return "vertex-clustering"
 
 
-def quadric_decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray] | None:
+def quadric_decimate(
+    vertices: np.ndarray, faces: np.ndarray, max_faces: int
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Quadric decimation via trimesh when fast-simplification is importable, else None."""
     try:
         import fast_simplification  # noqa: F401
         import trimesh
     except ImportError:
         return None
-    reduced = trimesh.Trimesh(vertices, faces, process=False).simplify_quadric_decimation(face_count=max_faces)
+    reduced = trimesh.Trimesh(vertices, faces, process=False).simplify_quadric_decimation(
+        face_count=max_faces
+    )
     return np.asarray(reduced.vertices, np.float64), np.asarray(reduced.faces, np.int64)
 
 

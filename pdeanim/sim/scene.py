@@ -4,7 +4,8 @@ Regions (for pins and drivers) are dicts with one of
 ``{"indices": [...]}`` (surface vertex indices), ``{"box": [xmin, ymin, zmin, xmax, ymax, zmax]}`` or
 ``{"plane": [px, py, pz, nx, ny, nz]}`` (the side (x - p) . n <= 0), plus ``"relative": true`` to give points
 as fractions of the rest bounding box. A driver is ``{"region": REGION, "keyframes": [{"t": 0..1,
-"rotate": [ax, ay, az, degrees], "translate": [x, y, z]}, ...], "center": [x, y, z] (default: region centroid)}``
+"rotate": [ax, ay, az, degrees], "translate": [x, y, z]}, ...], "center": [x, y, z] (default: region
+centroid)}``
 with t normalised over the clip; rotations are slerped and translations lerped between keyframes. The solver
 has no randomness (the same mesh, tets and parameters give the same poses), so there is no ``seed``: one given
 by an older client is accepted and ignored.
@@ -31,7 +32,8 @@ IGNORED_KEYS = ("seed",)
 
 @dataclass
 class SceneParams:
-    """Everything that defines a simulation besides the mesh; ``from_dict``/``to_dict`` for jobs and records."""
+    """Everything that defines a simulation besides the mesh; ``from_dict``/``to_dict`` for jobs and
+    records."""
 
     frames: int = 100
     fps: float = 30.0
@@ -107,7 +109,10 @@ class SceneParams:
         """Raise ParameterError for the first out-of-range or inconsistent value."""
         self.gravity = vector(self.gravity, 3, "gravity")
         checks = [
-            (isinstance(self.frames, int) and 1 <= self.frames <= 10_000, "frames must be an integer in [1, 10000]"),
+            (
+                isinstance(self.frames, int) and 1 <= self.frames <= 10_000,
+                "frames must be an integer in [1, 10000]",
+            ),
             (number(self.fps) and 0 < self.fps <= 10_000, "fps must be in (0, 10000]"),
             (self.duration is None or (number(self.duration) and self.duration > 0), "duration must be > 0"),
             (number(self.damping) and self.damping >= 0, "damping must be >= 0 (1/s)"),
@@ -115,22 +120,37 @@ class SceneParams:
              "young (Young's modulus, Pa) must be > 0, or null to choose it from the mesh's size"),
             (number(self.poisson) and 0 <= self.poisson < 0.5, "poisson must be in [0, 0.5)"),
             (number(self.density) and self.density > 0, "density must be > 0"),
-            (isinstance(self.target_tets, int) and 50 <= self.target_tets <= 2_000_000,
-             "target_tets must be an integer in [50, 2000000]"),
-            (self.substeps is None or (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000),
-             "substeps must be null (automatic) or an integer in [1, 10000]"),
-            (isinstance(self.max_substeps, int) and 1 <= self.max_substeps <= 10_000, "max_substeps in [1, 10000]"),
-            (isinstance(self.iterations, int) and 1 <= self.iterations <= 100, "iterations must be in [1, 100]"),
+            (
+                isinstance(self.target_tets, int) and 50 <= self.target_tets <= 2_000_000,
+                "target_tets must be an integer in [50, 2000000]",
+            ),
+            (
+                self.substeps is None or (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000),
+                "substeps must be null (automatic) or an integer in [1, 10000]",
+            ),
+            (
+                isinstance(self.max_substeps, int) and 1 <= self.max_substeps <= 10_000,
+                "max_substeps in [1, 10000]",
+            ),
+            (
+                isinstance(self.iterations, int) and 1 <= self.iterations <= 100,
+                "iterations must be in [1, 100]",
+            ),
             (isinstance(self.threads, int) and 1 <= self.threads <= 256, "threads must be in [1, 256]"),
-            (isinstance(self.pins, list) and isinstance(self.drivers, list), "pins and drivers must be lists"),
+            (
+                isinstance(self.pins, list) and isinstance(self.drivers, list),
+                "pins and drivers must be lists",
+            ),
         ]
         for ok, message in checks:
             if not ok:
                 raise ParameterError(message)
         if len(self.pins) > MAX_REGIONS or len(self.drivers) > MAX_REGIONS:
-            raise ParameterError(f"at most {MAX_REGIONS} pins and {MAX_REGIONS} drivers, got "
-                                 f"{len(self.pins)} pins and {len(self.drivers)} drivers (merge regions: a box "
-                                 "or plane covers many)")
+            raise ParameterError(
+                f"at most {MAX_REGIONS} pins and {MAX_REGIONS} drivers, got "
+                f"{len(self.pins)} pins and {len(self.drivers)} drivers (merge regions: a box "
+                "or plane covers many)"
+            )
         for region in self.pins:
             validate_region(region, "pin")
         for driver in self.drivers:
@@ -195,7 +215,9 @@ def validate_driver(driver: object) -> None:
     times = []
     for key in keys:
         if not isinstance(key, dict) or set(key) - {"t", "rotate", "translate"} or not number(key.get("t")):
-            raise ParameterError(f"a keyframe is {{'t', 'rotate', 'translate'}} with t in [0, 1], got {key!r}")
+            raise ParameterError(
+                f"a keyframe is {{'t', 'rotate', 'translate'}} with t in [0, 1], got {key!r}"
+            )
         if "rotate" in key:
             rot = vector(key["rotate"], 4, "keyframe rotate")
             if all(v == 0 for v in rot[:3]):

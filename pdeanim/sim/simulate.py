@@ -1,4 +1,5 @@
-"""Simulate a surface mesh: tetrahedralize, run XPBD under the scene, and sample the embedded surface as Poses."""
+"""Simulate a surface mesh: tetrahedralize, run XPBD under the scene, and sample the embedded surface as
+Poses."""
 
 from __future__ import annotations
 
@@ -123,20 +124,44 @@ def simulate_tets(tets: TetMesh, vertices: np.ndarray, faces: np.ndarray, scene:
             step(model, state, spare, dt)
             state, spare = spare, state
         if not np.all(np.isfinite(state.x)):
-            raise ParameterError(f"simulation became non-finite at frame {f}: reduce the step or the stiffness")
+            raise ParameterError(
+                f"simulation became non-finite at frame {f}: reduce the step or the stiffness"
+            )
         frames[f] = surface_positions(model, embedding, state.x)
         report(f / (len(times) - 1), f"simulate {f}/{len(times) - 1}")
-    warnings = [] if not capped else [
-        f"the substep cap binds: the material needs {needed} substeps per frame, max_substeps is "
-        f"{scene.max_substeps}, so the motion is stiffer and more damped than the material; raise "
-        "max_substeps or lower young"]
-    meta = {"source": "simulate", "scene": scene.to_dict(), "tets": tets.n_tets, "tet_points": tets.n_points,
-            "young": material.young, "young_auto": scene.young is None, "substeps": substeps,
-            "substeps_capped": capped, "substeps_needed": needed, "warnings": warnings, "dt": dt,
-            "colors": model.elements.n_colors,
-            "backend": model.backend, "ground": None if model.ground is None else
-            {"point": list(model.ground.point), "normal": list(model.ground.normal), "friction": model.ground.friction},
-            "seconds": round(time.perf_counter() - started, 3), "versions": library_versions()}
+    warnings = (
+        []
+        if not capped
+        else [
+            f"the substep cap binds: the material needs {needed} substeps per frame, max_substeps is "
+            f"{scene.max_substeps}, so the motion is stiffer and more damped than the material; raise "
+            "max_substeps or lower young"
+        ]
+    )
+    meta = {
+        "source": "simulate",
+        "scene": scene.to_dict(),
+        "tets": tets.n_tets,
+        "tet_points": tets.n_points,
+        "young": material.young,
+        "young_auto": scene.young is None,
+        "substeps": substeps,
+        "substeps_capped": capped,
+        "substeps_needed": needed,
+        "warnings": warnings,
+        "dt": dt,
+        "colors": model.elements.n_colors,
+        "backend": model.backend,
+        "ground": None
+        if model.ground is None
+        else {
+            "point": list(model.ground.point),
+            "normal": list(model.ground.normal),
+            "friction": model.ground.friction,
+        },
+        "seconds": round(time.perf_counter() - started, 3),
+        "versions": library_versions(),
+    }
     return make_poses(frames, faces, times, meta)
 
 
@@ -154,7 +179,9 @@ def simulate_mesh(mesh: SurfaceMesh, scene: SceneParams, progress: Progress | No
     if progress is not None:
         progress(0.0, "tetrahedralize")
     started = time.perf_counter()
-    tets = tetrahedralize(mesh, TetParams(target_tets=scene.target_tets), cache_dir=cache_dir, workdir=workdir)
+    tets = tetrahedralize(
+        mesh, TetParams(target_tets=scene.target_tets), cache_dir=cache_dir, workdir=workdir
+    )
     tet_seconds = time.perf_counter() - started
     poses = simulate_tets(tets, mesh.vertices, mesh.faces, scene, sub_progress(progress, 0.2, 1.0))
     poses.meta.update(tetrahedralize_seconds=round(tet_seconds, 3), mesh_hash=mesh.content_hash,

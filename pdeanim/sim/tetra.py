@@ -91,7 +91,8 @@ def tet_surface(mesh: SurfaceMesh, params: TetParams) -> tuple[np.ndarray, np.nd
 
 def tetrahedralize(mesh: SurfaceMesh, params: TetParams | None = None, cache_dir: Path | None = None,
                    workdir: Path | None = None) -> TetMesh:
-    """Tets filling ``mesh`` (decimated first if large), about ``params.target_tets`` of them, cached on disk."""
+    """Tets filling ``mesh`` (decimated first if large), about ``params.target_tets`` of them, cached on
+    disk."""
     params = params or TetParams()
     cached = Path(cache_dir) / f"tets-{cache_key(mesh, params)}.npz" if cache_dir else None
     if cached is not None and cached.is_file():
@@ -101,7 +102,9 @@ def tetrahedralize(mesh: SurfaceMesh, params: TetParams | None = None, cache_dir
     used = vertices[np.unique(faces)]  # vertices no face uses must not make a flat surface look solid
     diagonal = float(np.linalg.norm(np.ptp(used, axis=0)))
     if float(np.ptp(used, axis=0).min()) <= 1e-6 * diagonal:
-        raise TetrahedralizationError("the surface is flat (no thickness along one axis): it encloses no volume")
+        raise TetrahedralizationError(
+            "the surface is flat (no thickness along one axis): it encloses no volume"
+        )
     length = edge_length_for(enclosed_volume(vertices, faces), params.target_tets)
     result = None
     for attempt in range(params.retries + 1):
@@ -133,11 +136,18 @@ def run_tetwild(vertices: np.ndarray, faces: np.ndarray, edge_fac: float, thread
         if proc.returncode != 0 or not dst.is_file():
             tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:]
             if "bad_alloc" in (proc.stderr or ""):
-                raise TetrahedralizationError("fTetWild ran out of memory (the job's memory limit): lower "
-                                              "target_tets")
-            how = f"crashed with signal {-proc.returncode}" if proc.returncode < 0 else f"exited {proc.returncode}"
-            raise TetrahedralizationError(f"fTetWild {how} on this surface (non-manifold or degenerate input?)"
-                                          + (f": {tail[0][:300]}" if tail else ""))
+                raise TetrahedralizationError(
+                    "fTetWild ran out of memory (the job's memory limit): lower target_tets"
+                )
+            how = (
+                f"crashed with signal {-proc.returncode}"
+                if proc.returncode < 0
+                else f"exited {proc.returncode}"
+            )
+            raise TetrahedralizationError(
+                f"fTetWild {how} on this surface (non-manifold or degenerate input?)"
+                + (f": {tail[0][:300]}" if tail else "")
+            )
         with np.load(dst, allow_pickle=False) as data:
             return clean_tet_mesh(data["points"], data["tets"])
 

@@ -20,9 +20,11 @@ from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 
 API_VERSION = "1.0.0"
-DESCRIPTION = ("Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
-               "Every 4xx/5xx answers `{\"error\": {\"code\", \"message\"}}`; every /v1 route needs "
-               "`Authorization: Bearer KEY`.")
+DESCRIPTION = (
+    "Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
+    'Every 4xx/5xx answers `{"error": {"code", "message"}}`; every /v1 route needs '
+    "`Authorization: Bearer KEY`."
+)
 
 
 def create_app(settings: Settings | None = None, store: Store | None = None) -> FastAPI:

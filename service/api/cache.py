@@ -22,7 +22,8 @@ class CachedClip:
 
 
 class ClipCache:
-    """LRU of at most ``max_entries`` clips; loading happens outside the lock (a duplicate load is harmless)."""
+    """LRU of at most ``max_entries`` clips; loading happens outside the lock (a duplicate load is
+    harmless)."""
 
     def __init__(self, max_entries: int):
         self.max_entries = max(1, int(max_entries))

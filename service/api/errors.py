@@ -84,9 +84,14 @@ RETRY_AFTER_SECONDS = 5
 def _unavailable(_: Request, exc: Exception) -> JSONResponse:
     """The database cannot be reached or stayed locked: 503 with Retry-After, not a 500 (nothing is wrong with
     the request; the same request later may succeed)."""
-    log.warning("database unavailable: %s", str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__)
-    return JSONResponse(error_body("unavailable", "the database is unavailable; retry later"), 503,
-                        headers={"Retry-After": str(RETRY_AFTER_SECONDS)})
+    log.warning(
+        "database unavailable: %s", str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__
+    )
+    return JSONResponse(
+        error_body("unavailable", "the database is unavailable; retry later"),
+        503,
+        headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
+    )
 
 
 def _unexpected(_: Request, exc: Exception) -> JSONResponse:

@@ -24,7 +24,12 @@ STRICT = {int: Annotated[int, Strict()], float: Annotated[float, Strict()], bool
           str: Annotated[str, Strict()]}
 OPTIONS_CONFIG = ConfigDict(extra="forbid", allow_inf_nan=False)
 EXTRA_FIELDS = {"cyclic": "pdeanim.cyclic.swim:SwimParams"}  # accepted flat by CyclicOptions.from_dict
-MODEL_NAMES = {"simulate": "SceneParams", "fit": "FitOptions", "cyclic": "CyclicOptions", "export": "ExportOptions"}
+MODEL_NAMES = {
+    "simulate": "SceneParams",
+    "fit": "FitOptions",
+    "cyclic": "CyclicOptions",
+    "export": "ExportOptions",
+}
 
 
 def wire_type(tp: Any) -> Any:

@@ -62,9 +62,12 @@ class JobResult(BaseModel):
     poses_id: str | None = None
     clip_id: str | None = None
     tet_cache_key: str | None = Field(None, description="tets a simulation used (blob tets-<key>, shared)")
-    failed_stage: str | None = Field(None, description='the stage that failed after partial results, e.g. "fit"')
-    export_url: str | None = Field(None,
-                                   description="export: where to download the GLB (GET /v1/exports/{job_id})")
+    failed_stage: str | None = Field(
+        None, description='the stage that failed after partial results, e.g. "fit"'
+    )
+    export_url: str | None = Field(
+        None, description="export: where to download the GLB (GET /v1/exports/{job_id})"
+    )
     export_bytes: int | None = Field(None, description="export: size of the GLB in bytes")
 
 

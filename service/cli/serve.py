@@ -16,7 +16,9 @@ WORKER_CMD = [*CONSOLE, "worker"]
 
 def register(subparsers) -> None:  # noqa: ANN001
     """Add the ``serve`` sub-command."""
-    p = subparsers.add_parser("serve", help="run the HTTP API (settings from PDEANIM_* environment variables)")
+    p = subparsers.add_parser(
+        "serve", help="run the HTTP API (settings from PDEANIM_* environment variables)"
+    )
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     p.add_argument("--workers", type=int, default=None,
@@ -88,9 +90,16 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: None)
     try:
-        uvicorn.run("service.api.app:app_from_environment", factory=True, host=args.host, port=args.port,
-                    workers=args.workers or default_http_workers(), log_level=args.log_level, access_log=False,
-                    log_config=log_config(args.log_level))
+        uvicorn.run(
+            "service.api.app:app_from_environment",
+            factory=True,
+            host=args.host,
+            port=args.port,
+            workers=args.workers or default_http_workers(),
+            log_level=args.log_level,
+            access_log=False,
+            log_config=log_config(args.log_level),
+        )
     finally:
         _stop(workers)
     return 0

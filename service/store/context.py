@@ -30,9 +30,15 @@ class Store:
         if run_migrations:
             migrate(url)
         engine = make_engine(url)
-        policy = QueuePolicy(settings.lease_seconds, settings.max_attempts, settings.backoff_seconds,
-                             settings.backoff_max_seconds)
-        return cls(settings, engine, make_sessionmaker(engine), JobQueue(engine, policy), open_blob_store(settings))
+        policy = QueuePolicy(
+            settings.lease_seconds,
+            settings.max_attempts,
+            settings.backoff_seconds,
+            settings.backoff_max_seconds,
+        )
+        return cls(
+            settings, engine, make_sessionmaker(engine), JobQueue(engine, policy), open_blob_store(settings)
+        )
 
     def check(self) -> dict[str, str]:
         """Reachability of the database and the blob store, as {"database": "ok"|error, "blobs": ...}."""

@@ -114,7 +114,9 @@ class Job(Base):
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("job"))
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id"), index=True)
     kind: Mapped[str] = mapped_column(String(20))
-    state: Mapped[str] = mapped_column(String(20), default="queued")  # queued|running|succeeded|failed|cancelled
+    state: Mapped[str] = mapped_column(
+        String(20), default="queued"
+    )  # queued|running|succeeded|failed|cancelled
     mesh_id: Mapped[str | None] = mapped_column(ForeignKey("meshes.id"), nullable=True)
     poses_id: Mapped[str | None] = mapped_column(ForeignKey("poses.id"), nullable=True)
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)  # the whole validated request

@@ -74,11 +74,22 @@ class JobQueue:
                 .order_by(Job.run_after, Job.created_at).limit(1))
         if self.postgres:
             pick = pick.with_for_update(skip_locked=True)
-        stmt = (update(Job).where(Job.id == pick.scalar_subquery())
-                .values(state="running", attempt=Job.attempt + 1, worker_id=worker_id,
-                        lease_expires=now + self.policy.lease_seconds, stage="starting",
-                        started_at=now, versions=versions or {}, error=None, error_code=None)
-                .returning(Job.id, Job.kind, Job.attempt, Job.tenant_id, Job.mesh_id, Job.poses_id, Job.params))
+        stmt = (
+            update(Job)
+            .where(Job.id == pick.scalar_subquery())
+            .values(
+                state="running",
+                attempt=Job.attempt + 1,
+                worker_id=worker_id,
+                lease_expires=now + self.policy.lease_seconds,
+                stage="starting",
+                started_at=now,
+                versions=versions or {},
+                error=None,
+                error_code=None,
+            )
+            .returning(Job.id, Job.kind, Job.attempt, Job.tenant_id, Job.mesh_id, Job.poses_id, Job.params)
+        )
         with self._write() as session, session.begin():
             row = session.execute(stmt, execution_options={"synchronize_session": False}).first()
         return Claimed(*row) if row else None
@@ -112,12 +123,17 @@ class JobQueue:
                 return False
         return True
 
-    def store_partial(self, job_id: str, attempt: int, write: Callable[[Session], dict[str, Any]]) -> dict | None:
+    def store_partial(
+        self, job_id: str, attempt: int, write: Callable[[Session], dict[str, Any]]
+    ) -> dict | None:
         """Fenced partial result while the attempt runs: ``write(session)`` adds rows and returns their ids,
         merged into ``jobs.result``; committed only if this attempt still owns the job (else None)."""
         with self._write() as session, session.begin():
-            job = session.execute(select(Job).where(Job.id == job_id, Job.attempt == attempt,
-                                                    Job.state == "running").with_for_update()).scalar_one_or_none()
+            job = session.execute(
+                select(Job)
+                .where(Job.id == job_id, Job.attempt == attempt, Job.state == "running")
+                .with_for_update()
+            ).scalar_one_or_none()
             if job is None:
                 return None
             ids = write(session)
@@ -153,8 +169,11 @@ class JobQueue:
         """Return running jobs whose lease expired to the queue (or fail them past max attempts)."""
         now = time.time()
         with self.engine.connect() as conn:
-            rows = conn.execute(select(Job.id, Job.attempt).where(Job.state == "running", Job.lease_expires < now)
-                                .limit(limit)).all()
+            rows = conn.execute(
+                select(Job.id, Job.attempt)
+                .where(Job.state == "running", Job.lease_expires < now)
+                .limit(limit)
+            ).all()
         done = 0
         for job_id, attempt in rows:
             with self._write() as session, session.begin():

@@ -104,7 +104,9 @@ def sparse_morph_glb() -> bytes:
     b = GlbBuilder("pdeanim-tests")
     quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
     pos = b.add_accessor(quad, target=ARRAY_BUFFER, minmax=True)
-    idx = b.add_accessor(np.array([0, 1, 2, 0, 2, 3], np.uint16), target=ELEMENT_ARRAY_BUFFER, acc_type="SCALAR")
+    idx = b.add_accessor(
+        np.array([0, 1, 2, 0, 2, 3], np.uint16), target=ELEMENT_ARRAY_BUFFER, acc_type="SCALAR"
+    )
     sparse_idx = b.add_view(np.array([2], np.uint32).tobytes())
     sparse_val = b.add_view(np.array([0, 0, 1], np.float32).tobytes())
     b.doc["accessors"].append({"componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0],

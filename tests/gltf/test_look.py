@@ -166,7 +166,9 @@ def test_reader_decodes_gltfpack_meshopt_output(tmp_path, morph):
     reordered vertices) round-trips through pdeanim's reader; vertices are matched by their rest position."""
     from scipy.spatial import cKDTree
 
-    gltfpack = Path(__file__).resolve().parents[2] / "tools" / "gltfpack" / "node_modules" / ".bin" / "gltfpack"
+    gltfpack = (
+        Path(__file__).resolve().parents[2] / "tools" / "gltfpack" / "node_modules" / ".bin" / "gltfpack"
+    )
     if not gltfpack.exists():
         pytest.skip("tools/gltfpack is not installed: run script/setup")
     frames, faces, times = morph

@@ -121,11 +121,15 @@ def test_compressed_geometry_is_refused_clearly():
 
 
 def test_hand_built_assets_have_only_the_intended_defects():
-    bar, cubic, nodes, sparse = validate_many([skinned_bar_glb(), skinned_bar_glb("CUBICSPLINE"), two_node_glb(),
-                                               sparse_morph_glb()])
+    bar, cubic, nodes, sparse = validate_many(
+        [skinned_bar_glb(), skinned_bar_glb("CUBICSPLINE"), two_node_glb(), sparse_morph_glb()]
+    )
     assert_clean(nodes, "two nodes")
     assert_clean(sparse, "sparse morph")
-    for report in (bar, cubic):  # weights that do not sum to 1 and a transform on the skinned node, on purpose
+    for report in (
+        bar,
+        cubic,
+    ):  # weights that do not sum to 1 and a transform on the skinned node, on purpose
         codes = {m["code"] for m in report["issues"]["messages"]}
         assert codes == {"ACCESSOR_WEIGHTS_NON_NORMALIZED", "NODE_SKINNED_MESH_LOCAL_TRANSFORMS"}
 

@@ -74,7 +74,9 @@ def test_frame_single_list_and_all(clip_file, poses_file, tmp_path):
 def test_bad_arguments_exit_2(clip_file, poses_file, tmp_path, capsys):
     assert main(["frame", str(clip_file), "--t", "abc", "--out", str(tmp_path / "f.npz")]) == 2
     assert main(["frame", str(clip_file), "--t", "0.1", "--out", str(tmp_path / "f.txt")]) == 2
-    assert main(["frame", str(tmp_path / "missing.clip"), "--t", "0.1", "--out", str(tmp_path / "f.npz")]) == 2
+    assert (
+        main(["frame", str(tmp_path / "missing.clip"), "--t", "0.1", "--out", str(tmp_path / "f.npz")]) == 2
+    )
     assert main(["fit", str(poses_file), "--out", str(tmp_path / "y.clip"), "--segments", "0"]) == 2
     assert "error" in capsys.readouterr().err
 
@@ -94,7 +96,9 @@ def test_missed_target_exits_3_after_writing_the_best_clip(poses_file, tmp_path,
     assert main(args) == 3
     err = capsys.readouterr().err
     assert "target not met" in err and "segment cap" in err and "rel 1e-06" in err
-    assert any(line.startswith("fit: ") and "%" in line for line in err.splitlines())  # progress (not --quiet)
+    assert any(
+        line.startswith("fit: ") and "%" in line for line in err.splitlines()
+    )  # progress (not --quiet)
     info = load_clip_file(out).info()
     assert info["n_segments"] == 1 and info["errors"]["target_met"] is False
     assert main([*args, "--best-effort", "--quiet"]) == 0

@@ -193,11 +193,18 @@ def test_paper_coefficients_of_a_stored_segment(fixed_fit):
 
 
 @settings(max_examples=25, deadline=None)
-@given(F=st.integers(1, 6), V=st.integers(1, 9), seed=st.integers(0, 10_000),
-       motion=st.sampled_from(["displacement", "absolute", "rigid"]), param=st.sampled_from(["chord", "paper"]),
-       loop=st.booleans(), target=st.booleans())
+@given(
+    F=st.integers(1, 6),
+    V=st.integers(1, 9),
+    seed=st.integers(0, 10_000),
+    motion=st.sampled_from(["displacement", "absolute", "rigid"]),
+    param=st.sampled_from(["chord", "paper"]),
+    loop=st.booleans(),
+    target=st.booleans(),
+)
 def test_tiny_inputs_always_fit(F, V, seed, motion, param, loop, target):
-    """Any small pose set fits (1-frame, 1-vertex, short curves included) and evaluates to finite positions."""
+    """Any small pose set fits (1-frame, 1-vertex, short curves included) and evaluates to finite
+    positions."""
     v = np.random.default_rng(seed).normal(size=(F, V, 3)).astype(np.float32)
     opts = FitOptions(target_rel_rms=1e-2, motion=motion, param_mode=param, loop=loop) if target else \
         FitOptions(segments=2, motion=motion, param_mode=param, loop=loop)

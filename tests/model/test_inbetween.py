@@ -22,7 +22,9 @@ def synthetic(kind: str, frames: int = 41) -> Poses:
     if kind == "wave":
         d = 0.3 * np.sin(2 * np.pi * (2.5 * t + x[..., :1])) * np.array([0.0, 0.0, 1.0])
     else:
-        d = np.array([2.0, 0.0, 0.0]) * t**2 + 0.1 * np.sin(6 * np.pi * t + 3 * x[..., 2:]) * np.array([0.0, 1, 0])
+        d = np.array([2.0, 0.0, 0.0]) * t**2 + 0.1 * np.sin(6 * np.pi * t + 3 * x[..., 2:]) * np.array(
+            [0.0, 1, 0]
+        )
     return make_poses((x + d).astype(np.float32), np.asarray(mesh.faces))
 
 

@@ -1,4 +1,5 @@
-"""The CLI end to end on meshes and poses unlike the repository's data: valid input gives valid GLBs, bad input
+"""The CLI end to end on meshes and poses unlike the repository's data: valid input gives valid GLBs, bad
+input
 exits 2 with a message (never a traceback)."""
 
 from __future__ import annotations
@@ -24,10 +25,16 @@ def cli(capsys, *argv: str) -> tuple[int, str]:
     return rc, err
 
 
-def sphere_poses(path: Path, frames: int, vertices: np.ndarray, faces: np.ndarray, moving: bool = True) -> Path:
+def sphere_poses(
+    path: Path, frames: int, vertices: np.ndarray, faces: np.ndarray, moving: bool = True
+) -> Path:
     """(frames, V, 3) poses of a breathing shape (constant when ``moving`` is False)."""
     scale = 1 + (0.1 * np.sin(np.arange(frames)) if moving else np.zeros(frames))
-    np.savez(path, vertices=(vertices[None] * scale[:, None, None]).astype(np.float32), faces=faces.astype(np.int32))
+    np.savez(
+        path,
+        vertices=(vertices[None] * scale[:, None, None]).astype(np.float32),
+        faces=faces.astype(np.int32),
+    )
     return path
 
 
@@ -80,7 +87,9 @@ def test_bad_inputs_exit_2_with_a_message(tmp_path, capsys, ico) -> None:
     """Empty file, unknown extension, a flat plane, NaN t, fps 0 and a huge fps: exit code 2 and a message."""
     (tmp_path / "empty.obj").write_bytes(b"")
     ico.export(tmp_path / "mesh.txt", file_type="obj")
-    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]]).export(tmp_path / "plane.obj")
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]]).export(
+        tmp_path / "plane.obj"
+    )
     out = tmp_path / "p.npz"
     for mesh, needle in (("empty.obj", "empty"), ("mesh.txt", "unsupported"), ("plane.obj", "flat")):
         rc, err = cli(capsys, "simulate", tmp_path / mesh, "--frames", 2, "--tets", 300, "--out", out)

@@ -28,7 +28,9 @@ class Backend:
     env: dict[str, str] = field(default_factory=dict)
 
     def settings(self, **overrides) -> Settings:
-        values = {k.removeprefix("PDEANIM_").lower(): v for k, v in self.env.items() if k.startswith("PDEANIM_")}
+        values = {
+            k.removeprefix("PDEANIM_").lower(): v for k, v in self.env.items() if k.startswith("PDEANIM_")
+        }
         return Settings(**{**values, **overrides})
 
 
@@ -87,10 +89,16 @@ def open_backend(kind: str, data_dir: Path, request) -> Iterator[Backend]:
     name = f"pdeanim_test_{uuid.uuid4().hex[:12]}"
     _admin(pg, f"CREATE DATABASE {name}")
     _make_bucket(endpoint, name.replace("_", "-"))
-    env.update({"PDEANIM_DATABASE_URL": pg.url(name),
-                "PDEANIM_BLOB_URL": f"s3://{name.replace('_', '-')}/blobs", "PDEANIM_S3_ENDPOINT_URL": endpoint,
-                "AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing",
-                "AWS_DEFAULT_REGION": "us-east-1"})
+    env.update(
+        {
+            "PDEANIM_DATABASE_URL": pg.url(name),
+            "PDEANIM_BLOB_URL": f"s3://{name.replace('_', '-')}/blobs",
+            "PDEANIM_S3_ENDPOINT_URL": endpoint,
+            "AWS_ACCESS_KEY_ID": "testing",
+            "AWS_SECRET_ACCESS_KEY": "testing",
+            "AWS_DEFAULT_REGION": "us-east-1",
+        }
+    )
     try:
         yield Backend("postgres", env)
     finally:

@@ -166,7 +166,9 @@ def test_poses_upload_and_download(api, sphere, fish):
     assert np.array_equal(got["vertices"], sphere["verts"]) and np.array_equal(got["faces"], sphere["faces"])
     meta = api.get(f"/v1/poses/{p['id']}", headers={"Accept": "application/json"}).json()
     assert meta["id"] == p["id"]
-    err = assert_error(upload(api, "p.npz", sphere["npz"], f"/v1/meshes/{fish['id']}/poses"), 422, "invalid_poses")
+    err = assert_error(
+        upload(api, "p.npz", sphere["npz"], f"/v1/meshes/{fish['id']}/poses"), 422, "invalid_poses"
+    )
     assert "vertices" in err["message"]
     assert_error(upload(api, "p.txt", b"hello", f"/v1/meshes/{fish['id']}/poses"), 422, "invalid_poses")
 
@@ -174,11 +176,18 @@ def test_poses_upload_and_download(api, sphere, fish):
 OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n"
 
 
-@pytest.mark.parametrize("name,data,status", [
-    ("truncated.obj", None, 422), ("wrong.obj", b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 8, 422),
-    ("nan.obj", OBJ.replace(b"v 1 0 0", b"v nan 0 0"), 422), ("range.obj", OBJ.replace(b"f 2 3 4", b"f 2 3 9"), 422),
-    ("empty.obj", b"", 422), ("big.obj", b"v 0 0 0\n" * (UPLOAD_LIMIT // 8 + 1000), 413),
-    ("mesh.xyz", OBJ, 422)])
+@pytest.mark.parametrize(
+    "name,data,status",
+    [
+        ("truncated.obj", None, 422),
+        ("wrong.obj", b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 8, 422),
+        ("nan.obj", OBJ.replace(b"v 1 0 0", b"v nan 0 0"), 422),
+        ("range.obj", OBJ.replace(b"f 2 3 4", b"f 2 3 9"), 422),
+        ("empty.obj", b"", 422),
+        ("big.obj", b"v 0 0 0\n" * (UPLOAD_LIMIT // 8 + 1000), 413),
+        ("mesh.xyz", OBJ, 422),
+    ],
+)
 def test_malformed_uploads_get_4xx_with_a_reason(api, services, data_dir, name, data, status):
     if data is None:
         data = (data_dir / "spot.obj").read_bytes()[:100_000].rsplit(b"\n", 1)[0] + b"\nf 1 2"
@@ -219,10 +228,20 @@ SCENE = {"frames": 12, "target_tets": 600}
 def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, services):
     mesh = upload(api, "spot.obj", (data_dir / "spot.obj").read_bytes()).json()
     assert mesh["stats"]["watertight"] is True  # spot is closed (the loader welds its UV seams)
-    r = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": SCENE, "then_fit": True,
-                                   "fit": {"target_rel_rms": 0.005}})
+    r = api.post(
+        "/v1/jobs",
+        json={
+            "kind": "simulate",
+            "mesh_id": mesh["id"],
+            "params": SCENE,
+            "then_fit": True,
+            "fit": {"target_rel_rms": 0.005},
+        },
+    )
     assert r.status_code == 202, r.text
-    assert r.json()["params"]["params"]["max_substeps"] == 400  # the record keeps every parameter, defaults too
+    assert (
+        r.json()["params"]["params"]["max_substeps"] == 400
+    )  # the record keeps every parameter, defaults too
     job = wait_job(api, r.json()["id"], timeout=600)
     assert job["state"] == "succeeded", (job, services.logs())
     poses = np.load(io.BytesIO(api.get(f"/v1/poses/{job['result']['poses_id']}").content))
@@ -238,32 +257,55 @@ def test_full_chain_simulate_then_fit_frame_and_animation(api, data_dir, service
 
 
 def test_fit_job_on_uploaded_poses(api, sphere, services):
-    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"], "params": {"segments": 2}})
+    r = api.post(
+        "/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"], "params": {"segments": 2}}
+    )
     assert r.status_code == 202, r.text
     assert r.json()["mesh_id"] == sphere["mesh"]["id"]
     job = wait_job(api, r.json()["id"])
     assert job["state"] == "succeeded", (job, services.logs())
     clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
-    assert clip["kind"] == "dynamic-pde" and clip["segments"] == 2 and clip["poses_id"] == sphere["poses"]["id"]
-    assert_error(api.post("/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"],
-                                            "params": {"segments": -3}}), 422, "invalid_parameter")
-    assert_error(api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": sphere["mesh"]["id"],
-                                            "params": {"frames": 10 ** 6}}), 422)
+    assert (
+        clip["kind"] == "dynamic-pde" and clip["segments"] == 2 and clip["poses_id"] == sphere["poses"]["id"]
+    )
+    assert_error(
+        api.post(
+            "/v1/jobs", json={"kind": "fit", "poses_id": sphere["poses"]["id"], "params": {"segments": -3}}
+        ),
+        422,
+        "invalid_parameter",
+    )
+    assert_error(
+        api.post(
+            "/v1/jobs",
+            json={"kind": "simulate", "mesh_id": sphere["mesh"]["id"], "params": {"frames": 10**6}},
+        ),
+        422,
+    )
 
 
 def test_job_parameters_may_be_flat_and_fit_may_name_only_the_mesh(api, sphere, fish):
-    """DESIGN's form {"kind", "mesh_id", ...parameters}: flat parameters join params; a fit job naming only the
+    """DESIGN's form {"kind", "mesh_id", ...parameters}: flat parameters join params; a fit job naming only
+    the
     mesh fits its latest poses; a key given twice, or a mesh without poses, is a 422 with a reason."""
     r = api.post("/v1/jobs", json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "segments": 2})
     assert r.status_code == 202, r.text
     job = r.json()
     assert job["poses_id"] == sphere["poses"]["id"] and job["params"]["params"]["segments"] == 2
     assert wait_job(api, job["id"])["state"] == "succeeded"
-    err = assert_error(api.post("/v1/jobs", json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "segments": 2,
-                                                  "params": {"segments": 3}}), 422, "invalid_parameter")
+    err = assert_error(
+        api.post(
+            "/v1/jobs",
+            json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "segments": 2, "params": {"segments": 3}},
+        ),
+        422,
+        "invalid_parameter",
+    )
     assert "segments" in err["message"]
     assert_error(api.post("/v1/jobs", json={"kind": "fit", "mesh_id": sphere["mesh"]["id"], "bogus": 1}), 422)
-    err = assert_error(api.post("/v1/jobs", json={"kind": "fit", "mesh_id": fish["id"]}), 422, "invalid_parameter")
+    err = assert_error(
+        api.post("/v1/jobs", json={"kind": "fit", "mesh_id": fish["id"]}), 422, "invalid_parameter"
+    )
     assert "no poses" in err["message"]
 
 
@@ -277,7 +319,9 @@ def test_poses_upload_from_an_animated_glb(api, sphere):
     assert (r.json()["frames"], r.json()["vertices"]) == (10, verts.shape[1])
     got = np.load(io.BytesIO(api.get(f"/v1/poses/{r.json()['id']}").content))["vertices"]
     assert np.allclose(got, verts, atol=1e-5 * float(np.ptp(verts)))
-    assert_error(upload(api, "broken.glb", glb[: len(glb) // 2], f"/v1/meshes/{sphere['mesh']['id']}/poses"), 422)
+    assert_error(
+        upload(api, "broken.glb", glb[: len(glb) // 2], f"/v1/meshes/{sphere['mesh']['id']}/poses"), 422
+    )
 
 
 def test_size_limit_is_enforced_while_streaming_without_content_length(api, services):

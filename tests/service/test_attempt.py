@@ -1,4 +1,5 @@
-"""One attempt's lease: it is renewed from the moment the attempt begins, also while the child process is still
+"""One attempt's lease: it is renewed from the moment the attempt begins, also while the child process is
+still
 starting (the first start also starts the forkserver, which can outlast a lease on a loaded machine)."""
 
 from __future__ import annotations
@@ -50,14 +51,29 @@ def test_lease_is_renewed_while_the_child_starts(backend):
             job_id = job.id
         claimed = store.queue.claim("w1")
         reaped: list[int] = []
-        reaper = threading.Timer(3 * LEASE, lambda: reaped.append(store.queue.reap()))  # another worker's reaper
+        reaper = threading.Timer(
+            3 * LEASE, lambda: reaped.append(store.queue.reap())
+        )  # another worker's reaper
         reaper.start()
-        payload = {"id": job_id, "kind": "fit", "params": {}}  # no poses: the child fails at once, after its start
-        outcome = run_attempt(SlowStart(4 * LEASE), store.queue, claimed, payload, settings.model_dump_json(),
-                              lambda: False, timeout=600)
+        payload = {
+            "id": job_id,
+            "kind": "fit",
+            "params": {},
+        }  # no poses: the child fails at once, after its start
+        outcome = run_attempt(
+            SlowStart(4 * LEASE),
+            store.queue,
+            claimed,
+            payload,
+            settings.model_dump_json(),
+            lambda: False,
+            timeout=600,
+        )
         reaper.join()
         assert reaped == [0], "the job was reaped while its child process was starting"
         assert outcome.status == "error", outcome
-        assert store.queue.fail(job_id, claimed.attempt, outcome.message, outcome.code, retry=False) == "failed"
+        assert (
+            store.queue.fail(job_id, claimed.attempt, outcome.message, outcome.code, retry=False) == "failed"
+        )
     finally:
         store.close()

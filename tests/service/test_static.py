@@ -19,7 +19,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_openapi_file_matches_the_app():
-    assert DEFAULT_PATH.read_text() == openapi_text(), "openapi/openapi.json drifted: python -m service.api.openapi"
+    assert DEFAULT_PATH.read_text() == openapi_text(), (
+        "openapi/openapi.json drifted: python -m service.api.openapi"
+    )
 
 
 def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
@@ -27,10 +29,29 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
 
     doc = json.loads(openapi_text())
     ops = {op["operationId"] for methods in doc["paths"].values() for op in methods.values()}
-    assert ops == {"healthz", "uploadMesh", "getMesh", "getMeshTopology", "uploadPoses", "getPoses", "createJob",
-                   "getJob", "getClip", "getClipCoefficients", "getClipTopology", "getClipFrame",
-                   "getClipAnimation", "getExport", "listMeshes", "listPoses", "listClips", "listJobs",
-                   "deleteMesh", "deleteClip", "cancelJob"}
+    assert ops == {
+        "healthz",
+        "uploadMesh",
+        "getMesh",
+        "getMeshTopology",
+        "uploadPoses",
+        "getPoses",
+        "createJob",
+        "getJob",
+        "getClip",
+        "getClipCoefficients",
+        "getClipTopology",
+        "getClipFrame",
+        "getClipAnimation",
+        "getExport",
+        "listMeshes",
+        "listPoses",
+        "listClips",
+        "listJobs",
+        "deleteMesh",
+        "deleteClip",
+        "cancelJob",
+    }
     assert "HTTPValidationError" not in doc["components"]["schemas"]
     # typed job bodies: a union discriminated on kind, option models generated from the library's dataclasses
     body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]

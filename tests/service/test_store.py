@@ -16,7 +16,9 @@ from service.store.tenants import create_key, tenant_for_key
 
 @pytest.fixture
 def store(backend):
-    st = Store.open(backend.settings(lease_seconds=0.5, backoff_seconds=0.0, max_attempts=2), run_migrations=True)
+    st = Store.open(
+        backend.settings(lease_seconds=0.5, backoff_seconds=0.0, max_attempts=2), run_migrations=True
+    )
     yield st
     st.close()
 
@@ -28,7 +30,9 @@ def tenant(store) -> str:
         s.commit()
         assert tenant_for_key(s, key) == t.id
         assert tenant_for_key(s, key + "x") is None
-        mesh = Mesh(id="mesh_1", tenant_id=t.id, filename="a.obj", blob_key="k", n_vertices=3, n_faces=1, stats={})
+        mesh = Mesh(
+            id="mesh_1", tenant_id=t.id, filename="a.obj", blob_key="k", n_vertices=3, n_faces=1, stats={}
+        )
         s.add(mesh)
         s.commit()
         return t.id
@@ -176,7 +180,9 @@ def test_fenced_out_finish_writes_no_result_rows(store, tenant):
         assert s.get(ClipRecord, "clip_x") is None and s.get(Job, job_id).state == "running"
     assert store.queue.finish(job_id, 1, write)
     with store.sessions() as s:
-        assert s.get(ClipRecord, "clip_x").job_id == job_id and s.get(Job, job_id).result == {"clip_id": "clip_x"}
+        assert s.get(ClipRecord, "clip_x").job_id == job_id and s.get(Job, job_id).result == {
+            "clip_id": "clip_x"
+        }
 
 
 def test_put_if_absent_first_writer_wins(store):

@@ -188,7 +188,9 @@ def test_out_of_memory_fails_after_max_attempts_and_the_worker_survives(services
     job_id = submit(api, mesh_id, HEAVY)
     job = wait_job(api, job_id, timeout=300)
     assert job["state"] == "failed" and "gave up after 3 attempts" in job["error"]["message"], job
-    assert job["error"]["code"] == "out_of_memory" and f"({520 * 2**20} bytes;" in job["error"]["message"], job
+    assert job["error"]["code"] == "out_of_memory" and f"({520 * 2**20} bytes;" in job["error"]["message"], (
+        job
+    )
     log = (services.log_dir / "worker0.log").read_text()
     ends = re.findall(rf"job {job_id} attempt (\d): error (\S+)", log)
     assert ends == [("1", "out_of_memory"), ("2", "out_of_memory"), ("3", "out_of_memory")], log[-3000:]

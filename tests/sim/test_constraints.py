@@ -69,7 +69,10 @@ def test_corner_gradients_match_finite_differences(x):
 @settings(max_examples=40, deadline=None)
 def test_rotation_extraction_finds_the_polar_rotation(x, angle):
     assume(np.linalg.det(deformation_gradient(x, DM_INV)[0]) > 0.2)
-    f = Rotation.from_rotvec([0.3 * angle, angle, -0.5 * angle]).as_matrix() @ deformation_gradient(x, DM_INV)[0]
+    f = (
+        Rotation.from_rotvec([0.3 * angle, angle, -0.5 * angle]).as_matrix()
+        @ deformation_gradient(x, DM_INV)[0]
+    )
     q = np.array([[1.0, 0, 0, 0]])
     for _ in range(40):  # from a cold start: many warm-started solver steps
         q = extract_rotation(f[None], q)

@@ -40,7 +40,9 @@ def test_cache_returns_the_same_tets_and_cwd_stays_clean(spot_tets, tmp_path, mo
 
 
 def test_flat_and_degenerate_surfaces_fail_cleanly(tmp_path):
-    flat = SurfaceMesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), np.array([[0, 1, 2], [1, 3, 2]]))
+    flat = SurfaceMesh(
+        np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), np.array([[0, 1, 2], [1, 3, 2]])
+    )
     with pytest.raises(TetrahedralizationError, match="flat"):
         tetrahedralize(flat, TetParams(target_tets=100), workdir=tmp_path)
     # a single sliver triangle pair with thickness: fTetWild crashes in its child process, we raise

@@ -80,8 +80,12 @@ def clip_out(row: ClipRecord, info: dict) -> ClipOut:
                    segments=_count(info, report, "segments"), curves=_count(info, report, "curves"))
 
 
-@router.get("/v1/clips/{clip_id}", operation_id="getClip", response_model=ClipOut, responses=responses(401, 404, 422))
-def get_clip(clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreDep, cache: ClipCacheDep) -> ClipOut:
+@router.get(
+    "/v1/clips/{clip_id}", operation_id="getClip", response_model=ClipOut, responses=responses(401, 404, 422)
+)
+def get_clip(
+    clip_id: str, tenant: TenantDep, session: SessionDep, store: StoreDep, cache: ClipCacheDep
+) -> ClipOut:
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
     item = _cached(clip_id, tenant, store, cache)
@@ -114,7 +118,8 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
                        **responses(304, 401, 404, 422)})
 def get_clip_topology(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep,
                       store: StoreDep) -> Response:
-    """The static part this clip's coefficients evaluate on (shared by clips with the same ``topology_id``)."""
+    """The static part this clip's coefficients evaluate on (shared by clips with the same
+    ``topology_id``)."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
     return immutable_response(request, row.topology_key, lambda: store.blobs.get(row.topology_key),
                               "application/octet-stream")
@@ -139,7 +144,11 @@ async def get_frame(clip_id: str, request: Request, tenant: TenantDep,
     if not math.isfinite(t) or (not item.clip.looping and not 0.0 <= t <= 1.0):
         raise ApiError(422, "t_out_of_range", f"t must lie in [0, 1] for this clip, got {t}")
     etag = '"' + hashlib.sha256(f"{item.coefficients_key}:frame:{t!r}".encode()).hexdigest() + '"'
-    headers = {"ETag": etag, "Cache-Control": IMMUTABLE, **NO_COMPRESSION}  # float32 frames: gzip not worth it
+    headers = {
+        "ETag": etag,
+        "Cache-Control": IMMUTABLE,
+        **NO_COMPRESSION,
+    }  # float32 frames: gzip not worth it
     if etag_matches(request, etag):
         return Response(status_code=304, headers=headers)
     body = state.frame_cache.get((clip_id, t))

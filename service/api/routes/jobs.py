@@ -26,10 +26,23 @@ router = APIRouter(tags=["jobs"])
 def job_out(job: Job) -> JobOut:
     """Wire form of a job row."""
     error = ErrorBody(code=job.error_code or "error", message=job.error) if job.error else None
-    return JobOut(id=job.id, kind=job.kind, state=job.state, progress=job.progress, stage=job.stage, error=error,
-                  attempt=job.attempt, mesh_id=job.mesh_id, poses_id=job.poses_id,
-                  result=JobResult(**(job.result or {})), params=job.params, versions=job.versions,
-                  created_at=job.created_at, started_at=job.started_at, finished_at=job.finished_at)
+    return JobOut(
+        id=job.id,
+        kind=job.kind,
+        state=job.state,
+        progress=job.progress,
+        stage=job.stage,
+        error=error,
+        attempt=job.attempt,
+        mesh_id=job.mesh_id,
+        poses_id=job.poses_id,
+        result=JobResult(**(job.result or {})),
+        params=job.params,
+        versions=job.versions,
+        created_at=job.created_at,
+        started_at=job.started_at,
+        finished_at=job.finished_at,
+    )
 
 
 def _inputs(req: SimulateJob | FitJob | CyclicJob | ExportJob, tenant: str,
@@ -46,7 +59,9 @@ def _inputs(req: SimulateJob | FitJob | CyclicJob | ExportJob, tenant: str,
         raise ApiError(422, "invalid_parameter", f"a {req.kind} job takes no clip_id")
     if req.kind == "fit":
         if not req.poses_id and not req.mesh_id:
-            raise ApiError(422, "invalid_parameter", "a fit job needs poses_id (or mesh_id to fit its latest poses)")
+            raise ApiError(
+                422, "invalid_parameter", "a fit job needs poses_id (or mesh_id to fit its latest poses)"
+            )
         if not req.poses_id:
             poses = _latest_poses(session, owned(session, Mesh, req.mesh_id, tenant, "mesh"), tenant)
         else:
@@ -73,8 +88,12 @@ def _check_fit_memory(session, spec: dict, mesh_id: str, poses_id: str | None,  
 
 def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN001
     """The newest poses of ``mesh`` (uploaded or simulated) for a fit job that names only the mesh."""
-    poses = session.scalars(select(PosesRecord).where(PosesRecord.mesh_id == mesh.id, PosesRecord.tenant_id == tenant)
-                            .order_by(PosesRecord.created_at.desc(), PosesRecord.id.desc()).limit(1)).first()
+    poses = session.scalars(
+        select(PosesRecord)
+        .where(PosesRecord.mesh_id == mesh.id, PosesRecord.tenant_id == tenant)
+        .order_by(PosesRecord.created_at.desc(), PosesRecord.id.desc())
+        .limit(1)
+    ).first()
     if poses is None:
         raise ApiError(422, "invalid_parameter",
                        f"mesh {mesh.id} has no poses yet: upload poses or run a simulate job first")

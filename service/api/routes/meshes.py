@@ -20,9 +20,17 @@ router = APIRouter(tags=["meshes"])
 def mesh_out(row: Mesh) -> MeshOut:
     """Wire form of a mesh row."""
     stats = row.stats or {}
-    return MeshOut(id=row.id, filename=row.filename, vertices=row.n_vertices, faces=row.n_faces,
-                   watertight=stats.get("watertight"), components=stats.get("components"), bbox=stats.get("bbox"),
-                   stats=stats, created_at=row.created_at)
+    return MeshOut(
+        id=row.id,
+        filename=row.filename,
+        vertices=row.n_vertices,
+        faces=row.n_faces,
+        watertight=stats.get("watertight"),
+        components=stats.get("components"),
+        bbox=stats.get("bbox"),
+        stats=stats,
+        created_at=row.created_at,
+    )
 
 
 def _ingest(upload: Upload, settings: Settings) -> dict:
@@ -60,14 +68,30 @@ def get_mesh(mesh_id: str, tenant: TenantDep, session: SessionDep) -> MeshOut:
     return mesh_out(owned(session, Mesh, mesh_id, tenant, "mesh"))
 
 
-@router.get("/v1/meshes/{mesh_id}/topology", operation_id="getMeshTopology", response_class=Response,
-            responses={200: {"content": {"application/octet-stream": {}},
-                             "description": "the topology part (pdeanim container)"},
-                       **responses(304, 401, 404, 422)})
-def get_topology(mesh_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep,
-                 clip_id: str | None = Query(None, description="required: the clip whose topology to send (a "
-                                             "mesh may have clips of several kinds with different topologies)")
-                 ) -> Response:
+@router.get(
+    "/v1/meshes/{mesh_id}/topology",
+    operation_id="getMeshTopology",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {"application/octet-stream": {}},
+            "description": "the topology part (pdeanim container)",
+        },
+        **responses(304, 401, 404, 422),
+    },
+)
+def get_topology(
+    mesh_id: str,
+    request: Request,
+    tenant: TenantDep,
+    session: SessionDep,
+    store: StoreDep,
+    clip_id: str | None = Query(
+        None,
+        description="required: the clip whose topology to send (a "
+        "mesh may have clips of several kinds with different topologies)",
+    ),
+) -> Response:
     """The static part of clip ``clip_id`` of this mesh (prefer ``GET /v1/clips/{clip_id}/topology``)."""
     owned(session, Mesh, mesh_id, tenant, "mesh")
     if clip_id is None:

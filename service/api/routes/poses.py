@@ -47,7 +47,9 @@ def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,  # noqa: A
     else:
         raise PosesInputError(f"unsupported poses file type {suffix or upload.filename!r}: use .npz or .glb")
     if poses.n_vertices != mesh.n_vertices:
-        raise PosesInputError(f"poses have {poses.n_vertices} vertices but mesh {mesh.id} has {mesh.n_vertices}")
+        raise PosesInputError(
+            f"poses have {poses.n_vertices} vertices but mesh {mesh.id} has {mesh.n_vertices}"
+        )
     if poses.faces.size == 0:
         from pdeanim.mesh.io import load_mesh
 
@@ -100,12 +102,24 @@ async def upload_poses(mesh_id: str, request: Request, response: Response, tenan
     return poses_out(row)
 
 
-@router.get("/v1/poses/{poses_id}", operation_id="getPoses", response_class=Response,
-            responses={200: {"content": {"application/octet-stream": {}, "application/json": {
-                "schema": PosesOut.model_json_schema()}},
-                "description": "POSES.npz (vertices, faces, times); metadata with Accept: application/json"},
-                **responses(304, 401, 404, 422)})
-def get_poses(poses_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep) -> Response:
+@router.get(
+    "/v1/poses/{poses_id}",
+    operation_id="getPoses",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {
+                "application/octet-stream": {},
+                "application/json": {"schema": PosesOut.model_json_schema()},
+            },
+            "description": "POSES.npz (vertices, faces, times); metadata with Accept: application/json",
+        },
+        **responses(304, 401, 404, 422),
+    },
+)
+def get_poses(
+    poses_id: str, request: Request, tenant: TenantDep, session: SessionDep, store: StoreDep
+) -> Response:
     """The poses as a .npz (``vertices`` (F,V,3) float32, ``faces``, ``times``), or metadata as JSON."""
     row = owned(session, PosesRecord, poses_id, tenant, "poses")
     if "application/json" in request.headers.get("accept", ""):
