@@ -1,9 +1,9 @@
 // The node command: CLIP file or two parts in, little-endian float32 (K, V, 3) out; exit 2 on bad input.
 
-import { test } from 'node:test';
+import { after, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawnSync } from 'node:child_process';
-import { mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
+import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -12,6 +12,7 @@ import { FIXTURES, expected, manifest, readBytes } from './helpers.mjs';
 
 const BIN = join(dirname(fileURLToPath(import.meta.url)), '..', 'bin', 'pdeanim-eval.mjs');
 const tmp = mkdtempSync(join(tmpdir(), 'pdeanim-eval-'));
+after(() => rmSync(tmp, { recursive: true, force: true }));
 const man = manifest();
 
 function run(args) {
