@@ -20,7 +20,10 @@ from .harness import ROOT, Services, make_key, wait_job
 pytestmark = pytest.mark.slow
 MIN_REQUESTS = 2000
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
-BUDGET_SECONDS = 120  # the fuzzing and stateful phases repeat until this is spent (about 4000+ cases here)
+BUDGET_SECONDS = 150  # the fuzzing and stateful phases repeat until this is spent (about 3000+ cases here)
+# One worker: with two threads, hypothesis's ast.parse of filter lambdas (inside schemathesis) can crash on
+# CPython 3.11 ("AST constructor recursion depth mismatch", a thread-safety bug in the AST constructor).
+WORKERS = "1"
 
 
 @pytest.fixture
@@ -63,7 +66,7 @@ def test_schemathesis_finds_no_server_error_and_no_undocumented_status(services,
     cmd = [sys.executable, "-m", "schemathesis.cli", "--config-file",
            str(ROOT / "tests/service/schemathesis.toml"), "run", str(ROOT / "openapi/openapi.json"),
            "--url", services.url, "-H", f"Authorization: Bearer {key}",
-           "--checks", "all", "--max-examples", "25", "--workers", "2", "--max-time", str(BUDGET_SECONDS),
+           "--checks", "all", "--max-examples", "25", "--workers", WORKERS, "--max-time", str(BUDGET_SECONDS),
            "--seed", "20261126", "--generation-database", "none", "--no-color"]
     env = {**os.environ, **seed(services, key)}
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=BUDGET_SECONDS * 4, cwd=tmp_path,
