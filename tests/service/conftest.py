@@ -117,3 +117,34 @@ def module_backend(backend_kind, tmp_path_factory, request) -> Iterator[Backend]
     """A backend shared by the tests of one module (one server and its workers)."""
     with open_backend(backend_kind, tmp_path_factory.mktemp("data"), request) as b:
         yield b
+
+
+def running_services(backend: Backend, data_dir: Path, env_extra: dict[str, str] | None = None,
+                     server_args: tuple[str, ...] = ()) -> Iterator:
+    """A module's server and one job worker on ``backend`` (extra settings in ``env_extra``), stopped
+    after."""
+    from .harness import Services
+
+    svc = Services(backend, data_dir, env_extra=env_extra or {})
+    svc.start_server(*server_args)
+    svc.start_worker()
+    yield svc
+    svc.stop()
+
+
+@pytest.fixture(scope="module")
+def api(services):
+    """A client of the module's ``services`` with tenant alice's key."""
+    from .harness import client, make_key
+
+    with client(services, make_key(services.backend, "alice")) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def other(services):
+    """A client of the module's ``services`` with another tenant's key (mallory)."""
+    from .harness import client, make_key
+
+    with client(services, make_key(services.backend, "mallory")) as c:
+        yield c

@@ -8,7 +8,8 @@ import httpx
 import numpy as np
 import pytest
 
-from .harness import Services, client, make_key, wait_job
+from .conftest import running_services
+from .harness import client, wait_job
 
 pytestmark = pytest.mark.slow
 UPLOAD_LIMIT = 1_500_000
@@ -18,24 +19,9 @@ CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
 
 @pytest.fixture(scope="module")
 def services(module_backend, tmp_path_factory):
-    svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
-                   env_extra={"PDEANIM_MAX_UPLOAD_BYTES": str(UPLOAD_LIMIT), "PDEANIM_MAX_VERTICES": "5000"})
-    svc.start_server()
-    svc.start_worker()
-    yield svc
-    svc.stop()
-
-
-@pytest.fixture(scope="module")
-def api(services):
-    with client(services, make_key(services.backend, "alice")) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
-def other(services):
-    with client(services, make_key(services.backend, "mallory")) as c:
-        yield c
+    yield from running_services(module_backend, tmp_path_factory.mktemp("svc"),
+                                {"PDEANIM_MAX_UPLOAD_BYTES": str(UPLOAD_LIMIT),
+                                 "PDEANIM_MAX_VERTICES": "5000"})
 
 
 def upload(api, name: str, data: bytes, path: str = "/v1/meshes"):

@@ -16,7 +16,8 @@ from pdeanim.gltf.read import read_animated_poses, read_static_mesh
 from pdeanim.gltf.validate import assert_clean, validate_many
 
 from ..gltf.builders import textured_scene_glb
-from .harness import Services, client, make_key, wait_job
+from .conftest import running_services
+from .harness import wait_job
 
 pytestmark = pytest.mark.slow
 FRAMES = 10  # poses at 30 fps: 0.3 s
@@ -28,25 +29,9 @@ SYNC_BYTES = 8_000
 
 @pytest.fixture(scope="module")
 def services(module_backend, tmp_path_factory):
-    svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
-                   env_extra={"PDEANIM_MAX_EXPORT_FPS": str(MAX_FPS),
+    yield from running_services(module_backend, tmp_path_factory.mktemp("svc"),
+                                {"PDEANIM_MAX_EXPORT_FPS": str(MAX_FPS),
                               "PDEANIM_MAX_SYNC_EXPORT_BYTES": str(SYNC_BYTES)})
-    svc.start_server()
-    svc.start_worker()
-    yield svc
-    svc.stop()
-
-
-@pytest.fixture(scope="module")
-def api(services):
-    with client(services, make_key(services.backend, "alice")) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
-def other(services):
-    with client(services, make_key(services.backend, "mallory")) as c:
-        yield c
 
 
 def upload(api, name: str, data: bytes, path: str = "/v1/meshes"):

@@ -15,6 +15,7 @@ from sqlalchemy import update
 from service.api.cache import BodyCache
 from worker.child import lower_priority
 
+from .conftest import running_services
 from .harness import Services, client, make_key, wait_job
 
 pytestmark = pytest.mark.slow
@@ -25,18 +26,10 @@ CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
 
 @pytest.fixture(scope="module")
 def services(module_backend, tmp_path_factory):
-    svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
-                   env_extra={"PDEANIM_KEY_CACHE_SECONDS": str(KEY_TTL), "PDEANIM_JOB_NICE": str(JOB_NICE)})
-    svc.start_server("--workers", "2")
-    svc.start_worker()
-    yield svc
-    svc.stop()
-
-
-@pytest.fixture(scope="module")
-def api(services):
-    with client(services, make_key(services.backend, "alice")) as c:
-        yield c
+    yield from running_services(module_backend, tmp_path_factory.mktemp("svc"),
+                                {"PDEANIM_KEY_CACHE_SECONDS": str(KEY_TTL),
+                                 "PDEANIM_JOB_NICE": str(JOB_NICE)},
+                                server_args=("--workers", "2"))
 
 
 @pytest.fixture(scope="module")

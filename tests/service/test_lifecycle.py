@@ -17,6 +17,7 @@ import pytest
 
 from service.store.context import Store
 
+from .conftest import running_services
 from .harness import PDEANIM, ROOT, Services, client, make_key, process_env, wait_job
 
 pytestmark = pytest.mark.slow
@@ -27,24 +28,8 @@ OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n
 
 @pytest.fixture(scope="module")
 def services(module_backend, tmp_path_factory):
-    svc = Services(module_backend, tmp_path_factory.mktemp("svc"),
-                   env_extra={"PDEANIM_MAX_WAIT_SECONDS": "20"})
-    svc.start_server()
-    svc.start_worker()
-    yield svc
-    svc.stop()
-
-
-@pytest.fixture(scope="module")
-def api(services):
-    with client(services, make_key(services.backend, "alice")) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
-def other(services):
-    with client(services, make_key(services.backend, "mallory")) as c:
-        yield c
+    yield from running_services(module_backend, tmp_path_factory.mktemp("svc"),
+                                {"PDEANIM_MAX_WAIT_SECONDS": "20"})
 
 
 @pytest.fixture(scope="module")
