@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from service.store.scratch import alive
+
 PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "trimesh", "worker.stages"]
 
 
@@ -34,18 +36,8 @@ def child_context() -> multiprocessing.context.BaseContext:
 def _watch_parent(parent_pid: int) -> None:
     while True:
         time.sleep(1.0)
-        if os.getppid() == 1 or not _alive(parent_pid):
+        if os.getppid() == 1 or not alive(parent_pid):
             os._exit(3)  # the worker is gone: nobody will take our result
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-        return True
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
 
 
 def _warm_blas() -> None:

@@ -23,7 +23,8 @@ def prefix(kind: str) -> str:
     return f"{kind}-{HOST}-{os.getpid()}-"
 
 
-def _alive(pid: int) -> bool:
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (one owned by another user counts as alive)."""
     try:
         os.kill(pid, 0)
         return True
@@ -50,7 +51,7 @@ def clean_stale(tmp_dir: Path) -> int:
         return 0
     for entry in entries:
         match = _OWNED.match(entry.name)
-        if match is None or match[2] != HOST or _alive(int(match[3])):
+        if match is None or match[2] != HOST or alive(int(match[3])):
             continue
         remove(entry)
         removed += 1
