@@ -91,7 +91,7 @@ test(
         `--user-data-dir=${profile}`,
         url,
       ],
-      { stdio: 'ignore' },
+      { stdio: 'ignore', detached: true }, // its own process group: renderer and GPU processes go with it
     );
     let timer;
     try {
@@ -119,7 +119,13 @@ test(
     } finally {
       clearTimeout(timer);
       const exited = new Promise((resolve) => browser.once('exit', resolve));
-      if (browser.exitCode === null) browser.kill('SIGKILL');
+      if (browser.exitCode === null) {
+        try {
+          process.kill(-browser.pid, 'SIGKILL'); // the whole group, so none still writes to the profile
+        } catch {
+          browser.kill('SIGKILL');
+        }
+      }
       await exited;
       server.close();
       rmSync(profile, { recursive: true, force: true, maxRetries: 5, retryDelay: 200 });
