@@ -18,14 +18,20 @@ from pdeanim.gltf.layout import gltf_layout
 from pdeanim.gltf.read import read_static_mesh
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
+from tests.ci import missing
 from tests.gltf.builders import textured_scene_glb
 
 JS = Path(__file__).resolve().parents[2] / "clients" / "js"
 SCRIPT = JS / "test" / "tools" / "gltf_attach.mjs"
 NODE = shutil.which("node")
-pytestmark = pytest.mark.skipif(NODE is None or not (JS / "node_modules" / "three").is_dir(),
-                                reason="node and clients/js/node_modules (npm ci) are needed")
 TIMES = [0.0, 0.35, 1.0]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def node_tools() -> None:
+    """node and clients/js/node_modules: a skip on a developer's machine without them, a failure under CI."""
+    if NODE is None or not (JS / "node_modules" / "three").is_dir():
+        missing("node and clients/js/node_modules (npm ci, run by script/setup) are needed")
 
 
 @pytest.fixture(scope="module")

@@ -118,9 +118,9 @@ def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
 def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
     """A clip fitted on poses of a textured glTF, exported with ``--mesh``: the GLB has the source's
     materials, texture and node names; options are checked (exit 2 with a message)."""
-    fitclip = pytest.importorskip("pdeanim.model.fitclip")
     from pdeanim.gltf.glb import unpack_glb
     from pdeanim.gltf.read import read_static_mesh
+    from pdeanim.model import fitclip
     from pdeanim.poses import make_poses
 
     from .builders import textured_scene_glb
