@@ -1,15 +1,18 @@
 """The binary container every pdeanim blob uses: a small JSON header plus little-endian arrays.
 
-Layout (version 1), all integers little-endian::
+Layout, all integers little-endian::
 
     0   8 bytes   magic b"PDEANIM\\0"
-    8   uint32    container version (1)
+    8   uint32    container version (1, or 2 when an array is stored with an ``encoding``)
     12  uint32    H, length of the JSON header in bytes (UTF-8, space-padded to a multiple of 8)
     16  H bytes   JSON header: {"part": ..., ..., "arrays": {name: {"dtype", "shape", "offset", "nbytes"}}}
     16+H          array data; each array starts at ``offset`` bytes after the data start, 8-byte aligned
 
-Arrays are C-ordered with dtypes from ALLOWED_DTYPES. The JSON form (for debugging) is the same header with
-each array's values inlined as a flat list under "data" instead of offset/nbytes.
+Arrays are C-ordered with dtypes from ALLOWED_DTYPES. Version 2 adds an optional ``"encoding"`` per array:
+``"zstd"`` (the stored bytes are one zstd frame of the array's bytes) or ``"shuffle-zstd"`` (the same, of the
+array's bytes grouped by byte plane: byte j of element i at j * n + i); ``nbytes`` is then the stored
+size. The JSON form (for debugging) is the same header with each array's values inlined as a flat list
+under "data" instead of offset/nbytes (and no encoding).
 """
 
 from __future__ import annotations
@@ -24,6 +27,13 @@ from .errors import ClipFormatError
 
 MAGIC = b"PDEANIM\0"
 VERSION = 1
+ENCODED_VERSION = 2
+"""Container version written when an array carries an ``encoding`` (readers of version 1 refuse it)."""
+VERSIONS = (VERSION, ENCODED_VERSION)
+ENCODINGS = ("zstd", "shuffle-zstd")
+SMALLEST = "smallest"
+"""Writer's choice (never stored): whichever of ENCODINGS gives fewer bytes for the array."""
+ZSTD_LEVEL = 19
 ALLOWED_DTYPES = ("<f4", "<f8", "<i4", "<u4", "<i2", "<u2", "<u1", "<i1")
 _PREFIX = struct.Struct("<8sII")
 
@@ -41,16 +51,24 @@ def _canonical(arr: np.ndarray) -> np.ndarray:
     return a
 
 
-def pack(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
-    """Encode ``header`` (JSON-able, without "arrays") and named arrays into container bytes."""
+def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
+         encodings: dict[str, str] | None = None) -> bytes:
+    """Encode ``header`` (JSON-able, without "arrays") and named arrays into container bytes; arrays named
+    in ``encodings`` are stored compressed (``"zstd"``, ``"shuffle-zstd"`` or SMALLEST of the two), which
+    makes it version 2."""
+    encodings = encodings or {}
     table: dict[str, dict] = {}
     chunks: list[bytes] = []
     offset = 0
     for name, arr in arrays.items():
         a = _canonical(arr)
+        entry = {"dtype": a.dtype.str.replace("|", "<"), "shape": list(a.shape), "offset": offset}
         raw = a.tobytes()
-        table[name] = {"dtype": a.dtype.str.replace("|", "<"), "shape": list(a.shape), "offset": offset,
-                       "nbytes": len(raw)}
+        if name in encodings:
+            choices = ENCODINGS if encodings[name] == SMALLEST else (encodings[name],)
+            raw, entry["encoding"] = min(((_encode(a, e), e) for e in choices), key=lambda c: len(c[0]))
+        entry["nbytes"] = len(raw)
+        table[name] = entry
         chunks.append(raw + b"\0" * (_pad8(len(raw)) - len(raw)))
         offset += _pad8(len(raw))
     try:
@@ -59,7 +77,41 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
     except ValueError as exc:
         raise ValueError(f"container header must not hold NaN or infinity (use null): {exc}") from exc
     meta += b" " * (_pad8(len(meta)) - len(meta))
-    return _PREFIX.pack(MAGIC, VERSION, len(meta)) + meta + b"".join(chunks)
+    version = ENCODED_VERSION if any(name in encodings for name in arrays) else VERSION
+    return _PREFIX.pack(MAGIC, version, len(meta)) + meta + b"".join(chunks)
+
+
+def _encode(a: np.ndarray, encoding: str) -> bytes:
+    """The stored bytes of array ``a`` under ``encoding`` (deterministic: same array, same bytes)."""
+    import zstandard
+
+    if encoding not in ENCODINGS:
+        raise ValueError(f"unknown container encoding {encoding!r} (known: {', '.join(ENCODINGS)})")
+    raw = a.tobytes()
+    if encoding == "shuffle-zstd":
+        raw = np.frombuffer(raw, np.uint8).reshape(-1, a.dtype.itemsize).T.tobytes()
+    return zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True).compress(raw)
+
+
+def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str) -> np.ndarray:
+    """The flat array of ``count`` elements behind ``stored`` bytes; raises ClipFormatError."""
+    import zstandard
+
+    if encoding not in ENCODINGS:
+        raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
+    size = count * dtype.itemsize
+    try:
+        declared = zstandard.frame_content_size(stored)
+        if declared != size:  # writers record the size; checked before anything is allocated
+            raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
+        raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=size)
+    except zstandard.ZstdError as exc:
+        raise ClipFormatError(f"array {name!r}: bad zstd data ({exc})") from exc
+    if len(raw) != size:
+        raise ClipFormatError(f"array {name!r} decompresses to {len(raw)} bytes, expected {size}")
+    if encoding == "shuffle-zstd" and dtype.itemsize > 1:
+        raw = np.frombuffer(raw, np.uint8).reshape(dtype.itemsize, count).T.tobytes()
+    return np.frombuffer(raw, dtype=dtype, count=count)
 
 
 def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -69,8 +121,8 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
     if magic != MAGIC:
         raise ClipFormatError("not a pdeanim container (bad magic bytes)")
-    if version != VERSION:
-        raise ClipFormatError(f"unsupported container version {version} (this build reads {VERSION})")
+    if version not in VERSIONS:
+        raise ClipFormatError(f"unsupported container version {version} (this build reads 1 and 2)")
     start = _PREFIX.size + hlen
     if start > len(blob):
         raise ClipFormatError("truncated container header")
@@ -86,12 +138,19 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
             lo, n = start + int(spec["offset"]), int(spec["nbytes"])
         except (KeyError, TypeError, ValueError) as exc:
             raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
-        if spec["dtype"] not in ALLOWED_DTYPES or n != int(np.prod(shape, dtype=np.int64)) * dtype.itemsize:
+        count = int(np.prod(shape, dtype=np.int64))
+        encoding = spec.get("encoding")
+        if encoding is not None and version == VERSION:
+            raise ClipFormatError(f"array {name!r} has an encoding, which container version 1 does not allow")
+        if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (
+                encoding is None and n != count * dtype.itemsize):
             raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")
         if lo < start or lo + n > len(blob):
             raise ClipFormatError(f"array {name!r} lies outside the container (truncated file?)")
-        arrays[name] = np.frombuffer(blob, dtype=dtype, count=int(np.prod(shape, dtype=np.int64)),
-                                     offset=lo).reshape(shape)
+        if encoding is None:
+            arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
+        else:
+            arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
     return header, arrays
 
 
@@ -100,7 +159,7 @@ def to_json(blob: bytes) -> dict[str, Any]:
     header, arrays = unpack(blob)
     header["arrays"] = {name: {"dtype": a.dtype.str, "shape": list(a.shape), "data": a.ravel().tolist()}
                         for name, a in arrays.items()}
-    return {"container": "pdeanim", "version": VERSION, **header}
+    return {"container": "pdeanim", "version": VERSION, **header}  # arrays inlined: nothing is encoded
 
 
 def from_json(doc: dict[str, Any]) -> bytes:

@@ -1,5 +1,8 @@
-"""The "dynamic-pde" clip format (version 1): a topology part and a coefficients part, both pdeanim
-containers.
+"""The "dynamic-pde" clip format: a topology part and a coefficients part, both pdeanim containers.
+
+Version 2 (written by default) stores the same model as version 1 below, coded as integers: error-bounded
+steps (:mod:`pdeanim.model.quantise`), zigzag differences along time or along the curves, and zstd in the
+container (docs/format.md §3.8). Version 1 is still read, and written on request.
 
 Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + curve layout + rest pose)::
 
@@ -59,9 +62,14 @@ from .. import container
 from ..clip import topology_id
 from ..curveset import CurveSet
 from ..errors import ClipFormatError
+from . import quantise
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+FORMAT_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
+DEFAULT_TOLERANCE = 1e-5
+"""Quantisation tolerance of version 2 relative to the rest pose's bounding-box diagonal, when the caller
+gives none (a fit with error targets passes a share of its target)."""
 
 
 @dataclass
@@ -92,9 +100,11 @@ class CoefficientData:
 
 
 def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray,
-                    param_mode: str) -> bytes:
-    """Topology part bytes from curves, u (V, 3), faces (T, 3), rest (V, 3)."""
-    header = {"part": "topology", "model": "dynamic-pde", "format_version": FORMAT_VERSION,
+                    param_mode: str, version: int = FORMAT_VERSION, tolerance: float | None = None) -> bytes:
+    """Topology part bytes from curves, u (V, 3), faces (T, 3), rest (V, 3); version 2 rounds rest to a
+    step whose error is at most ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal)."""
+    _check_version(version)
+    header = {"part": "topology", "model": "dynamic-pde", "format_version": version,
               "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
     u = np.asarray(u, np.float32)
     if (
@@ -104,30 +114,64 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
         and np.array_equal(u[:, :1], u[:, 2:])
     ):
         u = u[:, :1]
-    return container.pack(header, {
-        "order": np.asarray(curves.order, np.int32), "offsets": np.asarray(curves.offsets, np.int32),
-        "u": u, "faces": np.asarray(faces, np.int32).reshape(-1, 3),
-        "rest": np.asarray(rest, np.float32)})
+    if version == 1:
+        return container.pack(header, {
+            "order": np.asarray(curves.order, np.int32), "offsets": np.asarray(curves.offsets, np.int32),
+            "u": u, "faces": np.asarray(faces, np.int32).reshape(-1, 3),
+            "rest": np.asarray(rest, np.float32)})
+    rest = np.asarray(rest, np.float32)
+    tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(rest)
+    origin, step = quantise.rest_origin_step(rest, tol)
+    order = np.asarray(curves.order, np.int64)
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    header.update({"rest_origin": [float(x) for x in origin], "rest_step": step, "u_step": quantise.U_STEP})
+    arrays = {
+        "curve_lengths": np.diff(np.asarray(curves.offsets, np.int64)).astype(np.uint32),
+        "order": quantise.zigzag_deltas(order),
+        "u": quantise.zigzag_deltas(np.rint(u[order].astype(np.float64) / quantise.U_STEP), axis=0),
+        "faces": quantise.zigzag_deltas(faces.reshape(-1)).reshape(faces.shape),
+        "rest": quantise.zigzag_deltas(np.rint((rest[order] - origin) / step), axis=0),
+    }
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
 
 
-def encode_coefficients(topology: bytes, data: CoefficientData) -> bytes:
-    """Coefficients part bytes for the given topology part."""
+def _diagonal(rest: np.ndarray) -> float:
+    return float(np.linalg.norm(np.ptp(rest, axis=0))) if len(rest) else 1.0
+
+
+def _check_version(version: int) -> None:
+    if version not in FORMAT_VERSIONS:
+        raise ValueError(f"dynamic-pde format version must be one of {FORMAT_VERSIONS}, got {version!r}")
+
+
+def encode_coefficients(topology: bytes, data: CoefficientData, version: int = FORMAT_VERSION,
+                        tolerance: float | None = None) -> bytes:
+    """Coefficients part bytes for the given topology part; version 2 rounds the knots to steps whose
+    error moves no vertex coordinate by more than ``tolerance`` (default: DEFAULT_TOLERANCE of the
+    diagonal)."""
+    _check_version(version)
     S, C = data.family.shape[:2]
-    header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": FORMAT_VERSION,
+    header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": version,
               "topology_id": topology_id(topology), "motion": data.motion, "looping": bool(data.looping),
               "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
-    return container.pack(
-        header,
-        {
-            "segment_t": np.asarray(data.segment_t, np.float64),
-            "frame_times": np.asarray(data.frame_times, np.float64),
-            "family": np.asarray(data.family, np.uint8),
-            "m": np.asarray(data.m, np.float32),
-            "D": np.asarray(data.D, np.float32),
-            "knots": np.asarray(data.knots, np.float32),
-            **data.extra,
-        },
-    )
+    arrays: dict[str, np.ndarray] = {
+        "segment_t": np.asarray(data.segment_t, np.float64),
+        "frame_times": np.asarray(data.frame_times, np.float64),
+        "family": np.asarray(data.family, np.uint8),
+    }
+    if version == 1:
+        arrays.update({"m": np.asarray(data.m, np.float32), "D": np.asarray(data.D, np.float32),
+                       "knots": np.asarray(data.knots, np.float32), **data.extra})
+        return container.pack(header, arrays)
+    topo = decode_topology(*container.unpack(topology))
+    tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(topo.rest)
+    m = np.asarray(data.m, np.float32)
+    steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
+    arrays.update({
+        "m": m, "D": np.asarray(data.D, np.float32), "knot_step": steps,
+        "knots": quantise.zigzag_deltas(quantise.quantise_knots(data.knots, steps), axis=0),
+        **{k: np.asarray(v) for k, v in data.extra.items()}})
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
 
 
 def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str) -> np.ndarray:
@@ -144,35 +188,74 @@ def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...
 
 
 def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> TopologyData:
-    """Validated topology data from a decoded container; raises ClipFormatError."""
-    if header.get("format_version") != FORMAT_VERSION:
-        raise ClipFormatError(f"unsupported dynamic-pde topology version {header.get('format_version')!r}")
+    """Validated topology data from a decoded container (version 1 or 2); raises ClipFormatError."""
+    version = header.get("format_version")
+    if version not in FORMAT_VERSIONS:
+        raise ClipFormatError(f"unsupported dynamic-pde topology version {version!r}")
     V = int(header.get("n_vertices", -1))
-    order = _need(arrays, "order", (V,), "topology")
-    offsets = _need(arrays, "offsets", (None,), "topology")
-    curves = CurveSet(order.astype(np.int32), offsets.astype(np.int32))
-    try:
-        curves.validate(V)
-    except Exception as exc:
-        raise ClipFormatError(f"topology curves are invalid: {exc}") from exc
-    faces = _need(arrays, "faces", (None, 3), "topology")
+    if version == 1:
+        order = _need(arrays, "order", (V,), "topology").astype(np.int32)
+        offsets = _need(arrays, "offsets", (None,), "topology").astype(np.int32)
+        curves = _valid_curves(order, offsets, V)
+        faces = _need(arrays, "faces", (None, 3), "topology")
+        u = _need(arrays, "u", (V, None), "topology")
+        rest = _need(arrays, "rest", (V, 3), "topology")
+    else:
+        lengths = _need(arrays, "curve_lengths", (None,), "topology").astype(np.int64)
+        offsets = np.concatenate([[0], np.cumsum(lengths)])
+        order_raw = quantise.undo_zigzag_deltas(_need(arrays, "order", (V,), "topology"))
+        if order_raw.size and (order_raw.min() < 0 or order_raw.max() >= V):
+            raise ClipFormatError("topology order holds an index outside the vertices")
+        order = order_raw.astype(np.int32)
+        curves = _valid_curves(order, offsets.astype(np.int64), V)
+        zf = _need(arrays, "faces", (None, 3), "topology")
+        faces = quantise.undo_zigzag_deltas(zf.reshape(-1)).reshape(zf.shape)
+        zu = _need(arrays, "u", (V, None), "topology")
+        u_step, rest_step, origin = _steps(header)
+        u = np.empty(zu.shape, np.float32)
+        u[order] = quantise.dequantise(quantise.undo_zigzag_deltas(zu, axis=0), u_step)
+        rest = np.empty((V, 3), np.float32)
+        rest[order] = quantise.dequantise(
+            quantise.undo_zigzag_deltas(_need(arrays, "rest", (V, 3), "topology"), axis=0), rest_step, origin)
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(rest))):
+            raise ClipFormatError("topology u or rest decode to non-finite values")
     if faces.size and (faces.min() < 0 or faces.max() >= V):
         raise ClipFormatError("topology faces index outside the vertices")
-    u = _need(arrays, "u", (V, None), "topology")
     if u.shape[1] not in (1, 3):
         raise ClipFormatError(f"topology array 'u' must have 1 or 3 columns, got {u.shape[1]}")
-    return TopologyData(curves, np.broadcast_to(u, (V, 3)), faces,
-                        _need(arrays, "rest", (V, 3), "topology"), str(header.get("param_mode", "chord")))
+    return TopologyData(curves, np.broadcast_to(u, (V, 3)), faces.astype(np.int32), rest,
+                        str(header.get("param_mode", "chord")))
+
+
+def _valid_curves(order: np.ndarray, offsets: np.ndarray, V: int) -> CurveSet:
+    if offsets.size and (offsets.min() < -(2**31) or offsets.max() >= 2**31):
+        raise ClipFormatError("topology curve offsets do not fit in int32")
+    curves = CurveSet(order, offsets.astype(np.int32))
+    try:
+        return curves.validate(V)
+    except Exception as exc:
+        raise ClipFormatError(f"topology curves are invalid: {exc}") from exc
+
+
+def _steps(header: dict[str, Any]) -> tuple[float, float, np.ndarray]:
+    """(u_step, rest_step, rest_origin (3,)) of a version 2 topology header."""
+    try:
+        u_step, rest_step = float(header["u_step"]), float(header["rest_step"])
+        origin = np.asarray(header["rest_origin"], np.float64).reshape(3)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ClipFormatError(f"topology header lacks valid u_step, rest_step or rest_origin: {exc}") from exc
+    if not (u_step > 0 and rest_step > 0 and np.all(np.isfinite([u_step, rest_step, *origin]))):
+        raise ClipFormatError("topology steps must be positive and finite")
+    return u_step, rest_step, origin
 
 
 def decode_coefficients(
     header: dict[str, Any], arrays: dict[str, np.ndarray], n_curves: int
 ) -> CoefficientData:
-    """Validated coefficient data from a decoded container; raises ClipFormatError."""
-    if header.get("format_version") != FORMAT_VERSION:
-        raise ClipFormatError(
-            f"unsupported dynamic-pde coefficients version {header.get('format_version')!r}"
-        )
+    """Validated coefficient data from a decoded container (version 1 or 2); raises ClipFormatError."""
+    version = header.get("format_version")
+    if version not in FORMAT_VERSIONS:
+        raise ClipFormatError(f"unsupported dynamic-pde coefficients version {version!r}")
     S, C = int(header.get("n_segments", -1)), int(n_curves)
     seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients")
     if S < 1 or np.any(np.diff(seg_t) < 0):
@@ -183,6 +266,10 @@ def decode_coefficients(
     if S > 1 and np.any(family % 2 != family[:1] % 2):
         raise ClipFormatError("the space kind of a curve+coordinate must be the same in every segment")
     m = _need(arrays, "m", (S, C, 3), "coefficients")
+    if version == 1:
+        knots = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients")
+    else:
+        knots = _knots_v2(arrays, S, C)
     if np.any(m < 0) or np.any((family >= 2) & (m >= np.pi)):
         raise ClipFormatError("time constants must be >= 0 (and < pi for trig families)")
     motion = str(header.get("motion"))
@@ -191,8 +278,21 @@ def decode_coefficients(
     extra = _rigid_arrays(arrays, C) if motion == "rigid" else {}
     return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients"), family, m,
                            _need(arrays, "D", (C, 3), "coefficients"),
-                           _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients"), motion,
+                           knots, motion,
                            bool(header.get("looping", False)), header, extra)
+
+
+def _knots_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:
+    """Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: codes (zigzag differences along time)
+    times knot_step per curve and coordinate."""
+    steps = _need(arrays, "knot_step", (C, 3), "coefficients")
+    if np.any(steps <= 0):
+        raise ClipFormatError("coefficients knot steps must be positive")
+    codes = quantise.undo_zigzag_deltas(_need(arrays, "knots", (S + 1, C, 3, 4), "coefficients"), axis=0)
+    knots = quantise.dequantise(codes, steps[None, :, :, None])
+    if not np.all(np.isfinite(knots)):
+        raise ClipFormatError("coefficients knots decode to non-finite values")
+    return knots
 
 
 def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray]:

@@ -18,7 +18,7 @@ from ..errors import ParameterError, PosesInputError
 from ..poses import Poses
 from ..progress import Progress, sub_progress
 from .adaptive import Targets, fit_adaptive
-from .clipformat import CoefficientData, encode_coefficients, encode_topology
+from .clipformat import FORMAT_VERSION, FORMAT_VERSIONS, CoefficientData, encode_coefficients, encode_topology
 from .clipmodel import clip_from_parts
 from .fitcore import (
     SpaceStage,
@@ -61,6 +61,7 @@ class FitOptions:
     max_segments: int = 64
     curve_points: int = 10
     best_effort: bool = False
+    format_version: int = FORMAT_VERSION
 
     def __post_init__(self) -> None:
         self.validate()
@@ -85,6 +86,9 @@ class FitOptions:
         for name in ("loop", "best_effort"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if self.format_version not in FORMAT_VERSIONS or isinstance(self.format_version, bool):
+            raise ParameterError(
+                f"format_version must be one of {FORMAT_VERSIONS}, got {self.format_version!r}")
         for name in ("max_segments", "curve_points"):
             v = getattr(self, name)
             if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 4096):
@@ -235,10 +239,8 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
         cap, unsplittable = res.cap_reached, res.unsplittable
     t_time = time.perf_counter()
     report_progress(0.92, "encode")
-    parts = _encode(p, sf.curves, space, fitted, options, poses)
-    clip = _decode(parts)
-    approx = clip.evaluate(clip.frame_t())
     exact = _distances(p, space, fitted)
+    tolerance, approx = _quantised(p, sf, space, fitted, options, poses, exact)
     report = _report(p, approx, exact, sf.floor_d, fitted, sf.targets, met, floor_high, history, options,
                      sf.curves, sf.diag, poses)
     report["curve_points"] = sf.curve_points
@@ -247,7 +249,8 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     t_end = time.perf_counter()
     report["timings_s"] = {"curves_and_space": t_space - t_start, "time": t_time - t_space,
                            "encode_measure": t_end - t_time, "total": t_end - t_start}
-    parts = _encode(p, sf.curves, space, fitted, options, poses, errors=_header_errors(report))
+    report["quantisation_tolerance"] = tolerance
+    parts = _encode(p, sf.curves, space, fitted, options, poses, _header_errors(report), tolerance)
     parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
     report_progress(1.0, "done")
     return parts
@@ -301,6 +304,34 @@ def _checked_curves(curves: CurveSet, n_vertices: int) -> CurveSet:
         raise PosesInputError(f"curves do not match the poses: {exc}") from exc
 
 
+QUANT_SHARE = 0.1
+"""Format version 2 rounds each stored quantity by at most this share of the fit's tightest target."""
+QUANT_RETRIES = 3
+
+
+def _quantised(p: _Problem, sf: _SpaceFit, space: SpaceStage, fitted: TimeStage, options: FitOptions,
+               poses: Poses, exact: np.ndarray) -> tuple[float | None, np.ndarray]:
+    """(tolerance, decoded positions (F, V, 3)) of the stored clip: the quantisation tolerance starts at
+    QUANT_SHARE of the tightest target and shrinks (x 1/4) while rounding alone makes a met target missed."""
+    goals = [g for g in (sf.targets.rms, sf.targets.max) if g is not None]
+    tolerance = QUANT_SHARE * min(goals) if goals and options.format_version >= 2 else None
+    F = poses.n_frames
+    for _ in range(QUANT_RETRIES + 1):
+        clip = _decode(_encode(p, sf.curves, space, fitted, options, poses, None, tolerance))
+        approx = clip.evaluate(clip.frame_t())
+        if tolerance is None or not _meets(sf.targets, exact[:F]) or _meets(
+                sf.targets, np.linalg.norm(approx[:F].astype(np.float64) - p.X[:F], axis=-1)):
+            break
+        tolerance /= 4.0
+    return tolerance, approx
+
+
+def _meets(targets: Targets, d: np.ndarray) -> bool:
+    """Whether per-vertex distances (F, V) meet the targets."""
+    return bool((targets.rms is None or np.sqrt(np.mean(d * d)) <= targets.rms)
+                and (targets.max is None or d.max(initial=0.0) <= targets.max))
+
+
 def _coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions, times: np.ndarray,
                       errors: dict) -> CoefficientData:
     K = space.b.shape[0]
@@ -314,15 +345,16 @@ def _coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions,
 
 
 def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, options: FitOptions,
-            poses: Poses, errors: dict | None = None) -> ClipParts:
+            poses: Poses, errors: dict | None = None, tolerance: float | None = None) -> ClipParts:
     V = p.X.shape[1]
     u_v = np.zeros((V, 3))
     u_v[p.idx[p.mask]] = np.moveaxis(p.u, 1, 2)[p.mask]
-    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode)
+    version = options.format_version
+    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode, version, tolerance)
     coef = _coefficient_data(space, fitted, options, np.asarray(poses.times, np.float64), errors or {})
     if p.rigid is not None:
         coef.extra = p.rigid.arrays()
-    return ClipParts(topology, encode_coefficients(topology, coef))
+    return ClipParts(topology, encode_coefficients(topology, coef, version, tolerance))
 
 
 def _decode(parts: ClipParts):

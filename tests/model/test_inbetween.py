@@ -35,8 +35,9 @@ def test_heldout_frames_no_worse_than_linear_interpolation(kind, target):
     curves = simple_curves(poses.vertices[0], max_points=4)
     res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=target, best_effort=True), curves=curves)
     # equality happens when every kept frame is a knot (the clip is then linear interpolation itself, up to
-    # float32 knots, ~1e-7 relative): 1e-4 relative slack, far below the 2x excess the uncapped fit showed
-    assert res["pde"]["rel_rms"] <= res["linear"]["rel_rms"] * (1 + 1e-4), res
+    # the stored clip's rounding, measured 5e-4 relative): 2e-3 slack, far below the 2x excess the uncapped
+    # fit showed
+    assert res["pde"]["rel_rms"] <= res["linear"]["rel_rms"] * (1 + 2e-3), res
     assert res["pde"]["rel_max"] <= res["linear"]["rel_max"] * 1.1, res  # measured <= 1.06x
 
 

@@ -1,0 +1,89 @@
+"""Error-bounded integer coding of the dynamic-PDE arrays for format version 2 (docs/format.md §3.8).
+
+Every quantised quantity is an integer times a step; the steps are chosen so that rounding moves no vertex
+coordinate by more than a tolerance. Integer tracks are stored as zigzag-coded differences, which are small
+where the data is smooth (along time for knots, along the curves for rest positions and u) and compress well.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..curveset import CurveSet
+from .families import SPACE_KINDS, space_basis
+
+U_STEP = 2.0**-20
+"""Step of the curve parameter u in [0, 1]: 1e-6, far below what moves a vertex visibly."""
+MAX_CODE = 2**29
+"""Largest magnitude of a knot code (so that differences fit int32); the step is coarsened beyond it."""
+
+
+def zigzag_deltas(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """uint32 zigzag codes of the differences of integer array ``q`` along ``axis`` (the first element
+    against 0): small magnitudes of either sign become small unsigned numbers."""
+    d = np.diff(np.asarray(q, np.int64), axis=axis, prepend=0)
+    if d.size and (d.min() < -(2**31) or d.max() >= 2**31):
+        raise ValueError("integer differences do not fit in 32 bits")
+    d = d.astype(np.int32)
+    return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
+
+
+def undo_zigzag_deltas(z: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Inverse of :func:`zigzag_deltas`: the int64 running sums of the decoded differences."""
+    z = np.asarray(z, np.uint32)
+    d = (z >> np.uint32(1)).astype(np.int64) ^ -(z & np.uint32(1)).astype(np.int64)
+    return np.cumsum(d, axis=axis)
+
+
+def power_of_two_step(tolerance: float) -> float:
+    """The largest power of two whose rounding error (half a step) is at most ``tolerance``."""
+    return float(2.0 ** np.floor(np.log2(2.0 * tolerance)))
+
+
+def rest_origin_step(rest: np.ndarray, tolerance: float) -> tuple[np.ndarray, float]:
+    """(origin (3,), step) of the rest positions: the box's low corner and a power-of-two step."""
+    rest = np.asarray(rest, np.float64)
+    origin = rest.min(axis=0) if len(rest) else np.zeros(3)
+    extent = float(np.ptp(rest, axis=0).max()) if len(rest) else 0.0
+    step = power_of_two_step(max(tolerance, extent * 2.0**-30, 1e-30))
+    return origin, step
+
+
+def dequantise(q: np.ndarray, step: float | np.ndarray, origin: float | np.ndarray = 0.0) -> np.ndarray:
+    """float32(origin + q * step), computed in float64: the decoder's exact arithmetic."""
+    return (np.asarray(origin, np.float64) + np.asarray(q, np.float64) * np.asarray(step, np.float64)).astype(
+        np.float32)
+
+
+def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
+               knots: np.ndarray, tolerance: float) -> np.ndarray:
+    """(C, 3) float32 power-of-two steps of the knots, per curve and coordinate, so that rounding every knot
+    to a multiple moves no vertex coordinate by more than ``tolerance``.
+
+    A knot error of at most step/2 moves a vertex by at most step/2 * sum_k |S_k(u)| * max_tau (phi0 + phi1);
+    the pair sum is at most 1 for exp and linear time, and 1 / cos(m/2) for trig time.
+    """
+    V, C = len(u), curves.n_curves
+    cid, _ = curves.curve_of_vertex(V)
+    uu, DD = np.asarray(u, np.float64), np.asarray(D, np.float64)[cid]
+    kind_v = (np.asarray(family)[0] % 2)[cid]
+    B = np.zeros((V, 3, 4))
+    for i, kind in enumerate(SPACE_KINDS):
+        sel = kind_v == i
+        if np.any(sel):
+            B[sel] = space_basis(uu[sel][:, None], DD[sel], kind)[:, 0, :]
+    sens = np.zeros((C, 3))
+    np.maximum.at(sens, cid, np.abs(B).sum(-1))
+    m_trig = np.where(np.asarray(family) >= 2, np.asarray(m, np.float64), 0.0).max(axis=0)
+    pair_max = 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
+    steps = 2.0 * tolerance / np.maximum(sens * pair_max, 1e-30)
+    biggest = np.abs(np.asarray(knots, np.float64)).max(axis=(0, 3)) if len(knots) else np.zeros((C, 3))
+    steps = np.maximum(steps, biggest / MAX_CODE)  # codes stay in int32 even for a huge sensitivity
+    steps = np.clip(steps, np.finfo(np.float32).tiny, np.finfo(np.float32).max)
+    return (2.0 ** np.floor(np.log2(steps))).astype(np.float32)  # powers of two: the steps cost ~1 byte each
+
+
+def quantise_knots(knots: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Integer codes (S+1, C, 3, 4) int64 of the knots for (C, 3) steps."""
+    return np.rint(np.asarray(knots, np.float64) / np.asarray(steps, np.float64)[None, :, :, None]).astype(
+        np.int64)
