@@ -6,7 +6,6 @@ folder, never copied into the repository):
 * ``pde``: this project, ``pdeanim fit`` at rel-RMS targets 1e-2, 3e-3, 1e-3 and a rel-max target, each in its
   own process (fit time, peak memory by resource.getrusage, exit code); bytes = topology + coefficients parts
   as the HTTP API serves them (no fit report);
-* ``levers``: estimates for a next clip format, on each pde fit (bytes and the error they would cause);
 * ``pca``: mean + k bases + per-frame weights, float32, and 16-bit-quantised + zstd;
 * ``gltfpack``: morph-target GLB of the frames (our glTF writer), ``gltfpack -cc -vp N`` (N = 8..16), decoded
   with meshoptimizer's decoder (node) and matched back to the source vertices by nearest trajectory;
@@ -44,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 from pdeanim.model.metrics import bbox_diagonal, error_summary  # noqa: E402
 
 PEERS_DIR = ROOT / "benchmarks" / "peers"
-ALL_METHODS = ("pde", "levers", "pca", "gltfpack", "dembones", "keyframes", "heldout", "scaling")
+ALL_METHODS = ("pde", "pca", "gltfpack", "dembones", "keyframes", "heldout", "scaling")
 PDE_TARGETS = (("rel_rms", 1e-2), ("rel_rms", 3e-3), ("rel_rms", 1e-3), ("rel_max", 1e-2))
 SUMMARY_TARGETS = (1e-2, 3e-3, 1e-3)
 PCA_K = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
@@ -153,7 +152,7 @@ def clip_errors(parts, X: np.ndarray) -> tuple[dict, object]:  # noqa: ANN001
 
 
 def method_pde(name: str, seq: Path, X: np.ndarray, faces: np.ndarray, work: Path, args) -> list[dict]:  # noqa: ANN001
-    """This project at each target (and the format levers estimated on each fitted clip)."""
+    """This project at each target (the clip format the CLI writes by default)."""
     from pdeanim.clip import read_clip_file
 
     rows = []
@@ -175,180 +174,7 @@ def method_pde(name: str, seq: Path, X: np.ndarray, faces: np.ndarray, work: Pat
         rows.append(r)
         log(f"{name}: pde {flag} {value:g}: {served} B, rel-rms {err['rel_rms']:.3g}, exit {res['rc']}, "
             f"{res['seconds']:.1f} s, {res['peak_mb']:.0f} MB")
-        if "levers" in args.methods:
-            rows += lever_rows(parts, X, faces, f"{flag} {value:g}")
     return rows
-
-
-# ----------------------------------------------------------------------------------------------- levers
-
-def lever_rows(parts, X: np.ndarray, faces: np.ndarray, setting: str) -> list[dict]:  # noqa: ANN001
-    """Estimated bytes and error of encoding levers that need a new format version, one at a time and all
-    together: knots at 16 bits with a range per curve and coordinate, knot deltas along time + zstd, m and
-    family only where not linear, faces by meshoptimizer's index codec, rest and u at 16 bits."""
-    from pdeanim import container
-    from pdeanim.clip import load_clip
-    from pdeanim.model.clipformat import decode_coefficients, decode_topology, encode_coefficients
-
-    th, ta = container.unpack(parts.topology)
-    ch, ca = container.unpack(parts.coefficients)
-    topo = decode_topology(th, ta)
-    coef = decode_coefficients(ch, ca, topo.curves.n_curves)
-    S1, C = coef.knots.shape[:2]
-    qk, knots_dq = quantise(coef.knots, axis=(0, 3))  # range per curve and coordinate over segments and k
-    ranges = np.zeros((C, 3, 2), np.float32)
-    delta = np.diff(qk.astype(np.int32), axis=0, prepend=0).astype(np.int16)  # wraps mod 2^16: lossless
-    nonlin = coef.m > 0
-    mask = np.packbits(nonlin.reshape(-1))
-    kind = np.packbits((coef.family[0] % 2).reshape(-1).astype(np.uint8))  # space kind per curve + coordinate
-    trig = np.packbits((coef.family[nonlin] >= 2).astype(np.uint8))
-    m16, m_dq = (
-        quantise(coef.m[nonlin], axis=None) if nonlin.any() else (np.zeros(0, np.uint16), coef.m[nonlin])
-    )
-    faces_codec = meshopt_faces(faces, len(topo.rest))
-    q_rest, rest_dq = quantise(topo.rest, axis=0)
-    u_cols = np.asarray(ta["u"])
-    q_u, u_dq = quantise(u_cols, axis=None)
-    order = np.asarray(ta["order"], np.int32)
-    lengths = np.diff(np.asarray(ta["offsets"], np.int64)).astype(np.uint16)
-    # what stays as version 1 stores it (header, segment times, D) is counted from the current parts
-    fixed = zstd_len(ca["segment_t"], ca["frame_times"], ca["D"], json.dumps(ch).encode())
-    base_err = clip_errors(parts, X)[0]
-    base_zstd = zstd_len(parts.topology, parts.coefficients)
-
-    def evaluate(knots=None, m=None, rest=None, u=None) -> dict:  # noqa: ANN001, ANN202
-        tt, cc = dict(ta), dict(ca)
-        if knots is not None:
-            cc["knots"] = knots.astype(np.float32)
-        if m is not None:
-            mm = coef.m.astype(np.float64).copy()
-            mm[nonlin] = m
-            cc["m"] = mm.astype(np.float32)
-        if rest is not None:
-            tt["rest"] = rest.astype(np.float32)
-        if u is not None:
-            tt["u"] = u.astype(np.float32)
-        topo_b = container.pack(th, tt)
-        coef_b = encode_coefficients(topo_b, decode_coefficients(ch, cc, C))
-        clip = load_clip(topo_b, coef_b)
-        return error_summary(X, clip.evaluate(clip.frame_t()))
-
-    knot_f32 = zstd_len(ca["knots"])
-    knot_q = zstd_len(qk) + ranges.nbytes
-    knot_qd = zstd_len(delta) + ranges.nbytes
-    mf_v1 = zstd_len(ca["m"], ca["family"])
-    mf_sparse = zstd_len(mask, kind, trig, m16) + 8
-    faces_v1 = zstd_len(np.asarray(ta["faces"], np.int32))
-    rest_v1, rest_q = zstd_len(ta["rest"]), zstd_len(q_rest) + 24
-    u_v1, u_q = zstd_len(u_cols), zstd_len(q_u) + 8
-    curves_v1 = zstd_len(order, ta["offsets"])
-    curves_v2 = zstd_len(np.diff(order, prepend=0).astype(np.int32), lengths)
-    err_k = evaluate(knots=knots_dq)
-    eps = ERRBOUND_SHARE * target_abs(setting, base_err)
-    codes, steps, knots_eb = errbound_knots(topo, coef, eps)
-    knot_eb = zstd_len(np.diff(codes, axis=0, prepend=0).astype(np.int32)) + steps.astype(np.float32).nbytes
-    err_eb = evaluate(knots=knots_eb)
-    err_all = evaluate(knots=knots_eb, m=m_dq, rest=rest_dq, u=u_dq)
-    share = {"knots": knot_f32, "m+family": mf_v1, "faces": faces_v1, "rest": rest_v1, "u": u_v1,
-             "order+offsets": curves_v1}
-    rows = [
-        row(
-            "lever:knots16",
-            setting,
-            knot_q,
-            base_zstd - knot_f32 + knot_q,
-            err_k,
-            note=f"knots zstd {knot_f32} -> {knot_q}",
-            parts_zstd=share,
-            nonlinear_fraction=float(nonlin.mean()),
-        ),
-        row(
-            "lever:knots16+delta",
-            setting,
-            knot_qd,
-            base_zstd - knot_f32 + knot_qd,
-            err_k,
-            note=f"knots zstd {knot_f32} -> {knot_qd}",
-        ),
-        row(
-            "lever:knots-errbound",
-            setting,
-            knot_eb,
-            base_zstd - knot_f32 + knot_eb,
-            err_eb,
-            note=f"knots zstd {knot_f32} -> {knot_eb} (integer steps per curve+coordinate so that rounding "
-                 f"moves "
-                 f"no vertex coordinate by more than {eps / base_err['diagonal']:.2g} of the diagonal, "
-                 "deltas along time, zstd)"),
-        row("lever:m-sparse", setting, mf_sparse, base_zstd - mf_v1 + mf_sparse, evaluate(m=m_dq),
-            note=f"m+family zstd {mf_v1} -> {mf_sparse} ({100 * nonlin.mean():.1f}% non-linear)"),
-        row("lever:faces-meshopt", setting, faces_codec, base_zstd - faces_v1 + faces_codec, base_err,
-            note=f"faces zstd {faces_v1} -> {faces_codec}"),
-        row("lever:rest+u16", setting, rest_q + u_q, base_zstd - rest_v1 - u_v1 + rest_q + u_q,
-            evaluate(rest=rest_dq, u=u_dq),
-            note=f"rest+u zstd {rest_v1 + u_v1} -> {rest_q + u_q}"),
-    ]
-    total = knot_eb + mf_sparse + faces_codec + rest_q + u_q + curves_v2 + fixed
-    rows.append(
-        row(
-            "pde v2 estimate",
-            setting,
-            total,
-            total,
-            err_all,
-            note=f"all levers: knots (error-bounded) {knot_eb}, m/family {mf_sparse}, faces {faces_codec}, "
-            f"rest {rest_q}, u {u_q}, curves {curves_v2}, rest of header {fixed}; "
-            f"S+1={S1}, C={C}",
-        )
-    )
-    return rows
-
-
-ERRBOUND_SHARE = 0.2
-"""Error-bounded knot quantisation: the largest coordinate error rounding may cause, as a share of the
-target."""
-
-
-def target_abs(setting: str, err: dict) -> float:
-    """The absolute target of a pde row's setting ("rel_rms 0.001" -> 0.001 * diagonal)."""
-    return float(setting.split()[1]) * err["diagonal"]
-
-
-def errbound_knots(topo, coef, eps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # noqa: ANN001
-    """Knots as integers times a step per curve and coordinate, the step chosen so that rounding moves no
-    vertex coordinate by more than ``eps`` (|dz_k| <= step / 2, so the error is <= step / 2 * max over
-    the curve's vertices of sum_k |S_k(u)| * max_tau (phi0 + phi1)). Returns (codes (S+1, C, 3, 4) int64,
-    steps (C, 3), dequantised knots)."""
-    from pdeanim.model.clipmodel import SPACE_KINDS
-    from pdeanim.model.families import space_basis
-
-    V, C = len(topo.rest), topo.curves.n_curves
-    cid, _ = topo.curves.curve_of_vertex(V)
-    u, D = np.asarray(topo.u, np.float64), coef.D.astype(np.float64)[cid]
-    kind_v = (coef.family[0] % 2)[cid]
-    B = np.zeros((V, 3, 4))
-    for i, kind in enumerate(SPACE_KINDS):
-        sel = kind_v == i
-        if np.any(sel):
-            B[sel] = space_basis(u[sel][:, None], D[sel], kind)[:, 0, :]
-    sens = np.zeros((C, 3))
-    np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    m_trig = np.where(coef.family >= 2, coef.m.astype(np.float64), 0.0).max(axis=0)  # (C, 3)
-    pair_max = 1.0 / np.cos(m_trig / 2.0)  # phi0 + phi1 peaks at 1 / cos(m / 2) (trig), <= 1 otherwise
-    steps = 2.0 * eps / np.maximum(sens * pair_max, 1e-30)
-    codes = np.rint(coef.knots / steps[None, :, :, None]).astype(np.int64)
-    return codes, steps, codes * steps[None, :, :, None]
-
-
-def meshopt_faces(faces: np.ndarray, n_vertices: int) -> int:
-    """Bytes of the faces through meshoptimizer's index codec (triangles reordered for the vertex cache first;
-    the vertex order is unchanged), then zstd."""
-    import meshoptimizer
-
-    idx = np.asarray(faces, np.uint32).reshape(-1)
-    opt = np.zeros_like(idx)
-    meshoptimizer.optimize_vertex_cache(opt, idx, len(idx), n_vertices)
-    return zstd_len(meshoptimizer.encode_index_buffer(opt, len(opt), n_vertices))
 
 
 # ----------------------------------------------------------------------------------------------- pca
@@ -615,7 +441,6 @@ def summary_table(results: dict) -> str:
     """Markdown: per sequence and target, the smallest bytes (served / zstd) each method needs to reach it."""
     methods = [
         "pde",
-        "pde v2 estimate",
         "gltfpack",
         "pca f32",
         "pca q16+zstd",
@@ -623,12 +448,18 @@ def summary_table(results: dict) -> str:
         "keyframes",
     ]
     lines = [
-        "| sequence | target rel-RMS | " + " | ".join(methods) + " |",
-        "|---|---|" + "---|" * len(methods),
+        "| sequence | target rel-RMS | " + " | ".join(methods) + " | pde / min(gltfpack, pca q16+zstd) |",
+        "|---|---|" + "---|" * (len(methods) + 1),
     ]
     for name, rows in results.items():
         for tgt in SUMMARY_TARGETS:
-            cells = []
+            cells, ratio = [], "-"
+            peers = [b["bytes"] for m in ("gltfpack", "pca q16+zstd") if (b := best_under(rows, m, tgt))]
+            ours = next((r for r in rows if r.get("method") == "pde" and "rel_rms" in r
+                         and r.get("setting") == f"rel_rms {tgt:g}"
+                         and r["rel_rms"] <= tgt * (1 + 1e-9)), None)
+            if peers and ours:
+                ratio = f"{ours['bytes'] / min(peers):.2f}"
             for m in methods:
                 b = best_under(rows, m, tgt)
                 if m.startswith("pde"):  # the project's row is the fit *for* that target
@@ -647,7 +478,7 @@ def summary_table(results: dict) -> str:
                         continue
                 cells.append("-" if b is None else f"{fmt_bytes(b['bytes'])} / {fmt_bytes(b['zstd_bytes'])} "
                              f"(max {b['rel_max']:.2g}, {b['setting']})")
-            lines.append(f"| {name} | {tgt:g} | " + " | ".join(cells) + " |")
+            lines.append(f"| {name} | {tgt:g} | " + " | ".join(cells) + f" | {ratio} |")
     return "\n".join(lines)
 
 
@@ -717,7 +548,7 @@ def pareto_plot(name: str, rows: list[dict], path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(7, 5))
     methods = [m for m in dict.fromkeys(r["method"] for r in rows)
-               if not m.startswith(("lever:", "heldout"))]
+               if not m.startswith("heldout")]
     for m in methods:
         pts = sorted((r["zstd_bytes"], r["rel_rms"]) for r in rows
                      if r["method"] == m and r.get("zstd_bytes") and r["rel_rms"] > 0)

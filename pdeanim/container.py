@@ -90,7 +90,8 @@ def _encode(a: np.ndarray, encoding: str) -> bytes:
     raw = a.tobytes()
     if encoding == "shuffle-zstd":
         raw = np.frombuffer(raw, np.uint8).reshape(-1, a.dtype.itemsize).T.tobytes()
-    return zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True).compress(raw)
+    writer = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True, write_checksum=True)
+    return writer.compress(raw)
 
 
 def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str) -> np.ndarray:

@@ -49,6 +49,9 @@ def register(subparsers) -> None:  # noqa: ANN001
         "(default: the first; the summary says which was used)",
     )
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
+    p.add_argument("--format-version", type=int, choices=[1, 2], default=2,
+                   help="clip format to write: 2 (default, integer-coded and compressed) or 1 (for readers "
+                        "that predate version 2)")
     p.add_argument("--best-effort", action="store_true",
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",
@@ -77,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
         loop=args.loop,
         max_segments=args.max_segments,
         best_effort=args.best_effort,
+        format_version=args.format_version,
     )
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps, animation=args.animation)

@@ -67,6 +67,8 @@ from . import quantise
 FORMAT_VERSION = 2
 FORMAT_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
+KNOT_CAP = 2.0
+"""With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
 DEFAULT_TOLERANCE = 1e-5
 """Quantisation tolerance of version 2 relative to the rest pose's bounding-box diagonal, when the caller
 gives none (a fit with error targets passes a share of its target)."""
@@ -129,7 +131,7 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
         "curve_lengths": np.diff(np.asarray(curves.offsets, np.int64)).astype(np.uint32),
         "order": quantise.zigzag_deltas(order),
         "u": quantise.zigzag_deltas(np.rint(u[order].astype(np.float64) / quantise.U_STEP), axis=0),
-        "faces": quantise.zigzag_deltas(faces.reshape(-1)).reshape(faces.shape),
+        "faces": quantise.encode_faces(faces, order),
         "rest": quantise.zigzag_deltas(np.rint((rest[order] - origin) / step), axis=0),
     }
     return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
@@ -145,10 +147,10 @@ def _check_version(version: int) -> None:
 
 
 def encode_coefficients(topology: bytes, data: CoefficientData, version: int = FORMAT_VERSION,
-                        tolerance: float | None = None) -> bytes:
-    """Coefficients part bytes for the given topology part; version 2 rounds the knots to steps whose
-    error moves no vertex coordinate by more than ``tolerance`` (default: DEFAULT_TOLERANCE of the
-    diagonal)."""
+                        tolerance: float | None = None, knot_rms: float | None = None) -> bytes:
+    """Coefficients part bytes for the given topology part; version 2 rounds the knots to steps that add at
+    most ``knot_rms`` to the RMS vertex distance when given, else whose error moves no vertex coordinate by
+    more than ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal)."""
     _check_version(version)
     S, C = data.family.shape[:2]
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": version,
@@ -166,7 +168,11 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     topo = decode_topology(*container.unpack(topology))
     tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(topo.rest)
     m = np.asarray(data.m, np.float32)
-    steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
+    if knot_rms is not None:
+        steps = quantise.knot_steps_rms(topo.curves, topo.u, data.family, m, data.D, data.knots, knot_rms,
+                                        KNOT_CAP * knot_rms)
+    else:
+        steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
     arrays.update({
         "m": m, "D": np.asarray(data.D, np.float32), "knot_step": steps,
         "knots": quantise.zigzag_deltas(quantise.quantise_knots(data.knots, steps), axis=0),
@@ -208,8 +214,7 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
             raise ClipFormatError("topology order holds an index outside the vertices")
         order = order_raw.astype(np.int32)
         curves = _valid_curves(order, offsets.astype(np.int64), V)
-        zf = _need(arrays, "faces", (None, 3), "topology")
-        faces = quantise.undo_zigzag_deltas(zf.reshape(-1)).reshape(zf.shape)
+        faces = quantise.decode_faces(_need(arrays, "faces", (None, 3), "topology"), order)
         zu = _need(arrays, "u", (V, None), "topology")
         u_step, rest_step, origin = _steps(header)
         u = np.empty(zu.shape, np.float32)

@@ -32,6 +32,7 @@ from .fitcore import (
 )
 from .metrics import bbox_diagonal, error_summary
 from .parameterisation import PARAM_MODES, curve_parameters
+from .quantise import power_of_two_step
 from .rigid import RigidTracks, fit_rigid, local_residual
 from .segments import Segmentation, uniform_segmentation
 
@@ -48,6 +49,7 @@ class FitOptions:
     "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last
     frame flows into the first); max_segments caps the adaptivity (reaching it is reported, never silent).
     best_effort: a missed target is not an error (the CLI exits 0, a fit job succeeds with the best clip).
+    format_version: 2 (integer-coded, rounding by at most QUANT_SHARE of the target) or 1 (float32).
     """
 
     target_rms: float | None = None
@@ -240,7 +242,7 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     t_time = time.perf_counter()
     report_progress(0.92, "encode")
     exact = _distances(p, space, fitted)
-    tolerance, approx = _quantised(p, sf, space, fitted, options, poses, exact)
+    quant, approx = _quantised(p, sf, space, fitted, options, poses, exact)
     report = _report(p, approx, exact, sf.floor_d, fitted, sf.targets, met, floor_high, history, options,
                      sf.curves, sf.diag, poses)
     report["curve_points"] = sf.curve_points
@@ -249,8 +251,9 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     t_end = time.perf_counter()
     report["timings_s"] = {"curves_and_space": t_space - t_start, "time": t_time - t_space,
                            "encode_measure": t_end - t_time, "total": t_end - t_start}
-    report["quantisation_tolerance"] = tolerance
-    parts = _encode(p, sf.curves, space, fitted, options, poses, _header_errors(report), tolerance)
+    report["quantisation_tolerance"] = quant.tolerance
+    report["quantisation_knot_rms"] = quant.knot_rms
+    parts = _encode(p, sf.curves, space, fitted, options, poses, _header_errors(report), quant)
     parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
     report_progress(1.0, "done")
     return parts
@@ -305,25 +308,56 @@ def _checked_curves(curves: CurveSet, n_vertices: int) -> CurveSet:
 
 
 QUANT_SHARE = 0.1
-"""Format version 2 rounds each stored quantity by at most this share of the fit's tightest target."""
-QUANT_RETRIES = 3
+"""Format version 2 rounds the rest pose (and, for max targets, the knots) by at most this share of the
+fit's tightest target per coordinate."""
+QUANT_BUDGET = 0.8
+"""With an RMS target only, the knots' rounding may take this share of what the fit leaves of the target
+(target^2 - fit rms^2, less the rest pose's share)."""
+QUANT_RETRIES = 4
+
+
+@dataclass
+class _Quantisation:
+    """How the stored clip was rounded: per-coordinate tolerance (rest; knots unless knot_rms) and the RMS
+    budget of the knots' rounding."""
+
+    tolerance: float | None = None
+    knot_rms: float | None = None
+
+    def finer(self) -> _Quantisation:
+        """Half the rounding error."""
+        return _Quantisation(None if self.tolerance is None else self.tolerance / 2,
+                             None if self.knot_rms is None else self.knot_rms / 2)
+
+
+def _first_quantisation(targets: Targets, exact: np.ndarray, options: FitOptions) -> _Quantisation:
+    """Rounding for format version 2: a share of the target where the fit leaves none to spare or a max
+    target is set; with an RMS target only, the knots get most of what the fit leaves of it."""
+    goals = [g for g in (targets.rms, targets.max) if g is not None]
+    if options.format_version < 2 or not goals:
+        return _Quantisation()
+    tolerance = QUANT_SHARE * min(goals)
+    if targets.max is not None:
+        return _Quantisation(tolerance)
+    rest_step = power_of_two_step(tolerance)
+    spare = QUANT_BUDGET * (targets.rms**2 - float(np.mean(exact * exact))) - rest_step**2 / 4
+    return _Quantisation(tolerance, float(np.sqrt(spare)) if spare > tolerance**2 else None)
 
 
 def _quantised(p: _Problem, sf: _SpaceFit, space: SpaceStage, fitted: TimeStage, options: FitOptions,
-               poses: Poses, exact: np.ndarray) -> tuple[float | None, np.ndarray]:
-    """(tolerance, decoded positions (F, V, 3)) of the stored clip: the quantisation tolerance starts at
-    QUANT_SHARE of the tightest target and shrinks (x 1/4) while rounding alone makes a met target missed."""
-    goals = [g for g in (sf.targets.rms, sf.targets.max) if g is not None]
-    tolerance = QUANT_SHARE * min(goals) if goals and options.format_version >= 2 else None
+               poses: Poses, exact: np.ndarray) -> tuple[_Quantisation, np.ndarray]:
+    """(rounding, decoded positions (F, V, 3)) of the stored clip: rounding halves while it alone makes a
+    target missed that the unrounded fit met."""
     F = poses.n_frames
+    quant = _first_quantisation(sf.targets, exact[:F], options)
     for _ in range(QUANT_RETRIES + 1):
-        clip = _decode(_encode(p, sf.curves, space, fitted, options, poses, None, tolerance))
+        clip = _decode(_encode(p, sf.curves, space, fitted, options, poses, None, quant))
         approx = clip.evaluate(clip.frame_t())
-        if tolerance is None or not _meets(sf.targets, exact[:F]) or _meets(
+        if quant.tolerance is None or not _meets(sf.targets, exact[:F]) or _meets(
                 sf.targets, np.linalg.norm(approx[:F].astype(np.float64) - p.X[:F], axis=-1)):
             break
-        tolerance /= 4.0
-    return tolerance, approx
+        quant = quant.finer()
+    return quant, approx
 
 
 def _meets(targets: Targets, d: np.ndarray) -> bool:
@@ -345,16 +379,16 @@ def _coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions,
 
 
 def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, options: FitOptions,
-            poses: Poses, errors: dict | None = None, tolerance: float | None = None) -> ClipParts:
+            poses: Poses, errors: dict | None = None, quant: _Quantisation | None = None) -> ClipParts:
     V = p.X.shape[1]
     u_v = np.zeros((V, 3))
     u_v[p.idx[p.mask]] = np.moveaxis(p.u, 1, 2)[p.mask]
-    version = options.format_version
-    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode, version, tolerance)
+    version, quant = options.format_version, quant or _Quantisation()
+    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode, version, quant.tolerance)
     coef = _coefficient_data(space, fitted, options, np.asarray(poses.times, np.float64), errors or {})
     if p.rigid is not None:
         coef.extra = p.rigid.arrays()
-    return ClipParts(topology, encode_coefficients(topology, coef, version, tolerance))
+    return ClipParts(topology, encode_coefficients(topology, coef, version, quant.tolerance, quant.knot_rms))
 
 
 def _decode(parts: ClipParts):

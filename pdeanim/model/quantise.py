@@ -35,6 +35,45 @@ def undo_zigzag_deltas(z: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.cumsum(d, axis=axis)
 
 
+def _zigzag(d: np.ndarray) -> np.ndarray:
+    """uint32 zigzag codes of int32-range differences."""
+    d = np.asarray(d, np.int64).astype(np.int32)
+    return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
+
+
+def _unzigzag(z: np.ndarray) -> np.ndarray:
+    z = np.asarray(z, np.uint32)
+    return (z >> np.uint32(1)).astype(np.int64) ^ -(z & np.uint32(1)).astype(np.int64)
+
+
+def encode_faces(faces: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """(T, 3) uint32 codes of the triangles in curve-rank space (rank = position in ``order``), in a canonical
+    order: each triangle turned (winding kept) to start at its lowest rank, rows sorted; column 0 holds the
+    zigzag differences of the first ranks along the rows, columns 1-2 the zigzag rank offsets from it.
+    Neighbouring triangles share curves, so the numbers are small."""
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    if not len(faces):
+        return np.zeros((0, 3), np.uint32)
+    rank = np.empty(len(order), np.int64)
+    rank[np.asarray(order, np.int64)] = np.arange(len(order))
+    r = rank[faces]
+    first = np.argmin(r, axis=1)[:, None]
+    r = np.take_along_axis(r, (first + np.arange(3)) % 3, axis=1)
+    r = r[np.lexsort((r[:, 2], r[:, 1], r[:, 0]))]
+    return np.stack([zigzag_deltas(r[:, 0]), _zigzag(r[:, 1] - r[:, 0]), _zigzag(r[:, 2] - r[:, 0])], axis=1)
+
+
+def decode_faces(codes: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`encode_faces`: (T, 3) int64 vertex indices (canonical triangle order); -1 marks a
+    rank outside the vertices."""
+    codes = np.asarray(codes, np.uint32).reshape(-1, 3)
+    a = undo_zigzag_deltas(codes[:, 0])
+    r = np.stack([a, a + _unzigzag(codes[:, 1]), a + _unzigzag(codes[:, 2])], axis=1)
+    order = np.asarray(order, np.int64)
+    ok = (r >= 0) & (r < len(order))
+    return np.where(ok, order[np.where(ok, r, 0)], -1)
+
+
 def power_of_two_step(tolerance: float) -> float:
     """The largest power of two whose rounding error (half a step) is at most ``tolerance``."""
     return float(2.0 ** np.floor(np.log2(2.0 * tolerance)))
@@ -55,15 +94,10 @@ def dequantise(q: np.ndarray, step: float | np.ndarray, origin: float | np.ndarr
         np.float32)
 
 
-def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-               knots: np.ndarray, tolerance: float) -> np.ndarray:
-    """(C, 3) float32 power-of-two steps of the knots, per curve and coordinate, so that rounding every knot
-    to a multiple moves no vertex coordinate by more than ``tolerance``.
-
-    A knot error of at most step/2 moves a vertex by at most step/2 * sum_k |S_k(u)| * max_tau (phi0 + phi1);
-    the pair sum is at most 1 for exp and linear time, and 1 / cos(m/2) for trig time.
-    """
-    V, C = len(u), curves.n_curves
+def _vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(curve id (V,), space basis (V, 3, 4)) of every vertex and coordinate."""
+    V = len(u)
     cid, _ = curves.curve_of_vertex(V)
     uu, DD = np.asarray(u, np.float64), np.asarray(D, np.float64)[cid]
     kind_v = (np.asarray(family)[0] % 2)[cid]
@@ -72,15 +106,60 @@ def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarra
         sel = kind_v == i
         if np.any(sel):
             B[sel] = space_basis(uu[sel][:, None], DD[sel], kind)[:, 0, :]
+    return cid, B
+
+
+def _pair_max(family: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """(C, 3) bound of phi0 + phi1 over every segment: 1 for exp and linear time, 1 / cos(m/2) for trig."""
+    m_trig = np.where(np.asarray(family) >= 2, np.asarray(m, np.float64), 0.0).max(axis=0)
+    return 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
+
+
+def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
+               knots: np.ndarray, tolerance: float) -> np.ndarray:
+    """(C, 3) float32 power-of-two steps of the knots, per curve and coordinate, so that rounding every knot
+    to a multiple moves no vertex coordinate by more than ``tolerance``.
+
+    A knot error of at most step/2 moves a vertex by at most step/2 * sum_k |S_k(u)| * max_tau (phi0 + phi1).
+    """
+    cid, B = _vertex_basis(curves, u, family, D)
+    sens = np.zeros((curves.n_curves, 3))
+    np.maximum.at(sens, cid, np.abs(B).sum(-1))
+    return _power_of_two(2.0 * tolerance / np.maximum(sens * _pair_max(family, m), 1e-30), knots)
+
+
+def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
+                   knots: np.ndarray, rms: float, cap: float) -> np.ndarray:
+    """(C, 3) float32 power-of-two steps whose rounding adds at most ``rms`` to the RMS vertex distance, and
+    moves no vertex coordinate by more than ``cap`` (so the max error stays near the unrounded one).
+
+    Rounding to a step h is noise of variance h^2 / 12 per knot value; at a vertex it adds
+    h^2 / 12 * sum_k S_k(u)^2 * (phi0^2 + phi1^2) to a coordinate's variance. Fewest bits for a given total:
+    every curve and coordinate contributes the same share of rms^2 (each has the same number of knots).
+    """
+    cid, B = _vertex_basis(curves, u, family, D)
+    V, C = len(u), curves.n_curves
+    pair = _pair_max(family, m)
+    weight = np.zeros((C, 3))
+    np.add.at(weight, cid, (B * B).sum(-1))  # sum over the curve's vertices of sum_k S_k^2
+    weight *= pair**2 / (12.0 * max(V, 1))
+    share = rms * rms / max(3 * C, 1)
+    # nearest power of two (in log2): the budget is a total, so rounding up here is balanced by rounding down
+    # elsewhere; the caller measures the stored clip anyway
+    steps = np.sqrt(2.0 * share / np.maximum(weight, 1e-300))
     sens = np.zeros((C, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    m_trig = np.where(np.asarray(family) >= 2, np.asarray(m, np.float64), 0.0).max(axis=0)
-    pair_max = 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
-    steps = 2.0 * tolerance / np.maximum(sens * pair_max, 1e-30)
+    return _power_of_two(np.minimum(steps, 2.0 * cap / np.maximum(sens * pair, 1e-30)), knots)
+
+
+def _power_of_two(steps: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Steps rounded down to powers of two (a byte each after compression), coarse enough that every code
+    stays within MAX_CODE."""
+    C = steps.shape[0]
     biggest = np.abs(np.asarray(knots, np.float64)).max(axis=(0, 3)) if len(knots) else np.zeros((C, 3))
-    steps = np.maximum(steps, biggest / MAX_CODE)  # codes stay in int32 even for a huge sensitivity
+    steps = np.maximum(steps, biggest / MAX_CODE)
     steps = np.clip(steps, np.finfo(np.float32).tiny, np.finfo(np.float32).max)
-    return (2.0 ** np.floor(np.log2(steps))).astype(np.float32)  # powers of two: the steps cost ~1 byte each
+    return (2.0 ** np.floor(np.log2(steps))).astype(np.float32)
 
 
 def quantise_knots(knots: np.ndarray, steps: np.ndarray) -> np.ndarray:

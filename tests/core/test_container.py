@@ -71,3 +71,55 @@ def test_poses_round_trip_and_validation(morph_sphere_path):
         make_poses(poses.vertices, poses.faces, limits=PoseLimits(max_frames=10))
     with pytest.raises(PosesInputError):
         load_poses_npz(b"not a zip")
+
+
+@given(
+    hnp.arrays(st.sampled_from([np.float32, np.float64, np.int32, np.uint32, np.int16, np.uint8]),
+               hnp.array_shapes(min_dims=1, max_dims=3, min_side=0, max_side=6)),
+    st.sampled_from(["zstd", "shuffle-zstd", container.SMALLEST]),
+)
+def test_encoded_arrays_round_trip_in_container_version_2(a, encoding):
+    blob = container.pack({"part": "test"}, {"a": a, "raw": np.arange(3, dtype=np.int32)}, {"a": encoding})
+    assert int.from_bytes(blob[8:12], "little") == 2
+    header, arrays = container.unpack(blob)
+    np.testing.assert_array_equal(arrays["a"], a)
+    assert arrays["a"].dtype == a.dtype.newbyteorder("<") and arrays["a"].shape == a.shape
+    assert container.pack({"part": "test"}, {"a": a}, {"a": encoding}) == container.pack(
+        {"part": "test"}, {"a": a}, {"a": encoding})  # deterministic bytes
+
+
+def _table_edit(blob: bytes, name: str, **changes) -> bytes:
+    """The blob with one array entry of its JSON header changed (same header length)."""
+    import json
+    import struct
+
+    _, version, hlen = struct.unpack_from("<8sII", blob)
+    header = json.loads(blob[16:16 + hlen])
+    header["arrays"][name].update(changes)
+    meta = json.dumps(header, separators=(",", ":"), sort_keys=True).encode()
+    meta += b" " * ((len(meta) + 7) // 8 * 8 - len(meta))
+    return struct.pack("<8sII", b"PDEANIM\0", version, len(meta)) + meta + blob[16 + hlen:]
+
+
+def test_bad_encoded_arrays_raise_clear_errors():
+    a = np.arange(1000, dtype=np.uint32)
+    blob = container.pack({"part": "x"}, {"a": a}, {"a": "shuffle-zstd"})
+    with pytest.raises(ClipFormatError, match="unknown encoding"):
+        container.unpack(_table_edit(blob, "a", encoding="lz4"))
+    with pytest.raises(ClipFormatError, match="holds 4000 bytes, expected 8000"):
+        container.unpack(_table_edit(blob, "a", shape=[2000]))  # the frame declares another size
+    header_end = 16 + int.from_bytes(blob[12:16], "little")
+    garbled = bytearray(blob)
+    garbled[header_end + 12:header_end + 40] = b"\xff" * 28
+    with pytest.raises(ClipFormatError, match="array 'a'"):
+        container.unpack(bytes(garbled))
+    with pytest.raises(ClipFormatError, match="truncated|outside"):
+        container.unpack(blob[:-16])
+    v1 = blob[:8] + (1).to_bytes(4, "little") + blob[12:]
+    with pytest.raises(ClipFormatError, match="container version 1 does not allow"):
+        container.unpack(v1)
+
+
+def test_version_1_writer_output_is_unchanged_without_encodings():
+    blob = container.pack({"part": "x"}, {"a": np.arange(4, dtype=np.int32)})
+    assert int.from_bytes(blob[8:12], "little") == 1

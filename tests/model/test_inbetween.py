@@ -34,11 +34,12 @@ def test_heldout_frames_no_worse_than_linear_interpolation(kind, target):
     poses = synthetic(kind)
     curves = simple_curves(poses.vertices[0], max_points=4)
     res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=target, best_effort=True), curves=curves)
-    # equality happens when every kept frame is a knot (the clip is then linear interpolation itself, up to
-    # the stored clip's rounding, measured 5e-4 relative): 2e-3 slack, far below the 2x excess the uncapped
-    # fit showed
-    assert res["pde"]["rel_rms"] <= res["linear"]["rel_rms"] * (1 + 2e-3), res
-    assert res["pde"]["rel_max"] <= res["linear"]["rel_max"] * 1.1, res  # measured <= 1.06x
+    # equality happens when every kept frame is a knot (the clip is then linear interpolation itself, plus
+    # the stored clip's rounding, which may use what the fit leaves of its target on the kept frames:
+    # measured up to 2.5% here): 6% slack, far below the 2x excess the uncapped fit showed
+    assert res["pde"]["rel_rms"] <= res["linear"]["rel_rms"] * 1.06, res
+    # measured <= 1.17x: the rounding of the stored clip may move a vertex by 2x its RMS budget
+    assert res["pde"]["rel_max"] <= res["linear"]["rel_max"] * 1.35, res
 
 
 def test_uncapped_time_constants_overshoot_between_frames(monkeypatch):

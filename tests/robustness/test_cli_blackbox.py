@@ -77,8 +77,10 @@ def test_poses_edge_cases_fit_and_export(tmp_path, capsys, ico, frames, moving, 
     with np.load(frames_out) as data:
         got = data["vertices"]
     assert got.shape == (frames, len(vertices), 3) and np.isfinite(got).all()
-    # achieved max error 1.4e-4 x scale (the motion's amplitude is 0.09 x scale); 0 for F = 1 and constant
-    assert np.abs(got - np.load(poses)["vertices"]).max() <= 4e-4 * scale
+    # the default target, rel-RMS 3e-3 of the first frame's diagonal, holds for the stored (rounded) clip
+    d = np.linalg.norm(got.astype(np.float64) - np.load(poses)["vertices"], axis=-1)
+    diag = np.linalg.norm(np.ptp(np.load(poses)["vertices"][0], axis=0))
+    assert np.sqrt(np.mean(d * d)) <= 3e-3 * diag
     assert cli(capsys, "export", clip, "--out", anim)[0] == 0
     assert_clean(validate_many([anim.read_bytes()])[0])
 

@@ -1,0 +1,162 @@
+"""Format version 2 of the dynamic-PDE clip: the same model as version 1 within the stated quantisation
+bound, exact integer round trips, clear errors on broken parts, and version 1 still read."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pdeanim import container
+from pdeanim.clip import load_clip
+from pdeanim.errors import ClipFormatError
+from pdeanim.model import quantise
+from pdeanim.model.clipformat import (
+    decode_coefficients,
+    decode_topology,
+    encode_coefficients,
+    encode_topology,
+)
+from pdeanim.model.fitclip import FitOptions, fit_poses
+
+
+@given(st.lists(st.integers(-(2**30), 2**30), min_size=0, max_size=50))
+def test_zigzag_differences_round_trip(values):
+    q = np.asarray(values, np.int64)
+    z = quantise.zigzag_deltas(q)
+    assert z.dtype == np.uint32
+    np.testing.assert_array_equal(quantise.undo_zigzag_deltas(z), q)
+
+
+@pytest.fixture(scope="module")
+def both_versions(morph_small, short_curves):
+    """The same fit stored as version 1 and version 2."""
+    opts = {"target_rel_max": 3e-2}  # a max target: every rounding is bounded per coordinate
+    return {v: fit_poses(morph_small, FitOptions(format_version=v, **opts), curves=short_curves)
+            for v in (1, 2)}
+
+
+def test_version_2_is_smaller_and_evaluates_like_version_1_within_the_bound(both_versions, morph_small):
+    one, two = both_versions[1], both_versions[2]
+    c1, c2 = load_clip(one.topology, one.coefficients), load_clip(two.topology, two.coefficients)
+    assert container.unpack(two.coefficients)[0]["format_version"] == 2
+    assert container.unpack(one.coefficients)[0]["format_version"] == 1  # still written on request
+    t = c1.frame_t()
+    diff = np.linalg.norm(c1.evaluate(t).astype(np.float64) - c2.evaluate(t), axis=-1).max()
+    tol = two.report["quantisation_tolerance"]
+    assert tol == pytest.approx(0.1 * 3e-2 * two.report["diagonal"])
+    assert two.report["quantisation_knot_rms"] is None
+    assert diff <= 2 * np.sqrt(3) * tol  # rest and knots each round by at most tol per coordinate
+    assert two.report["target_met"] and two.report["rel_max"] <= 3e-2
+    size = len(two.topology) + len(two.coefficients)
+    assert size < 0.5 * (len(one.topology) + len(one.coefficients))
+
+
+def test_an_rms_target_lets_the_knots_use_what_the_fit_leaves(morph_small, short_curves):
+    """With only an RMS target, the knots' rounding adds at most its budget to the RMS; the target holds."""
+    parts = fit_poses(morph_small, FitOptions(target_rel_rms=3e-3), curves=short_curves)
+    r = parts.report
+    assert r["target_met"] and r["rel_rms"] <= 3e-3
+    exact = fit_poses(morph_small, FitOptions(target_rel_rms=3e-3, format_version=1), curves=short_curves)
+    added = np.sqrt(max(r["rms"] ** 2 - exact.report["rms"] ** 2, 0.0))
+    assert 0 < r["quantisation_knot_rms"]
+    assert added <= r["quantisation_knot_rms"] + r["quantisation_tolerance"]
+    v1 = exact.topology + exact.coefficients
+    assert len(parts.topology) + len(parts.coefficients) < 0.4 * len(v1)
+
+
+def test_version_2_arrays_are_exact_integer_codes(both_versions):
+    parts = both_versions[2]
+    th, ta = container.unpack(parts.topology)
+    ch, ca = container.unpack(parts.coefficients)
+    topo = decode_topology(th, ta)
+    coef = decode_coefficients(ch, ca, topo.curves.n_curves)
+    steps = ca["knot_step"].astype(np.float64)
+    assert np.all(np.log2(steps) == np.round(np.log2(steps)))  # powers of two
+    codes = np.rint(coef.knots / steps[None, :, :, None])
+    np.testing.assert_array_equal(quantise.dequantise(codes, steps[None, :, :, None]), coef.knots)
+    # re-encoding the decoded clip gives the same bytes: the codes are a fixed point
+    again = encode_topology(topo.curves, topo.u, topo.faces, topo.rest, topo.param_mode,
+                            tolerance=parts.report["quantisation_tolerance"])
+    assert again == parts.topology
+
+
+@settings(max_examples=30, deadline=None)
+@given(scale=st.floats(1e-4, 1e4), tol_share=st.floats(1e-6, 1e-2), seed=st.integers(0, 1000))
+def test_rest_and_knot_rounding_stay_within_the_tolerance(scale, tol_share, seed):
+    """Whatever the scale: decoded rest within tol per coordinate; the knots' share of any vertex within
+    tol (the bound the knot steps are chosen for)."""
+    rng = np.random.default_rng(seed)
+    from pdeanim.curveset import CurveSet
+    from pdeanim.model.clipformat import CoefficientData
+    from pdeanim.model.families import space_basis
+
+    V, S = 12, 3
+    rest = (rng.normal(size=(V, 3)) * scale).astype(np.float32)
+    curves = CurveSet(rng.permutation(V).astype(np.int32), np.array([0, 4, 9, 12], np.int32))
+    u = np.zeros((V, 3), np.float32)
+    for c in range(3):
+        idx = curves.order[curves.offsets[c]:curves.offsets[c + 1]]
+        u[idx] = np.linspace(0, 1, len(idx))[:, None]
+    tol = tol_share * scale
+    topo_b = encode_topology(curves, u, np.zeros((0, 3), np.int32), rest, "chord", tolerance=tol)
+    topo = decode_topology(*container.unpack(topo_b))
+    assert np.abs(topo.rest.astype(np.float64) - rest).max() <= tol * (1 + 1e-6) + 1e-7 * scale
+    family = rng.integers(0, 4, size=(S, 3, 3)).astype(np.uint8)
+    family = (family // 2) * 2 + family[:1] % 2  # one space kind per item
+    data = CoefficientData(np.linspace(0, 1, S + 1), np.arange(5.0), family,
+                           rng.uniform(0, 2.5, size=(S, 3, 3)).astype(np.float32),
+                           rng.uniform(0, 20, size=(3, 3)).astype(np.float32),
+                           (rng.normal(size=(S + 1, 3, 3, 4)) * scale).astype(np.float32),
+                           "displacement", False, {})
+    coef = decode_coefficients(*container.unpack(encode_coefficients(topo_b, data, tolerance=tol)), 3)
+    cid, _ = topo.curves.curve_of_vertex(V)
+    err = np.abs(coef.knots.astype(np.float64) - data.knots)  # (S+1, C, 3, 4)
+    kinds = ("D0", "D1")
+    for w in range(3):
+        for v in range(V):
+            c = cid[v]
+            B = np.abs(space_basis(np.array([float(topo.u[v, w])]), float(data.D[c, w]),
+                                   kinds[family[0, c, w] % 2])[0])
+            pair = 1.0 / np.cos(np.where(family[:, c, w] >= 2, data.m[:, c, w], 0.0).max() / 2)
+            assert (err[:, c, w] @ B).max() * pair <= tol * (1 + 1e-5) + 1e-6 * scale
+
+
+def _edit(blob: bytes, header: dict | None = None, **arrays) -> bytes:
+    h, a = container.unpack(blob)
+    return container.pack({**h, **(header or {})}, {**a, **arrays})
+
+
+def test_broken_version_2_parts_raise_clear_errors(both_versions):
+    parts = both_versions[2]
+    topo, coef = parts.topology, parts.coefficients
+    h, a = container.unpack(topo)
+    swapped = quantise.undo_zigzag_deltas(a["order"]).copy()
+    swapped[0] = swapped[1]
+    cases = [
+        (_edit(topo, order=quantise.zigzag_deltas(swapped)), "curves are invalid"),
+        (_edit(topo, {"rest_step": -1.0}), "steps must be positive"),
+        (_edit(topo, {"u_step": None}), "u_step"),
+        (_edit(topo, curve_lengths=a["curve_lengths"][:-1]), "curves are invalid"),
+        (_edit(topo, faces=quantise.zigzag_deltas(np.full(3 * len(a["faces"]), 10**6)).reshape(-1, 3)),
+         "faces index outside"),
+    ]
+    for blob, match in cases:
+        with pytest.raises(ClipFormatError, match=match):
+            decode_topology(*container.unpack(blob))
+    ch, ca = container.unpack(coef)
+    C = len(ca["knot_step"])
+    with pytest.raises(ClipFormatError, match="knot steps must be positive"):
+        decode_coefficients(*container.unpack(_edit(coef, knot_step=np.zeros_like(ca["knot_step"]))), C)
+    with pytest.raises(ClipFormatError, match="no 'knot_step'"):
+        h2, a2 = container.unpack(coef)
+        decode_coefficients(h2, {k: v for k, v in a2.items() if k != "knot_step"}, C)
+
+
+def test_version_1_clip_is_still_read_and_evaluates_as_written(both_versions, morph_small):
+    one = both_versions[1]
+    clip = load_clip(one.topology, one.coefficients)
+    frames = clip.evaluate(clip.frame_t())
+    d = np.linalg.norm(frames.astype(np.float64) - morph_small.vertices, axis=-1)
+    assert np.sqrt(np.mean(d * d)) == pytest.approx(one.report["rms"], rel=1e-9)
