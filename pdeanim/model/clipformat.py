@@ -67,7 +67,7 @@ from . import quantise
 FORMAT_VERSION = 2
 FORMAT_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
-KNOT_CAP = 2.0
+KNOT_CAP = 4.0
 """With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
 DEFAULT_TOLERANCE = 1e-5
 """Quantisation tolerance of version 2 relative to the rest pose's bounding-box diagonal, when the caller
