@@ -10,7 +10,7 @@ Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + c
     offsets  (C+1,)    int32    curve c is order[offsets[c]:offsets[c+1]]
     u        (V, 1|3)  float32  curve parameter of every vertex (original order): one column when x, y, z
                                 share it (chord length), per coordinate otherwise (paper mode)
-    faces    (T, 3)    int32    original faces
+    faces    (T, 3)    int32    the mesh's triangles
     rest     (V, 3)    float32  first-frame positions (original order)
     header: format_version 1, n_vertices, n_curves, param_mode
 
