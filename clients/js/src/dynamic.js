@@ -86,8 +86,9 @@ function topologyV1(ta, V) {
 }
 
 /**
- * The same arrays from a version 2 topology part: curve lengths, zigzag differences of order and faces, u and
- * rest as integer codes in curve order (differences along the curves) times u_step / rest_step.
+ * The same arrays from a version 2 topology part: curve lengths, zigzag differences of order, faces in
+ * curve-rank space, u and rest as integer codes in curve order (differences along the curves) times u_step /
+ * rest_step.
  */
 function topologyV2(th, ta, V) {
   const lengths = need(ta, 'curve_lengths', [null], 'topology', U4).data;
@@ -106,9 +107,7 @@ function topologyV2(th, ta, V) {
   const order = new Int32Array(V);
   undoZigzag(zo, 1, (q) => (q >= 0 && q < V ? q : -1), order);
   if (order.includes(-1)) throw new ClipFormatError('topology order holds an index outside the vertices');
-  const zf = need(ta, 'faces', [null, 3], 'topology', U4).data;
-  const faces = new Int32Array(zf.length);
-  undoZigzag(zf, 1, (q) => (q >= 0 && q < V ? q : -1), faces);
+  const faces = facesV2(need(ta, 'faces', [null, 3], 'topology', U4).data, order);
   if (faces.includes(-1)) throw new ClipFormatError('topology faces index outside the vertices');
   const uStep = positiveStep(th.u_step, 'u_step');
   const restStep = positiveStep(th.rest_step, 'rest_step');
@@ -127,6 +126,25 @@ function topologyV2(th, ta, V) {
   checkFinite(uCurve, 'topology u');
   checkFinite(restCurve, 'topology rest');
   return { order, offsets, faces, uCurve, restCurve, uColumns: cols };
+}
+
+/**
+ * Triangles (T * 3 vertex indices, -1 for a rank outside the vertices) of version 2 face codes, which are in
+ * curve-rank space (rank i = vertex order[i]): per row, column 0 is the zigzag difference of its first rank
+ * from the previous row's, columns 1 and 2 the zigzag offsets of the other two ranks from the first.
+ */
+function facesV2(codes, order) {
+  const V = order.length;
+  const faces = new Int32Array(codes.length);
+  let first = 0;
+  for (let i = 0; i < codes.length; i += 3) {
+    first += (codes[i] >>> 1) ^ -(codes[i] & 1);
+    for (let j = 0; j < 3; j++) {
+      const r = j === 0 ? first : first + ((codes[i + j] >>> 1) ^ -(codes[i + j] & 1));
+      faces[i + j] = r >= 0 && r < V ? order[r] : -1;
+    }
+  }
+  return faces;
 }
 
 /** Rows stored in curve order (row i belongs to vertex order[i]) moved to the original vertex order. */

@@ -158,7 +158,16 @@ test('version 2 parts decode to what the helpers encode (zigzag differences, cur
   assert.equal(header.format_version, 2);
   const order = unzigzag(arrays.order.data);
   assert.deepEqual(Array.from(clip.order), order);
-  assert.deepEqual(Array.from(clip.faces), unzigzag(arrays.faces.data));
+  // faces: ranks in curve order (column 0 running, columns 1-2 offsets from column 0), vertex = order[rank]
+  const fc = arrays.faces.data;
+  const first = unzigzag(fc.filter((_, i) => i % 3 === 0));
+  const ranks = Array.from(fc, (z, i) => first[Math.floor(i / 3)] + (i % 3 ? unzigzag([z])[0] : 0));
+  assert.deepEqual(Array.from(clip.faces), ranks.map((r) => order[r]));
+  for (let i = 0; i < ranks.length; i += 3) {
+    // canonical: each triangle starts at its lowest rank, rows sorted
+    assert.ok(ranks[i] < ranks[i + 1] && ranks[i] < ranks[i + 2]);
+    if (i) assert.ok(ranks[i] >= ranks[i - 3]);
+  }
   const q = unzigzag(arrays.rest.data, 3);
   for (let i = 0; i < order.length; i++) {
     for (let w = 0; w < 3; w++) {
@@ -180,8 +189,15 @@ test('version 2 topologies with bad curves, order, faces or steps are rejected',
   bad(editedCodes(parts2.topology, 'order', (v) => (v[0] = v.length)), /order holds an index outside/);
   bad(editedCodes(parts2.topology, 'order', (v) => (v[2] = -1)), /order holds an index outside/);
   const V = decodeClip(parts2.topology, parts2.coefficients).nVertices;
-  bad(editedCodes(parts2.topology, 'faces', (v) => (v[4] = V)), /faces index outside the vertices/);
-  bad(editedCodes(parts2.topology, 'faces', (v) => (v[0] = -3)), /faces index outside the vertices/);
+  const faceCodes = (edit) =>
+    edited(parts2.topology, ({ arrays }) => {
+      const d = Uint32Array.from(arrays.faces.data);
+      edit(d);
+      arrays.faces = { ...arrays.faces, data: d };
+    });
+  bad(faceCodes((d) => (d[4] = 2 * V)), /faces index outside the vertices/); // row 1: offset V past its first
+  bad(faceCodes((d) => (d[0] = 5)), /faces index outside the vertices/); // first rank -3
+  bad(faceCodes((d) => (d[2] = 2 * V + 1)), /faces index outside the vertices/); // offset -(V + 1)
   const lengths = edited(parts2.topology, ({ arrays }) => {
     const d = Uint32Array.from(arrays.curve_lengths.data);
     d[0] += 1;

@@ -40,7 +40,10 @@ export declare function decodeContainer(data: BytesLike): Container;
 
 interface ClipBase {
   nVertices: number;
-  /** Triangles (T * 3) in the original vertex order. */
+  /**
+   * Triangles (T * 3) as original vertex indices; format version 2 stores them in a canonical order (each
+   * turned to start at its lowest curve rank, winding kept; rows sorted), so only the set matches the source.
+   */
   faces: Int32Array;
   /** Rest (first-frame) positions, V * 3. */
   rest: Float32Array;
