@@ -21,10 +21,14 @@ def test_vendored_files_match_their_sources():
 
 def test_vendored_libraries_carry_their_licenses_and_pinned_versions():
     versions = json.loads((STATIC / "vendor" / "versions.json").read_text())
-    assert set(versions) == {"three", "swagger-ui-dist", "redoc"}
+    assert set(versions) == {"three", "fzstd", "swagger-ui-dist", "redoc"}
     package = json.loads((ROOT / "tools" / "web-vendor" / "package.json").read_text())
     assert package["dependencies"] == versions  # exact pins, so the copies are reproducible
-    licenses = (("three", "MIT License"), ("redoc", "MIT License"), ("swagger-ui", "Apache License"))
+    # the viewer ships the fzstd the JS client is tested with (its one runtime dependency)
+    client_lock = json.loads((ROOT / "clients" / "js" / "package-lock.json").read_text())
+    assert client_lock["packages"]["node_modules/fzstd"]["version"] == versions["fzstd"]
+    licenses = (("three", "MIT License"), ("fzstd", "MIT License"), ("redoc", "MIT License"),
+                ("swagger-ui", "Apache License"))
     for folder, words in licenses:
         assert words in (STATIC / "vendor" / folder / "LICENSE").read_text()
 

@@ -184,8 +184,10 @@ def test_viewer_page_needs_no_key_and_sends_none(services):
     assert r.headers["referrer-policy"] == "no-referrer" and "importmap" in r.text
     assert "default-src 'self'" in r.headers["content-security-policy"]
     for path in ("/static/viewer/viewer.js", "/static/viewer/pdeanim/index.js",
-                 "/static/vendor/three/three.module.js"):
-        assert client(services, None).get(path).status_code == 200, path
+                 "/static/vendor/three/three.module.js", "/static/vendor/fzstd/fzstd.js"):
+        got = client(services, None).get(path)
+        assert got.status_code == 200, path
+        assert "javascript" in got.headers["content-type"], path  # module scripts need a JavaScript type
 
 
 def test_docs_render_with_no_other_host_reachable(services):

@@ -6,7 +6,9 @@ and looping mode, with the positions the Python evaluator gives at chosen times.
 vertex count, bounding-box diagonal and what it covers. Fitted cases go through the real fit and cyclic
 pipelines on tiny meshes; synthetic cases encode hand-chosen coefficients that reach every branch of the
 evaluator (all four families, D on both sides of D_SWITCH and near 0, trig constants at their cap, a
-zero-length segment, large and tiny rigid rotations).
+zero-length segment, large and tiny rigid rotations). Cases are written in the current format (dynamic-pde
+version 2: integer codes in zstd-compressed container version 2 arrays); the "-v1" cases keep version 1
+(raw float arrays in container version 1) covered.
 """
 
 from __future__ import annotations
@@ -23,12 +25,12 @@ from pdeanim import container
 from pdeanim.clip import ClipParts, load_clip, write_clip_file
 from pdeanim.curveset import CurveSet
 from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
-from pdeanim.model.clipformat import CoefficientData, encode_coefficients, encode_topology
+from pdeanim.model.clipformat import FORMAT_VERSION, CoefficientData, encode_coefficients, encode_topology
 from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 1
+FIXTURE_VERSION = 2
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -49,9 +51,10 @@ def _sphere_poses(n_frames: int = 13, loop: bool = False):
     return make_poses(np.stack(frames), np.asarray(mesh.faces), np.arange(n_frames) / 24.0)
 
 
-def _fit(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
+def _fit(motion: str, param_mode: str, loop: bool, version: int = FORMAT_VERSION) -> Callable[[], ClipParts]:
     return lambda: fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion,
-                                                                   param_mode=param_mode, loop=loop))
+                                                                   param_mode=param_mode, loop=loop,
+                                                                   format_version=version))
 
 
 def _single_frame_rigid() -> ClipParts:
@@ -69,7 +72,7 @@ def _cyclic(mode: str, **overrides) -> Callable[[], ClipParts]:
     return lambda: make_cyclic_clip(_capsule(), opts)
 
 
-def _synthetic_topology(param_mode: str) -> tuple[bytes, int, np.ndarray]:
+def _synthetic_topology(param_mode: str, version: int = FORMAT_VERSION) -> tuple[bytes, int, np.ndarray]:
     """A 5 x 6 grid of 30 vertices in 5 curves (vertex order shuffled against curve order)."""
     rng = np.random.default_rng(7)
     gx, gy = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-0.5, 0.5, 5))
@@ -92,13 +95,14 @@ def _synthetic_topology(param_mode: str) -> tuple[bytes, int, np.ndarray]:
         u[perm, 2] = 1.0 - u[perm, 0]
     pos = np.zeros((V, 3))
     pos[perm] = rest
-    topo = encode_topology(CurveSet(order, offsets), u, faces, pos, param_mode)
+    topo = encode_topology(CurveSet(order, offsets), u, faces, pos, param_mode, version)
     return topo, 5, pos
 
 
-def _synthetic_dynamic(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
+def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
+                       version: int = FORMAT_VERSION) -> Callable[[], ClipParts]:
     def make() -> ClipParts:
-        topo, C, _ = _synthetic_topology(param_mode)
+        topo, C, _ = _synthetic_topology(param_mode, version)
         rng = np.random.default_rng(11)
         S = 4
         seg_t = np.array([0.0, 0.3, 0.3, 0.55, 1.0])  # a zero-length segment at t = 0.3
@@ -129,7 +133,7 @@ def _synthetic_dynamic(motion: str, param_mode: str, loop: bool) -> Callable[[],
                     extra[k][-1] = extra[k][0]
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, 9), family, m, D, knots, motion, loop,
                                {"errors": {}}, extra)
-        return ClipParts(topo, encode_coefficients(topo, data))
+        return ClipParts(topo, encode_coefficients(topo, data, version))
     return make
 
 
@@ -144,6 +148,8 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
     "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),
     "synthetic-rigid-chord-loop": (_synthetic_dynamic("rigid", "chord", True), {}),
+    "fit-rigid-paper-loop-v1": (_fit("rigid", "paper", True, version=1), {}),
+    "synthetic-displacement-paper-v1": (_synthetic_dynamic("displacement", "paper", False, version=1), {}),
     "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
@@ -163,6 +169,11 @@ def case_times(parts: ClipParts) -> list[float]:
     looping = bool(ch.get("looping", False)) or ch.get("kind") == "cyclic-spine"
     ts.update([1.25, -0.3, 2.0, -1.0] if looping else [-0.5, 1.5])
     return sorted(ts)
+
+
+def _container_version(blob: bytes) -> int:
+    """The container version field of a part (1: raw arrays, 2: arrays may be zstd-encoded)."""
+    return int.from_bytes(blob[8:12], "little")
 
 
 def generate(out: Path, names: list[str] | None = None) -> dict:
@@ -185,7 +196,9 @@ def generate(out: Path, names: list[str] | None = None) -> dict:
         manifest["cases"].append({
             "name": name, "clip": f"{name}.clip", "expected": f"{name}.expected.bin", "kind": clip.kind,
             "motion": ch.get("motion"), "param_mode": th.get("param_mode"), "looping": bool(clip.looping),
-            "format_version": ch.get("format_version"), "n_vertices": int(clip.n_vertices), "t": ts,
+            "format_version": ch.get("format_version"),
+            "container_versions": [_container_version(p) for p in (parts.topology, parts.coefficients)],
+            "n_vertices": int(clip.n_vertices), "t": ts,
             "diagonal": float(np.linalg.norm(np.ptp(rest, axis=0)))})
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
     return manifest

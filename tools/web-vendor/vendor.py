@@ -1,5 +1,6 @@
-"""Copy the browser files the service ships into service/api/static: three.js, Swagger UI and ReDoc from
-this folder's node_modules (npm ci), and the JS client's browser modules from clients/js/src.
+"""Copy the browser files the service ships into service/api/static: three.js, fzstd (the zstd decoder the JS
+client imports), Swagger UI and ReDoc from this folder's node_modules (npm ci), and the JS client's browser
+modules from clients/js/src.
 
 ``python tools/web-vendor/vendor.py`` copies; ``--check`` only compares and exits 1 on drift (a test runs it).
 """
@@ -24,6 +25,8 @@ NPM_FILES: dict[str, list[tuple[str, str]]] = {
               ("build/three.core.js", "three/three.core.js"),
               ("examples/jsm/controls/OrbitControls.js", "three/addons/controls/OrbitControls.js"),
               ("LICENSE", "three/LICENSE")],
+    # ESM build, mapped to the bare specifier "fzstd" by the viewer's import map (.js: served as JavaScript)
+    "fzstd": [("esm/index.mjs", "fzstd/fzstd.js"), ("LICENSE", "fzstd/LICENSE")],
     "swagger-ui-dist": [("swagger-ui-bundle.js", "swagger-ui/swagger-ui-bundle.js"),
                         ("swagger-ui.css", "swagger-ui/swagger-ui.css"),
                         ("favicon-32x32.png", "swagger-ui/favicon-32x32.png"),

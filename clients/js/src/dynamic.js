@@ -3,16 +3,22 @@
 import { ClipFormatError } from './container.js';
 import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
 
-export const DYNAMIC_FORMAT_VERSION = 1;
+/** The newest dynamic-pde format version this build reads. */
+export const DYNAMIC_FORMAT_VERSION = 2;
+/** Every dynamic-pde format version this build reads (2: integer codes, docs/format.md §3.8). */
+export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2]);
 const MOTIONS = ['displacement', 'absolute', 'rigid'];
 
-function need(arrays, name, shape, part) {
+function need(arrays, name, shape, part, dtype = null) {
   const a = arrays[name];
   if (!a) throw new ClipFormatError(`${part} part has no '${name}' array`);
   if (a.shape.length !== shape.length || shape.some((w, i) => w !== null && a.shape[i] !== w)) {
     throw new ClipFormatError(
       `${part} array '${name}' has shape [${a.shape}], expected [${shape.map((w) => w ?? 'any')}]`,
     );
+  }
+  if (dtype !== null && !dtype.includes(a.dtype)) {
+    throw new ClipFormatError(`${part} array '${name}' has dtype ${a.dtype}, expected ${dtype.join(' or ')}`);
   }
   if (a.dtype[1] === 'f') {
     for (let i = 0; i < a.data.length; i++) {
@@ -24,10 +30,10 @@ function need(arrays, name, shape, part) {
 }
 
 function checkVersion(header, part) {
-  if (header.format_version !== DYNAMIC_FORMAT_VERSION) {
+  if (!DYNAMIC_FORMAT_VERSIONS.includes(header.format_version)) {
     throw new ClipFormatError(
       `unsupported dynamic-pde ${part} version ${JSON.stringify(header.format_version)}` +
-        ` (this build reads ${DYNAMIC_FORMAT_VERSION})`,
+        ` (this build reads ${DYNAMIC_FORMAT_VERSIONS.join(' and ')})`,
     );
   }
 }
@@ -37,7 +43,131 @@ function nondecreasing(a) {
   return true;
 }
 
-/** Validate and decode the topology and coefficients containers of a dynamic-PDE clip. */
+const U4 = ['<u4'];
+
+/**
+ * Undo zigzag-coded differences in place order: z (uint32, rows x cols row-major) becomes the running sums
+ * along the rows of d = (z >>> 1) ^ -(z & 1), per column, as float64 (exact integers), then value(q, col).
+ */
+function undoZigzag(z, cols, value, out) {
+  const rows = cols ? z.length / cols : 0;
+  const sum = new Float64Array(cols);
+  for (let r = 0, i = 0; r < rows; r++) {
+    for (let c = 0; c < cols; c++, i++) {
+      const q = z[i];
+      sum[c] += (q >>> 1) ^ -(q & 1);
+      out[i] = value(sum[c], c);
+    }
+  }
+  return out;
+}
+
+function positiveStep(x, what) {
+  if (typeof x !== 'number' || !(x > 0) || !Number.isFinite(x)) {
+    throw new ClipFormatError(`topology ${what} must be a positive finite number, got ${JSON.stringify(x)}`);
+  }
+  return x;
+}
+
+function checkFinite(a, what) {
+  for (let i = 0; i < a.length; i++) {
+    if (!Number.isFinite(a[i])) throw new ClipFormatError(`${what} decode to non-finite values`);
+  }
+}
+
+/** order, offsets, u (original vertex order), faces, rest of a version 1 topology part (stored as is). */
+function topologyV1(ta, V) {
+  const order = need(ta, 'order', [V], 'topology').data;
+  const offsets = need(ta, 'offsets', [null], 'topology').data;
+  const faces = need(ta, 'faces', [null, 3], 'topology').data;
+  const u = need(ta, 'u', [V, null], 'topology');
+  const rest = need(ta, 'rest', [V, 3], 'topology').data;
+  return { order, offsets, faces, u: u.data, uColumns: u.shape[1], rest };
+}
+
+/**
+ * The same arrays from a version 2 topology part: curve lengths, zigzag differences of order, faces in
+ * curve-rank space, u and rest as integer codes in curve order (differences along the curves) times u_step /
+ * rest_step.
+ */
+function topologyV2(th, ta, V) {
+  const lengths = need(ta, 'curve_lengths', [null], 'topology', U4).data;
+  const C = lengths.length;
+  const offsets = new Int32Array(C + 1);
+  let total = 0;
+  for (let c = 0; c < C; c++) {
+    total += lengths[c];
+    if (total > V) break;
+    offsets[c + 1] = total;
+  }
+  if (total !== V) {
+    throw new ClipFormatError('topology curves are invalid: curve_lengths must add up to n_vertices');
+  }
+  const zo = need(ta, 'order', [V], 'topology', U4).data;
+  const order = new Int32Array(V);
+  undoZigzag(zo, 1, (q) => (q >= 0 && q < V ? q : -1), order);
+  if (order.includes(-1)) throw new ClipFormatError('topology order holds an index outside the vertices');
+  const faces = facesV2(need(ta, 'faces', [null, 3], 'topology', U4).data, order);
+  if (faces.includes(-1)) throw new ClipFormatError('topology faces index outside the vertices');
+  const uStep = positiveStep(th.u_step, 'u_step');
+  const restStep = positiveStep(th.rest_step, 'rest_step');
+  const origin = th.rest_origin;
+  if (!Array.isArray(origin) || origin.length !== 3 || !origin.every((x) => typeof x === 'number' && Number.isFinite(x))) {
+    throw new ClipFormatError('topology rest_origin must be 3 finite numbers');
+  }
+  const zu = need(ta, 'u', [V, null], 'topology', U4);
+  const cols = zu.shape[1];
+  if (cols !== 1 && cols !== 3) {
+    throw new ClipFormatError(`topology array 'u' must have 1 or 3 columns, got ${cols}`);
+  }
+  const uCurve = undoZigzag(zu.data, cols, (q) => Math.fround(q * uStep), new Float32Array(V * cols));
+  const zr = need(ta, 'rest', [V, 3], 'topology', U4).data;
+  const restCurve = undoZigzag(zr, 3, (q, w) => Math.fround(origin[w] + q * restStep), new Float32Array(V * 3));
+  checkFinite(uCurve, 'topology u');
+  checkFinite(restCurve, 'topology rest');
+  return { order, offsets, faces, uCurve, restCurve, uColumns: cols };
+}
+
+/**
+ * Triangles (T * 3 vertex indices, -1 for a rank outside the vertices) of version 2 face codes, which are in
+ * curve-rank space (rank i = vertex order[i]): per row, column 0 is the zigzag difference of its first rank
+ * from the previous row's, columns 1 and 2 the zigzag offsets of the other two ranks from the first.
+ */
+function facesV2(codes, order) {
+  const V = order.length;
+  const faces = new Int32Array(codes.length);
+  let first = 0;
+  for (let i = 0; i < codes.length; i += 3) {
+    first += (codes[i] >>> 1) ^ -(codes[i] & 1);
+    for (let j = 0; j < 3; j++) {
+      const r = j === 0 ? first : first + ((codes[i + j] >>> 1) ^ -(codes[i + j] & 1));
+      faces[i + j] = r >= 0 && r < V ? order[r] : -1;
+    }
+  }
+  return faces;
+}
+
+/** Rows stored in curve order (row i belongs to vertex order[i]) moved to the original vertex order. */
+function toVertexOrder(rows, cols, order) {
+  const out = new Float32Array(rows.length);
+  for (let i = 0; i < order.length; i++) {
+    const v = order[i];
+    for (let c = 0; c < cols; c++) out[v * cols + c] = rows[i * cols + c];
+  }
+  return out;
+}
+
+/** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: codes along time times knot_step. */
+function knotsV2(ca, S, C) {
+  const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4', '<f8']).data;
+  if (steps.some((x) => !(x > 0))) throw new ClipFormatError('coefficients knot steps must be positive');
+  const z = need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients', U4).data;
+  const knots = undoZigzag(z, C * 12, (q, j) => Math.fround(q * steps[j >> 2]), new Float32Array(z.length));
+  checkFinite(knots, 'coefficients knots');
+  return knots;
+}
+
+/** Validate and decode the topology and coefficients containers of a dynamic-PDE clip (versions 1 and 2). */
 export function decodeDynamic(topo, coef) {
   const th = topo.header;
   const ch = coef.header;
@@ -47,8 +177,8 @@ export function decodeDynamic(topo, coef) {
   if (!Number.isInteger(V) || V < 0) throw new ClipFormatError('topology header has no valid n_vertices');
   const ta = topo.arrays;
   const ca = coef.arrays;
-  const order = need(ta, 'order', [V], 'topology').data;
-  const offsets = need(ta, 'offsets', [null], 'topology').data;
+  const t = th.format_version === 1 ? topologyV1(ta, V) : topologyV2(th, ta, V);
+  const { order, offsets, faces, uColumns } = t;
   const C = offsets.length - 1;
   if (C < 0 || offsets[0] !== 0 || offsets[C] !== V || !nondecreasing(offsets)) {
     throw new ClipFormatError('topology curves are invalid: offsets must run from 0 to n_vertices');
@@ -63,16 +193,14 @@ export function decodeDynamic(topo, coef) {
       curveOf[v] = c;
     }
   }
-  const faces = need(ta, 'faces', [null, 3], 'topology');
-  for (let i = 0; i < faces.data.length; i++) {
-    if (faces.data[i] < 0 || faces.data[i] >= V)
-      throw new ClipFormatError('topology faces index outside the vertices');
+  for (let i = 0; i < faces.length; i++) {
+    if (faces[i] < 0 || faces[i] >= V) throw new ClipFormatError('topology faces index outside the vertices');
   }
-  const u = need(ta, 'u', [V, null], 'topology');
-  if (u.shape[1] !== 1 && u.shape[1] !== 3) {
-    throw new ClipFormatError(`topology array 'u' must have 1 or 3 columns, got ${u.shape[1]}`);
+  if (uColumns !== 1 && uColumns !== 3) {
+    throw new ClipFormatError(`topology array 'u' must have 1 or 3 columns, got ${uColumns}`);
   }
-  const rest = need(ta, 'rest', [V, 3], 'topology').data;
+  const u = t.u ?? toVertexOrder(t.uCurve, uColumns, order);
+  const rest = t.rest ?? toVertexOrder(t.restCurve, 3, order);
 
   const S = Number(ch.n_segments);
   const segT = need(ca, 'segment_t', [S + 1], 'coefficients').data;
@@ -94,7 +222,8 @@ export function decodeDynamic(topo, coef) {
   if (!MOTIONS.includes(motion))
     throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
   const D = need(ca, 'D', [C, 3], 'coefficients').data;
-  const knots = need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data;
+  const knots =
+    ch.format_version === 1 ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data : knotsV2(ca, S, C);
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
   let rigid = null;
   if (motion === 'rigid') {
@@ -117,13 +246,13 @@ export function decodeDynamic(topo, coef) {
     nVertices: V,
     nCurves: C,
     nSegments: S,
-    faces: faces.data,
+    faces,
     rest,
     order,
     offsets,
     curveOf,
-    u: u.data,
-    uColumns: u.shape[1],
+    u,
+    uColumns,
     paramMode: String(th.param_mode ?? 'chord'),
     segmentT: segT,
     frameTimes,

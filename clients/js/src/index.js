@@ -1,6 +1,12 @@
 // pdeanim: decode and evaluate pdeanim clips (dynamic-PDE and cyclic-spine) in browsers and node.
 
-export { ClipFormatError, decodeContainer, CONTAINER_VERSION } from './container.js';
+export {
+  ClipFormatError,
+  decodeContainer,
+  CONTAINER_VERSION,
+  CONTAINER_VERSIONS,
+  ENCODINGS,
+} from './container.js';
 export {
   decodeClip,
   decodeClipFile,
@@ -14,7 +20,13 @@ export {
   createEvaluator,
   sha256Hex,
 } from './clip.js';
-export { DynamicEvaluator, DYNAMIC_FORMAT_VERSION, vertexBasis, vertexBase } from './dynamic.js';
+export {
+  DynamicEvaluator,
+  DYNAMIC_FORMAT_VERSION,
+  DYNAMIC_FORMAT_VERSIONS,
+  vertexBasis,
+  vertexBase,
+} from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
 export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
 export { computeNormals, boundingBoxDiagonal } from './geometry.js';

@@ -8,7 +8,7 @@ import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { splitClipFile } from '../src/index.js';
-import { FIXTURES, expected, manifest, readBytes } from './helpers.mjs';
+import { FIXTURES, encodeContainer, expected, manifest, readBytes, storedArrays } from './helpers.mjs';
 
 const BIN = join(dirname(fileURLToPath(import.meta.url)), '..', 'bin', 'pdeanim-eval.mjs');
 const tmp = mkdtempSync(join(tmpdir(), 'pdeanim-eval-'));
@@ -26,7 +26,8 @@ function readF32LE(path) {
 }
 
 for (const c of [
-  man.cases.find((x) => x.motion === 'rigid' && x.looping),
+  man.cases.find((x) => x.motion === 'rigid' && x.looping && x.format_version === 2),
+  man.cases.find((x) => x.motion === 'rigid' && x.looping && x.format_version === 1),
   man.cases.find((x) => x.kind === 'cyclic-spine'),
 ]) {
   test(`pdeanim-eval writes the expected frames of ${c.name}`, () => {
@@ -64,6 +65,12 @@ test('pdeanim-eval reads the two parts from separate files', () => {
 test('pdeanim-eval exits 2 with a reason on bad input', () => {
   const clip = join(FIXTURES, man.cases[0].clip);
   const out = join(tmp, 'bad.bin');
+  // a version 2 coefficients part whose knots' zstd frame is cut short
+  const v2 = splitClipFile(readBytes(join(FIXTURES, man.cases.find((x) => x.format_version === 2).clip)));
+  const arrays = storedArrays(v2.coefficients);
+  arrays.knots = { ...arrays.knots, stored: arrays.knots.stored.subarray(0, arrays.knots.nbytes - 4) };
+  writeFileSync(join(tmp, 'topo2.bin'), v2.topology);
+  writeFileSync(join(tmp, 'cut.bin'), encodeContainer({ part: 'coefficients' }, arrays));
   const cases = [
     [[join(tmp, 'missing.clip'), '--t', '0', '--out', out], /cannot read clip file/],
     [[join(FIXTURES, 'manifest.json'), '--t', '0', '--out', out], /bad magic/],
@@ -75,6 +82,8 @@ test('pdeanim-eval exits 2 with a reason on bad input', () => {
     [[clip, '--topology', clip, '--t', '0', '--out', out], /not both/],
     [['--topology', clip, '--coefficients', clip, '--t', '0', '--out', out], /expected a topology part/],
     [[clip, '--bogus'], /bogus/],
+    [['--topology', join(tmp, 'topo2.bin'), '--coefficients', join(tmp, 'cut.bin'), '--t', '0', '--out', out],
+      /array "knots": bad zstd data/],
     [[clip, '--t', '0', '--out', join(tmp, 'no', 'such', 'dir', 'x.bin')], /cannot write/],
   ];
   for (const [args, reason] of cases) {

@@ -17,6 +17,9 @@ test('the fixture set covers every kind, motion, parameterisation and looping mo
   assert.deepEqual([...new Set(dyn.map((c) => c.motion))].sort(), ['absolute', 'displacement', 'rigid']);
   assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
   assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
+  // dynamic-pde format versions 1 (raw floats, container 1) and 2 (integer codes, zstd in container 2)
+  assert.deepEqual([...new Set(dyn.map((c) => c.format_version))].sort(), [1, 2]);
+  for (const c of dyn) assert.deepEqual(c.container_versions, [c.format_version, c.format_version], c.name);
 });
 
 for (const c of man.cases) {
@@ -25,6 +28,7 @@ for (const c of man.cases) {
     assert.equal(clip.kind, c.kind);
     assert.equal(clip.nVertices, c.n_vertices);
     assert.equal(clip.looping, c.looping);
+    if (c.kind === 'dynamic-pde') assert.equal(clip.header.format_version, c.format_version);
     const ev = createEvaluator(clip);
     const want = expected(c);
     const N = c.n_vertices * 3;

@@ -4,8 +4,14 @@ export type BytesLike = ArrayBuffer | ArrayBufferView;
 export type TypedArray =
   Float32Array | Float64Array | Int32Array | Uint32Array | Int16Array | Uint16Array | Uint8Array | Int8Array;
 
-export declare const CONTAINER_VERSION: 1;
-export declare const DYNAMIC_FORMAT_VERSION: 1;
+/** The newest container version read; CONTAINER_VERSIONS lists all (2 adds zstd-encoded arrays). */
+export declare const CONTAINER_VERSION: 2;
+export declare const CONTAINER_VERSIONS: readonly [1, 2];
+/** Array encodings of container version 2 (decoded with the fzstd package). */
+export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
+/** The newest dynamic-pde format version read; DYNAMIC_FORMAT_VERSIONS lists all (2: integer codes). */
+export declare const DYNAMIC_FORMAT_VERSION: 2;
+export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2];
 
 /** Thrown for anything that is not a valid pdeanim container, part, clip or CLIP file. */
 export declare class ClipFormatError extends Error {
@@ -15,7 +21,10 @@ export declare class ClipFormatError extends Error {
 export interface ContainerArray {
   dtype: '<f4' | '<f8' | '<i4' | '<u4' | '<i2' | '<u2' | '<u1' | '<i1';
   shape: number[];
+  /** The decoded values (C order); a view on the input for raw arrays, a fresh array for encoded ones. */
   data: TypedArray;
+  /** How the array was stored in a version 2 container (absent: raw little-endian bytes). */
+  encoding?: 'zstd' | 'shuffle-zstd';
 }
 
 export interface Container {
@@ -23,12 +32,18 @@ export interface Container {
   arrays: Record<string, ContainerArray>;
 }
 
-/** Decode container bytes (magic, version, JSON header, little-endian arrays). */
+/**
+ * Decode container bytes (magic, version 1 or 2, JSON header, little-endian arrays; version 2 arrays may be
+ * zstd frames, decompressed here). Throws ClipFormatError.
+ */
 export declare function decodeContainer(data: BytesLike): Container;
 
 interface ClipBase {
   nVertices: number;
-  /** Triangles (T * 3) in the original vertex order. */
+  /**
+   * Triangles (T * 3) as original vertex indices; format version 2 stores them in a canonical order (each
+   * turned to start at its lowest curve rank, winding kept; rows sorted), so only the set matches the source.
+   */
   faces: Int32Array;
   /** Rest (first-frame) positions, V * 3. */
   rest: Float32Array;

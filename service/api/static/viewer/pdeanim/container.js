@@ -1,7 +1,15 @@
-// Decode the pdeanim binary container: magic, version, JSON header, little-endian arrays (docs/format.md §1).
+// Decode the pdeanim binary container: magic, version, JSON header, little-endian arrays (docs/format.md §1);
+// version 2 arrays may be stored as one zstd frame ("zstd") or byte planes in one zstd frame ("shuffle-zstd").
+
+import { Decompress } from 'fzstd';
 
 export const MAGIC = 'PDEANIM\0';
-export const CONTAINER_VERSION = 1;
+/** The newest container version this build reads. */
+export const CONTAINER_VERSION = 2;
+/** Every container version this build reads (1: raw arrays; 2: arrays may carry an "encoding"). */
+export const CONTAINER_VERSIONS = Object.freeze([1, 2]);
+/** The array encodings of container version 2. */
+export const ENCODINGS = Object.freeze(['zstd', 'shuffle-zstd']);
 
 /** Error thrown for anything that is not a valid pdeanim clip, part or container. */
 export class ClipFormatError extends Error {
@@ -52,6 +60,83 @@ function typedArray(bytes, lo, dtype, count) {
 }
 
 /**
+ * Walk the zstd frame (RFC 8878) in stored: one frame with no dictionary whose header declares its content
+ * size, blocks inside the bytes, nothing after it. Returns the declared size (checked before anything is
+ * decompressed: a corrupt header cannot make the decoder allocate a huge buffer).
+ */
+function zstdFrame(stored, label) {
+  const bad = (why) => new ClipFormatError(`${label}: bad zstd data (${why})`);
+  const n = stored.length;
+  if (n < 6 || stored[0] !== 0x28 || stored[1] !== 0xb5 || stored[2] !== 0x2f || stored[3] !== 0xfd) {
+    throw bad('not a zstd frame');
+  }
+  const fhd = stored[4];
+  if (fhd & 8) throw bad('reserved frame header bit set');
+  const single = (fhd >> 5) & 1;
+  const dictBytes = [0, 1, 2, 4][fhd & 3];
+  const sizeBytes = [single, 2, 4, 8][fhd >> 6];
+  let pos = 5 + (single ? 0 : 1);
+  if (pos + dictBytes + sizeBytes > n) throw bad('truncated frame header');
+  let dict = 0;
+  for (let i = 0; i < dictBytes; i++) dict += stored[pos + i] * 2 ** (8 * i);
+  if (dict !== 0) throw bad('the frame needs a dictionary');
+  pos += dictBytes;
+  if (sizeBytes === 0) throw new ClipFormatError(`${label}: the zstd frame does not declare its content size`);
+  let declared = 0;
+  for (let i = 0; i < sizeBytes; i++) declared += stored[pos + i] * 2 ** (8 * i);
+  if (sizeBytes === 2) declared += 256;
+  pos += sizeBytes;
+  for (let last = 0; !last; ) {
+    if (pos + 3 > n) throw bad('truncated frame');
+    const h = stored[pos] | (stored[pos + 1] << 8) | (stored[pos + 2] << 16);
+    last = h & 1;
+    const type = (h >> 1) & 3;
+    if (type === 3) throw bad('reserved block type');
+    pos += 3 + (type === 1 ? 1 : h >>> 3);
+    if (pos > n) throw bad('truncated frame');
+  }
+  pos += (fhd >> 2) & 1 ? 4 : 0; // content checksum
+  if (pos > n) throw bad('truncated frame');
+  if (pos !== n) throw bad(`${n - pos} bytes after the frame`);
+  return declared;
+}
+
+/** The element bytes of an encoded array: decompressed (exactly size bytes) and, for shuffle-zstd, unshuffled. */
+function decodeArrayBytes(stored, encoding, itemsize, count, label) {
+  const size = count * itemsize;
+  const declared = zstdFrame(stored, label);
+  if (declared !== size) {
+    throw new ClipFormatError(`${label}: zstd frame holds ${declared} bytes, expected ${size}`);
+  }
+  let raw = new Uint8Array(size);
+  let got = 0;
+  const inflate = new Decompress((chunk) => {
+    if (got + chunk.length > size) {
+      throw new ClipFormatError(`${label} decompresses to more than the expected ${size} bytes`);
+    }
+    raw.set(chunk, got);
+    got += chunk.length;
+  });
+  try {
+    inflate.push(stored, true);
+  } catch (err) {
+    if (err instanceof ClipFormatError) throw err;
+    throw new ClipFormatError(`${label}: bad zstd data (${err.message})`);
+  }
+  if (got !== size) throw new ClipFormatError(`${label} decompresses to ${got} bytes, expected ${size}`);
+  if (encoding === 'shuffle-zstd' && itemsize > 1) {
+    // byte j of element i sits at j * count + i
+    const planes = raw;
+    raw = new Uint8Array(size);
+    for (let j = 0; j < itemsize; j++) {
+      const plane = planes.subarray(j * count, (j + 1) * count);
+      for (let i = 0, o = j; i < count; i++, o += itemsize) raw[o] = plane[i];
+    }
+  }
+  return raw;
+}
+
+/**
  * Decode container bytes into {header, arrays}; each array is {dtype, shape, data} with data a typed
  * array (a view on the input where alignment allows). Throws ClipFormatError.
  */
@@ -66,9 +151,9 @@ export function decodeContainer(data) {
   }
   const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
   const version = view.getUint32(8, true);
-  if (version !== CONTAINER_VERSION) {
+  if (!CONTAINER_VERSIONS.includes(version)) {
     throw new ClipFormatError(
-      `unsupported container version ${version} (this build reads ${CONTAINER_VERSION})`,
+      `unsupported container version ${version} (this build reads ${CONTAINER_VERSIONS.join(' and ')})`,
     );
   }
   const hlen = view.getUint32(12, true);
@@ -95,19 +180,37 @@ export function decodeContainer(data) {
       shape.some((s) => !Number.isInteger(s) || s < 0) ||
       !Number.isInteger(spec.offset) ||
       !Number.isInteger(spec.nbytes) ||
-      spec.offset < 0
+      spec.offset < 0 ||
+      spec.nbytes < 0
     ) {
       throw new ClipFormatError(`bad array entry ${JSON.stringify(name)} in container header`);
     }
+    const label = `array ${JSON.stringify(name)}`;
+    const encoded = Object.hasOwn(spec, 'encoding');
+    const encoding = spec.encoding;
+    if (encoded && version === 1) {
+      throw new ClipFormatError(`${label} has an encoding, which container version 1 does not allow`);
+    }
+    if (encoded && !ENCODINGS.includes(encoding)) {
+      throw new ClipFormatError(
+        `${label} has an unknown encoding ${JSON.stringify(encoding)} (known: ${ENCODINGS.join(', ')})`,
+      );
+    }
     const count = shape.reduce((a, b) => a * b, 1);
-    if (spec.nbytes !== count * DTYPES[dtype][1]) {
-      throw new ClipFormatError(`array ${JSON.stringify(name)} has an inconsistent dtype or size`);
+    const itemsize = DTYPES[dtype][1];
+    if (!Number.isSafeInteger(count * itemsize) || (!encoded && spec.nbytes !== count * itemsize)) {
+      throw new ClipFormatError(`${label} has an inconsistent dtype or size`);
     }
     const lo = start + spec.offset;
     if (lo + spec.nbytes > bytes.byteLength) {
-      throw new ClipFormatError(`array ${JSON.stringify(name)} lies outside the container (truncated file?)`);
+      throw new ClipFormatError(`${label} lies outside the container (truncated file?)`);
     }
-    arrays[name] = { dtype, shape, data: typedArray(bytes, lo, dtype, count) };
+    if (!encoded) {
+      arrays[name] = { dtype, shape, data: typedArray(bytes, lo, dtype, count) };
+    } else {
+      const raw = decodeArrayBytes(bytes.subarray(lo, lo + spec.nbytes), encoding, itemsize, count, label);
+      arrays[name] = { dtype, shape, data: typedArray(raw, 0, dtype, count), encoding };
+    }
   }
   return { header, arrays };
 }
