@@ -105,9 +105,12 @@ def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str
         declared = zstandard.frame_content_size(stored)
         if declared != size:  # writers record the size; checked before anything is allocated
             raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
-        raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=size)
+        reader = zstandard.ZstdDecompressor().decompressobj()
+        raw = reader.decompress(stored)
     except zstandard.ZstdError as exc:
         raise ClipFormatError(f"array {name!r}: bad zstd data ({exc})") from exc
+    if not reader.eof or reader.unused_data:
+        raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame")
     if len(raw) != size:
         raise ClipFormatError(f"array {name!r} decompresses to {len(raw)} bytes, expected {size}")
     if encoding == "shuffle-zstd" and dtype.itemsize > 1:
@@ -141,6 +144,8 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
             raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
         count = int(np.prod(shape, dtype=np.int64))
         encoding = spec.get("encoding")
+        if "encoding" in spec and not isinstance(encoding, str):
+            raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
         if encoding is not None and version == VERSION:
             raise ClipFormatError(f"array {name!r} has an encoding, which container version 1 does not allow")
         if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (

@@ -180,10 +180,13 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
 
 
-def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str) -> np.ndarray:
+def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str,
+          dtype: str | None = None) -> np.ndarray:
     if name not in arrays:
         raise ClipFormatError(f"{part} part has no {name!r} array")
     a = arrays[name]
+    if dtype is not None and a.dtype.str.replace("|", "<") != dtype:
+        raise ClipFormatError(f"{part} array {name!r} has dtype {a.dtype.str}, expected {dtype}")
     if a.ndim != len(shape) or any(
         want is not None and have != want for have, want in zip(a.shape, shape, strict=True)
     ):
@@ -207,21 +210,21 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
         u = _need(arrays, "u", (V, None), "topology")
         rest = _need(arrays, "rest", (V, 3), "topology")
     else:
-        lengths = _need(arrays, "curve_lengths", (None,), "topology").astype(np.int64)
+        lengths = _need(arrays, "curve_lengths", (None,), "topology", "<u4").astype(np.int64)
         offsets = np.concatenate([[0], np.cumsum(lengths)])
-        order_raw = quantise.undo_zigzag_deltas(_need(arrays, "order", (V,), "topology"))
+        order_raw = quantise.undo_zigzag_deltas(_need(arrays, "order", (V,), "topology", "<u4"))
         if order_raw.size and (order_raw.min() < 0 or order_raw.max() >= V):
             raise ClipFormatError("topology order holds an index outside the vertices")
         order = order_raw.astype(np.int32)
         curves = _valid_curves(order, offsets.astype(np.int64), V)
-        faces = quantise.decode_faces(_need(arrays, "faces", (None, 3), "topology"), order)
-        zu = _need(arrays, "u", (V, None), "topology")
+        faces = quantise.decode_faces(_need(arrays, "faces", (None, 3), "topology", "<u4"), order)
+        zu = _need(arrays, "u", (V, None), "topology", "<u4")
         u_step, rest_step, origin = _steps(header)
         u = np.empty(zu.shape, np.float32)
         u[order] = quantise.dequantise(quantise.undo_zigzag_deltas(zu, axis=0), u_step)
         rest = np.empty((V, 3), np.float32)
-        rest[order] = quantise.dequantise(
-            quantise.undo_zigzag_deltas(_need(arrays, "rest", (V, 3), "topology"), axis=0), rest_step, origin)
+        zr = _need(arrays, "rest", (V, 3), "topology", "<u4")
+        rest[order] = quantise.dequantise(quantise.undo_zigzag_deltas(zr, axis=0), rest_step, origin)
         if not (np.all(np.isfinite(u)) and np.all(np.isfinite(rest))):
             raise ClipFormatError("topology u or rest decode to non-finite values")
     if faces.size and (faces.min() < 0 or faces.max() >= V):
@@ -245,8 +248,11 @@ def _valid_curves(order: np.ndarray, offsets: np.ndarray, V: int) -> CurveSet:
 def _steps(header: dict[str, Any]) -> tuple[float, float, np.ndarray]:
     """(u_step, rest_step, rest_origin (3,)) of a version 2 topology header."""
     try:
-        u_step, rest_step = float(header["u_step"]), float(header["rest_step"])
-        origin = np.asarray(header["rest_origin"], np.float64).reshape(3)
+        values = [header["u_step"], header["rest_step"], *header["rest_origin"]]
+        numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+        if len(values) != 5 or not numbers:
+            raise TypeError("steps and origin must be 5 JSON numbers")
+        u_step, rest_step, origin = float(values[0]), float(values[1]), np.asarray(values[2:], np.float64)
     except (KeyError, TypeError, ValueError) as exc:
         raise ClipFormatError(f"topology header lacks valid u_step, rest_step or rest_origin: {exc}") from exc
     if not (u_step > 0 and rest_step > 0 and np.all(np.isfinite([u_step, rest_step, *origin]))):
@@ -290,10 +296,11 @@ def decode_coefficients(
 def _knots_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:
     """Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: codes (zigzag differences along time)
     times knot_step per curve and coordinate."""
-    steps = _need(arrays, "knot_step", (C, 3), "coefficients")
+    steps = _need(arrays, "knot_step", (C, 3), "coefficients", "<f4")
     if np.any(steps <= 0):
         raise ClipFormatError("coefficients knot steps must be positive")
-    codes = quantise.undo_zigzag_deltas(_need(arrays, "knots", (S + 1, C, 3, 4), "coefficients"), axis=0)
+    zk = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients", "<u4")
+    codes = quantise.undo_zigzag_deltas(zk, axis=0)
     knots = quantise.dequantise(codes, steps[None, :, :, None])
     if not np.all(np.isfinite(knots)):
         raise ClipFormatError("coefficients knots decode to non-finite values")

@@ -123,3 +123,16 @@ def test_bad_encoded_arrays_raise_clear_errors():
 def test_version_1_writer_output_is_unchanged_without_encodings():
     blob = container.pack({"part": "x"}, {"a": np.arange(4, dtype=np.int32)})
     assert int.from_bytes(blob[8:12], "little") == 1
+
+
+def test_trailing_bytes_after_the_zstd_frame_and_null_encodings_are_refused():
+    import zstandard
+
+    raw = np.arange(64, dtype="<u4").tobytes()
+    frame = zstandard.ZstdCompressor(write_content_size=True).compress(raw)
+    assert container._decode(frame, "zstd", np.dtype("<u4"), 64, "a").tobytes() == raw
+    with pytest.raises(ClipFormatError, match="exactly one complete frame"):
+        container._decode(frame + frame, "zstd", np.dtype("<u4"), 64, "a")
+    blob = container.pack({"part": "x"}, {"a": np.arange(64, dtype=np.uint32)}, {"a": "zstd"})
+    with pytest.raises(ClipFormatError, match="unknown encoding"):
+        container.unpack(_table_edit(blob, "a", encoding=None))
