@@ -126,11 +126,12 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
     origin, step = quantise.rest_origin_step(rest, tol)
     order = np.asarray(curves.order, np.int64)
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
-    header.update({"rest_origin": [float(x) for x in origin], "rest_step": step, "u_step": quantise.U_STEP})
+    step_u = quantise.u_step(u)
+    header.update({"rest_origin": [float(x) for x in origin], "rest_step": step, "u_step": step_u})
     arrays = {
         "curve_lengths": np.diff(np.asarray(curves.offsets, np.int64)).astype(np.uint32),
         "order": quantise.zigzag_deltas(order),
-        "u": quantise.zigzag_deltas(np.rint(u[order].astype(np.float64) / quantise.U_STEP), axis=0),
+        "u": quantise.zigzag_deltas(np.rint(u[order].astype(np.float64) / step_u), axis=0),
         "faces": quantise.encode_faces(faces, order),
         "rest": quantise.zigzag_deltas(np.rint((rest[order] - origin) / step), axis=0),
     }

@@ -163,6 +163,8 @@ def _prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> _Problem:
     idx, mask = curves.padded()
     u = curve_parameters(X[:, idx].astype(np.float64) if options.param_mode == "paper" else rest[idx], mask,
                          options.param_mode)
+    grid = u_grid(mask.shape[1])
+    u = np.rint(u / grid) * grid  # on the grid version 2 stores exactly: rounding u costs no error
     t = (times - times[0]) / (times[-1] - times[0])
     rigid = None
     if options.motion == "rigid":
@@ -307,6 +309,10 @@ def _checked_curves(curves: CurveSet, n_vertices: int) -> CurveSet:
         raise PosesInputError(f"curves do not match the poses: {exc}") from exc
 
 
+def u_grid(points_per_curve: int) -> float:
+    """Grid of the curve parameters, applied before the fit so that format version 2 stores them exactly and
+    cheaply: 2^-12, or finer for long curves (at least 256 steps between evenly spaced points)."""
+    return 2.0 ** -max(12, int(np.ceil(np.log2(max(points_per_curve, 1)))) + 8)
 QUANT_SHARE = 0.1
 """Format version 2 rounds the rest pose (and, for max targets, the knots) by at most this share of the
 fit's tightest target per coordinate."""

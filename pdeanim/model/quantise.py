@@ -12,8 +12,9 @@ import numpy as np
 from ..curveset import CurveSet
 from .families import SPACE_KINDS, space_basis
 
-U_STEP = 2.0**-20
-"""Step of the curve parameter u in [0, 1]: 1e-6, far below what moves a vertex visibly."""
+U_STEPS = 2.0 ** -np.arange(12, 21)
+"""Candidate steps of the curve parameter u in [0, 1]: the coarsest that holds every u exactly (the fit puts
+u on the 2^-12 grid), else 2^-20 (1e-6: far below what moves a vertex visibly)."""
 MAX_CODE = 2**29
 """Largest magnitude of a knot code (so that differences fit int32); the step is coarsened beyond it."""
 
@@ -72,6 +73,15 @@ def decode_faces(codes: np.ndarray, order: np.ndarray) -> np.ndarray:
     order = np.asarray(order, np.int64)
     ok = (r >= 0) & (r < len(order))
     return np.where(ok, order[np.where(ok, r, 0)], -1)
+
+
+def u_step(u: np.ndarray) -> float:
+    """The coarsest of U_STEPS that represents every u exactly (else the finest)."""
+    u = np.asarray(u, np.float64)
+    for step in U_STEPS:
+        if np.array_equal(np.rint(u / step) * step, u):
+            return float(step)
+    return float(U_STEPS[-1])
 
 
 def power_of_two_step(tolerance: float) -> float:
