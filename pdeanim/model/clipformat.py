@@ -160,22 +160,25 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     arrays: dict[str, np.ndarray] = {
         "segment_t": np.asarray(data.segment_t, np.float64),
         "frame_times": np.asarray(data.frame_times, np.float64),
-        "family": np.asarray(data.family, np.uint8),
     }
+    family = np.asarray(data.family, np.uint8)
     if version == 1:
-        arrays.update({"m": np.asarray(data.m, np.float32), "D": np.asarray(data.D, np.float32),
-                       "knots": np.asarray(data.knots, np.float32), **data.extra})
+        arrays.update({"family": family, "m": np.asarray(data.m, np.float32),
+                       "D": np.asarray(data.D, np.float32), "knots": np.asarray(data.knots, np.float32),
+                       **data.extra})
         return container.pack(header, arrays)
     topo = decode_topology(*container.unpack(topology))
     tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(topo.rest)
     m = np.asarray(data.m, np.float32)
+    arrays["space_kind"] = (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8)
     if knot_rms is not None:
         steps = quantise.knot_steps_rms(topo.curves, topo.u, data.family, m, data.D, data.knots, knot_rms,
                                         KNOT_CAP * knot_rms)
     else:
         steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
     arrays.update({
-        "m": m, "D": np.asarray(data.D, np.float32), "knot_step": steps,
+        "m": np.where((family >= 2) & (m > 0), -m, m), "D": np.asarray(data.D, np.float32),
+        "knot_step": steps,
         "knots": quantise.zigzag_deltas(quantise.quantise_knots(data.knots, steps), axis=0),
         **{k: np.asarray(v) for k, v in data.extra.items()}})
     return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
@@ -272,12 +275,15 @@ def decode_coefficients(
     seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients")
     if S < 1 or np.any(np.diff(seg_t) < 0):
         raise ClipFormatError("segment boundaries must be non-decreasing with at least one segment")
-    family = _need(arrays, "family", (S, C, 3), "coefficients")
+    if version == 1:
+        family = _need(arrays, "family", (S, C, 3), "coefficients")
+        m = _need(arrays, "m", (S, C, 3), "coefficients")
+    else:
+        family, m = _family_v2(arrays, S, C)
     if family.size and family.max() > 3:
         raise ClipFormatError("family codes must be 0..3")
     if S > 1 and np.any(family % 2 != family[:1] % 2):
         raise ClipFormatError("the space kind of a curve+coordinate must be the same in every segment")
-    m = _need(arrays, "m", (S, C, 3), "coefficients")
     if version == 1:
         knots = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients")
     else:
@@ -292,6 +298,17 @@ def decode_coefficients(
                            _need(arrays, "D", (C, 3), "coefficients"),
                            knots, motion,
                            bool(header.get("looping", False)), header, extra)
+
+
+def _family_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> tuple[np.ndarray, np.ndarray]:
+    """(family (S, C, 3) uint8, m >= 0 float32) of a version 2 coefficients part: a space kind per curve and
+    coordinate, and signed m (< 0: trig time with |m|, > 0: exp, 0: linear)."""
+    kind = _need(arrays, "space_kind", (C, 3), "coefficients", "<u1")
+    if kind.size and kind.max() > 1:
+        raise ClipFormatError("space kinds must be 0 or 1")
+    signed = _need(arrays, "m", (S, C, 3), "coefficients", "<f4")
+    family = (kind[None] + 2 * (signed < 0)).astype(np.uint8)
+    return family, np.abs(signed)
 
 
 def _knots_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:

@@ -94,8 +94,11 @@ def test_corrupt_parts_raise_clip_format_error(fixed_fit):
     th, ta = container.unpack(fixed_fit.topology)
     ch, ca = container.unpack(fixed_fit.coefficients)
     bad = dict(ca)
-    bad["family"] = np.full_like(ca["family"], 7)
-    with pytest.raises(ClipFormatError):
+    bad["space_kind"] = np.full_like(ca["space_kind"], 7)
+    with pytest.raises(ClipFormatError, match="space kinds"):
+        load_clip(fixed_fit.topology, container.pack({k: v for k, v in ch.items()}, bad))
+    bad = {**ca, "m": np.full_like(ca["m"], -4.0)}  # trig time at a constant above pi
+    with pytest.raises(ClipFormatError, match="time constants"):
         load_clip(fixed_fit.topology, container.pack({k: v for k, v in ch.items()}, bad))
     with pytest.raises(ClipFormatError):
         load_clip(fixed_fit.topology, container.pack({**ch, "n_segments": 99}, dict(ca)))
@@ -175,6 +178,7 @@ def test_every_frame_is_used_and_progress_reported(morph_small, short_curves):
 
 def test_paper_coefficients_of_a_stored_segment(fixed_fit):
     """The stored knots convert to the paper's c1..c8 and evaluate to the same curve."""
+    from pdeanim.model.clipformat import decode_coefficients, decode_topology
     from pdeanim.model.families import (
         evaluate_family,
         family_kinds,
@@ -183,14 +187,14 @@ def test_paper_coefficients_of_a_stored_segment(fixed_fit):
         time_basis_paper,
     )
 
-    ch, ca = container.unpack(fixed_fit.coefficients)
-    th, ta = container.unpack(fixed_fit.topology)
+    topo = decode_topology(*container.unpack(fixed_fit.topology))
+    ca = decode_coefficients(*container.unpack(fixed_fit.coefficients), topo.curves.n_curves)
     s, c, w = 2, 5, 1
-    code, m, D = int(ca["family"][s, c, w]), float(ca["m"][s, c, w]), float(ca["D"][c, w])
+    code, m, D = int(ca.family[s, c, w]), float(ca.m[s, c, w]), float(ca.D[c, w])
     if m == 0 or D == 0:
         m, D = max(m, 0.3), max(D, 0.7)  # the paper's basis is degenerate at 0; check the map elsewhere
-    coef = np.stack([ca["knots"][s, c, w], ca["knots"][s + 1, c, w]]).astype(np.float64)
-    t0, t1 = float(ca["segment_t"][s]), float(ca["segment_t"][s + 1])
+    coef = np.stack([ca.knots[s, c, w], ca.knots[s + 1, c, w]]).astype(np.float64)
+    t0, t1 = float(ca.segment_t[s]), float(ca.segment_t[s + 1])
     u = np.linspace(0, 1, 9)
     tau = np.linspace(0, 1, 5)
     ours = evaluate_family(u, tau, code, m, D, coef)

@@ -259,4 +259,30 @@ test('version 2 coefficients with bad knot steps or codes are rejected', () => {
     arrays.knots = { ...arrays.knots, dtype: '<f4', data: Float32Array.from(arrays.knots.data) };
   });
   bad(floatKnots, /array 'knots' has dtype <f4, expected <u4/);
+  const badKind = edited(parts2.coefficients, ({ arrays }) => {
+    const d = Uint8Array.from(arrays.space_kind.data);
+    d[0] = 2;
+    arrays.space_kind = { ...arrays.space_kind, data: d };
+  });
+  bad(badKind, /space kinds must be 0 or 1/);
+  const trigOverPi = edited(parts2.coefficients, ({ arrays }) => {
+    const d = Float32Array.from(arrays.m.data);
+    d[0] = -4; // trig time with a constant above pi
+    arrays.m = { ...arrays.m, data: d };
+  });
+  bad(trigOverPi, /time constants must be >= 0 \(and < pi for trig families\)/);
+});
+
+test('version 2 signed m gives the family: < 0 trig, > 0 exp, 0 linear', () => {
+  const c = edited(parts2.coefficients, ({ arrays }) => {
+    const d = Float32Array.from(arrays.m.data);
+    d[0] = -0.5;
+    d[1] = 0.5;
+    d[2] = 0;
+    arrays.m = { ...arrays.m, data: d };
+  });
+  const clip = decodeClip(parts2.topology, c);
+  assert.ok(clip.family[0] >= 2 && clip.family[1] < 2 && clip.family[2] < 2); // trig, exp, (linear) exp
+  assert.equal(clip.family[0] % 2, clip.family[1] % 2); // one space kind per item
+  assert.deepEqual(Array.from(clip.m.slice(0, 3)), [0.5, 0.5, 0]);
 });

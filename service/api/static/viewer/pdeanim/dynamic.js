@@ -157,6 +157,24 @@ function toVertexOrder(rows, cols, order) {
   return out;
 }
 
+/**
+ * Family codes and m >= 0 (S, C, 3) of a version 2 coefficients part: space kind per item, m signed
+ * (< 0: trig with |m|, > 0: exp, 0: linear).
+ */
+function familyV2(ca, S, C) {
+  const kind = need(ca, 'space_kind', [C, 3], 'coefficients', ['<u1']).data;
+  const signed = need(ca, 'm', [S, C, 3], 'coefficients', ['<f4']).data;
+  const family = new Uint8Array(signed.length);
+  const m = new Float32Array(signed.length);
+  for (let i = 0; i < signed.length; i++) {
+    const k = kind[i % (C * 3)];
+    if (k > 1) throw new ClipFormatError('space kinds must be 0 or 1');
+    family[i] = k + (signed[i] < 0 ? 2 : 0);
+    m[i] = Math.abs(signed[i]);
+  }
+  return { family, m };
+}
+
 /** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: codes along time times knot_step. */
 function knotsV2(ca, S, C) {
   const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4', '<f8']).data;
@@ -207,8 +225,10 @@ export function decodeDynamic(topo, coef) {
   if (!(S >= 1) || !nondecreasing(segT)) {
     throw new ClipFormatError('segment boundaries must be non-decreasing with at least one segment');
   }
-  const family = need(ca, 'family', [S, C, 3], 'coefficients').data;
-  const m = need(ca, 'm', [S, C, 3], 'coefficients').data;
+  const { family, m } =
+    ch.format_version === 1
+      ? { family: need(ca, 'family', [S, C, 3], 'coefficients').data, m: need(ca, 'm', [S, C, 3], 'coefficients').data }
+      : familyV2(ca, S, C);
   for (let i = 0; i < family.length; i++) {
     if (family[i] > 3) throw new ClipFormatError('family codes must be 0..3');
     if (family[i] % 2 !== family[i % (C * 3)] % 2) {
