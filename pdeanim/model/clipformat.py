@@ -176,11 +176,11 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
                                         KNOT_CAP * knot_rms)
     else:
         steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
+    codes = quantise.quantise_knots(data.knots, steps)
+    tracks, header["knot_differences"] = quantise.encode_knot_tracks(codes)
     arrays.update({
         "m": np.where((family >= 2) & (m > 0), -m, m), "D": np.asarray(data.D, np.float32),
-        "knot_step": steps,
-        "knots": quantise.zigzag_deltas(quantise.quantise_knots(data.knots, steps), axis=0),
-        **{k: np.asarray(v) for k, v in data.extra.items()}})
+        "knot_step": steps, "knots": tracks, **{k: np.asarray(v) for k, v in data.extra.items()}})
     return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
 
 
@@ -287,7 +287,7 @@ def decode_coefficients(
     if version == 1:
         knots = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients")
     else:
-        knots = _knots_v2(arrays, S, C)
+        knots = _knots_v2(header, arrays, S, C)
     if np.any(m < 0) or np.any((family >= 2) & (m >= np.pi)):
         raise ClipFormatError("time constants must be >= 0 (and < pi for trig families)")
     motion = str(header.get("motion"))
@@ -311,15 +311,17 @@ def _family_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> tuple[np.ndarra
     return family, np.abs(signed)
 
 
-def _knots_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:
-    """Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: codes (zigzag differences along time)
-    times knot_step per curve and coordinate."""
+def _knots_v2(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:
+    """Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: one track (C, 3, 4, S+1) of zigzag
+    differences of order ``knot_differences`` along time per item and coefficient, times knot_step."""
     steps = _need(arrays, "knot_step", (C, 3), "coefficients", "<f4")
     if np.any(steps <= 0):
         raise ClipFormatError("coefficients knot steps must be positive")
-    zk = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients", "<u4")
-    codes = quantise.undo_zigzag_deltas(zk, axis=0)
-    knots = quantise.dequantise(codes, steps[None, :, :, None])
+    order = header.get("knot_differences")
+    if order not in (1, 2) or isinstance(order, bool):
+        raise ClipFormatError(f"coefficients knot_differences must be 1 or 2, got {order!r}")
+    tracks = _need(arrays, "knots", (C, 3, 4, S + 1), "coefficients", "<u4")
+    knots = quantise.dequantise(quantise.decode_knot_tracks(tracks, order), steps[None, :, :, None])
     if not np.all(np.isfinite(knots)):
         raise ClipFormatError("coefficients knots decode to non-finite values")
     return knots

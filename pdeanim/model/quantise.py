@@ -15,7 +15,7 @@ from .families import SPACE_KINDS, space_basis
 U_STEPS = 2.0 ** -np.arange(12, 21)
 """Candidate steps of the curve parameter u in [0, 1]: the coarsest that holds every u exactly (the fit puts
 u on the 2^-12 grid), else 2^-20 (1e-6: far below what moves a vertex visibly)."""
-MAX_CODE = 2**29
+MAX_CODE = 2**28
 """Largest magnitude of a knot code (so that differences fit int32); the step is coarsened beyond it."""
 
 
@@ -170,6 +170,27 @@ def _power_of_two(steps: np.ndarray, knots: np.ndarray) -> np.ndarray:
     steps = np.maximum(steps, biggest / MAX_CODE)
     steps = np.clip(steps, np.finfo(np.float32).tiny, np.finfo(np.float32).max)
     return (2.0 ** np.floor(np.log2(steps))).astype(np.float32)
+
+
+def encode_knot_tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
+    """(tracks (C, 3, 4, S+1) uint32, order): the integer knot codes (S+1, C, 3, 4) as one time track per
+    curve, coordinate and coefficient, coded as zigzag differences of order 1 or 2 along time, whichever
+    compresses smaller (order 2 wins where the knots move smoothly from segment to segment)."""
+    import zstandard
+
+    tracks = np.ascontiguousarray(np.moveaxis(np.asarray(codes, np.int64), 0, -1))
+    first = zigzag_deltas(tracks, axis=-1)
+    second = zigzag_deltas(np.diff(tracks, axis=-1, prepend=0), axis=-1)
+    size = zstandard.ZstdCompressor(level=3).compress
+    return (first, 1) if len(size(first.tobytes())) <= len(size(second.tobytes())) else (second, 2)
+
+
+def decode_knot_tracks(tracks: np.ndarray, order: int) -> np.ndarray:
+    """Inverse of :func:`encode_knot_tracks`: codes (S+1, C, 3, 4) int64."""
+    q = undo_zigzag_deltas(tracks, axis=-1)
+    if order == 2:
+        q = np.cumsum(q, axis=-1)
+    return np.moveaxis(q, -1, 0)
 
 
 def quantise_knots(knots: np.ndarray, steps: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 2
+FIXTURE_VERSION = 3
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -55,6 +55,11 @@ def _fit(motion: str, param_mode: str, loop: bool, version: int = FORMAT_VERSION
     return lambda: fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion,
                                                                    param_mode=param_mode, loop=loop,
                                                                    format_version=version))
+
+
+def _smooth_many_segments() -> ClipParts:
+    """12 segments over 25 frames of smooth motion: the writer codes the knots as second differences."""
+    return fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12))
 
 
 def _single_frame_rigid() -> ClipParts:
@@ -144,6 +149,7 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "fit-displacement-chord-loop": (_fit("displacement", "chord", True), {}),
     "fit-rigid-paper-loop": (_fit("rigid", "paper", True), {}),
     "fit-rigid-single-frame": (_single_frame_rigid, {}),
+    "fit-displacement-chord-smooth": (_smooth_many_segments, {}),
     "synthetic-displacement-paper": (_synthetic_dynamic("displacement", "paper", False), {}),
     "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
     "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),

@@ -29,6 +29,23 @@ def test_zigzag_differences_round_trip(values):
     np.testing.assert_array_equal(quantise.undo_zigzag_deltas(z), q)
 
 
+@given(st.integers(1, 6), st.integers(1, 4), st.booleans(), st.integers(0, 1000))
+def test_knot_tracks_round_trip_with_either_difference_order(S1, C, smooth, seed):
+    rng = np.random.default_rng(seed)
+    if smooth:  # knots on a line in time: second differences are zero
+        codes = (np.arange(S1)[:, None, None, None] * rng.integers(-50, 50, (1, C, 3, 4))
+                 + rng.integers(-(2**20), 2**20, (1, C, 3, 4)))
+    else:
+        codes = rng.integers(-(2**27), 2**27, (S1, C, 3, 4))
+    tracks, order = quantise.encode_knot_tracks(codes)
+    assert tracks.shape == (C, 3, 4, S1) and tracks.dtype == np.uint32 and order in (1, 2)
+    np.testing.assert_array_equal(quantise.decode_knot_tracks(tracks, order), codes)
+    other = 3 - order
+    again = quantise.zigzag_deltas(np.moveaxis(codes, 0, -1) if other == 1 else
+                                   np.diff(np.moveaxis(codes, 0, -1), axis=-1, prepend=0), axis=-1)
+    np.testing.assert_array_equal(quantise.decode_knot_tracks(again, other), codes)
+
+
 @pytest.fixture(scope="module")
 def both_versions(morph_small, short_curves):
     """The same fit stored as version 1 and version 2."""

@@ -175,12 +175,30 @@ function familyV2(ca, S, C) {
   return { family, m };
 }
 
-/** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: codes along time times knot_step. */
-function knotsV2(ca, S, C) {
-  const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4', '<f8']).data;
+/** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: tracks (C, 3, 4, S+1) of differences. */
+function knotsV2(ch, ca, S, C) {
+  const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data;
   if (steps.some((x) => !(x > 0))) throw new ClipFormatError('coefficients knot steps must be positive');
-  const z = need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients', U4).data;
-  const knots = undoZigzag(z, C * 12, (q, j) => Math.fround(q * steps[j >> 2]), new Float32Array(z.length));
+  const order = ch.knot_differences;
+  if (order !== 1 && order !== 2) {
+    throw new ClipFormatError(`coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`);
+  }
+  const z = need(ca, 'knots', [C, 3, 4, S + 1], 'coefficients', U4).data;
+  const knots = new Float32Array(z.length);
+  const n = S + 1;
+  for (let track = 0; track < C * 12; track++) {
+    // one time track per curve, coordinate and coefficient: running sums (one or two) of zigzag differences
+    const step = steps[track >> 2];
+    let first = 0;
+    let q = 0;
+    for (let s = 0; s < n; s++) {
+      const code = z[track * n + s];
+      const d = (code >>> 1) ^ -(code & 1);
+      if (order === 1) q += d;
+      else q += first += d;
+      knots[(s * C * 12) + track] = Math.fround(q * step);
+    }
+  }
   checkFinite(knots, 'coefficients knots');
   return knots;
 }
@@ -243,7 +261,7 @@ export function decodeDynamic(topo, coef) {
     throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
   const D = need(ca, 'D', [C, 3], 'coefficients').data;
   const knots =
-    ch.format_version === 1 ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data : knotsV2(ca, S, C);
+    ch.format_version === 1 ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data : knotsV2(ch, ca, S, C);
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
   let rigid = null;
   if (motion === 'rigid') {
