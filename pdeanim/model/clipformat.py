@@ -67,8 +67,6 @@ from . import quantise
 FORMAT_VERSION = 2
 FORMAT_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
-KNOT_CAP = 4.0
-"""With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
 DEFAULT_TOLERANCE = 1e-5
 """Quantisation tolerance of version 2 relative to the rest pose's bounding-box diagonal, when the caller
 gives none (a fit with error targets passes a share of its target)."""
@@ -148,10 +146,12 @@ def _check_version(version: int) -> None:
 
 
 def encode_coefficients(topology: bytes, data: CoefficientData, version: int = FORMAT_VERSION,
-                        tolerance: float | None = None, knot_rms: float | None = None) -> bytes:
+                        tolerance: float | None = None, knot_rms: float | None = None,
+                        knot_cap: float | None = None) -> bytes:
     """Coefficients part bytes for the given topology part; version 2 rounds the knots to steps that add at
-    most ``knot_rms`` to the RMS vertex distance when given, else whose error moves no vertex coordinate by
-    more than ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal)."""
+    most ``knot_rms`` to the RMS vertex distance and move no coordinate by more than ``knot_cap`` (default
+    4 x knot_rms) when given, else whose error moves no vertex coordinate by more than ``tolerance``
+    (default: DEFAULT_TOLERANCE of the diagonal)."""
     _check_version(version)
     S, C = data.family.shape[:2]
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": version,
@@ -173,7 +173,7 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     arrays["space_kind"] = (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8)
     if knot_rms is not None:
         steps = quantise.knot_steps_rms(topo.curves, topo.u, data.family, m, data.D, data.knots, knot_rms,
-                                        KNOT_CAP * knot_rms)
+                                        4.0 * knot_rms if knot_cap is None else knot_cap)
     else:
         steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
     codes = quantise.quantise_knots(data.knots, steps)

@@ -39,7 +39,7 @@ def test_heldout_frames_no_worse_than_linear_interpolation(kind, target):
     # measured up to 2.5% here): 6% slack, far below the 2x excess the uncapped fit showed
     assert res["pde"]["rel_rms"] <= res["linear"]["rel_rms"] * 1.06, res
     # measured <= 1.38x (1.06x before rounding): the stored clip's rounding may move a vertex by up to 4x its
-    # RMS budget (pdeanim.model.clipformat.KNOT_CAP); still well apart from the uncapped fit's 2x pull
+    # RMS budget (pdeanim.model.fitclip.KNOT_CAP); still well apart from the uncapped fit's 2x pull
     assert res["pde"]["rel_max"] <= res["linear"]["rel_max"] * 1.6, res
 
 

@@ -62,4 +62,7 @@ def test_rigid_mode_on_morph_sphere(morph_small):
     parts = fit_poses(morph_small, FitOptions(target_rel_rms=5e-3, motion="rigid"), curves=curves)
     r = parts.report
     assert r["target_met"] and r["rel_rms"] <= 5e-3
-    assert r["float32_vs_float64_max"] < 1e-3 * r["diagonal"]
+    # the stored clip differs from the float64 model by its rounding: knots by at most knot_cap and the rest
+    # pose by at most the tolerance per coordinate (the rigid frames turn them, keeping lengths)
+    bound = np.sqrt(3) * ((r["quantisation_knot_cap"] or 0.0) + r["quantisation_tolerance"])
+    assert r["float32_vs_float64_max"] <= bound * 1.01 + 1e-6 * r["diagonal"]
