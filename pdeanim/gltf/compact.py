@@ -23,7 +23,7 @@ from ..errors import ParameterError
 from .glb import ARRAY_BUFFER, pack_glb
 from .layout import Layout, Part, add_accessor, add_view, minmax_of
 from .meshopt import compress_glb
-from .normals import vertex_normals_frames
+from .normals import unit_normals_frames
 
 QUANT = "KHR_mesh_quantization"
 TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one meshopt stream) at most
@@ -67,15 +67,16 @@ def _local(part: Part, world: np.ndarray) -> np.ndarray:
 
 
 def _normals(layout: Layout, frames: np.ndarray) -> np.ndarray:
-    """Unit normals (K, V, 3) in world space, area-weighted over the welded surface."""
+    """Unit normals (K, V, 3) in world space, area-weighted over the welded surface (compiled, one pass per
+    frame)."""
     if not len(layout.faces):
         return np.zeros(frames.shape, np.float32)
     if layout.weld is None:
-        return vertex_normals_frames(frames, layout.faces)
+        return unit_normals_frames(frames, layout.faces)
     weld = layout.weld
     first = np.zeros(int(weld.max()) + 1, np.int64)
     first[weld[::-1]] = np.arange(len(weld))[::-1]
-    welded = vertex_normals_frames(frames[:, first], weld[layout.faces])
+    welded = unit_normals_frames(frames[:, first], weld[layout.faces])
     return welded[:, weld]
 
 
@@ -296,7 +297,9 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
             pos = grid.q[:, a:b] if grid is not None else local[:, a:b]
             nrm = None
             if slot.normals and normals is not None:
-                nrm = _local_normals(part, normals[:, slot.start: slot.stop].astype(np.float64))
+                nrm = normals[:, slot.start: slot.stop].astype(np.float64)  # unit already
+                if not np.array_equal(part.to_local, np.eye(4)):  # an identity node keeps them as they are
+                    nrm = _local_normals(part, nrm)
                 if opts.quantize:
                     nrm = _quantised_normals(nrm)
             p_acc, n_acc, targets = _add_targets(doc, views, pos, nrm, opts)
