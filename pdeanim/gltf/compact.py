@@ -175,13 +175,20 @@ class LayoutFrames:
         return pack_glb({**self._doc, "accessors": accessors}, bytes(out))
 
 
+def _bounds(values: np.ndarray, axis: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Exact (min, max) of (..., 3) values per component, over ``axis`` (default: all but the last). One
+    strided reduction per component: numpy reduces over rows of three values about 20x slower."""
+    lo = [values[..., c].min(axis=axis) for c in range(values.shape[-1])]
+    hi = [values[..., c].max(axis=axis) for c in range(values.shape[-1])]
+    return np.stack(lo, axis=-1), np.stack(hi, axis=-1)
+
+
 class _Grid:
     """Integer grid of one part: origin + step * q with q in [0, 2**bits - 1] over every frame."""
 
     def __init__(self, local: np.ndarray, bits: int) -> None:
-        flat = local.reshape(-1, 3)
-        self.origin = flat.min(axis=0)
-        extent = float((flat.max(axis=0) - self.origin).max())
+        self.origin, top = _bounds(local)
+        extent = float((top - self.origin).max())
         self.step = extent / (2**bits - 1) if extent > 0 else 1.0
         # float32 arithmetic: its rounding is ~1e-3 of a step at 14 bits; int16 holds 0..2**15 - 1
         self.q = np.rint((local - self.origin.astype(np.float32)) / np.float32(self.step)).astype(np.int16)
@@ -226,7 +233,7 @@ def _add_targets(doc: dict, views: list[bytes], positions: np.ndarray, normals: 
         pos = add_accessor(doc, views, positions[0].astype(np.float32), "VEC3", ARRAY_BUFFER, minmax=True)
         delta = (positions - positions[:1]).astype(np.float32)
         tdata, tstride, tdtype = delta, 12, np.float32
-    lo, hi = delta.min(axis=1), delta.max(axis=1)  # exact bounds of every target, (K, 3)
+    lo, hi = _bounds(delta, axis=1)  # exact bounds of every target, (K, 3)
     targets: list[dict] = []
     for i, (view, off) in enumerate(_target_views(doc, views, tdata, tstride)):
         acc = add_accessor(doc, views, np.zeros((n, 3), tdtype), "VEC3", view=view, byte_offset=off)
