@@ -305,15 +305,18 @@ def animation_ms(api: httpx.Client, clip_id: str, n: int = 7) -> dict:
 
 
 def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
-    """Median wall and CPU times here of what a route computes (``which``): a frame GLB at a new t
-    (evaluate + normals + GLB) or the 30 fps animation GLB (evaluate all frames + normals + GLB)."""
+    """Median wall and CPU times here of what a route computes (``which``), with one BLAS thread as in the
+    API process: a frame GLB at a new t (evaluate + normals + GLB) or the 30 fps animation GLB (evaluate all
+    frames + normals + quantised, meshopt-compressed GLB, the route's default)."""
     from pdeanim.clip import load_clip
     from pdeanim.gltf.clipexport import clip_animation_glb
     from pdeanim.gltf.write import FrameGlb
+    from service.api.threads import single_threaded_blas
     from service.settings import Settings
     from service.store.context import Store
     from service.store.models import ClipRecord
 
+    single_threaded_blas()  # as in the API process
     store = Store.open(Settings(data_dir=data_dir))
     try:
         with store.sessions() as session:

@@ -139,8 +139,10 @@ def add_accessor(doc: dict, views: list[bytes], data: np.ndarray, acc_type: str,
 
 
 def minmax_of(flat: np.ndarray) -> dict[str, list]:
-    """Exact ``min``/``max`` of (N, k) data as JSON lists (float32 values or integers)."""
-    lo, hi = flat.min(axis=0), flat.max(axis=0)
+    """Exact ``min``/``max`` of (N, k) data as JSON lists (float32 values or integers); one strided reduction
+    per component (numpy reduces over rows of a few values about 20x slower)."""
+    lo = [flat[:, c].min() for c in range(flat.shape[1])]
+    hi = [flat[:, c].max() for c in range(flat.shape[1])]
     if np.issubdtype(flat.dtype, np.floating):
         return {"min": [float(np.float32(x)) for x in lo], "max": [float(np.float32(x)) for x in hi]}
     return {"min": [int(x) for x in lo], "max": [int(x) for x in hi]}

@@ -18,6 +18,7 @@ from .memory import keep_freed_memory
 from .middleware import install_http_middleware
 from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
+from .threads import single_threaded_blas
 
 API_VERSION = "1.0.0"
 DESCRIPTION = (
@@ -34,6 +35,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         keep_freed_memory()
+        single_threaded_blas()  # frames are computed concurrently: BLAS threads would fight them
         own = app.state.store is None
         clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:

@@ -19,6 +19,11 @@ class LazyLayout:
     def __init__(self, load: Callable[[], Any]) -> None:
         self._load, self._value, self._lock = load, None, threading.Lock()
 
+    @property
+    def loaded(self) -> bool:
+        """Whether the layout is built (get() costs no I/O)."""
+        return self._value is not None
+
     def get(self) -> Any:
         """The layout (built once)."""
         with self._lock:
@@ -33,6 +38,11 @@ class FrameWriter:
     def __init__(self, fast: Callable[[np.ndarray], bytes], layout: LazyLayout) -> None:
         self.fast, self.layout = fast, layout
         self._look: Callable[[np.ndarray], bytes] | None = None
+
+    @property
+    def ready(self) -> bool:
+        """Whether a frame can be written without I/O or set-up (the layout and its writer are built)."""
+        return self.layout.loaded and (self.layout.get().source == "plain" or self._look is not None)
 
     def __call__(self, positions: np.ndarray) -> bytes:
         """GLB bytes of one frame."""
