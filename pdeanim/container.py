@@ -52,10 +52,10 @@ def _canonical(arr: np.ndarray) -> np.ndarray:
 
 
 def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
-         encodings: dict[str, str] | None = None) -> bytes:
+         encodings: dict[str, str] | None = None, level: int = ZSTD_LEVEL) -> bytes:
     """Encode ``header`` (JSON-able, without "arrays") and named arrays into container bytes; arrays named
-    in ``encodings`` are stored compressed (``"zstd"``, ``"shuffle-zstd"`` or SMALLEST of the two), which
-    makes it version 2."""
+    in ``encodings`` are stored compressed (``"zstd"``, ``"shuffle-zstd"`` or SMALLEST of the two) at zstd
+    ``level``, which makes it version 2."""
     encodings = encodings or {}
     table: dict[str, dict] = {}
     chunks: list[bytes] = []
@@ -66,7 +66,8 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
         raw = a.tobytes()
         if name in encodings:
             choices = ENCODINGS if encodings[name] == SMALLEST else (encodings[name],)
-            raw, entry["encoding"] = min(((_encode(a, e), e) for e in choices), key=lambda c: len(c[0]))
+            trials = [(_encode(a, e, level), e) for e in choices]
+            raw, entry["encoding"] = min(trials, key=lambda c: len(c[0]))
         entry["nbytes"] = len(raw)
         table[name] = entry
         chunks.append(raw + b"\0" * (_pad8(len(raw)) - len(raw)))
@@ -81,7 +82,7 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
     return _PREFIX.pack(MAGIC, version, len(meta)) + meta + b"".join(chunks)
 
 
-def _encode(a: np.ndarray, encoding: str) -> bytes:
+def _encode(a: np.ndarray, encoding: str, level: int = ZSTD_LEVEL) -> bytes:
     """The stored bytes of array ``a`` under ``encoding`` (deterministic: same array, same bytes)."""
     import zstandard
 
@@ -90,7 +91,7 @@ def _encode(a: np.ndarray, encoding: str) -> bytes:
     raw = a.tobytes()
     if encoding == "shuffle-zstd":
         raw = np.frombuffer(raw, np.uint8).reshape(-1, a.dtype.itemsize).T.tobytes()
-    writer = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True, write_checksum=True)
+    writer = zstandard.ZstdCompressor(level=level, write_content_size=True, write_checksum=True)
     return writer.compress(raw)
 
 

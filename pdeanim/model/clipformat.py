@@ -100,9 +100,11 @@ class CoefficientData:
 
 
 def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray,
-                    param_mode: str, version: int = FORMAT_VERSION, tolerance: float | None = None) -> bytes:
+                    param_mode: str, version: int = FORMAT_VERSION, tolerance: float | None = None,
+                    level: int = container.ZSTD_LEVEL) -> bytes:
     """Topology part bytes from curves, u (V, 3), faces (T, 3), rest (V, 3); version 2 rounds rest to a
-    step whose error is at most ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal)."""
+    step whose error is at most ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal) and compresses
+    at zstd ``level`` (a trial encoding may use a fast one)."""
     _check_version(version)
     header = {"part": "topology", "model": "dynamic-pde", "format_version": version,
               "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
@@ -133,7 +135,7 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
         "faces": quantise.encode_faces(faces, order),
         "rest": quantise.zigzag_deltas(np.rint((rest[order] - origin) / step), axis=0),
     }
-    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
 
 
 def _diagonal(rest: np.ndarray) -> float:
@@ -147,7 +149,7 @@ def _check_version(version: int) -> None:
 
 def encode_coefficients(topology: bytes, data: CoefficientData, version: int = FORMAT_VERSION,
                         tolerance: float | None = None, knot_rms: float | None = None,
-                        knot_cap: float | None = None) -> bytes:
+                        knot_cap: float | None = None, level: int = container.ZSTD_LEVEL) -> bytes:
     """Coefficients part bytes for the given topology part; version 2 rounds the knots to steps that add at
     most ``knot_rms`` to the RMS vertex distance and move no coordinate by more than ``knot_cap`` (default
     4 x knot_rms) when given, else whose error moves no vertex coordinate by more than ``tolerance``
@@ -181,7 +183,7 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     arrays.update({
         "m": np.where((family >= 2) & (m > 0), -m, m), "D": np.asarray(data.D, np.float32),
         "knot_step": steps, "knots": tracks, **{k: np.asarray(v) for k, v in data.extra.items()}})
-    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays})
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
 
 
 def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str,

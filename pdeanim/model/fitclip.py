@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..clip import ClipParts
+from ..container import ZSTD_LEVEL
 from ..curveset import CurveSet
 from ..errors import ParameterError, PosesInputError
 from ..poses import Poses
@@ -368,6 +369,9 @@ QUANT_BUDGET = 0.8
 KNOT_CAP = 4.0
 """With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
 QUANT_RETRIES = 6
+TRIAL_LEVEL = 3
+"""zstd level of the trial encodings (rounding search, choice between fits): fast, and about proportional to
+the final level 19 sizes; only the clip that is kept is compressed at ZSTD_LEVEL."""
 QUANT_FILL = 0.9
 """The knots' rounding grows (x 1.4) while the stored clip's RMS stays below this share of an RMS target."""
 
@@ -425,7 +429,7 @@ def _quantised(p: _Problem, sf: _SpaceFit, space: SpaceStage, fitted: TimeStage,
     quant = _first_quantisation(sf.targets, exact[:F], options)
     best = None
     for _ in range(QUANT_RETRIES + 1):
-        parts = _encode(p, sf.curves, space, fitted, options, poses, None, quant)
+        parts = _encode(p, sf.curves, space, fitted, options, poses, None, quant, TRIAL_LEVEL)
         clip = _decode(parts)
         approx = clip.evaluate(clip.frame_t())
         found = (quant, approx, len(parts.topology) + len(parts.coefficients))
@@ -463,17 +467,19 @@ def _coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions,
 
 
 def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, options: FitOptions,
-            poses: Poses, errors: dict | None = None, quant: _Quantisation | None = None) -> ClipParts:
+            poses: Poses, errors: dict | None = None, quant: _Quantisation | None = None,
+            level: int = ZSTD_LEVEL) -> ClipParts:
     V = p.X.shape[1]
     u_v = np.zeros((V, 3))
     u_v[p.idx[p.mask]] = np.moveaxis(p.u, 1, 2)[p.mask]
     version, quant = options.format_version, quant or _Quantisation()
-    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode, version, quant.tolerance)
+    topology = encode_topology(curves, u_v, poses.faces, p.rest, options.param_mode, version, quant.tolerance,
+                               level)
     coef = _coefficient_data(space, fitted, options, np.asarray(poses.times, np.float64), errors or {})
     if p.rigid is not None:
         coef.extra = p.rigid.arrays()
     return ClipParts(topology, encode_coefficients(topology, coef, version, quant.tolerance, quant.knot_rms,
-                                                   quant.knot_cap))
+                                                   quant.knot_cap, level))
 
 
 def _decode(parts: ClipParts):
