@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from pdeanim.model import timefit
+from pdeanim.model import fitclip, timefit
 from pdeanim.model.fitclip import FitOptions
 from pdeanim.model.heldout import heldout_comparison
 from pdeanim.model.simplecurves import simple_curves
@@ -47,6 +47,7 @@ def test_uncapped_time_constants_overshoot_between_frames(monkeypatch):
     """The same wave without the cap (as before): 2x worse than linear at the left-out frames, so the test
     above does detect the pull toward the rest pose."""
     monkeypatch.setattr(timefit, "MU_CAP_PER_INTERVAL", np.inf)
+    monkeypatch.setattr(fitclip, "DENSE_FROM", np.inf)  # the error-driven fit alone (a dense one hides it)
     poses = synthetic("wave")
     res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=3e-3, best_effort=True),
                              curves=simple_curves(poses.vertices[0], max_points=4))
