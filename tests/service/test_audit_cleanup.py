@@ -40,7 +40,9 @@ def uploads(tmp: Path) -> list[Path]:
 
 
 def test_killed_upload_temp_file_removed_at_start(svc, tmp_path):
-    svc.start_server()
+    # one process: SIGKILL then kills the process that handles the upload (with several uvicorn workers an
+    # orphaned worker could finish the request and remove its file, and the crash would not be reproduced)
+    svc.start_server("--workers", "1")
     key = make_key(svc.backend, "t")
     tmp = tmp_path / "data" / "tmp"
     sock = socket.create_connection(("127.0.0.1", svc.port))
