@@ -2,9 +2,10 @@
 
 Everything that does not depend on t is precomputed when a clip is loaded: the per-vertex space basis
 (V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), plus the item (curve, coordinate) of
-every value. A frame at t is then: find the segment (pure Python), evaluate the time pair of every item of
-that segment and compute positions = rest + phi0 * P[s] + phi1 * P[s+1] per value. Both steps are one
-compiled pass each (numba, no BLAS, no temporaries; the numpy path below stays as the fallback).
+every value. A frame at t is then: find the segment (pure Python), evaluate the time pair of the items of
+that segment once per distinct mu (few in the integer-coded format) and compute positions = rest +
+phi0 * P[s] + phi1 * P[s+1] per value. Both steps are one compiled pass each (numba: no BLAS, so no caller
+meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
 """
 
 from __future__ import annotations
