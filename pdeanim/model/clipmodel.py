@@ -164,9 +164,9 @@ class _SegmentTime:
     """Fast evaluation of the time pair of all items of one segment (precomputed constants).
 
     The pair depends on an item's signed mu alone, and clips store few distinct values per segment (the
-    integer-coded format: about a hundred for 20k items), so it is evaluated once per distinct value
-    (``code`` maps items to them), grouped exp | trig | linear. Compiled: one pass writing float32 (phi0,
-    phi1) (trig: the sine series of :data:`timefit.SIN_COEF` by Horner's rule on m (1 - tau) and m tau,
+    integer-coded format: 143-243 of 21k items on a 20k-vertex clip), so it is evaluated once per distinct
+    value (``code`` maps items to them), grouped exp | trig | linear. Compiled: one pass writing float32
+    (phi0, phi1) (trig: the sine series of :data:`timefit.SIN_COEF` by Horner's rule on m (1 - tau) and m tau,
     over sin m, as float64 sines are slow). The numpy path evaluates the same in one (2, U) float64 buffer
     (trig: one (2, P) @ (P, nt) product) and permutes it back with one ``take``.
     """
