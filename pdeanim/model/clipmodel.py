@@ -1,21 +1,27 @@
 """Evaluation of "dynamic-pde" clips: the loader registered in :data:`pdeanim.clip.LOADERS`.
 
 Everything that does not depend on t is precomputed when a clip is loaded: the per-vertex space basis
-(V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), stored per segment as one flat array
-[P[s], P[s+1]], plus one gather index from (curve, coordinate) items to values. A frame at t is then: find
-the segment (pure Python), evaluate the time pair of every item of that segment (a dozen numpy calls on C*3
-items), gather it to the values with one ``np.take`` and compute
-positions = rest + phi0 * P[s] + phi1 * P[s+1] (a few multiply-adds per vertex, into preallocated buffers).
+(V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), plus the item (curve, coordinate) of
+every value. A frame at t is then: find the segment (pure Python), evaluate the time pair of the items of
+that segment once per distinct mu (few in the integer-coded format) and compute positions = rest +
+phi0 * P[s] + phi1 * P[s+1] per value. Both steps are one compiled pass each (numba: no BLAS, so no caller
+meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
 """
 
 from __future__ import annotations
 
 import bisect
 import math
-import threading
 from typing import Any
 
 import numpy as np
+
+try:
+    from numba import njit
+
+    COMPILED = True
+except ImportError:  # pragma: no cover - numba is a pinned dependency; this keeps the numpy path usable
+    COMPILED = False
 
 from ..errors import ClipFormatError
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
@@ -45,7 +51,6 @@ class DynamicClip:
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
-        self._local = threading.local()
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
@@ -57,15 +62,13 @@ class DynamicClip:
         self._init_gather(self._precompute(fam[0] % 2))
 
     def _init_gather(self, knot_fields: np.ndarray) -> None:
-        """Per segment the flat (2 * V * 3,) fields [P[s], P[s+1]] and the one gather index into (phi0,
-        phi1)."""
-        flat = knot_fields.reshape(len(knot_fields), -1)  # (S+1, V*3)
-        self._pair_fields = [np.concatenate([flat[s], flat[s + 1]]) for s in range(len(flat) - 1)]
-        n_items = 3 * self.topo.curves.n_curves
-        # (V*3,) item of a value
-        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()
-        # (2 * V * 3,) into phi (2, C*3) flattened
-        self._gather = np.concatenate([item_of, item_of + n_items])
+        """The flat (S+1, V * 3) knot fields and, per segment, the distinct time value of every value (its
+        item's mu; uint16 where the segment has few, as the integer-coded format gives)."""
+        self._knot_fields = np.ascontiguousarray(knot_fields.reshape(len(knot_fields), -1))  # (S+1, V*3)
+        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
+        self._value_code = [np.ascontiguousarray(
+            seg.code[item_of], np.uint16 if seg.n_values <= np.iinfo(np.uint16).max else np.int32)
+            for seg in self._time]
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -102,25 +105,19 @@ class DynamicClip:
         tau = min(max((t - t0) / (t1 - t0 if t1 > t0 else 1.0), 0.0), 1.0)
         return seg, tau, t
 
-    def _scratch(self) -> np.ndarray:
-        """Per-thread (2 * V * 3,) float32 scratch (no fresh large allocation per frame, safe across
-        threads)."""
-        buf = getattr(self._local, "buf", None)
-        if buf is None:
-            buf = self._local.buf = np.empty(2 * self.n_vertices * 3, np.float32)
-        return buf
-
     def _frame(self, s: int, tau: float, out: np.ndarray | None = None) -> np.ndarray:
         """(V, 3) float32 positions (before any rigid motion) in segment s at local time tau."""
-        phi = self._time[s].pair(tau)  # (2, C*3) float32, item order
-        # every curve id was checked in __init__; mode="wrap" only avoids the buffered out= of "raise"
-        both = np.take(phi.reshape(-1), self._gather, out=self._scratch(), mode="wrap")
-        np.multiply(both, self._pair_fields[s], out=both)  # [phi0 * P[s], phi1 * P[s+1]] per value
-        n = len(self._base_flat)
         if out is None:
             out = np.empty((self.n_vertices, 3), np.float32)
-        flat = out.reshape(-1)
-        np.add(both[:n], both[n:], out=flat)
+        flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
+        phi = self._time[s].pair_values(tau)  # (2, U) float32 of the segment's distinct values
+        if COMPILED:
+            _combine(phi[0], phi[1], code, fields[s], fields[s + 1], self._base_flat, flat)
+            return out
+        a, b = np.take(phi[0], code), np.take(phi[1], code)
+        np.multiply(a, fields[s], out=a)  # phi0 * P[s]
+        np.multiply(b, fields[s + 1], out=b)  # phi1 * P[s+1]
+        np.add(a, b, out=flat)
         np.add(flat, self._base_flat, out=flat)
         return out
 
@@ -166,20 +163,31 @@ class DynamicClip:
 class _SegmentTime:
     """Fast evaluation of the time pair of all items of one segment (precomputed constants).
 
-    Items are computed grouped exp | trig | linear in one (2, N) float64 buffer (exp: in-place ufuncs; trig:
-    one (2, P) @ (P, nt) product with the sine series of :data:`timefit.SIN_COEF`, as float64 np.sin is
-    slow) and permuted back to item order (c * 3 + coordinate) by one ``take``.
+    The pair depends on an item's signed mu alone, and clips store few distinct values per segment (the
+    integer-coded format: 143-243 of 21k items on a 20k-vertex clip), so it is evaluated once per distinct
+    value (``code`` maps items to them), grouped exp | trig | linear. Compiled: one pass writing float32
+    (phi0, phi1) (trig: the sine series of :data:`timefit.SIN_COEF` by Horner's rule on m (1 - tau) and m tau,
+    over sin m, as float64 sines are slow). The numpy path evaluates the same in one (2, U) float64 buffer
+    (trig: one (2, P) @ (P, nt) product) and permutes it back with one ``take``.
     """
 
     def __init__(self, mu: np.ndarray):
-        exp, trig = np.flatnonzero(mu > 1e-12), np.flatnonzero(mu < -1e-12)
-        lin = np.flatnonzero(np.abs(mu) <= 1e-12)
-        self.n = len(mu)
+        values, code = np.unique(np.asarray(mu, np.float64), return_inverse=True)
+        self.n, self.code = len(mu), code.reshape(-1)
+        exp, trig = np.flatnonzero(values > 1e-12), np.flatnonzero(values < -1e-12)
+        lin = np.flatnonzero(np.abs(values) <= 1e-12)
+        self.n_values = len(values)
         self.ne, self.nt = len(exp), len(trig)
-        self.position = np.argsort(np.concatenate([exp, trig, lin]), kind="stable")  # item -> grouped slot
-        me, mt = mu[exp], np.minimum(-mu[trig], MU_TRIG_MAX)  # the clip of time_pair
-        self.me2 = np.stack([me, me])  # (2, ne)
+        self.exp_items, self.trig_items, self.lin_items = exp, trig, lin
+        me, mt = values[exp], np.minimum(-values[trig], MU_TRIG_MAX)  # the clip of time_pair
+        self.me = np.ascontiguousarray(me)
         self.inv_exp = 1.0 / np.expm1(-2.0 * me)
+        self.mt = np.ascontiguousarray(mt)
+        self.inv_sin = 1.0 / np.sin(mt)
+        if COMPILED:
+            return
+        self.position = np.argsort(np.concatenate([exp, trig, lin]), kind="stable")  # value -> grouped slot
+        self.me2 = np.stack([me, me])  # (2, ne)
         # sin(m t) = sum_k (c_k m^(2k+1)) t^(2k+1) (timefit.sin_table): the m side, over sin m, precomputed
         powers = mt[None, :] ** _ODD[:, None] * SIN_COEF[:, None]  # (P, nt)
         self.trig_table = np.ascontiguousarray(powers / np.sin(mt))
@@ -187,7 +195,16 @@ class _SegmentTime:
     def pair(self, tau: float) -> np.ndarray:
         """(2, N) float32 (phi0, phi1) in item order at local time tau; equals :func:`time_pair` to
         rounding."""
-        g = np.empty((2, self.n))
+        return np.take(self.pair_values(tau), self.code, axis=1)
+
+    def pair_values(self, tau: float) -> np.ndarray:
+        """(2, U) float32 (phi0, phi1) of the distinct values at local time tau."""
+        if COMPILED:
+            out = np.empty((2, self.n_values), np.float32)
+            _pair(float(tau), self.me, self.inv_exp, self.exp_items, self.mt, self.inv_sin, self.trig_items,
+                  self.lin_items, SIN_COEF, out[0], out[1])
+            return out
+        g = np.empty((2, self.n_values))
         ne, nt = self.ne, self.nt
         if ne:
             # phi0 = e^{-m tau} expm1(-2m (1 - tau)) / expm1(-2m); phi1 = e^{m (tau - 1)} expm1(-2m tau) / ...
@@ -201,8 +218,47 @@ class _SegmentTime:
         if nt:  # (phi0, phi1) = ((1 - tau)^(2k+1), tau^(2k+1)) @ table: one small product, no float64 sine
             g[:, ne:ne + nt] = np.power(np.array([[1.0 - tau], [tau]]), _ODD) @ self.trig_table
         g[0, ne + nt:], g[1, ne + nt:] = 1.0 - tau, tau
-        # position is a permutation of range(n) (an argsort), never out of range; "wrap": no buffering
+        # position is a permutation of range(U) (an argsort), never out of range; "wrap": no buffering
         return np.take(g.astype(np.float32), self.position, axis=1, mode="wrap")
+
+
+def _pair(tau: float, me: np.ndarray, inv_exp: np.ndarray, exp_items: np.ndarray, mt: np.ndarray,
+          inv_sin: np.ndarray, trig_items: np.ndarray, lin_items: np.ndarray, coef: np.ndarray,
+          phi0: np.ndarray, phi1: np.ndarray) -> None:
+    """Compiled time pair at tau of one segment's distinct values into float32 phi0, phi1."""
+    s = 1.0 - tau
+    for j in range(me.shape[0]):
+        m, i = me[j], exp_items[j]
+        phi0[i] = np.float32(math.exp(m * -tau) * math.expm1(m * (-2.0 * s)) * inv_exp[j])
+        phi1[i] = np.float32(math.exp(m * (tau - 1.0)) * math.expm1(m * (-2.0 * tau)) * inv_exp[j])
+    top = coef.shape[0] - 1
+    for j in range(mt.shape[0]):
+        m, i = mt[j], trig_items[j]
+        y0, y1 = m * s, m * tau
+        z0, z1 = y0 * y0, y1 * y1
+        a0, a1 = coef[top], coef[top]
+        for k in range(top - 1, -1, -1):  # sin y = y * sum_k c_k (y^2)^k
+            a0 = a0 * z0 + coef[k]
+            a1 = a1 * z1 + coef[k]
+        phi0[i] = np.float32(y0 * a0 * inv_sin[j])
+        phi1[i] = np.float32(y1 * a1 * inv_sin[j])
+    for j in range(lin_items.shape[0]):
+        i = lin_items[j]
+        phi0[i], phi1[i] = np.float32(s), np.float32(tau)
+
+
+def _combine(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, p0: np.ndarray, p1: np.ndarray,
+             base: np.ndarray, out: np.ndarray) -> None:
+    """Compiled (phi0 * P[s] + phi1 * P[s+1]) + base per value (phi of its distinct time value ``code``),
+    in float32 as the numpy path rounds it."""
+    for v in range(out.shape[0]):
+        i = code[v]
+        out[v] = (phi0[i] * p0[v] + phi1[i] * p1[v]) + base[v]
+
+
+if COMPILED:
+    _pair = njit(cache=True, nogil=True, boundscheck=False)(_pair)
+    _combine = njit(cache=True, nogil=True, boundscheck=False)(_combine)
 
 
 def clip_from_parts(topo_header: dict[str, Any], topo_arrays: dict[str, np.ndarray],

@@ -29,7 +29,7 @@ GLB = "model/gltf-binary"
 GLB_RESPONSE = {200: {"content": {GLB: {}}, "description": "a binary glTF 2.0 file"}}
 SUMMARY_KEYS = ("rms", "max", "rel_rms", "rel_max", "p95", "target")
 # New frames of clips up to this many vertices are computed on the event loop (the cost grows with the
-# vertices: about 0.5 ms at 20k), larger ones in the thread pool so the process keeps answering meanwhile.
+# vertices: about 0.35 ms at 20k), larger ones in the thread pool so the process keeps answering meanwhile.
 INLINE_FRAME_VERTICES = 50_000
 
 
@@ -139,7 +139,7 @@ async def get_frame(clip_id: str, request: Request, tenant: TenantDep,
     # The hot path of the service (see the README's performance section for the measurements behind it):
     # ``async def`` with async dependencies, so a repeated frame (encoded-frame LRU) or a 304 costs no
     # thread-pool hop; a clip is loaded (database, blobs) in the pool once per process. A new frame of a
-    # clip up to INLINE_FRAME_VERTICES is computed right here on the event loop (about 0.5 ms for 20k
+    # clip up to INLINE_FRAME_VERTICES is computed right here on the event loop (about 0.35 ms for 20k
     # vertices): the hop to the pool and the threads' contention for the GIL cost more server CPU per
     # request than the loop waiting that long; larger frames go to the pool.
     state = request.app.state
