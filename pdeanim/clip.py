@@ -106,7 +106,12 @@ def load_clip(topology: bytes, coefficients: bytes) -> Clip:
     want = ch.get("topology_id")
     if want and want != topology_id(topology):
         raise ClipFormatError("the coefficients were made for another topology part (topology_id mismatch)")
-    return _loader(str(ch.get("kind")))(th, ta, ch, ca)
+    clip = _loader(str(ch.get("kind")))(th, ta, ch, ca)
+    with np.errstate(all="ignore"):
+        probe = clip.evaluate(np.array([0.0, 0.5, 1.0]))
+    if not np.all(np.isfinite(probe)):  # a damaged or hand-made part whose numbers overflow the evaluator
+        raise ClipFormatError("the clip evaluates to non-finite positions")
+    return clip
 
 
 def write_clip_file(path: str | Path, parts: ClipParts) -> None:

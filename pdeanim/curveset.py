@@ -54,7 +54,7 @@ class CurveSet:
 
     def validate(self, n_vertices: int) -> CurveSet:
         """Check that the curves partition range(n_vertices); raises InputError otherwise."""
-        o, off = np.asarray(self.order), np.asarray(self.offsets)
+        o, off = np.asarray(self.order), np.asarray(self.offsets, np.int64)  # int64: no wrapping differences
         if off.ndim != 1 or len(off) < 1 or off[0] != 0 or off[-1] != len(o) or np.any(np.diff(off) < 1):
             raise InputError("curve offsets must start at 0, end at len(order) and give non-empty curves")
         if len(o) != n_vertices or not np.array_equal(np.sort(o), np.arange(n_vertices)):

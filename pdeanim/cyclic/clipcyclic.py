@@ -139,6 +139,10 @@ class CyclicClip:
         }
 
 
+MAX_FRAMES = 100_000
+"""Most frames a cyclic clip's header may declare (its frame times are allocated from it)."""
+
+
 def _need(arrays: dict[str, np.ndarray], names: tuple[str, ...], part: str) -> None:
     missing = [n for n in names if n not in arrays]
     if missing:
@@ -155,22 +159,33 @@ def clip_from_parts(th: dict, ta: dict[str, np.ndarray], ch: dict, ca: dict[str,
     try:
         frame = BodyFrame.from_dict(th["frame"])
         params = SwimParams.from_dict(ch["swim"])
-        frames = int(ch.get("frames", 24))
+        frames = ch.get("frames", 24)
+        if not isinstance(frames, int) or isinstance(frames, bool) or not 1 <= frames <= MAX_FRAMES:
+            raise ValueError(f"frames must be an integer in 1..{MAX_FRAMES}, got {frames!r}")
     except (KeyError, TypeError, ValueError, ParameterError) as exc:
         raise ClipFormatError(f"bad cyclic-spine clip header: {exc}") from exc
     spine = Spine(np.asarray(ca["spine"], dtype=np.float64))
-    patch = np.asarray(ta["vertex_patch"], dtype=np.int64)
-    u = np.asarray(ta["vertex_uv"], dtype=np.float64)[:, 0]
-    rest = ta["rest"]
-    if spine.coef.ndim != 3 or spine.coef.shape[2] != 3 or len(patch) != len(rest) or frames < 1 or (
-            len(patch) and (patch.min() < 0 or patch.max() >= spine.n_patches)):
+    patch, uv = np.asarray(ta["vertex_patch"]), np.asarray(ta["vertex_uv"], dtype=np.float64)
+    rest, faces = np.asarray(ta["rest"]), np.asarray(ta["faces"])
+    V = len(rest)
+    shapes_ok = (spine.coef.ndim == 3 and spine.coef.shape[2] == 3 and spine.n_patches >= 1
+                 and rest.ndim == 2 and rest.shape[1] == 3 and patch.shape == (V,) and uv.ndim == 2
+                 and uv.shape[0] == V and uv.shape[1] >= 1 and faces.ndim == 2 and faces.shape[1] == 3)
+    if not shapes_ok:
         raise ClipFormatError("cyclic-spine clip arrays do not fit together")
+    patch = patch.astype(np.int64)
+    if (V and (patch.min() < 0 or patch.max() >= spine.n_patches)) or (
+            faces.size and (faces.min() < 0 or faces.max() >= V)):
+        raise ClipFormatError("cyclic-spine clip arrays index outside their range")
+    if not (np.all(np.isfinite(spine.coef)) and np.all(np.isfinite(rest)) and np.all(np.isfinite(uv))):
+        raise ClipFormatError("cyclic-spine clip arrays hold non-finite values")
+    u = uv[:, 0]
     s = (patch + u) / spine.n_patches
     extra = {
         "curves": int(ta["curves"].shape[0]) if "curves" in ta else None,
         "surface": th.get("surface", {}),
     }
-    return CyclicClip(ta["faces"], rest, s, spine, frame, params, frames, extra, ta.get("curves"))
+    return CyclicClip(faces, rest, s, spine, frame, params, frames, extra, ta.get("curves"))
 
 
 def make_parts(faces: np.ndarray, rest: np.ndarray, vmap: VertexMap, spine: Spine, curves: np.ndarray,

@@ -207,7 +207,7 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
     version = header.get("format_version")
     if version not in FORMAT_VERSIONS:
         raise ClipFormatError(f"unsupported dynamic-pde topology version {version!r}")
-    V = int(header.get("n_vertices", -1))
+    V = _count(header, "n_vertices", "topology")
     if version == 1:
         order = _need(arrays, "order", (V,), "topology").astype(np.int32)
         offsets = _need(arrays, "offsets", (None,), "topology").astype(np.int32)
@@ -237,8 +237,18 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
         raise ClipFormatError("topology faces index outside the vertices")
     if u.shape[1] not in (1, 3):
         raise ClipFormatError(f"topology array 'u' must have 1 or 3 columns, got {u.shape[1]}")
+    if u.size and (u.min() < 0 or u.max() > 1):
+        raise ClipFormatError("topology curve parameters u must lie in [0, 1]")
     return TopologyData(curves, np.broadcast_to(u, (V, 3)), faces.astype(np.int32), rest,
                         str(header.get("param_mode", "chord")))
+
+
+def _count(header: dict[str, Any], key: str, part: str) -> int:
+    """A non-negative integer header field; raises ClipFormatError for anything else."""
+    value = header.get(key)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise ClipFormatError(f"{part} header field {key!r} must be a non-negative integer, got {value!r}")
+    return value
 
 
 def _valid_curves(order: np.ndarray, offsets: np.ndarray, V: int) -> CurveSet:
@@ -273,7 +283,7 @@ def decode_coefficients(
     version = header.get("format_version")
     if version not in FORMAT_VERSIONS:
         raise ClipFormatError(f"unsupported dynamic-pde coefficients version {version!r}")
-    S, C = int(header.get("n_segments", -1)), int(n_curves)
+    S, C = _count(header, "n_segments", "coefficients"), int(n_curves)
     seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients")
     if S < 1 or np.any(np.diff(seg_t) < 0):
         raise ClipFormatError("segment boundaries must be non-decreasing with at least one segment")

@@ -236,6 +236,9 @@ export function decodeDynamic(topo, coef) {
     throw new ClipFormatError(`topology array 'u' must have 1 or 3 columns, got ${uColumns}`);
   }
   const u = t.u ?? toVertexOrder(t.uCurve, uColumns, order);
+  for (let i = 0; i < u.length; i++) {
+    if (!(u[i] >= 0 && u[i] <= 1)) throw new ClipFormatError('topology curve parameters u must lie in [0, 1]');
+  }
   const rest = t.rest ?? toVertexOrder(t.restCurve, 3, order);
 
   const S = Number(ch.n_segments);

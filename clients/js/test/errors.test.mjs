@@ -273,6 +273,16 @@ test('version 2 coefficients with bad knot steps or codes are rejected', () => {
   bad(trigOverPi, /time constants must be >= 0 \(and < pi for trig families\)/);
 });
 
+test('curve parameters outside [0, 1] are rejected (they would overflow the space basis)', () => {
+  const t = edited(parts2.topology, ({ header }) => {
+    header.u_step = 2 ** 40;
+  });
+  const c = edited(parts2.coefficients, ({ header }) => {
+    header.topology_id = null;
+  });
+  assert.throws(() => decodeClip(t, c), /topology curve parameters u must lie in \[0, 1\]/);
+});
+
 test('version 2 signed m gives the family: < 0 trig, > 0 exp, 0 linear', () => {
   const c = edited(parts2.coefficients, ({ arrays }) => {
     const d = Float32Array.from(arrays.m.data);
