@@ -8,7 +8,7 @@ import os
 import subprocess
 import sys
 
-import pytest
+from tests.ci import missing
 
 CHECK = r"""
 import ctypes, json
@@ -35,6 +35,6 @@ def test_api_process_runs_openblas_single_threaded():
     out = subprocess.run([sys.executable, "-c", CHECK], capture_output=True, text=True, env=env, check=True)
     report = json.loads(out.stdout.strip().splitlines()[-1])
     if not report["threads"]:
-        pytest.skip("numpy/scipy are not linked against OpenBLAS here")
+        missing("numpy/scipy are not linked against OpenBLAS here (the wheels from the lock file are)")
     assert report["limited"] == len(report["threads"]), report
     assert set(report["threads"].values()) == {1}, report

@@ -13,6 +13,7 @@ import pytest
 from sqlalchemy import update
 
 from service.api.cache import BodyCache
+from tests.ci import missing
 from worker.child import lower_priority
 
 from .conftest import running_services
@@ -143,8 +144,9 @@ def _descendants(root: int, table: dict[int, tuple[int, int, str]]) -> list[int]
     return out
 
 
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process priorities from /proc")
 def test_the_job_process_runs_niced(api, services, data_dir):
+    if not Path("/proc/self/stat").exists():
+        missing("reads process priorities from /proc (Linux)")
     worker = services.workers[0].pid
     base = _processes()[worker][1]  # the worker's own priority (the test run itself may be niced)
     expected = min(19, base + JOB_NICE)
