@@ -49,9 +49,10 @@ def register(subparsers) -> None:  # noqa: ANN001
         "(default: the first; the summary says which was used)",
     )
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
-    p.add_argument("--format-version", type=int, choices=[1, 2], default=2,
-                   help="clip format to write: 2 (default, integer-coded and compressed) or 1 (for readers "
-                        "that predate version 2)")
+    p.add_argument("--format-version", type=int, choices=[1, 2, 3], default=3,
+                   help="newest clip format to write: 3 (default: integer-coded and compressed, knots on a "
+                        "shared time basis where that is smaller, else written as version 2), 2 (for readers "
+                        "that predate version 3) or 1 (for readers that predate version 2)")
     p.add_argument("--best-effort", action="store_true",
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",

@@ -62,10 +62,19 @@ from .. import container
 from ..clip import topology_id
 from ..curveset import CurveSet
 from ..errors import ClipFormatError
-from . import quantise
+from . import knotbasis, quantise
 
-FORMAT_VERSION = 2
-FORMAT_VERSIONS = (1, 2)
+TRIAL_LEVEL = 3
+"""zstd level of trial encodings (the fit's rounding search, its choice between fits, and the choice between
+knot encodings): fast, and about proportional to the final level 19 sizes; only the clip that is kept is
+compressed at container.ZSTD_LEVEL."""
+
+FORMAT_VERSION = 3
+FORMAT_VERSIONS = (1, 2, 3)
+"""Versions a writer may be asked for. Version 3 adds the knot basis (§3.9) to the coefficients part only: a
+clip asked for in version 3 whose knots code smaller without a basis is written as version 2, and its
+topology part is version 2 either way."""
+TOPOLOGY_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
 DEFAULT_TOLERANCE = 1e-5
 """Quantisation tolerance of version 2 relative to the rest pose's bounding-box diagonal, when the caller
@@ -106,6 +115,7 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
     step whose error is at most ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal) and compresses
     at zstd ``level`` (a trial encoding may use a fast one)."""
     _check_version(version)
+    version = min(version, 2)  # version 3 changes the coefficients part only
     header = {"part": "topology", "model": "dynamic-pde", "format_version": version,
               "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
     u = np.asarray(u, np.float32)
@@ -153,7 +163,8 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     """Coefficients part bytes for the given topology part; version 2 rounds the knots to steps that add at
     most ``knot_rms`` to the RMS vertex distance and move no coordinate by more than ``knot_cap`` (default
     4 x knot_rms) when given, else whose error moves no vertex coordinate by more than ``tolerance``
-    (default: DEFAULT_TOLERANCE of the diagonal)."""
+    (default: DEFAULT_TOLERANCE of the diagonal). Version 3 stores the same rounded knots on a shared time
+    basis plus residual tracks where that is smaller, and writes version 2 otherwise."""
     _check_version(version)
     S, C = data.family.shape[:2]
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": version,
@@ -179,11 +190,30 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     else:
         steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
     codes = quantise.quantise_knots(data.knots, steps)
-    tracks, header["knot_differences"] = quantise.encode_knot_tracks(codes)
+    tracks, differences = quantise.encode_knot_tracks(codes)
+    knot_arrays: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
+    header.update(format_version=2, knot_differences=differences)
+    if version >= 3:
+        options = [(knot_arrays, differences, 0)]
+        for b in knotbasis.basis_candidates(topo.curves, topo.u, data.family, m, data.D, data.knots, steps,
+                                            data.looping):
+            residual, order = quantise.encode_knot_tracks(b.residual)
+            options.append(({"knot_step": steps, "knot_weights": quantise.zigzag(b.weights),
+                              "knot_basis": b.basis, "knots": residual}, order, b.rank))
+        knot_arrays, differences, rank = min(options, key=lambda o: _trial_bytes(o[0]))  # plain on a tie
+        if rank:
+            header.update(format_version=3, knot_differences=differences, knot_rank=rank)
     arrays.update({
         "m": np.where((family >= 2) & (m > 0), -m, m), "D": np.asarray(data.D, np.float32),
-        "knot_step": steps, "knots": tracks, **{k: np.asarray(v) for k, v in data.extra.items()}})
+        **knot_arrays, **{k: np.asarray(v) for k, v in data.extra.items()}})
     return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
+
+
+def _trial_bytes(arrays: dict[str, np.ndarray]) -> int:
+    """Compressed size of arrays at the trial level (the choice must not depend on the final level: the fit
+    measures the clip of its trial encodings)."""
+    packed = container.pack({}, arrays, {name: container.SMALLEST for name in arrays}, TRIAL_LEVEL)
+    return len(packed)
 
 
 def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...], part: str,
@@ -205,7 +235,7 @@ def _need(arrays: dict[str, np.ndarray], name: str, shape: tuple[int | None, ...
 def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> TopologyData:
     """Validated topology data from a decoded container (version 1 or 2); raises ClipFormatError."""
     version = header.get("format_version")
-    if version not in FORMAT_VERSIONS:
+    if version not in TOPOLOGY_VERSIONS:
         raise ClipFormatError(f"unsupported dynamic-pde topology version {version!r}")
     V = _count(header, "n_vertices", "topology")
     if version == 1:
@@ -298,8 +328,10 @@ def decode_coefficients(
         raise ClipFormatError("the space kind of a curve+coordinate must be the same in every segment")
     if version == 1:
         knots = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients")
-    else:
+    elif version == 2:
         knots = _knots_v2(header, arrays, S, C)
+    else:
+        knots = _knots_v3(header, arrays, S, C)
     if np.any(m < 0) or np.any((family >= 2) & (m >= np.pi)):
         raise ClipFormatError("time constants must be >= 0 (and < pi for trig families)")
     motion = str(header.get("motion"))
@@ -326,6 +358,25 @@ def _family_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> tuple[np.ndarra
 def _knots_v2(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:
     """Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: one track (C, 3, 4, S+1) of zigzag
     differences of order ``knot_differences`` along time per item and coefficient, times knot_step."""
+    steps, codes = _knot_tracks(header, arrays, S, C)
+    return _finite_knots(quantise.dequantise(codes, steps[None, :, :, None]))
+
+
+def _knots_v3(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int) -> np.ndarray:
+    """Knots (S+1, C, 3, 4) float32 of a version 3 coefficients part: zigzag weight codes (r, C, 3, 4) times
+    knot_step on a shared time basis (r, S+1), plus residual tracks coded as the version 2 knots (§3.9)."""
+    r = header.get("knot_rank")
+    if not isinstance(r, int) or isinstance(r, bool) or not 1 <= r <= S + 1:
+        raise ClipFormatError(f"coefficients knot_rank must be an integer in 1..{S + 1}, got {r!r}")
+    steps, residual = _knot_tracks(header, arrays, S, C)
+    codes = quantise.unzigzag(_need(arrays, "knot_weights", (r, C, 3, 4), "coefficients", "<u4"))
+    basis = _need(arrays, "knot_basis", (r, S + 1), "coefficients", "<f4")
+    return _finite_knots(knotbasis.knots_from_basis(codes, residual, steps, basis))
+
+
+def _knot_tracks(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(knot_step (C, 3) float32, integer codes (S+1, C, 3, 4)) of the ``knots`` time tracks."""
     steps = _need(arrays, "knot_step", (C, 3), "coefficients", "<f4")
     if np.any(steps <= 0):
         raise ClipFormatError("coefficients knot steps must be positive")
@@ -333,7 +384,10 @@ def _knots_v2(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: 
     if order not in (1, 2) or isinstance(order, bool):
         raise ClipFormatError(f"coefficients knot_differences must be 1 or 2, got {order!r}")
     tracks = _need(arrays, "knots", (C, 3, 4, S + 1), "coefficients", "<u4")
-    knots = quantise.dequantise(quantise.decode_knot_tracks(tracks, order), steps[None, :, :, None])
+    return steps, quantise.decode_knot_tracks(tracks, order)
+
+
+def _finite_knots(knots: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(knots)):
         raise ClipFormatError("coefficients knots decode to non-finite values")
     return knots

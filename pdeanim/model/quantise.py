@@ -36,13 +36,14 @@ def undo_zigzag_deltas(z: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.cumsum(d, axis=axis)
 
 
-def _zigzag(d: np.ndarray) -> np.ndarray:
-    """uint32 zigzag codes of int32-range differences."""
+def zigzag(d: np.ndarray) -> np.ndarray:
+    """uint32 zigzag codes of int32-range integers (0, -1, 1, -2, 2 -> 0, 1, 2, 3, 4)."""
     d = np.asarray(d, np.int64).astype(np.int32)
     return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
 
 
-def _unzigzag(z: np.ndarray) -> np.ndarray:
+def unzigzag(z: np.ndarray) -> np.ndarray:
+    """int64 values of uint32 zigzag codes (inverse of :func:`zigzag`)."""
     z = np.asarray(z, np.uint32)
     return (z >> np.uint32(1)).astype(np.int64) ^ -(z & np.uint32(1)).astype(np.int64)
 
@@ -61,7 +62,7 @@ def encode_faces(faces: np.ndarray, order: np.ndarray) -> np.ndarray:
     first = np.argmin(r, axis=1)[:, None]
     r = np.take_along_axis(r, (first + np.arange(3)) % 3, axis=1)
     r = r[np.lexsort((r[:, 2], r[:, 1], r[:, 0]))]
-    return np.stack([zigzag_deltas(r[:, 0]), _zigzag(r[:, 1] - r[:, 0]), _zigzag(r[:, 2] - r[:, 0])], axis=1)
+    return np.stack([zigzag_deltas(r[:, 0]), zigzag(r[:, 1] - r[:, 0]), zigzag(r[:, 2] - r[:, 0])], axis=1)
 
 
 def decode_faces(codes: np.ndarray, order: np.ndarray) -> np.ndarray:
@@ -69,7 +70,7 @@ def decode_faces(codes: np.ndarray, order: np.ndarray) -> np.ndarray:
     rank outside the vertices."""
     codes = np.asarray(codes, np.uint32).reshape(-1, 3)
     a = undo_zigzag_deltas(codes[:, 0])
-    r = np.stack([a, a + _unzigzag(codes[:, 1]), a + _unzigzag(codes[:, 2])], axis=1)
+    r = np.stack([a, a + unzigzag(codes[:, 1]), a + unzigzag(codes[:, 2])], axis=1)
     order = np.asarray(order, np.int64)
     ok = (r >= 0) & (r < len(order))
     return np.where(ok, order[np.where(ok, r, 0)], -1)

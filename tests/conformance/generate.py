@@ -7,8 +7,10 @@ vertex count, bounding-box diagonal and what it covers. Fitted cases go through 
 pipelines on tiny meshes; synthetic cases encode hand-chosen coefficients that reach every branch of the
 evaluator (all four families, D on both sides of D_SWITCH and near 0, trig constants at their cap, a
 zero-length segment, large and tiny rigid rotations). Cases are written in the current format (dynamic-pde
-version 2: integer codes in zstd-compressed container version 2 arrays); the "-v1" cases keep version 1
-(raw float arrays in container version 1) covered.
+version 2: integer codes in zstd-compressed container version 2 arrays, or version 3 where the writer finds
+the knot basis smaller); the "-v1" cases keep version 1 (raw float arrays in container version 1) covered,
+and the "-v3" cases are morph-target blends whose coefficients part is version 3 (knots on a shared
+low-rank time basis, docs/format.md §3.9; the generator checks that the writer did choose it).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 3
+FIXTURE_VERSION = 4
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -142,6 +144,83 @@ def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
     return make
 
 
+def _blend_poses(n_frames: int = 25, loop: bool = False):
+    """The icosphere of _sphere_poses blending towards two morph targets (a squash and a bulge)."""
+    mesh = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
+    rest = np.asarray(mesh.vertices, np.float64)
+    squash = rest * np.array([1.3, 0.8, 1.0]) - rest
+    bulge = 0.3 * np.sin(3 * rest[:, [1, 2, 0]])
+    span = n_frames - 1
+    frames = []
+    for f in range(n_frames):
+        ph = 2 * np.pi * f / span
+        a, b = (0.5 * (1 - np.cos(ph)), 0.5 * np.sin(ph) ** 2) if loop else (f / span, np.sin(2 * ph) ** 2)
+        frames.append(rest + a * squash + b * bulge)
+    return make_poses(np.stack(frames), np.asarray(mesh.faces), np.arange(n_frames) / 24.0)
+
+
+def _assert_v3(parts: ClipParts) -> ClipParts:
+    """The case really is what it covers: a version 3 coefficients part (knots on a basis of rank r < S+1
+    plus residual tracks coded as version 2 knots) with a version 2 topology part."""
+    header, arrays = container.unpack(parts.coefficients)
+    S, C = header["n_segments"], header["n_curves"]
+    assert header["format_version"] == 3 and header["knot_differences"] in (1, 2), header
+    assert arrays["knots"].dtype == np.uint32 and arrays["knots"].shape == (C, 3, 4, S + 1)
+    r = header["knot_rank"]
+    assert arrays["knot_weights"].dtype == np.uint32 and arrays["knot_weights"].shape == (r, C, 3, 4)
+    assert 1 <= r < S + 1 and arrays["knot_basis"].shape == (r, S + 1)
+    assert container.unpack(parts.topology)[0]["format_version"] == 2
+    return parts
+
+
+def _fit_blend(loop: bool) -> Callable[[], ClipParts]:
+    """A fit with an RMS target of a morph-target blend: the fit's own encoder picks the knot basis."""
+    return lambda: _assert_v3(fit_poses(_blend_poses(loop=loop),
+                                        FitOptions(target_rel_rms=1e-3, loop=loop, format_version=3)))
+
+
+def _synthetic_blend(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
+    """A morph-target blend: knots that are exactly a blend of three shapes with weights that vary over 11
+    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins (format version 3)."""
+    def make() -> ClipParts:
+        topo, C, _ = _synthetic_topology(param_mode)
+        rng = np.random.default_rng(13)
+        S = 11
+        seg_t = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 1.0, S - 1)), [1.0]])
+        seg_t[5] = seg_t[4]  # a zero-length segment
+        space = rng.integers(0, 2, (C, 3))
+        trig = rng.integers(0, 2, (S, C, 3))
+        family = (2 * trig + space[None]).astype(np.uint8)
+        m = np.where(trig == 1, rng.choice([0.0, 1e-3, 1.0, MU_TRIG_MAX * 0.9999], (S, C, 3)),
+                     rng.choice([0.0, 1e-13, 0.4, 2.0, 9.0], (S, C, 3)))
+        D = np.array([[0.0, 1e-5, 0.5], [2.0, 3.99, 4.0], [4.01, 8.0, 20.0], [1.0, 6.0, 0.05],
+                      [3.0, 3.0, 12.0]])
+        shapes = rng.normal(0, 0.05, (3, C, 3, 4))
+        phase = 2 * np.pi * seg_t
+        if loop:  # periodic weights: the last knot is the first
+            blend = np.stack([np.ones_like(phase), np.sin(phase), 0.5 * (1 - np.cos(2 * phase))])
+        else:
+            blend = np.stack([np.ones_like(phase), seg_t, np.sin(3 * phase)])
+        knots = np.einsum("js,jcwk->scwk", blend, shapes)
+        if loop:
+            knots[-1] = knots[0]
+        extra = {}
+        if motion == "rigid":
+            extra = {"rigid_segment_t": np.array([0.0, 0.4, 1.0]),
+                     "rigid_centre": rng.normal(0, 0.3, (C, 3)).astype(np.float32),
+                     "rigid_rot_knots": rng.normal(0, 0.8, (3, C, 3)).astype(np.float32),
+                     "rigid_rot_mu": rng.choice([-1.5, 0.0, 2.0], (2, C)).astype(np.float32),
+                     "rigid_trans_knots": rng.normal(0, 0.4, (3, C, 3)).astype(np.float32),
+                     "rigid_trans_mu": rng.choice([-0.5, 0.0, 3.0], (2, C)).astype(np.float32)}
+            if loop:
+                for k in ("rigid_rot_knots", "rigid_trans_knots"):
+                    extra[k][-1] = extra[k][0]
+        data = CoefficientData(seg_t, np.linspace(0.0, 2.0, S + 1), family, m, D, knots, motion, loop,
+                               {"errors": {}}, extra)
+        return _assert_v3(ClipParts(topo, encode_coefficients(topo, data, 3, knot_rms=2e-4)))
+    return make
+
+
 CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "fit-displacement-chord": (_fit("displacement", "chord", False), {}),
     "fit-absolute-paper": (_fit("absolute", "paper", False), {}),
@@ -156,6 +235,9 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "synthetic-rigid-chord-loop": (_synthetic_dynamic("rigid", "chord", True), {}),
     "fit-rigid-paper-loop-v1": (_fit("rigid", "paper", True, version=1), {}),
     "synthetic-displacement-paper-v1": (_synthetic_dynamic("displacement", "paper", False, version=1), {}),
+    "synthetic-blend-displacement-paper-v3": (_synthetic_blend("displacement", "paper", False), {}),
+    "synthetic-blend-rigid-chord-loop-v3": (_synthetic_blend("rigid", "chord", True), {}),
+    "fit-blend-displacement-chord-loop-v3": (_fit_blend(True), {}),
     "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),

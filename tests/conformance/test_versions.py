@@ -32,14 +32,17 @@ def test_future_container_version_is_refused():
         container.unpack(future)
 
 
-@pytest.mark.parametrize(("name", "future"),
-                         [("fit-displacement-chord", 3), ("cyclic-eel-standing-rotate", 2)])
-def test_future_format_versions_are_refused(name, future):
+@pytest.mark.parametrize(("name", "future_coefficients", "future_topology"),
+                         [("fit-displacement-chord", 4, 3), ("synthetic-blend-displacement-paper-v3", 4, 3),
+                          ("cyclic-eel-standing-rotate", 2, 2)])
+def test_future_format_versions_are_refused(name, future_coefficients, future_topology):
+    """dynamic-pde coefficients read versions 1-3 but topology parts only 1-2 (version 3 changes the
+    coefficients part only); cyclic-spine parts read version 1."""
     topo, coef = _parts(name)
-    with pytest.raises(ClipFormatError, match=f"version {future}"):
-        load_clip(topo, _edit(coef, format_version=future))
-    new_topo = _edit(topo, format_version=future)
-    with pytest.raises(ClipFormatError, match=f"version {future}"):
+    with pytest.raises(ClipFormatError, match=f"coefficients version {future_coefficients}"):
+        load_clip(topo, _edit(coef, format_version=future_coefficients))
+    new_topo = _edit(topo, format_version=future_topology)
+    with pytest.raises(ClipFormatError, match=f"topology version {future_topology}"):
         load_clip(new_topo, _edit(coef, topology_id=None))
 
 

@@ -3,10 +3,15 @@
 import { ClipFormatError } from './container.js';
 import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
 
-/** The newest dynamic-pde format version this build reads. */
-export const DYNAMIC_FORMAT_VERSION = 2;
-/** Every dynamic-pde format version this build reads (2: integer codes, docs/format.md §3.8). */
-export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2]);
+/** The newest dynamic-pde format version this build reads (of a coefficients part). */
+export const DYNAMIC_FORMAT_VERSION = 3;
+/**
+ * Every dynamic-pde format version this build reads in a coefficients part (1: float arrays; 2: integer
+ * codes, docs/format.md §3.7; 3: knots on a shared low-rank time basis plus residual tracks, §3.9).
+ */
+export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2, 3]);
+/** Every dynamic-pde format version this build reads in a topology part (version 3 changes coefficients only). */
+export const DYNAMIC_TOPOLOGY_VERSIONS = Object.freeze([1, 2]);
 const MOTIONS = ['displacement', 'absolute', 'rigid'];
 
 function need(arrays, name, shape, part, dtype = null) {
@@ -29,11 +34,16 @@ function need(arrays, name, shape, part, dtype = null) {
   return a;
 }
 
-function checkVersion(header, part) {
-  if (!DYNAMIC_FORMAT_VERSIONS.includes(header.format_version)) {
+/** "1", "1 and 2", "1, 2 and 3". */
+function listed(versions) {
+  return versions.length < 2 ? versions.join('') : `${versions.slice(0, -1).join(', ')} and ${versions.at(-1)}`;
+}
+
+function checkVersion(header, part, versions) {
+  if (!versions.includes(header.format_version)) {
     throw new ClipFormatError(
       `unsupported dynamic-pde ${part} version ${JSON.stringify(header.format_version)}` +
-        ` (this build reads ${DYNAMIC_FORMAT_VERSIONS.join(' and ')})`,
+        ` (this build reads ${listed(versions)})`,
     );
   }
 }
@@ -158,7 +168,7 @@ function toVertexOrder(rows, cols, order) {
 }
 
 /**
- * Family codes and m >= 0 (S, C, 3) of a version 2 coefficients part: space kind per item, m signed
+ * Family codes and m >= 0 (S, C, 3) of a version 2 or 3 coefficients part: space kind per item, m signed
  * (< 0: trig with |m|, > 0: exp, 0: linear).
  */
 function familyV2(ca, S, C) {
@@ -175,8 +185,12 @@ function familyV2(ca, S, C) {
   return { family, m };
 }
 
-/** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: tracks (C, 3, 4, S+1) of differences. */
-function knotsV2(ch, ca, S, C) {
+/**
+ * knot_step (C, 3) and the integer codes (S+1, C, 3, 4) as float64 (exact integers) of the `knots` time
+ * tracks of a version 2 or 3 coefficients part: tracks (C, 3, 4, S+1) of zigzag differences of order
+ * knot_differences (1 or 2) along time (docs/format.md §3.7). Version 3 stores its residual tracks so (§3.9).
+ */
+function knotTracks(ch, ca, S, C) {
   const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data;
   if (steps.some((x) => !(x > 0))) throw new ClipFormatError('coefficients knot steps must be positive');
   const order = ch.knot_differences;
@@ -184,11 +198,11 @@ function knotsV2(ch, ca, S, C) {
     throw new ClipFormatError(`coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`);
   }
   const z = need(ca, 'knots', [C, 3, 4, S + 1], 'coefficients', U4).data;
-  const knots = new Float32Array(z.length);
+  const codes = new Float64Array(z.length);
   const n = S + 1;
-  for (let track = 0; track < C * 12; track++) {
+  const T = C * 12;
+  for (let track = 0; track < T; track++) {
     // one time track per curve, coordinate and coefficient: running sums (one or two) of zigzag differences
-    const step = steps[track >> 2];
     let first = 0;
     let q = 0;
     for (let s = 0; s < n; s++) {
@@ -196,19 +210,64 @@ function knotsV2(ch, ca, S, C) {
       const d = (code >>> 1) ^ -(code & 1);
       if (order === 1) q += d;
       else q += first += d;
-      knots[(s * C * 12) + track] = Math.fround(q * step);
+      codes[s * T + track] = q;
+    }
+  }
+  return { steps, codes };
+}
+
+/** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: float32(q * knot_step) of its tracks. */
+function knotsV2(ch, ca, S, C) {
+  const { steps, codes } = knotTracks(ch, ca, S, C);
+  const knots = new Float32Array(codes.length);
+  for (let i = 0; i < codes.length; i++) knots[i] = Math.fround(codes[i] * steps[(i % (C * 12)) >> 2]);
+  checkFinite(knots, 'coefficients knots');
+  return knots;
+}
+
+/**
+ * Knots (S+1, C, 3, 4) float32 of a version 3 coefficients part (docs/format.md §3.9): integer weights
+ * q (r, C, 3, 4), stored as plain zigzag codes (not differences), on r shared time tracks knot_basis
+ * (r, S+1), plus residual integers p (S+1, C, 3, 4) from the `knots` tracks, coded as in version 2. With
+ * h = knot_step[c, w]: knots[s, c, w, k] = float32(sum over j = 0..r-1, in this order from 0, of
+ * (q[j, c, w, k] * h) * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double
+ * (no fused multiply-add: bit for bit the knots of every other reader).
+ */
+function knotsV3(ch, ca, S, C) {
+  const r = ch.knot_rank;
+  if (!Number.isInteger(r) || r < 1 || r > S + 1) {
+    const got = JSON.stringify(r);
+    throw new ClipFormatError(`coefficients knot_rank must be an integer in 1..${S + 1}, got ${got}`);
+  }
+  const { steps, codes: residual } = knotTracks(ch, ca, S, C);
+  const z = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
+  const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
+  const n = S + 1;
+  const T = C * 12; // one track per curve, coordinate and coefficient
+  const weights = new Float64Array(r * T); // q * h
+  for (let i = 0; i < weights.length; i++) weights[i] = ((z[i] >>> 1) ^ -(z[i] & 1)) * steps[(i % T) >> 2];
+  const knots = new Float32Array(n * T);
+  for (let s = 0; s < n; s++) {
+    for (let track = 0; track < T; track++) {
+      let acc = 0;
+      for (let j = 0; j < r; j++) acc += weights[j * T + track] * basis[j * n + s];
+      acc += residual[s * T + track] * steps[track >> 2];
+      knots[s * T + track] = Math.fround(acc);
     }
   }
   checkFinite(knots, 'coefficients knots');
   return knots;
 }
 
-/** Validate and decode the topology and coefficients containers of a dynamic-PDE clip (versions 1 and 2). */
+/**
+ * Validate and decode the topology and coefficients containers of a dynamic-PDE clip (topology versions 1
+ * and 2, coefficients versions 1, 2 and 3).
+ */
 export function decodeDynamic(topo, coef) {
   const th = topo.header;
   const ch = coef.header;
-  checkVersion(th, 'topology');
-  checkVersion(ch, 'coefficients');
+  checkVersion(th, 'topology', DYNAMIC_TOPOLOGY_VERSIONS);
+  checkVersion(ch, 'coefficients', DYNAMIC_FORMAT_VERSIONS);
   const V = Number(th.n_vertices);
   if (!Number.isInteger(V) || V < 0) throw new ClipFormatError('topology header has no valid n_vertices');
   const ta = topo.arrays;
@@ -264,7 +323,11 @@ export function decodeDynamic(topo, coef) {
     throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
   const D = need(ca, 'D', [C, 3], 'coefficients').data;
   const knots =
-    ch.format_version === 1 ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data : knotsV2(ch, ca, S, C);
+    ch.format_version === 1
+      ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data
+      : ch.format_version === 2
+        ? knotsV2(ch, ca, S, C)
+        : knotsV3(ch, ca, S, C);
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
   let rigid = null;
   if (motion === 'rigid') {

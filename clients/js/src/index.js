@@ -24,6 +24,7 @@ export {
   DynamicEvaluator,
   DYNAMIC_FORMAT_VERSION,
   DYNAMIC_FORMAT_VERSIONS,
+  DYNAMIC_TOPOLOGY_VERSIONS,
   vertexBasis,
   vertexBase,
 } from './dynamic.js';

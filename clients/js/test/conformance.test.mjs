@@ -17,9 +17,32 @@ test('the fixture set covers every kind, motion, parameterisation and looping mo
   assert.deepEqual([...new Set(dyn.map((c) => c.motion))].sort(), ['absolute', 'displacement', 'rigid']);
   assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
   assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
-  // dynamic-pde format versions 1 (raw floats, container 1) and 2 (integer codes, zstd in container 2)
-  assert.deepEqual([...new Set(dyn.map((c) => c.format_version))].sort(), [1, 2]);
-  for (const c of dyn) assert.deepEqual(c.container_versions, [c.format_version, c.format_version], c.name);
+  // dynamic-pde format versions 1 (raw floats, container 1), 2 (integer codes, zstd in container 2) and 3
+  // (coefficients only: knots on a shared time basis; its topology part is a version 2 one, container 2)
+  assert.deepEqual([...new Set(dyn.map((c) => c.format_version))].sort(), [1, 2, 3]);
+  for (const c of dyn) {
+    const container = Math.min(c.format_version, 2);
+    assert.deepEqual(c.container_versions, [container, container], c.name);
+  }
+  const v3 = dyn.filter((c) => c.format_version === 3);
+  assert.ok(v3.some((c) => c.looping) && v3.some((c) => !c.looping));
+});
+
+test('version 3 fixtures: a version 2 topology part, knots on a basis of rank below S + 1 plus residuals', () => {
+  for (const c of man.cases.filter((x) => x.format_version === 3)) {
+    const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+    const clip = decodeClip(topology, coefficients);
+    assert.equal(clip.topologyHeader.format_version, 2, c.name);
+    const r = clip.header.knot_rank;
+    assert.ok(Number.isInteger(r) && r >= 1 && r < clip.nSegments + 1, c.name);
+    // the residual tracks are coded as version 2 knots: differences of order 1 or 2
+    assert.ok([1, 2].includes(clip.header.knot_differences), c.name);
+    if (c.looping) {
+      // a looping clip's basis has equal first and last columns: its first and last knots are equal
+      const n = clip.nCurves * 12;
+      assert.deepEqual(clip.knots.subarray(0, n), clip.knots.subarray(clip.nSegments * n), c.name);
+    }
+  }
 });
 
 for (const c of man.cases) {

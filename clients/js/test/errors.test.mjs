@@ -19,6 +19,7 @@ const dynamicCase = (version) =>
   man.cases.find((c) => c.kind === 'dynamic-pde' && c.motion === 'displacement' && c.format_version === version);
 const parts = splitClipFile(readBytes(join(FIXTURES, dynamicCase(1).clip))); // format version 1
 const parts2 = splitClipFile(readBytes(join(FIXTURES, dynamicCase(2).clip))); // format version 2
+const parts3 = splitClipFile(readBytes(join(FIXTURES, dynamicCase(3).clip))); // coefficients version 3
 
 /** Re-encode a part with its header and arrays changed by edit({header, arrays}). */
 function edited(bytes, edit) {
@@ -40,16 +41,31 @@ test('truncated, foreign and future containers are rejected with a reason', () =
 });
 
 test('unknown format versions, kinds and motions are rejected', () => {
-  for (const p of [parts, parts2]) {
-    const v3 = edited(p.coefficients, ({ header }) => {
-      header.format_version = 3;
-    });
-    assert.throws(() => decodeClip(p.topology, v3), /unsupported dynamic-pde coefficients version 3 \(this build reads 1 and 2\)/);
+  for (const p of [parts, parts2, parts3]) {
+    for (const future of [0, 4, '3', null]) {
+      const v = edited(p.coefficients, ({ header }) => {
+        header.format_version = future;
+      });
+      assert.throws(
+        () => decodeClip(p.topology, v),
+        new RegExp(
+          `unsupported dynamic-pde coefficients version ${JSON.stringify(future)} \\(this build reads 1, 2 and 3\\)`,
+        ),
+      );
+    }
+    // version 3 changes the coefficients part only: a topology part claiming it is refused
     const t3 = edited(p.topology, ({ header }) => {
       header.format_version = 3;
     });
-    assert.throws(() => decodeClip(t3, p.coefficients), /unsupported dynamic-pde topology version 3/);
+    assert.throws(
+      () => decodeClip(t3, p.coefficients),
+      /unsupported dynamic-pde topology version 3 \(this build reads 1 and 2\)/,
+    );
   }
+  const noVersion = edited(parts3.coefficients, ({ header }) => {
+    delete header.format_version;
+  });
+  assert.throws(() => decodeClip(parts3.topology, noVersion), /unsupported dynamic-pde coefficients version/);
   const kind = edited(parts.coefficients, ({ header }) => {
     header.kind = 'spline';
   });
@@ -295,4 +311,311 @@ test('version 2 signed m gives the family: < 0 trig, > 0 exp, 0 linear', () => {
   assert.ok(clip.family[0] >= 2 && clip.family[1] < 2 && clip.family[2] < 2); // trig, exp, (linear) exp
   assert.equal(clip.family[0] % 2, clip.family[1] % 2); // one space kind per item
   assert.deepEqual(Array.from(clip.m.slice(0, 3)), [0.5, 0.5, 0]);
+});
+
+/** The integers of plain (not differenced) zigzag codes. */
+const plain = (codes) => Array.from(codes, (z) => (z >>> 1) ^ -(z & 1));
+/** Plain zigzag codes of integers. */
+const codesOf = (vals) => Uint32Array.from(vals, (q) => ((q << 1) ^ (q >> 31)) >>> 0);
+
+/**
+ * The integers q[s * T + t] (S+1 = n knots of T tracks) of knot tracks (T, n) of zigzag differences of order
+ * `order`, decoded here independently of the client.
+ */
+function trackIntegers(codes, T, n, order) {
+  const z = plain(codes);
+  const q = new Array(n * T);
+  for (let t = 0; t < T; t++) {
+    let first = 0;
+    let v = 0;
+    for (let s = 0; s < n; s++) {
+      if (order === 1) v += z[t * n + s];
+      else v += first += z[t * n + s];
+      q[s * T + t] = v;
+    }
+  }
+  return q;
+}
+
+/** Knot tracks (T, n) of zigzag differences of order `order` of the integers p[s * T + t]. */
+function tracksOf(p, T, n, order) {
+  const d = new Array(T * n);
+  for (let t = 0; t < T; t++) {
+    for (let s = 0; s < n; s++) {
+      const at = (k) => (k < 0 ? 0 : p[k * T + t]);
+      d[t * n + s] = order === 1 ? at(s) - at(s - 1) : at(s) - 2 * at(s - 1) + at(s - 2);
+    }
+  }
+  return codesOf(d);
+}
+
+test('version 3 knots are the weights on the basis, summed in order, plus the residual, bit for bit', () => {
+  for (const c of man.cases.filter((x) => x.format_version === 3)) {
+    const p3 = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+    const { header, arrays } = decodeContainer(p3.coefficients.slice());
+    const clip = decodeClip(p3.topology, p3.coefficients);
+    assert.equal(header.format_version, 3);
+    const r = header.knot_rank;
+    const S = clip.nSegments;
+    const n = S + 1;
+    const T = clip.nCurves * 12;
+    assert.ok(r >= 1 && r < n);
+    assert.deepEqual(arrays.knots.shape, [clip.nCurves, 3, 4, n]);
+    const q = plain(arrays.knot_weights.data);
+    const p = trackIntegers(arrays.knots.data, T, n, header.knot_differences);
+    const step = arrays.knot_step.data;
+    const basis = arrays.knot_basis.data;
+    for (let s = 0; s <= S; s++) {
+      for (let i = 0; i < T; i++) {
+        let acc = 0;
+        for (let j = 0; j < r; j++) acc += q[j * T + i] * step[i >> 2] * basis[j * n + s];
+        acc += p[s * T + i] * step[i >> 2];
+        assert.equal(clip.knots[s * T + i], Math.fround(acc), c.name);
+      }
+    }
+  }
+});
+
+/**
+ * A version 3 part with weights (r, C, 3, 4) of the integers q, basis (r, S+1), residual integers p
+ * (S+1, C, 3, 4; zeros unless given) coded with `order` (default 1) differences, and steps as given.
+ */
+function withBasis(bytes, { rank, q, basis, step, residual, order = 1 }) {
+  return edited(bytes, ({ header, arrays }) => {
+    const C = arrays.knot_step.shape[0];
+    const n = basis.length / rank;
+    const T = C * 12;
+    header.format_version = 3;
+    header.knot_rank = rank;
+    header.knot_differences = order;
+    arrays.knots = {
+      dtype: '<u4',
+      shape: [C, 3, 4, n],
+      data: tracksOf(residual ?? new Array(n * T).fill(0), T, n, order),
+    };
+    arrays.knot_weights = { dtype: '<u4', shape: [rank, C, 3, 4], data: codesOf(q) };
+    arrays.knot_basis = { dtype: '<f4', shape: [rank, n], data: Float32Array.from(basis) };
+    if (step) arrays.knot_step = { ...arrays.knot_step, data: Float32Array.from(arrays.knot_step.data, step) };
+  });
+}
+
+test('a full-rank identity basis decodes to the knots of version 2 (knot_rank may be S + 1)', () => {
+  const { header, arrays } = decodeContainer(parts2.coefficients.slice());
+  const S = header.n_segments;
+  const n = S + 1;
+  const T = arrays.knot_step.shape[0] * 12;
+  // the version 2 integers q[track, s] (running sums of order knot_differences along s) as weights q[s, track]
+  const q = trackIntegers(arrays.knots.data, T, n, header.knot_differences);
+  const eye = Array.from({ length: n * n }, (_, i) => (Math.floor(i / n) === i % n ? 1 : 0));
+  const want = decodeClip(parts2.topology, parts2.coefficients);
+  const a = createEvaluator(want).evaluate(0.42);
+  const zeros = new Array(n * T).fill(0);
+  for (const order of [1, 2]) {
+    // all in the weights (zero residual), all in the residual (zero weights), or split between them
+    const half = q.map((v) => Math.trunc(v / 2));
+    for (const [weights, residual] of [
+      [q, zeros],
+      [zeros, q],
+      [half, q.map((v, i) => v - half[i])],
+    ]) {
+      const v3 = withBasis(parts2.coefficients, { rank: n, q: weights, basis: eye, residual, order });
+      const got = decodeClip(parts2.topology, v3);
+      assert.equal(got.header.format_version, 3);
+      assert.deepEqual(got.knots, want.knots);
+      assert.deepEqual(createEvaluator(got).evaluate(0.42), a);
+    }
+  }
+});
+
+test('a version 2 part with zero weights on any basis decodes to its own knots: the residual is its tracks', () => {
+  const want = decodeClip(parts2.topology, parts2.coefficients);
+  const c = edited(parts2.coefficients, ({ header, arrays }) => {
+    const C = arrays.knot_step.shape[0];
+    header.format_version = 3;
+    header.knot_rank = 2; // knot_differences and knots stay those of version 2
+    arrays.knot_weights = { dtype: '<u4', shape: [2, C, 3, 4], data: new Uint32Array(2 * C * 12) };
+    arrays.knot_basis = {
+      dtype: '<f4',
+      shape: [2, header.n_segments + 1],
+      data: Float32Array.from({ length: 2 * (header.n_segments + 1) }, (_, i) => 0.25 * i - 1),
+    };
+  });
+  assert.deepEqual(decodeClip(parts2.topology, c).knots, want.knots);
+});
+
+test('version 3 sums the basis tracks from j = 0 upwards in doubles, then rounds to float32', () => {
+  // per track the products 1, 2^53 and -2^53: (0 + 1 + 2^53) rounds to 2^53 (ties to even), so the
+  // ascending sum is 0; summed from j = r - 1 downwards it is 1
+  const { header, arrays } = decodeContainer(parts3.coefficients.slice());
+  const S = header.n_segments;
+  const T = arrays.knot_step.shape[0] * 12;
+  const q = [...new Array(T).fill(1), ...new Array(T).fill(2 ** 22), ...new Array(T).fill(-(2 ** 22))];
+  const basis = [...new Array(S + 1).fill(1), ...new Array(2 * (S + 1)).fill(2 ** 31)];
+  const c = withBasis(parts3.coefficients, { rank: 3, q, basis, step: () => 1 });
+  const clip = decodeClip(parts3.topology, c);
+  assert.ok(clip.knots.every((k) => Object.is(k, 0)));
+  // the total is rounded once, to float32: 1 + 3 * 2^-25 is more than half a float32 ulp above 1, so it
+  // rounds up to 1 + 2^-23 (a float32 accumulator would stay at 1)
+  const once = withBasis(parts3.coefficients, {
+    rank: 4,
+    q: new Array(4 * T).fill(1),
+    basis: [...new Array(S + 1).fill(1), ...new Array(3 * (S + 1)).fill(2 ** -25)],
+    step: () => 1,
+  });
+  assert.ok(decodeClip(parts3.topology, once).knots.every((k) => k === 1 + 2 ** -23));
+});
+
+test('version 3 adds the residual p * h after the basis sum, in doubles', () => {
+  const { header, arrays } = decodeContainer(parts3.coefficients.slice());
+  const S = header.n_segments;
+  const n = S + 1;
+  const T = arrays.knot_step.shape[0] * 12;
+  // basis products 2^53 then -2^53, residual 1: after the basis sum, (0 + 2^53 - 2^53) + 1 = 1; added first,
+  // (0 + 1 + 2^53) would round to 2^53 (ties to even) and the total would be 0
+  const q = [...new Array(T).fill(2 ** 22), ...new Array(T).fill(-(2 ** 22))];
+  const basis = new Array(2 * n).fill(2 ** 31);
+  for (const order of [1, 2]) {
+    const residual = new Array(n * T).fill(1);
+    const c = withBasis(parts3.coefficients, { rank: 2, q, basis, step: () => 1, residual, order });
+    assert.ok(decodeClip(parts3.topology, c).knots.every((k) => k === 1));
+  }
+  // a residual that varies along the tracks (differences of order 1 and 2), on steps of 2^-3 and a basis
+  // part of weights 3 on a ramp: knots = float32((3 h) * ramp[s] + p[s, t] h)
+  const h = 2 ** -3;
+  const ramp = Array.from({ length: n }, (_, s) => 0.1 * s - 0.35);
+  const residual = Array.from({ length: n * T }, (_, i) => ((i * 7919) % 23) - 11);
+  for (const order of [1, 2]) {
+    const q3 = new Array(T).fill(3);
+    const c = withBasis(parts3.coefficients, { rank: 1, q: q3, basis: ramp, step: () => h, residual, order });
+    const { knots } = decodeClip(parts3.topology, c);
+    for (let s = 0; s < n; s++) {
+      for (let t = 0; t < T; t++) {
+        const want = Math.fround(3 * h * Math.fround(ramp[s]) + residual[s * T + t] * h);
+        assert.equal(knots[s * T + t], want);
+      }
+    }
+  }
+});
+
+test('version 3 coefficients with a bad knot_rank, weights, basis, steps or residual tracks are rejected', () => {
+  const bad = (coef, pattern) => assert.throws(() => decodeClip(parts3.topology, coef), pattern);
+  const { header } = decodeContainer(parts3.coefficients.slice());
+  const S = header.n_segments;
+  const r = header.knot_rank;
+  const rankError = new RegExp(`coefficients knot_rank must be an integer in 1\\.\\.${S + 1}, got`);
+  for (const rank of [0, -1, S + 2, 1.5, '2', null, true, [2], undefined]) {
+    const c = edited(parts3.coefficients, ({ header: h }) => {
+      h.knot_rank = rank;
+    });
+    bad(c, rankError);
+  }
+  // another valid rank than the arrays': their shapes disagree
+  const lower = edited(parts3.coefficients, ({ header: h }) => {
+    h.knot_rank = r - 1 || r + 1;
+  });
+  bad(lower, /array 'knot_weights' has shape/);
+  // a version 2 part that claims version 3: no knot_rank (and no weights nor basis)
+  const claimed = edited(parts2.coefficients, ({ header: h }) => {
+    h.format_version = 3;
+  });
+  assert.throws(
+    () => decodeClip(parts2.topology, claimed),
+    /coefficients knot_rank must be an integer in 1\.\.\d+, got undefined/,
+  );
+  const edit = (name, change) =>
+    edited(parts3.coefficients, ({ arrays }) => {
+      arrays[name] = change(arrays[name]);
+    });
+  for (const name of ['knot_weights', 'knot_basis', 'knot_step', 'knots']) {
+    const missing = edited(parts3.coefficients, ({ arrays }) => {
+      delete arrays[name];
+    });
+    bad(missing, new RegExp(`coefficients part has no '${name}' array`));
+  }
+  // the residual tracks are read as version 2 knots: knot_differences 1 or 2, required
+  for (const order of [0, 3, -1, 1.5, '1', null, true, [1], undefined]) {
+    const c = edited(parts3.coefficients, ({ header: h }) => {
+      if (order === undefined) delete h.knot_differences;
+      else h.knot_differences = order;
+    });
+    const want = `coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`;
+    assert.throws(
+      () => decodeClip(parts3.topology, c),
+      (e) => e instanceof ClipFormatError && e.message.includes(want),
+    );
+  }
+  // shapes: the axes in another order, a flat array, a rank too many
+  bad(edit('knots', (a) => ({ ...a, shape: [a.shape[3], a.shape[0], 3, 4] })), /array 'knots' has shape/);
+  bad(edit('knots', (a) => ({ ...a, shape: [a.data.length] })), /array 'knots' has shape/);
+  const moved = edit('knot_weights', (a) => ({ ...a, shape: [a.shape[1], 3, 4, a.shape[0]] }));
+  bad(moved, /array 'knot_weights' has shape/);
+  bad(edit('knot_weights', (a) => ({ ...a, shape: [a.data.length] })), /array 'knot_weights' has shape/);
+  bad(edit('knot_basis', (a) => ({ ...a, shape: [a.shape[1], a.shape[0]] })), /array 'knot_basis' has shape/);
+  const extraRow = edit('knot_basis', (a) => ({
+    ...a,
+    shape: [a.shape[0] + 1, a.shape[1]],
+    data: new Float32Array(a.data.length + a.shape[1]),
+  }));
+  bad(extraRow, /array 'knot_basis' has shape/);
+  // dtypes: signed or float weights, a float64 basis, float64 steps
+  for (const [name, dtype, Type, want] of [
+    ['knot_weights', '<i4', Int32Array, '<u4'],
+    ['knot_weights', '<f4', Float32Array, '<u4'],
+    ['knot_basis', '<f8', Float64Array, '<f4'],
+    ['knot_step', '<f8', Float64Array, '<f4'],
+    ['knots', '<i4', Int32Array, '<u4'],
+    ['knots', '<f4', Float32Array, '<u4'],
+  ]) {
+    const c = edit(name, (a) => ({ ...a, dtype, data: Type.from(a.data) }));
+    bad(c, new RegExp(`array '${name}' has dtype ${dtype}, expected ${want}`));
+  }
+  // values: a non-finite basis, bad steps, knots that leave float32
+  for (const value of [NaN, Infinity, -Infinity]) {
+    bad(
+      edit('knot_basis', (a) => {
+        const d = Float32Array.from(a.data);
+        d[a.shape[1] - 1] = value;
+        return { ...a, data: d };
+      }),
+      /array 'knot_basis' has non-finite values/,
+    );
+  }
+  for (const [value, pattern] of [
+    [0, /knot steps must be positive/],
+    [-1, /knot steps must be positive/],
+    [NaN, /array 'knot_step' has non-finite values/],
+  ]) {
+    bad(
+      edit('knot_step', (a) => {
+        const d = Float32Array.from(a.data);
+        d[1] = value;
+        return { ...a, data: d };
+      }),
+      pattern,
+    );
+  }
+  const T = decodeClip(parts3.topology, parts3.coefficients).nCurves * 12;
+  const huge = withBasis(parts3.coefficients, {
+    rank: 1,
+    q: new Array(T).fill(2 ** 20),
+    basis: new Array(S + 1).fill(3e38),
+    step: () => 1,
+  });
+  bad(huge, /coefficients knots decode to non-finite values/);
+  // a residual alone that leaves float32 (zero weights): 2 * 3e38
+  const hugeResidual = withBasis(parts3.coefficients, {
+    rank: 1,
+    q: new Array(T).fill(0),
+    basis: new Array(S + 1).fill(1),
+    step: () => 3e38,
+    residual: new Array((S + 1) * T).fill(2),
+  });
+  bad(hugeResidual, /coefficients knots decode to non-finite values/);
+  // the version 2 checks still apply: space kinds and signed m
+  const badKind = edit('space_kind', (a) => {
+    const d = Uint8Array.from(a.data);
+    d[0] = 2;
+    return { ...a, data: d };
+  });
+  bad(badKind, /space kinds must be 0 or 1/);
 });

@@ -9,9 +9,14 @@ export declare const CONTAINER_VERSION: 2;
 export declare const CONTAINER_VERSIONS: readonly [1, 2];
 /** Array encodings of container version 2 (decoded with the fzstd package). */
 export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
-/** The newest dynamic-pde format version read; DYNAMIC_FORMAT_VERSIONS lists all (2: integer codes). */
-export declare const DYNAMIC_FORMAT_VERSION: 2;
-export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2];
+/**
+ * The newest dynamic-pde format version read (of a coefficients part); DYNAMIC_FORMAT_VERSIONS lists all
+ * (2: integer codes; 3: knots on a shared low-rank time basis plus residual tracks, coefficients part only).
+ */
+export declare const DYNAMIC_FORMAT_VERSION: 3;
+export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2, 3];
+/** The dynamic-pde format versions read in a topology part (version 3 changes the coefficients part only). */
+export declare const DYNAMIC_TOPOLOGY_VERSIONS: readonly [1, 2];
 
 /** Thrown for anything that is not a valid pdeanim container, part, clip or CLIP file. */
 export declare class ClipFormatError extends Error {
@@ -85,6 +90,7 @@ export interface DynamicClip extends ClipBase {
   family: Uint8Array;
   m: Float32Array;
   D: Float32Array;
+  /** Knots (S+1, C, 3, 4) as float32, decoded (format versions 2 and 3 store them as integer codes). */
   knots: Float32Array;
   rigid: RigidTracks | null;
 }

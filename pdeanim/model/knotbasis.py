@@ -1,0 +1,113 @@
+"""A low-rank time basis shared by the knot tracks of all curves (format version 3, docs/format.md §3.9).
+
+The knots (S+1, C, 3, 4) are C * 12 time tracks of S+1 values. Where the motion is a blend of a few shapes
+(morph targets, a few dominant modes), the tracks span only a few directions in time, so ``knots[s, c, w, k]
+~ sum_j weights[j, c, w, k] * basis[j, s]`` with r << S+1 stores r values per track plus r * (S+1) shared
+ones. The basis is the leading right singular vectors of the tracks weighted by how much each moves the
+vertices. Weights and a residual track are integer codes on the same power-of-two step as version 2 knots,
+and the residual takes whatever the basis misses, so every knot is rounded exactly as well as in version 2
+(at most half a step) while tracks that follow the basis store residual codes of about zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..curveset import CurveSet
+from .quantise import MAX_CODE, _pair_max, _vertex_basis
+
+TRUNCATION_SHARES = (1.0, 0.5, 0.25)
+"""Ranks tried: for each share, the smallest rank whose truncation alone moves the vertices by at most that
+share of what rounding the knots to their steps does (RMS, estimated; the residual takes the truncation back
+where it exceeds half a step); the writer keeps the smallest encoding."""
+MAX_RANK_SHARE = 0.75
+"""A rank above this share of the knot count saves too little to be worth trying."""
+
+
+@dataclass
+class KnotBasis:
+    """Integer weights (r, C, 3, 4) and residual codes (S+1, C, 3, 4), both int64 on the knot steps (C, 3),
+    and the basis (r, S+1) float32."""
+
+    weights: np.ndarray
+    residual: np.ndarray
+    basis: np.ndarray
+
+    @property
+    def rank(self) -> int:
+        """Number of basis tracks r."""
+        return int(self.basis.shape[0])
+
+
+def basis_part(codes: np.ndarray, steps: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """(S+1, C, 3, 4) float64 sum over j (ascending, from 0) of (code * step) * basis[j, s]: the decoder's
+    exact arithmetic (each product and partial sum rounded as an IEEE double, no fused multiply-add)."""
+    q = np.asarray(codes, np.float64) * np.asarray(steps, np.float64)[None, :, :, None]  # (r, C, 3, 4)
+    b = np.asarray(basis, np.float64)  # (r, S+1)
+    acc = np.zeros((b.shape[1], *q.shape[1:]))
+    for j in range(len(b)):
+        acc += b[j][:, None, None, None] * q[j][None]
+    return acc
+
+
+def knots_from_basis(codes: np.ndarray, residual: np.ndarray, steps: np.ndarray, basis: np.ndarray
+                     ) -> np.ndarray:
+    """Knots (S+1, C, 3, 4) float32 = float32(basis part + residual * step), in doubles (§3.9)."""
+    acc = basis_part(codes, steps, basis)
+    acc += np.asarray(residual, np.float64) * np.asarray(steps, np.float64)[None, :, :, None]
+    with np.errstate(over="ignore"):  # a value beyond float32 becomes inf, which the reader refuses
+        return acc.astype(np.float32)
+
+
+def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
+                     knots: np.ndarray, steps: np.ndarray, loop: bool) -> list[KnotBasis]:
+    """Encodings of the knots on a basis, one per distinct rank of TRUNCATION_SHARES, below MAX_RANK_SHARE of
+    the knot count. Every knot decodes within half a step of ``steps`` (C, 3), as in version 2. ``loop``
+    keeps the basis's first and last columns equal, so equal first and last knots stay equal."""
+    knots = np.asarray(knots, np.float64)
+    K, C = knots.shape[0], curves.n_curves
+    if K < 3 or C == 0:
+        return []
+    cid, B = _vertex_basis(curves, u, family, D)
+    V = max(len(u), 1)
+    weight = np.zeros((C, 3, 4))
+    np.add.at(weight, cid, B * B)
+    weight *= (_pair_max(family, m) ** 2)[..., None]  # how much a unit track error moves the vertices
+    tracks = np.moveaxis(knots, 0, -1).reshape(-1, K)  # (C * 12, K)
+    root = np.sqrt(weight).reshape(-1, 1)
+    _, sigma, vt = np.linalg.svd(np.linalg.qr(root * tracks, mode="r"))  # QR first: (K, K), same spectrum
+    tail = np.concatenate([np.cumsum((sigma**2)[::-1])[::-1], [0.0]]) / (V * K)  # tail[r]: drop r..
+    rounding = float(np.sum(weight * (np.asarray(steps, np.float64) ** 2)[..., None])) / (12.0 * V)
+    out, ranks = [], set()
+    for share in TRUNCATION_SHARES:
+        r = int(np.argmax(tail <= share**2 * rounding))
+        if 1 <= r <= MAX_RANK_SHARE * K and r not in ranks:
+            ranks.add(r)
+            found = _on_basis(knots, tracks, vt[:r], steps, loop)
+            if found is not None:
+                out.append(found)
+    return out
+
+
+def _on_basis(knots: np.ndarray, tracks: np.ndarray, rows: np.ndarray, steps: np.ndarray, loop: bool
+              ) -> KnotBasis | None:
+    """The knots on the basis ``rows`` (r, K): least-squares weights rounded to the steps, and the rounded
+    residual of what the decoder's basis part leaves; None if a code would leave the int32-safe range."""
+    r, K = rows.shape
+    C = steps.shape[0]
+    basis = rows.astype(np.float32)
+    if loop:
+        basis[:, -1] = basis[:, 0]
+    b = basis.astype(np.float64)
+    coef = np.linalg.lstsq(b.T, tracks.T, rcond=None)[0].T  # (C * 12, r)
+    h = np.asarray(steps, np.float64)
+    weights = np.rint(np.moveaxis(coef.reshape(C, 3, 4, r), -1, 0) / h[None, :, :, None])
+    if not np.all(np.abs(weights) <= MAX_CODE):
+        return None
+    weights = weights.astype(np.int64)
+    residual = np.rint((knots - basis_part(weights, steps, basis)) / h[None, :, :, None])
+    if not np.all(np.abs(residual) <= MAX_CODE):
+        return None
+    return KnotBasis(weights, residual.astype(np.int64), basis)
