@@ -138,7 +138,8 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         + (" (the curves' spatial floor is above the target)" if r.get("floor_exceeds_target") else ""),
         f"bytes: topology {s['topology_bytes']}, coefficients {s['coefficients_bytes']}, "
         f"raw float32 {s['raw_float32_bytes']} (coefficients {100 * s['ratio_coefficients_to_raw']:.2f}% "
-        f"of raw, total {100 * s['ratio_total_to_raw']:.2f}%)",
+        f"of raw, total {100 * s['ratio_total_to_raw']:.2f}%), format version {r.get('format_version')}"
+        + (f" (knots on {r['knot_rank']} shared time tracks)" if r.get("knot_rank") else ""),
         f"time {seconds:.2f} s -> {out}",
     ]
     return "\n".join(lines)

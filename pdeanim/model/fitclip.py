@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import container
 from ..clip import ClipParts
 from ..container import ZSTD_LEVEL
 from ..curveset import CurveSet
@@ -264,6 +265,9 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     report["quantisation_knot_rms"] = quant.knot_rms
     report["quantisation_knot_cap"] = quant.knot_cap
     parts = _encode(p, sf.curves, space, fitted, options, poses, _header_errors(report), quant)
+    header = container.unpack(parts.coefficients)[0]
+    report["format_version"] = header["format_version"]
+    report["knot_rank"] = header.get("knot_rank")  # shared time tracks of version 3, None without
     parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
     report_progress(1.0, "done")
     return parts
@@ -513,8 +517,6 @@ def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage,
 
 
 def _decode(parts: ClipParts):
-    from .. import container
-
     th, ta = container.unpack(parts.topology)
     ch, ca = container.unpack(parts.coefficients)
     return clip_from_parts(th, ta, ch, ca)

@@ -24,6 +24,8 @@ share of what rounding the knots to their steps does (RMS, estimated; the residu
 where it exceeds half a step); the writer keeps the smallest encoding."""
 MAX_RANK_SHARE = 0.75
 """A rank above this share of the knot count saves too little to be worth trying."""
+MAX_RANK = 96
+"""Nor above this many shared tracks: decoding costs r multiply-adds per knot value."""
 
 
 @dataclass
@@ -83,7 +85,7 @@ def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.
     out, ranks = [], set()
     for share in TRUNCATION_SHARES:
         r = int(np.argmax(tail <= share**2 * rounding))
-        if 1 <= r <= MAX_RANK_SHARE * K and r not in ranks:
+        if 1 <= r <= min(MAX_RANK_SHARE * K, MAX_RANK) and r not in ranks:
             ranks.add(r)
             found = _on_basis(knots, tracks, vt[:r], steps, loop)
             if found is not None:

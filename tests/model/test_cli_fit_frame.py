@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 
+from pdeanim import container
 from pdeanim.cli import main
 from pdeanim.clip import load_clip_file, read_clip_file
 from pdeanim.poses import make_poses, save_poses
@@ -51,6 +52,8 @@ def test_fit_meets_target_and_prints_summary(fit_run, poses_file):
     assert lines[3].startswith(f"bytes: topology {len(parts.topology)}, "
                                f"coefficients {len(parts.coefficients)}, "
                                f"raw float32 {frames * vertices * 12} ")
+    version = container.unpack(parts.coefficients)[0]["format_version"]
+    assert f"), format version {version}" in lines[3]
     assert lines[4].startswith("time ") and lines[4].endswith(f" s -> {clip_file}")
 
 
