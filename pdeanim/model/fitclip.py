@@ -247,7 +247,7 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
             and DENSE_FROM * (len(p.t) - 1) <= best.fitted.segm.n_segments < dense):
         report_progress(0.86, f"dense fit ({dense} segments)")
         cand = _candidate(p, sf, options, poses, None, dense)
-        if cand.meets and _smaller(p, sf, options, poses, cand, best):
+        if cand.meets and _preferred(p, sf, options, poses, cand, best):
             best = cand
     t_time = time.perf_counter()
     report_progress(0.97, "report")
@@ -274,16 +274,24 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
 
 
 CLOSE_SIZES = 0.15
-"""Candidates whose trial sizes lie within this share of each other are compared at the final zstd level:
-trial sizes can tie where the final ones differ (pdance at 3e-3: 452 KB both at level 3, 358 KB against
-405 KB at level 19)."""
+"""Candidates whose trial sizes lie within this share of each other are close: the one with a clearly lower
+max error is kept (AnimatedMorphSphere at 3e-3: 9.6 KB with rel-max 0.0048 instead of 9.2 KB with 0.024),
+else they are compared at the final zstd level (trial sizes can tie where the final ones differ: pdance at
+3e-3, 452 KB both at level 3, 358 KB against 405 KB at level 19)."""
+CLEARLY_LOWER_MAX = 0.75
+"""A close candidate's max error is clearly lower below this share of the other's."""
 
 
-def _smaller(p: _Problem, sf: _SpaceFit, options: FitOptions, poses: Poses, a: _Candidate, b: _Candidate
-             ) -> bool:
-    """Whether candidate ``a`` stores smaller than ``b`` (final sizes where the trial sizes are close)."""
+def _preferred(p: _Problem, sf: _SpaceFit, options: FitOptions, poses: Poses, a: _Candidate, b: _Candidate
+               ) -> bool:
+    """Whether candidate ``a`` is kept over ``b``: the smaller, or of two close in size the one with a clearly
+    lower max error, else the smaller at the final zstd level."""
     if abs(a.size - b.size) > CLOSE_SIZES * min(a.size, b.size):
         return a.size < b.size
+    F = poses.n_frames
+    worst = [float(np.linalg.norm(c.approx[:F].astype(np.float64) - p.X[:F], axis=-1).max()) for c in (a, b)]
+    if worst[0] < CLEARLY_LOWER_MAX * worst[1] or worst[1] < CLEARLY_LOWER_MAX * worst[0]:
+        return worst[0] < worst[1]
 
     def final(c: _Candidate) -> int:
         parts = _encode(p, sf.curves, sf.space, c.fitted, options, poses, None, c.quant)
@@ -403,11 +411,14 @@ fit's tightest target per coordinate."""
 QUANT_BUDGET = 0.8
 """With an RMS target only, the knots' rounding may take this share of what the fit leaves of the target
 (target^2 - fit rms^2, less the rest pose's share)."""
-KNOT_CAP = 4.0
+KNOT_CAP = 2.0
 """With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
 QUANT_RETRIES = 6
 QUANT_FILL = 0.9
-"""The knots' rounding grows (x 1.4) while the stored clip's RMS stays below this share of an RMS target."""
+"""The knots' rounding grows while the stored clip's RMS stays below this share of an RMS target."""
+QUANT_AIM = 0.95
+"""Each growth aims the stored clip's RMS at this share of the target: the rounding's share of the mean
+square error is taken as proportional to the knots' budget squared (between x 1.2 and x 4 per step)."""
 
 
 @dataclass
@@ -426,11 +437,11 @@ class _Quantisation:
             return None if x is None else x / 2
         return _Quantisation(half(self.tolerance), half(self.knot_rms), half(self.knot_cap), self.cap_limit)
 
-    def coarser(self) -> _Quantisation:
-        """1.4 x the knots' rounding (the cap no further than what a max target leaves)."""
+    def coarser(self, factor: float) -> _Quantisation:
+        """``factor`` x the knots' rounding (the cap no further than what a max target leaves)."""
         assert self.knot_rms is not None and self.knot_cap is not None
-        return _Quantisation(self.tolerance, 1.4 * self.knot_rms, min(1.4 * self.knot_cap, self.cap_limit),
-                             self.cap_limit)
+        return _Quantisation(self.tolerance, factor * self.knot_rms,
+                             min(factor * self.knot_cap, self.cap_limit), self.cap_limit)
 
 
 def _first_quantisation(targets: Targets, exact: np.ndarray, options: FitOptions) -> _Quantisation:
@@ -476,10 +487,20 @@ def _quantised(p: _Problem, sf: _SpaceFit, space: SpaceStage, fitted: TimeStage,
             quant = quant.finer()
             continue
         best = found
-        if quant.knot_rms is None or np.sqrt(np.mean(d * d)) > QUANT_FILL * sf.targets.rms:
+        stored = float(np.mean(d * d))
+        if quant.knot_rms is None or np.sqrt(stored) > QUANT_FILL * sf.targets.rms:
             return best
-        quant = quant.coarser()
+        quant = quant.coarser(_growth(stored, float(np.mean(exact[:F] ** 2)), sf.targets.rms))
     return best or found
+
+
+def _growth(stored: float, exact: float, target: float) -> float:
+    """Factor on the knots' budget that should bring the stored mean square error ``stored`` to QUANT_AIM of
+    the RMS ``target``, the rounding adding ``stored - exact`` (proportional to the budget squared)."""
+    added = stored - exact
+    if added <= 0:
+        return 4.0
+    return float(np.clip(np.sqrt(max((QUANT_AIM * target) ** 2 - exact, 0.0) / added), 1.2, 4.0))
 
 
 def _meets(targets: Targets, d: np.ndarray) -> bool:
