@@ -50,6 +50,10 @@ class Settings(BaseSettings):
     max_header_bytes: int = Field(32 * 1024, gt=0, description="largest total size of a request's headers")
     access_log: bool = Field(True, description="one log line per request (logger pdeanim.access, level INFO)")
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
+    clip_cache_bytes: int = Field(
+        1024**3, ge=0, description="memory of the parsed clips kept in each API process (their evaluation "
+        "tables grow with segments x vertices); the least recently used are dropped beyond it, the newest is "
+        "always kept; 0 = no bound")
     cors_origins: str = Field("", description="comma-separated origins allowed by CORS (``*`` for any); "
                               "empty = CORS off")
     frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0, description="encoded frame and animation GLBs "

@@ -416,6 +416,9 @@ KNOT_CAP = 2.0
 QUANT_RETRIES = 6
 QUANT_FILL = 0.9
 """The knots' rounding grows while the stored clip's RMS stays below this share of an RMS target."""
+BISECT_UNTIL = 1.15
+"""When a grown rounding misses the target, the budget is bisected (geometric mean) between it and the last
+one that met it while they differ by more than this factor (and retries remain)."""
 QUANT_AIM = 0.95
 """Each growth aims the stored clip's RMS at this share of the target: the rounding's share of the mean
 square error is taken as proportional to the knots' budget squared (between x 1.2 and x 4 per step)."""
@@ -472,7 +475,7 @@ def _quantised(p: _Problem, sf: _SpaceFit, space: SpaceStage, fitted: TimeStage,
     well inside an RMS target (the estimate of the noise is conservative)."""
     F = poses.n_frames
     quant = _first_quantisation(sf.targets, exact[:F], options)
-    best = None
+    best, missed = None, None  # the coarsest rounding that met the targets; the finest grown one that did not
     for _ in range(QUANT_RETRIES + 1):
         parts = _encode(p, sf.curves, space, fitted, options, poses, None, quant, TRIAL_LEVEL)
         clip = _decode(parts)
@@ -482,15 +485,23 @@ def _quantised(p: _Problem, sf: _SpaceFit, space: SpaceStage, fitted: TimeStage,
             return found
         d = np.linalg.norm(approx[:F].astype(np.float64) - p.X[:F], axis=-1)
         if not _meets(sf.targets, d):
-            if best is not None:
+            if best is None:
+                quant = quant.finer()
+                continue
+            missed = quant
+        else:
+            best = found
+            if quant.knot_rms is None or np.sqrt(np.mean(d * d)) > QUANT_FILL * sf.targets.rms:
                 return best
-            quant = quant.finer()
+        good = best[0]
+        if missed is None:
+            quant = good.coarser(_growth(float(np.mean(d * d)), float(np.mean(exact[:F] ** 2)),
+                                         sf.targets.rms))
             continue
-        best = found
-        stored = float(np.mean(d * d))
-        if quant.knot_rms is None or np.sqrt(stored) > QUANT_FILL * sf.targets.rms:
+        gap = missed.knot_rms / good.knot_rms  # a grown rounding missed: halve the gap (in log) between them
+        if gap < BISECT_UNTIL:
             return best
-        quant = quant.coarser(_growth(stored, float(np.mean(exact[:F] ** 2)), sf.targets.rms))
+        quant = good.coarser(float(np.sqrt(gap)))
     return best or found
 
 

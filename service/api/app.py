@@ -47,7 +47,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app = FastAPI(title="pdeanim", version=API_VERSION, description=DESCRIPTION, lifespan=lifespan,
                   docs_url=None, redoc_url=None)
     app.state.store = store
-    app.state.clip_cache = ClipCache(settings.max_clip_cache)
+    app.state.clip_cache = ClipCache(settings.max_clip_cache, settings.clip_cache_bytes)
     app.state.frame_cache = BodyCache(settings.frame_cache_bytes)
     app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
     install_error_handlers(app)

@@ -9,6 +9,8 @@ from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class CachedClip:
@@ -20,14 +22,46 @@ class CachedClip:
     clip: Any  # pdeanim.clip.Clip
     frame_glb: Any  # pdeanim.gltf.write.FrameGlb of the clip's topology: positions (V, 3) -> GLB bytes
 
+    @property
+    def nbytes(self) -> int:
+        """Memory of the clip's arrays (a dense clip's evaluation tables: (S+1) x V x 3 floats)."""
+        return array_bytes(self.clip) + array_bytes(self.frame_glb)
+
+
+def array_bytes(obj: Any, depth: int = 3) -> int:
+    """Bytes of the numpy arrays held by ``obj``'s attributes (and their attributes, lists and dicts, down to
+    ``depth`` levels); shared arrays count once."""
+    seen: set[int] = set()
+
+    def walk(x: Any, level: int) -> int:
+        if isinstance(x, np.ndarray):
+            base = x if x.base is None else x.base
+            if id(base) in seen:
+                return 0
+            seen.add(id(base))
+            return int(getattr(base, "nbytes", x.nbytes))
+        if level <= 0 or isinstance(x, (str, bytes, int, float, bool)) or x is None:
+            return 0
+        if isinstance(x, dict):
+            return sum(walk(v, level - 1) for v in x.values())
+        if isinstance(x, (list, tuple)):
+            return sum(walk(v, level - 1) for v in x)
+        attrs = getattr(x, "__dict__", None)
+        return sum(walk(v, level - 1) for v in attrs.values()) if attrs else 0
+
+    return walk(obj, depth)
+
 
 class ClipCache:
-    """LRU of at most ``max_entries`` clips; loading happens outside the lock (a duplicate load is
-    harmless)."""
+    """LRU of at most ``max_entries`` clips holding at most ``max_bytes`` of arrays in total (the most recent
+    clip is kept whatever its size); loading happens outside the lock (a duplicate load is harmless)."""
 
-    def __init__(self, max_entries: int):
+    def __init__(self, max_entries: int, max_bytes: int = 0):
         self.max_entries = max(1, int(max_entries))
+        self.max_bytes = max(0, int(max_bytes))  # 0: no byte bound
         self._items: OrderedDict[str, CachedClip] = OrderedDict()
+        self._sizes: dict[str, int] = {}
+        self._size = 0
         self._lock = threading.Lock()
         self.hits = self.misses = 0
 
@@ -50,17 +84,29 @@ class ClipCache:
                 return item
             self.misses += 1
         item = load()
+        size = item.nbytes if self.max_bytes else 0
         with self._lock:
+            self._drop(clip_id)
             self._items[clip_id] = item
-            self._items.move_to_end(clip_id)
-            while len(self._items) > self.max_entries:
-                self._items.popitem(last=False)
+            self._sizes[clip_id] = size
+            self._size += size
+            while len(self._items) > self.max_entries or (
+                    self.max_bytes and self._size > self.max_bytes and len(self._items) > 1):
+                self._drop(next(iter(self._items)))
         return item
+
+    def _drop(self, clip_id: str) -> None:
+        if self._items.pop(clip_id, None) is not None:
+            self._size -= self._sizes.pop(clip_id, 0)
 
     def evict(self, clip_id: str) -> None:
         """Forget a clip (deleted), so this process answers 404 for it from now on."""
         with self._lock:
-            self._items.pop(clip_id, None)
+            self._drop(clip_id)
+
+    def size(self) -> int:
+        """Bytes of the cached clips' arrays (0 when the cache has no byte bound)."""
+        return self._size
 
     def __len__(self) -> int:
         return len(self._items)

@@ -252,3 +252,15 @@ def test_topology_whose_curves_miss_a_vertex_is_an_error(fixed_fit):
     assert len(first) > 1 and short.n_curves == topo.curves.n_curves
     with pytest.raises(ClipFormatError, match="do not cover every vertex"):
         DynamicClip(replace(topo, curves=short), coef)
+
+
+def test_rounding_growth_aims_at_the_target():
+    """The knots' budget grows by the factor that would bring the stored MSE to QUANT_AIM of the target
+    (the rounding's share of the MSE taken as proportional to the budget squared), within [1.2, 4]."""
+    from pdeanim.model.fitclip import QUANT_AIM, _growth
+
+    g = _growth(stored=0.5**2, exact=0.3**2, target=1.0)
+    assert g == pytest.approx(np.sqrt(((QUANT_AIM**2) - 0.09) / (0.25 - 0.09)))
+    assert 0.09 + (0.25 - 0.09) * g**2 == pytest.approx(QUANT_AIM**2)
+    assert _growth(stored=0.09, exact=0.09, target=1.0) == 4.0  # rounding added nothing measurable
+    assert _growth(stored=0.9, exact=0.1, target=1.0) == 1.2  # already close: the smallest step

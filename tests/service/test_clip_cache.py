@@ -1,0 +1,48 @@
+"""The decoded-clip cache of the API processes: bounded by entries and by the memory of the clips' arrays
+(a dense clip's evaluation tables grow with segments x vertices)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pdeanim.clip import load_clip_file
+from pdeanim.gltf.write import FrameGlb
+from service.api.cache import CachedClip, ClipCache, array_bytes
+
+FIXTURES = Path(__file__).resolve().parents[2] / "clients" / "js" / "test" / "fixtures"
+
+
+def _item(name: str) -> CachedClip:
+    clip = load_clip_file(FIXTURES / name)
+    return CachedClip("tenant", f"key-{name}", f"topo-{name}", clip, FrameGlb(clip.faces, clip.n_vertices))
+
+
+def test_array_bytes_counts_the_evaluation_tables_once():
+    item = _item("fit-blend-displacement-chord-loop-v3.clip")
+    fields = item.clip._knot_fields  # (S+1, V*3) float32: the table that grows with segments x vertices
+    assert fields.nbytes > 0
+    assert item.nbytes >= fields.nbytes
+    shared = np.zeros(1000)
+    assert array_bytes({"a": shared, "b": [shared, shared[10:]]}) == shared.nbytes
+
+
+def test_the_cache_drops_the_least_recent_clips_beyond_its_bytes_and_keeps_the_newest():
+    names = ["fit-blend-displacement-chord-loop-v3.clip", "synthetic-blend-displacement-paper-v3.clip",
+             "synthetic-blend-rigid-chord-loop-v3.clip"]
+    items = {n: _item(n) for n in names}
+    smallest = min(i.nbytes for i in items.values())
+    cache = ClipCache(max_entries=32, max_bytes=smallest + 1)  # never room for two clips
+    for n in names:
+        assert cache.get(n, lambda n=n: items[n]) is items[n]
+        assert len(cache) == 1 and cache.peek(n) is items[n]
+        assert cache.size() == items[n].nbytes
+    tiny = ClipCache(max_entries=32, max_bytes=1)  # smaller than any clip: the newest is still served and kept
+    assert tiny.get(names[0], lambda: items[names[0]]) is items[names[0]] and len(tiny) == 1
+    roomy = ClipCache(max_entries=2, max_bytes=0)  # no byte bound: the entry count still applies
+    for n in names:
+        roomy.get(n, lambda n=n: items[n])
+    assert len(roomy) == 2 and roomy.peek(names[0]) is None and roomy.size() == 0
+    cache.evict(names[-1])
+    assert len(cache) == 0 and cache.size() == 0
