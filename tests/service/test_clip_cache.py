@@ -38,7 +38,7 @@ def test_the_cache_drops_the_least_recent_clips_beyond_its_bytes_and_keeps_the_n
         assert cache.get(n, lambda n=n: items[n]) is items[n]
         assert len(cache) == 1 and cache.peek(n) is items[n]
         assert cache.size() == items[n].nbytes
-    tiny = ClipCache(max_entries=32, max_bytes=1)  # smaller than any clip: the newest is still served and kept
+    tiny = ClipCache(max_entries=32, max_bytes=1)  # below any clip: the newest is still served and kept
     assert tiny.get(names[0], lambda: items[names[0]]) is items[names[0]] and len(tiny) == 1
     roomy = ClipCache(max_entries=2, max_bytes=0)  # no byte bound: the entry count still applies
     for n in names:
