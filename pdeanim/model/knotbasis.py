@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..curveset import CurveSet
-from .quantise import MAX_CODE, _pair_max, _vertex_basis
+from .quantise import MAX_CODE, pair_max, vertex_basis
 
 TRUNCATION_SHARES = (1.0, 0.5, 0.25)
 """Ranks tried: for each share, the smallest rank whose truncation alone moves the vertices by at most that
@@ -72,11 +72,11 @@ def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.
     K, C = knots.shape[0], curves.n_curves
     if K < 3 or C == 0:
         return []
-    cid, B = _vertex_basis(curves, u, family, D)
+    cid, B = vertex_basis(curves, u, family, D)
     V = max(len(u), 1)
     weight = np.zeros((C, 3, 4))
     np.add.at(weight, cid, B * B)
-    weight *= (_pair_max(family, m) ** 2)[..., None]  # how much a unit track error moves the vertices
+    weight *= (pair_max(family, m) ** 2)[..., None]  # how much a unit track error moves the vertices
     tracks = np.moveaxis(knots, 0, -1).reshape(-1, K)  # (C * 12, K)
     root = np.sqrt(weight).reshape(-1, 1)
     _, sigma, vt = np.linalg.svd(np.linalg.qr(root * tracks, mode="r"))  # QR first: (K, K), same spectrum

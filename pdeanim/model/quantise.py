@@ -105,7 +105,7 @@ def dequantise(q: np.ndarray, step: float | np.ndarray, origin: float | np.ndarr
         np.float32)
 
 
-def _vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.ndarray
+def vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
     """(curve id (V,), space basis (V, 3, 4)) of every vertex and coordinate."""
     V = len(u)
@@ -120,7 +120,7 @@ def _vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.nda
     return cid, B
 
 
-def _pair_max(family: np.ndarray, m: np.ndarray) -> np.ndarray:
+def pair_max(family: np.ndarray, m: np.ndarray) -> np.ndarray:
     """(C, 3) bound of phi0 + phi1 over every segment: 1 for exp and linear time, 1 / cos(m/2) for trig."""
     m_trig = np.where(np.asarray(family) >= 2, np.asarray(m, np.float64), 0.0).max(axis=0)
     return 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
@@ -133,10 +133,10 @@ def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarra
 
     A knot error of at most step/2 moves a vertex by at most step/2 * sum_k |S_k(u)| * max_tau (phi0 + phi1).
     """
-    cid, B = _vertex_basis(curves, u, family, D)
+    cid, B = vertex_basis(curves, u, family, D)
     sens = np.zeros((curves.n_curves, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    return _power_of_two(2.0 * tolerance / np.maximum(sens * _pair_max(family, m), 1e-30), knots)
+    return _power_of_two(2.0 * tolerance / np.maximum(sens * pair_max(family, m), 1e-30), knots)
 
 
 def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
@@ -148,9 +148,9 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     h^2 / 12 * sum_k S_k(u)^2 * (phi0^2 + phi1^2) to a coordinate's variance. Fewest bits for a given total:
     every curve and coordinate contributes the same share of rms^2 (each has the same number of knots).
     """
-    cid, B = _vertex_basis(curves, u, family, D)
+    cid, B = vertex_basis(curves, u, family, D)
     V, C = len(u), curves.n_curves
-    pair = _pair_max(family, m)
+    pair = pair_max(family, m)
     weight = np.zeros((C, 3))
     np.add.at(weight, cid, (B * B).sum(-1))  # sum over the curve's vertices of sum_k S_k^2
     weight *= pair**2 / (12.0 * max(V, 1))
