@@ -1,8 +1,10 @@
 """The "dynamic-pde" clip format: a topology part and a coefficients part, both pdeanim containers.
 
-Version 2 (written by default) stores the same model as version 1 below, coded as integers: error-bounded
-steps (:mod:`pdeanim.model.quantise`), zigzag differences along time or along the curves, and zstd in the
-container (docs/format.md §3.8). Version 1 is still read, and written on request.
+Version 2 stores the same model as version 1 below, coded as integers: error-bounded steps
+(:mod:`pdeanim.model.quantise`), zigzag differences along time or along the curves, and zstd in the container
+(docs/format.md §3.7). Version 3 (written by default where it is smaller, else version 2) changes only how
+the coefficients part stores the knots: weights on a few shared time tracks plus residual tracks
+(:mod:`pdeanim.model.knotbasis`, §3.9). Versions 1 and 2 are still read, and written on request.
 
 Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + curve layout + rest pose)::
 

@@ -1,4 +1,4 @@
-"""Error-bounded integer coding of the dynamic-PDE arrays for format version 2 (docs/format.md §3.8).
+"""Error-bounded integer coding of the dynamic-PDE arrays for format versions 2 and 3 (docs/format.md §3.7).
 
 Every quantised quantity is an integer times a step; the steps are chosen so that rounding moves no vertex
 coordinate by more than a tolerance. Integer tracks are stored as zigzag-coded differences, which are small
