@@ -361,10 +361,16 @@ def method_keyframes(X: np.ndarray, faces: np.ndarray) -> list[dict]:
 def method_heldout(X: np.ndarray, faces: np.ndarray, target: float) -> list[dict]:
     """Fit from every 4th frame; error on the frames left out vs linear and Catmull-Rom of the kept frames.
 
-    The fit's target on the kept frames is the tighter of ``target`` and a quarter of linear interpolation's
-    held-out error (a fit that misses the kept frames by more than linear misses the others cannot win)."""
+    The fit's target on the kept frames is the tighter of ``target`` and a quarter of the held-out error of
+    the better interpolant (a fit that misses the kept frames by more than the interpolants miss the others
+    cannot match them)."""
     from pdeanim.model.fitclip import FitOptions
-    from pdeanim.model.heldout import heldout_comparison, kept_frames, linear_interpolation
+    from pdeanim.model.heldout import (
+        catmull_rom_interpolation,
+        heldout_comparison,
+        kept_frames,
+        linear_interpolation,
+    )
     from pdeanim.poses import make_poses
 
     keep = kept_frames(len(X), 4)
@@ -373,7 +379,10 @@ def method_heldout(X: np.ndarray, faces: np.ndarray, target: float) -> list[dict
     lin = error_summary(
         X[out_idx], linear_interpolation(times[keep], X[keep], times[out_idx]), bbox_diagonal(X[0])
     )
-    fit_target = float(min(target, 0.25 * lin["rel_rms"]))
+    cr = error_summary(
+        X[out_idx], catmull_rom_interpolation(times[keep], X[keep], times[out_idx]), bbox_diagonal(X[0])
+    )
+    fit_target = float(min(target, 0.25 * lin["rel_rms"], 0.25 * cr["rel_rms"]))
     t = time.perf_counter()
     res = heldout_comparison(make_poses(X, faces), 4, FitOptions(target_rel_rms=fit_target, best_effort=True))
     secs = time.perf_counter() - t

@@ -49,10 +49,12 @@ def register(subparsers) -> None:  # noqa: ANN001
         "(default: the first; the summary says which was used)",
     )
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
-    p.add_argument("--format-version", type=int, choices=[1, 2, 3], default=3,
-                   help="newest clip format to write: 3 (default: integer-coded and compressed, knots on a "
-                        "shared time basis where that is smaller, else written as version 2), 2 (for readers "
-                        "that predate version 3) or 1 (for readers that predate version 2)")
+    p.add_argument("--format-version", type=int, choices=[1, 2, 3, 4], default=4,
+                   help="newest clip format to write: 4 (default: Catmull-Rom time tangents for the items "
+                        "whose motion is smooth, else written as version 3), 3 (integer-coded and "
+                        "compressed, knots on a shared time basis where that is smaller, else written as "
+                        "version 2), 2 (for readers that predate version 3) or 1 (for readers that predate "
+                        "version 2)")
     p.add_argument("--best-effort", action="store_true",
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",
@@ -139,7 +141,8 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         f"bytes: topology {s['topology_bytes']}, coefficients {s['coefficients_bytes']}, "
         f"raw float32 {s['raw_float32_bytes']} (coefficients {100 * s['ratio_coefficients_to_raw']:.2f}% "
         f"of raw, total {100 * s['ratio_total_to_raw']:.2f}%), format version {r.get('format_version')}"
-        + (f" (knots on {r['knot_rank']} shared time tracks)" if r.get("knot_rank") else ""),
+        + (f" (knots on {r['knot_rank']} shared time tracks)" if r.get("knot_rank") else "")
+        + (f" ({r['tangent_items']} curve coordinates with time tangents)" if r.get("tangent_items") else ""),
         f"time {seconds:.2f} s -> {out}",
     ]
     return "\n".join(lines)

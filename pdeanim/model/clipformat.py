@@ -4,7 +4,10 @@ Version 2 stores the same model as version 1 below, coded as integers: error-bou
 (:mod:`pdeanim.model.quantise`), zigzag differences along time or along the curves, and zstd in the container
 (docs/format.md §3.7). Version 3 (written by default where it is smaller, else version 2) changes only how
 the coefficients part stores the knots: weights on a few shared time tracks plus residual tracks
-(:mod:`pdeanim.model.knotbasis`, §3.9). Versions 1 and 2 are still read, and written on request.
+(:mod:`pdeanim.model.knotbasis`, §3.9). Version 4 (written by default where some item uses them) adds
+Catmull-Rom time tangents: a ``tangents`` (C, 3) uint8 array whose items interpolate their knots on linear
+segments with a C1 cubic (:mod:`pdeanim.model.tangents`, §3.10). Versions 1 to 3 are still read, and written
+on request.
 
 Topology part (``part: "topology"``, ``model: "dynamic-pde"``, once per mesh + curve layout + rest pose)::
 
@@ -71,11 +74,12 @@ TRIAL_LEVEL = 3
 knot encodings): fast, and about proportional to the final level 19 sizes; only the clip that is kept is
 compressed at container.ZSTD_LEVEL."""
 
-FORMAT_VERSION = 3
-FORMAT_VERSIONS = (1, 2, 3)
+FORMAT_VERSION = 4
+FORMAT_VERSIONS = (1, 2, 3, 4)
 """Versions a writer may be asked for. Version 3 adds the knot basis (§3.9) to the coefficients part only: a
 clip asked for in version 3 whose knots code smaller without a basis is written as version 2, and its
-topology part is version 2 either way."""
+topology part is version 2 either way. Version 4 adds Catmull-Rom time tangents (§3.10): a clip asked for in
+version 4 without any is written as version 3 (or 2)."""
 TOPOLOGY_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
 DEFAULT_TOLERANCE = 1e-5
@@ -108,6 +112,7 @@ class CoefficientData:
     looping: bool
     header: dict[str, Any]
     extra: dict[str, np.ndarray] = field(default_factory=dict)  # "rigid_*" arrays of motion "rigid"
+    tangents: np.ndarray | None = None  # (C, 3) uint8, 1: cubic linear segments (version 4); None: none
 
 
 def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray,
@@ -169,6 +174,11 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     basis plus residual tracks where that is smaller, and writes version 2 otherwise."""
     _check_version(version)
     S, C = data.family.shape[:2]
+    tangents = None
+    if data.tangents is not None and np.any(data.tangents):
+        tangents = np.asarray(data.tangents, np.uint8)
+    if tangents is not None and version < 4:
+        raise ValueError(f"time tangents need format version 4, not {version}")
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": version,
               "topology_id": topology_id(topology), "motion": data.motion, "looping": bool(data.looping),
               "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
@@ -188,9 +198,9 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     arrays["space_kind"] = (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8)
     if knot_rms is not None:
         steps = quantise.knot_steps_rms(topo.curves, topo.u, data.family, m, data.D, data.knots, knot_rms,
-                                        4.0 * knot_rms if knot_cap is None else knot_cap)
+                                        4.0 * knot_rms if knot_cap is None else knot_cap, tangents)
     else:
-        steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol)
+        steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol, tangents)
     codes = quantise.quantise_knots(data.knots, steps)
     tracks, differences = quantise.encode_knot_tracks(codes)
     knot_arrays: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
@@ -205,6 +215,9 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
         knot_arrays, differences, rank = min(options, key=lambda o: _trial_bytes(o[0]))  # plain on a tie
         if rank:
             header.update(format_version=3, knot_differences=differences, knot_rank=rank)
+    if tangents is not None:
+        header.update(format_version=4, knot_rank=header.get("knot_rank", 0))
+        knot_arrays["tangents"] = tangents
     arrays.update({
         "m": np.where((family >= 2) & (m > 0), -m, m), "D": np.asarray(data.D, np.float32),
         **knot_arrays, **{k: np.asarray(v) for k, v in data.extra.items()}})
@@ -311,7 +324,7 @@ def _steps(header: dict[str, Any]) -> tuple[float, float, np.ndarray]:
 def decode_coefficients(
     header: dict[str, Any], arrays: dict[str, np.ndarray], n_curves: int
 ) -> CoefficientData:
-    """Validated coefficient data from a decoded container (version 1 or 2); raises ClipFormatError."""
+    """Validated coefficient data from a decoded container (version 1 to 4); raises ClipFormatError."""
     version = header.get("format_version")
     if version not in FORMAT_VERSIONS:
         raise ClipFormatError(f"unsupported dynamic-pde coefficients version {version!r}")
@@ -330,10 +343,13 @@ def decode_coefficients(
         raise ClipFormatError("the space kind of a curve+coordinate must be the same in every segment")
     if version == 1:
         knots = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients")
-    elif version == 2:
+    elif version == 2 or (version == 4 and header.get("knot_rank") == 0):
+        if version == 4 and ("knot_weights" in arrays or "knot_basis" in arrays):
+            raise ClipFormatError("coefficients with knot_rank 0 must not hold knot_weights or knot_basis")
         knots = _knots_v2(header, arrays, S, C)
     else:
         knots = _knots_v3(header, arrays, S, C)
+    tangents = _tangents(arrays, C) if version == 4 else None
     if np.any(m < 0) or np.any((family >= 2) & (m >= np.pi)):
         raise ClipFormatError("time constants must be >= 0 (and < pi for trig families)")
     motion = str(header.get("motion"))
@@ -343,7 +359,15 @@ def decode_coefficients(
     return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients"), family, m,
                            _need(arrays, "D", (C, 3), "coefficients"),
                            knots, motion,
-                           bool(header.get("looping", False)), header, extra)
+                           bool(header.get("looping", False)), header, extra, tangents)
+
+
+def _tangents(arrays: dict[str, np.ndarray], C: int) -> np.ndarray:
+    """The (C, 3) uint8 tangent flags of a version 4 coefficients part (0 or 1)."""
+    tangents = _need(arrays, "tangents", (C, 3), "coefficients", "<u1")
+    if tangents.size and tangents.max() > 1:
+        raise ClipFormatError("coefficients tangents must be 0 or 1")
+    return tangents
 
 
 def _family_v2(arrays: dict[str, np.ndarray], S: int, C: int) -> tuple[np.ndarray, np.ndarray]:
@@ -368,8 +392,9 @@ def _knots_v3(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: 
     """Knots (S+1, C, 3, 4) float32 of a version 3 coefficients part: zigzag weight codes (r, C, 3, 4) times
     knot_step on a shared time basis (r, S+1), plus residual tracks coded as the version 2 knots (§3.9)."""
     r = header.get("knot_rank")
+    low = 0 if header.get("format_version") == 4 else 1
     if not isinstance(r, int) or isinstance(r, bool) or not 1 <= r <= S + 1:
-        raise ClipFormatError(f"coefficients knot_rank must be an integer in 1..{S + 1}, got {r!r}")
+        raise ClipFormatError(f"coefficients knot_rank must be an integer in {low}..{S + 1}, got {r!r}")
     steps, residual = _knot_tracks(header, arrays, S, C)
     codes = quantise.unzigzag(_need(arrays, "knot_weights", (r, C, 3, 4), "coefficients", "<u4"))
     basis = _need(arrays, "knot_basis", (r, S + 1), "coefficients", "<f4")

@@ -4,8 +4,9 @@ Everything that does not depend on t is precomputed when a clip is loaded: the p
 (V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), plus the item (curve, coordinate) of
 every value. A frame at t is then: find the segment (pure Python), evaluate the time pair of the items of
 that segment once per distinct mu (few in the integer-coded format) and compute positions = rest +
-phi0 * P[s] + phi1 * P[s+1] per value. Both steps are one compiled pass each (numba: no BLAS, so no caller
-meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
+phi0 * P[s] + phi1 * P[s+1] per value (items with time tangents, format version 4: a weighted sum of four
+knot fields, the weights shared by the segment). Both steps are one compiled pass each (numba: no BLAS, so
+no caller meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from ..errors import ClipFormatError
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
+from .tangents import cubic_weights
 from .timefit import SIN_COEF
 
 _ODD = 2.0 * np.arange(len(SIN_COEF)) + 1.0  # (P,) odd powers of the sine series
@@ -51,6 +53,11 @@ class DynamicClip:
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
+        tangents = np.zeros(self._mu[0].size, bool)
+        if coef.tangents is not None:
+            tangents = coef.tangents.reshape(-1) > 0
+        # per segment, the items on the cubic (tangents and a linear constant there): docs/format.md §3.10
+        self._cubic_items = [tangents & (np.abs(mu.ravel()) <= 1e-12) for mu in self._mu]
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
@@ -66,9 +73,12 @@ class DynamicClip:
         item's mu; uint16 where the segment has few, as the integer-coded format gives)."""
         self._knot_fields = np.ascontiguousarray(knot_fields.reshape(len(knot_fields), -1))  # (S+1, V*3)
         item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
-        self._value_code = [np.ascontiguousarray(
-            seg.code[item_of], np.uint16 if seg.n_values <= np.iinfo(np.uint16).max else np.int32)
-            for seg in self._time]
+        self._value_code, self._cubic_values = [], []
+        for seg, cubic in zip(self._time, self._cubic_items, strict=True):
+            code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
+            small = seg.n_values < np.iinfo(np.uint16).max
+            self._value_code.append(np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32))
+            self._cubic_values.append(np.flatnonzero(cubic[item_of]) if cubic.any() else None)
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -111,6 +121,8 @@ class DynamicClip:
             out = np.empty((self.n_vertices, 3), np.float32)
         flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
         phi = self._time[s].pair_values(tau)  # (2, U) float32 of the segment's distinct values
+        if self._cubic_values[s] is not None:
+            return self._cubic_frame(s, tau, phi, out)
         if COMPILED:
             _combine(phi[0], phi[1], code, fields[s], fields[s + 1], self._base_flat, flat)
             return out
@@ -119,6 +131,23 @@ class DynamicClip:
         np.multiply(b, fields[s + 1], out=b)  # phi1 * P[s+1]
         np.add(a, b, out=flat)
         np.add(flat, self._base_flat, out=flat)
+        return out
+
+    def _cubic_frame(self, s: int, tau: float, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """:meth:`_frame` of a segment with cubic items: their values sum four knot fields (§3.10)."""
+        flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
+        lo, hi, w = cubic_weights(self._segment_list, s, tau)
+        w32 = np.array(w, np.float32)
+        if COMPILED:
+            _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32, fields[lo], fields[s], fields[s + 1],
+                           fields[hi], self._base_flat, flat)
+            return out
+        phi = np.concatenate([phi, np.zeros((2, 1), np.float32)], axis=1)  # the cubic code: pair unused
+        a, b = np.take(phi[0], code), np.take(phi[1], code)
+        np.add(a * fields[s] + b * fields[s + 1], self._base_flat, out=flat)
+        i = self._cubic_values[s]
+        flat[i] = (((w32[0] * fields[lo][i] + w32[1] * fields[s][i]) + w32[2] * fields[s + 1][i])
+                   + w32[3] * fields[hi][i]) + self._base_flat[i]
         return out
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
@@ -256,7 +285,21 @@ def _combine(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, p0: np.ndarra
         out[v] = (phi0[i] * p0[v] + phi1[i] * p1[v]) + base[v]
 
 
+def _combine_cubic(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, cubic: int, w: np.ndarray,
+                   pl: np.ndarray, p0: np.ndarray, p1: np.ndarray, ph: np.ndarray, base: np.ndarray,
+                   out: np.ndarray) -> None:
+    """Compiled :func:`_combine` where values of code ``cubic`` sum four knot fields with weights w (4,)
+    float32 (docs/format.md §3.10), in the float32 order of the numpy path."""
+    for v in range(out.shape[0]):
+        i = code[v]
+        if i == cubic:
+            out[v] = (((w[0] * pl[v] + w[1] * p0[v]) + w[2] * p1[v]) + w[3] * ph[v]) + base[v]
+        else:
+            out[v] = (phi0[i] * p0[v] + phi1[i] * p1[v]) + base[v]
+
+
 if COMPILED:
+    _combine_cubic = njit(cache=True, nogil=True, boundscheck=False)(_combine_cubic)
     _pair = njit(cache=True, nogil=True, boundscheck=False)(_pair)
     _combine = njit(cache=True, nogil=True, boundscheck=False)(_combine)
 

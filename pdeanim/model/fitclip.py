@@ -44,6 +44,7 @@ from .parameterisation import PARAM_MODES, curve_parameters
 from .quantise import power_of_two_step
 from .rigid import RigidTracks, fit_rigid, local_residual
 from .segments import Segmentation, normalised_times, uniform_segmentation
+from .tangents import prefer_tangents
 
 MOTIONS = ("displacement", "absolute", "rigid")
 DEFAULT_TARGET_REL_RMS = 3e-3
@@ -58,9 +59,10 @@ class FitOptions:
     "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last
     frame flows into the first); max_segments caps the adaptivity (reaching it is reported, never silent).
     best_effort: a missed target is not an error (the CLI exits 0, a fit job succeeds with the best clip).
-    format_version: 3 (integer-coded, rounding by at most QUANT_SHARE of the target, knots on a shared time
-    basis where that is smaller; such a clip without the basis is written as version 2), 2 (the same without
-    the basis) or 1 (float32).
+    format_version: 4 (as 3, plus Catmull-Rom time tangents for the items whose motion they predict better;
+    a clip without any is written as version 3), 3 (integer-coded, rounding by at most QUANT_SHARE of the
+    target, knots on a shared time basis where that is smaller; such a clip without the basis is written as
+    version 2), 2 (the same without the basis) or 1 (float32).
     """
 
     target_rms: float | None = None
@@ -224,6 +226,8 @@ def _space_fit(poses: Poses, options: FitOptions, curves: CurveSet | None, progr
         K, N = p.Y.shape[1], p.Y.shape[2]
         progress(0.05, "space fit")
         space = space_stage(p.Y, p.u.reshape(K, N), np.repeat(p.mask, 3, axis=0))
+        if options.format_version >= 4 and not options.loop:
+            space.tangents = prefer_tangents(space.b, p.t)
         diag = bbox_diagonal(p.rest)
         targets = options.targets(diag)
         floor_d = _floor_distances(p, space)
@@ -268,6 +272,7 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     header = container.unpack(parts.coefficients)[0]
     report["format_version"] = header["format_version"]
     report["knot_rank"] = header.get("knot_rank")  # shared time tracks of version 3, None without
+    report["tangent_items"] = 0 if fitted.tangents is None else int(fitted.tangents.sum())  # cubic (v4)
     parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
     report_progress(1.0, "done")
     return parts
@@ -527,9 +532,11 @@ def _coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions,
     mu = fitted.mu.reshape(C, 3, S)
     family = (2 * (mu < 0) + space.proj.kind.reshape(C, 3)[:, :, None]).astype(np.uint8)
     knots = fitted.knots.reshape(C, 3, S + 1, 4)
+    tangents = None if fitted.tangents is None else fitted.tangents.reshape(C, 3).astype(np.uint8)
     return CoefficientData(fitted.segm.segment_t, times, np.moveaxis(family, 2, 0),
                            np.moveaxis(np.abs(mu), 2, 0), space.proj.D.reshape(C, 3),
-                           np.moveaxis(knots, 2, 0), options.motion, options.loop, {"errors": errors})
+                           np.moveaxis(knots, 2, 0), options.motion, options.loop, {"errors": errors},
+                           tangents=tangents)
 
 
 def _encode(p: _Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, options: FitOptions,

@@ -12,19 +12,20 @@ import numpy as np
 
 from .segments import Segmentation
 from .spacefit import SpaceProjection, project_items, search_D
-from .timefit import fit_tracks, predict
+from .timefit import fit_tracks, fit_tracks_cubic, predict
 
 
 @dataclass
 class SpaceStage:
     """Per-item space fit: projection, projected tracks b (K, F, 4), floor energy per item and frame (K, F),
-    and the item data Yk (K, F, N) float64 it was fitted to (for per-point residuals; may be a strided
-    view)."""
+    the item data Yk (K, F, N) float64 it was fitted to (for per-point residuals; may be a strided view),
+    and which items the time stage may fit as cubic tracks."""
 
     proj: SpaceProjection
     b: np.ndarray
     floor_frames: np.ndarray
     Yk: np.ndarray | None = None
+    tangents: np.ndarray | None = None  # (K,) bool: candidates for cubic tracks (format version 4)
 
 
 @dataclass
@@ -36,6 +37,7 @@ class TimeStage:
     mu: np.ndarray
     err_frames: np.ndarray  # (K, F) squared error per item and frame (floor included)
     pred: np.ndarray  # (K, F, 4) model tracks in orthonormal coordinates
+    tangents: np.ndarray | None = None  # (K,) bool cubic tracks (format version 4), None: none
 
 
 def items_from_curves(values: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -102,13 +104,18 @@ def space_stage(Y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> SpaceStage:
 
 
 def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine_iters: int = 5) -> TimeStage:
-    """Fit C0 knot tracks for one segmentation; errors per item and frame include the spatial floor."""
-    z, mu = fit_tracks(space.b, segm, loop, refine_iters=refine_iters)
-    pred = predict(z, segm, mu)
+    """Fit knot tracks (C0, or cubic for the space stage's tangent items) for one segmentation; errors per
+    item and frame include the spatial floor."""
+    tangents = None
+    if space.tangents is not None and space.tangents.any() and not loop:
+        z, mu, tangents = fit_tracks_cubic(space.b, segm, space.tangents, refine_iters=refine_iters)
+    else:
+        z, mu = fit_tracks(space.b, segm, loop, refine_iters=refine_iters)
+    pred = predict(z, segm, mu, tangents)
     d = space.b - pred
     err = space.floor_frames + np.einsum("kfa,kfa->kf", d, d)  # einsum: a sum over axis -1 is ~5x slower
     knots = np.einsum("kab,ksb->ksa", space.proj.to_coef, z)
-    return TimeStage(segm, knots, mu, err, pred)
+    return TimeStage(segm, knots, mu, err, pred, tangents)
 
 
 def reconstruct_items(space: SpaceStage, time: TimeStage) -> np.ndarray:

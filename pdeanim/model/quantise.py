@@ -120,14 +120,23 @@ def vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.ndar
     return cid, B
 
 
-def pair_max(family: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """(C, 3) bound of phi0 + phi1 over every segment: 1 for exp and linear time, 1 / cos(m/2) for trig."""
+CUBIC_PAIR_MAX = 1.5
+"""Bound of the summed absolute knot weights of a cubic track (format version 4): h00 + h01 = 1 and
+|h10| + |h11| = tau (1 - tau) <= 1/4, each entering twice with a factor of at most 1."""
+
+
+def pair_max(family: np.ndarray, m: np.ndarray, tangents: np.ndarray | None = None) -> np.ndarray:
+    """(C, 3) bound of phi0 + phi1 over every segment: 1 for exp and linear time, 1 / cos(m/2) for trig, and
+    CUBIC_PAIR_MAX for items with tangents (C, 3)."""
     m_trig = np.where(np.asarray(family) >= 2, np.asarray(m, np.float64), 0.0).max(axis=0)
-    return 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
+    bound = 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
+    if tangents is None:
+        return bound
+    return np.where(np.asarray(tangents) > 0, np.maximum(bound, CUBIC_PAIR_MAX), bound)
 
 
 def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-               knots: np.ndarray, tolerance: float) -> np.ndarray:
+               knots: np.ndarray, tolerance: float, tangents: np.ndarray | None = None) -> np.ndarray:
     """(C, 3) float32 power-of-two steps of the knots, per curve and coordinate, so that rounding every knot
     to a multiple moves no vertex coordinate by more than ``tolerance``.
 
@@ -136,11 +145,12 @@ def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarra
     cid, B = vertex_basis(curves, u, family, D)
     sens = np.zeros((curves.n_curves, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    return _power_of_two(2.0 * tolerance / np.maximum(sens * pair_max(family, m), 1e-30), knots)
+    return _power_of_two(2.0 * tolerance / np.maximum(sens * pair_max(family, m, tangents), 1e-30), knots)
 
 
 def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-                   knots: np.ndarray, rms: float, cap: float) -> np.ndarray:
+                   knots: np.ndarray, rms: float, cap: float, tangents: np.ndarray | None = None
+                   ) -> np.ndarray:
     """(C, 3) float32 power-of-two steps whose rounding adds at most ``rms`` to the RMS vertex distance, and
     moves no vertex coordinate by more than ``cap`` (so the max error stays near the unrounded one).
 
@@ -150,7 +160,7 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     """
     cid, B = vertex_basis(curves, u, family, D)
     V, C = len(u), curves.n_curves
-    pair = pair_max(family, m)
+    pair = pair_max(family, m)  # the cubic's squared weights sum to at most 1 too (1 at the knots)
     weight = np.zeros((C, 3))
     np.add.at(weight, cid, (B * B).sum(-1))  # sum over the curve's vertices of sum_k S_k^2
     weight *= pair**2 / (12.0 * max(V, 1))
@@ -160,7 +170,8 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     steps = np.sqrt(2.0 * share / np.maximum(weight, 1e-300))
     sens = np.zeros((C, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    return _power_of_two(np.minimum(steps, 2.0 * cap / np.maximum(sens * pair, 1e-30)), knots)
+    bound = pair_max(family, m, tangents)
+    return _power_of_two(np.minimum(steps, 2.0 * cap / np.maximum(sens * bound, 1e-30)), knots)
 
 
 def _power_of_two(steps: np.ndarray, knots: np.ndarray) -> np.ndarray:

@@ -6,11 +6,12 @@ and looping mode, with the positions the Python evaluator gives at chosen times.
 vertex count, bounding-box diagonal and what it covers. Fitted cases go through the real fit and cyclic
 pipelines on tiny meshes; synthetic cases encode hand-chosen coefficients that reach every branch of the
 evaluator (all four families, D on both sides of D_SWITCH and near 0, trig constants at their cap, a
-zero-length segment, large and tiny rigid rotations). Cases are written in the current format (dynamic-pde
-version 2: integer codes in zstd-compressed container version 2 arrays, or version 3 where the writer finds
-the knot basis smaller); the "-v1" cases keep version 1 (raw float arrays in container version 1) covered,
-and the "-v3" cases are morph-target blends whose coefficients part is version 3 (knots on a shared
-low-rank time basis, docs/format.md §3.9; the generator checks that the writer did choose it).
+zero-length segment, large and tiny rigid rotations). Cases without a suffix are written as version 3 is
+(dynamic-pde version 2: integer codes in zstd-compressed container version 2 arrays, or version 3 where the
+writer finds the knot basis smaller); the "-v1" cases keep version 1 (raw float arrays in container version
+1) covered, the "-v3" cases are morph-target blends whose coefficients part is version 3 (knots on a shared
+low-rank time basis, docs/format.md §3.9), and the "-v4" cases have Catmull-Rom time tangents on some items
+(§3.10), with and without a knot basis (the generator checks that the writer did choose what each covers).
 """
 
 from __future__ import annotations
@@ -27,13 +28,15 @@ from pdeanim import container
 from pdeanim.clip import ClipParts, load_clip, write_clip_file
 from pdeanim.curveset import CurveSet
 from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
-from pdeanim.model.clipformat import FORMAT_VERSION, CoefficientData, encode_coefficients, encode_topology
+from pdeanim.model.clipformat import CoefficientData, encode_coefficients, encode_topology
 from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 4
+FIXTURE_VERSION = 5
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
+PLAIN = 3
+"""Format version of the cases without a suffix: version 2, or 3 where the knot basis is smaller."""
 
 
 def _sphere_poses(n_frames: int = 13, loop: bool = False):
@@ -53,7 +56,7 @@ def _sphere_poses(n_frames: int = 13, loop: bool = False):
     return make_poses(np.stack(frames), np.asarray(mesh.faces), np.arange(n_frames) / 24.0)
 
 
-def _fit(motion: str, param_mode: str, loop: bool, version: int = FORMAT_VERSION) -> Callable[[], ClipParts]:
+def _fit(motion: str, param_mode: str, loop: bool, version: int = PLAIN) -> Callable[[], ClipParts]:
     return lambda: fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion,
                                                                    param_mode=param_mode, loop=loop,
                                                                    format_version=version))
@@ -61,13 +64,19 @@ def _fit(motion: str, param_mode: str, loop: bool, version: int = FORMAT_VERSION
 
 def _smooth_many_segments() -> ClipParts:
     """12 segments over 25 frames of smooth motion: the writer codes the knots as second differences."""
-    return fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12))
+    return fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12, format_version=PLAIN))
+
+
+def _smooth_tangents(motion: str) -> Callable[[], ClipParts]:
+    """The smooth 12-segment fit in the default format: its moving items get time tangents (version 4)."""
+    return lambda: _assert_v4(fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12, motion=motion)))
 
 
 def _single_frame_rigid() -> ClipParts:
     """A one-frame clip (rigid motion): every t shows that frame."""
     p = _sphere_poses()
-    return fit_poses(make_poses(p.vertices[:1], p.faces, p.times[:1]), FitOptions(motion="rigid"))
+    return fit_poses(make_poses(p.vertices[:1], p.faces, p.times[:1]),
+                     FitOptions(motion="rigid", format_version=PLAIN))
 
 
 def _capsule():
@@ -79,7 +88,7 @@ def _cyclic(mode: str, **overrides) -> Callable[[], ClipParts]:
     return lambda: make_cyclic_clip(_capsule(), opts)
 
 
-def _synthetic_topology(param_mode: str, version: int = FORMAT_VERSION) -> tuple[bytes, int, np.ndarray]:
+def _synthetic_topology(param_mode: str, version: int = PLAIN) -> tuple[bytes, int, np.ndarray]:
     """A 5 x 6 grid of 30 vertices in 5 curves (vertex order shuffled against curve order)."""
     rng = np.random.default_rng(7)
     gx, gy = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-0.5, 0.5, 5))
@@ -107,7 +116,9 @@ def _synthetic_topology(param_mode: str, version: int = FORMAT_VERSION) -> tuple
 
 
 def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
-                       version: int = FORMAT_VERSION) -> Callable[[], ClipParts]:
+                       version: int = PLAIN) -> Callable[[], ClipParts]:
+    """Hand-chosen coefficients reaching every branch; version 4 adds tangents on a random half of the items
+    (which then take the cubic in their linear segments)."""
     def make() -> ClipParts:
         topo, C, _ = _synthetic_topology(param_mode, version)
         rng = np.random.default_rng(11)
@@ -138,9 +149,11 @@ def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
             if loop:
                 for k in ("rigid_rot_knots", "rigid_trans_knots"):
                     extra[k][-1] = extra[k][0]
+        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version == 4 else None
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, 9), family, m, D, knots, motion, loop,
-                               {"errors": {}}, extra)
-        return ClipParts(topo, encode_coefficients(topo, data, version))
+                               {"errors": {}}, extra, tangents)
+        parts = ClipParts(topo, encode_coefficients(topo, data, version))
+        return _assert_v4(parts, rank=False) if version == 4 else parts
     return make
 
 
@@ -173,15 +186,29 @@ def _assert_v3(parts: ClipParts) -> ClipParts:
     return parts
 
 
+def _assert_v4(parts: ClipParts, rank: bool | None = None) -> ClipParts:
+    """The case has a version 4 coefficients part with tangents on some items (and a knot basis when ``rank``
+    is True, none when False)."""
+    header, arrays = container.unpack(parts.coefficients)
+    assert header["format_version"] == 4, header
+    tangents = arrays["tangents"]
+    assert tangents.dtype == np.uint8 and tangents.shape == (header["n_curves"], 3) and tangents.any()
+    if rank is not None:
+        assert (header["knot_rank"] >= 1) == rank and (("knot_basis" in arrays) == rank), header
+    assert container.unpack(parts.topology)[0]["format_version"] == 2
+    return parts
+
+
 def _fit_blend(loop: bool) -> Callable[[], ClipParts]:
     """A fit with an RMS target of a morph-target blend: the fit's own encoder picks the knot basis."""
     return lambda: _assert_v3(fit_poses(_blend_poses(loop=loop),
                                         FitOptions(target_rel_rms=1e-3, loop=loop, format_version=3)))
 
 
-def _synthetic_blend(motion: str, param_mode: str, loop: bool) -> Callable[[], ClipParts]:
+def _synthetic_blend(motion: str, param_mode: str, loop: bool, version: int = 3) -> Callable[[], ClipParts]:
     """A morph-target blend: knots that are exactly a blend of three shapes with weights that vary over 11
-    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins (format version 3)."""
+    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins (format version 3; 4 adds
+    tangents on a random half of the items)."""
     def make() -> ClipParts:
         topo, C, _ = _synthetic_topology(param_mode)
         rng = np.random.default_rng(13)
@@ -215,9 +242,11 @@ def _synthetic_blend(motion: str, param_mode: str, loop: bool) -> Callable[[], C
             if loop:
                 for k in ("rigid_rot_knots", "rigid_trans_knots"):
                     extra[k][-1] = extra[k][0]
+        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version == 4 else None
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, S + 1), family, m, D, knots, motion, loop,
-                               {"errors": {}}, extra)
-        return _assert_v3(ClipParts(topo, encode_coefficients(topo, data, 3, knot_rms=2e-4)))
+                               {"errors": {}}, extra, tangents)
+        parts = ClipParts(topo, encode_coefficients(topo, data, version, knot_rms=2e-4))
+        return _assert_v4(parts, rank=True) if version == 4 else _assert_v3(parts)
     return make
 
 
@@ -238,6 +267,12 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "synthetic-blend-displacement-paper-v3": (_synthetic_blend("displacement", "paper", False), {}),
     "synthetic-blend-rigid-chord-loop-v3": (_synthetic_blend("rigid", "chord", True), {}),
     "fit-blend-displacement-chord-loop-v3": (_fit_blend(True), {}),
+    "fit-displacement-chord-smooth-v4": (_smooth_tangents("displacement"), {}),
+    "fit-rigid-chord-smooth-v4": (_smooth_tangents("rigid"), {}),
+    "synthetic-displacement-chord-v4": (_synthetic_dynamic("displacement", "chord", False, version=4), {}),
+    "synthetic-rigid-paper-v4": (_synthetic_dynamic("rigid", "paper", False, version=4), {}),
+    "synthetic-absolute-paper-loop-v4": (_synthetic_dynamic("absolute", "paper", True, version=4), {}),
+    "synthetic-blend-absolute-chord-v4": (_synthetic_blend("absolute", "chord", False, version=4), {}),
     "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),

@@ -157,7 +157,8 @@ def small_clip(morph_small, short_curves):
 
 
 def _plain_frame(clip, t: float) -> np.ndarray:
-    """A frame from the definitions: per value, time_pair of its item times (space basis . knots)."""
+    """A frame from the definitions: per value, time_pair of its item times (space basis . knots), or the
+    cubic of items with time tangents."""
     coef, topo = clip.coef, clip.topo
     tw = min(max(t, 0.0), 1.0) if not clip.looping else t - np.floor(t)
     st = np.asarray(coef.segment_t, np.float64)
@@ -171,10 +172,22 @@ def _plain_frame(clip, t: float) -> np.ndarray:
     for kind in (0, 1):
         sel = code % 2 == kind
         B[sel] = fam.space_basis(u[sel][:, None], D[sel], fam.SPACE_KINDS[kind])[:, 0, :]
-    p0 = (B * coef.knots[s][cid].astype(np.float64)).sum(-1)
-    p1 = (B * coef.knots[s + 1][cid].astype(np.float64)).sum(-1)
+    P = [(B * coef.knots[j][cid].astype(np.float64)).sum(-1) for j in range(len(st))]
     phi = fam.time_pair(np.full(mu.shape, tau), mu)
-    return topo.rest.astype(np.float64) + phi[..., 0] * p0 + phi[..., 1] * p1
+    value = phi[..., 0] * P[s] + phi[..., 1] * P[s + 1]
+    if coef.tangents is not None:  # docs/format.md §3.10: the Hermite form with central-difference tangents
+        S = len(st) - 1
+
+        def tangent(j: int) -> np.ndarray:
+            lo, hi = max(j - 1, 0), min(j + 1, S)
+            return (P[hi] - P[lo]) / (st[hi] - st[lo]) if st[hi] > st[lo] else 0.0 * P[j]
+
+        h00, h01 = (1 + 2 * tau) * (1 - tau) ** 2, tau**2 * (3 - 2 * tau)
+        h10, h11 = tau * (1 - tau) ** 2, tau**2 * (tau - 1)
+        cubic = h00 * P[s] + h01 * P[s + 1] + (st[s + 1] - st[s]) * (h10 * tangent(s) + h11 * tangent(s + 1))
+        on = (coef.tangents[cid] > 0) & (np.abs(mu) <= 1e-12)
+        value = np.where(on, cubic, value)
+    return topo.rest.astype(np.float64) + value
 
 
 @pytest.mark.parametrize("t", [0.0, 0.13, 1 / 3, 0.5, 0.77, 1.0, -0.2, 1.4])

@@ -1,16 +1,20 @@
 // Decode and evaluate "dynamic-pde" clips (docs/format.md §3) on the CPU.
 
 import { ClipFormatError } from './container.js';
-import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
+import { hermiteWeights, locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
 
 /** The newest dynamic-pde format version this build reads (of a coefficients part). */
-export const DYNAMIC_FORMAT_VERSION = 3;
+export const DYNAMIC_FORMAT_VERSION = 4;
 /**
  * Every dynamic-pde format version this build reads in a coefficients part (1: float arrays; 2: integer
- * codes, docs/format.md §3.7; 3: knots on a shared low-rank time basis plus residual tracks, §3.9).
+ * codes, docs/format.md §3.7; 3: knots on a shared low-rank time basis plus residual tracks, §3.9; 4: as 3
+ * (or as 2 with knot_rank 0) plus Catmull-Rom time tangents per item, §3.10).
  */
-export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2, 3]);
-/** Every dynamic-pde format version this build reads in a topology part (version 3 changes coefficients only). */
+export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2, 3, 4]);
+/**
+ * Every dynamic-pde format version this build reads in a topology part (versions 3 and 4 change the
+ * coefficients part only).
+ */
 export const DYNAMIC_TOPOLOGY_VERSIONS = Object.freeze([1, 2]);
 const MOTIONS = ['displacement', 'absolute', 'rigid'];
 
@@ -168,7 +172,7 @@ function toVertexOrder(rows, cols, order) {
 }
 
 /**
- * Family codes and m >= 0 (S, C, 3) of a version 2 or 3 coefficients part: space kind per item, m signed
+ * Family codes and m >= 0 (S, C, 3) of a version 2, 3 or 4 coefficients part: space kind per item, m signed
  * (< 0: trig with |m|, > 0: exp, 0: linear).
  */
 function familyV2(ca, S, C) {
@@ -187,8 +191,9 @@ function familyV2(ca, S, C) {
 
 /**
  * knot_step (C, 3) and the integer codes (S+1, C, 3, 4) as float64 (exact integers) of the `knots` time
- * tracks of a version 2 or 3 coefficients part: tracks (C, 3, 4, S+1) of zigzag differences of order
- * knot_differences (1 or 2) along time (docs/format.md §3.7). Version 3 stores its residual tracks so (§3.9).
+ * tracks of a version 2, 3 or 4 coefficients part: tracks (C, 3, 4, S+1) of zigzag differences of order
+ * knot_differences (1 or 2) along time (docs/format.md §3.7). Versions 3 and 4 store their residual tracks so
+ * (§3.9, §3.10).
  */
 function knotTracks(ch, ca, S, C) {
   const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data;
@@ -216,7 +221,10 @@ function knotTracks(ch, ca, S, C) {
   return { steps, codes };
 }
 
-/** Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part: float32(q * knot_step) of its tracks. */
+/**
+ * Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part (or a version 4 one of knot_rank 0):
+ * float32(q * knot_step) of its tracks.
+ */
 function knotsV2(ch, ca, S, C) {
   const { steps, codes } = knotTracks(ch, ca, S, C);
   const knots = new Float32Array(codes.length);
@@ -233,12 +241,7 @@ function knotsV2(ch, ca, S, C) {
  * (q[j, c, w, k] * h) * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double
  * (no fused multiply-add: bit for bit the knots of every other reader).
  */
-function knotsV3(ch, ca, S, C) {
-  const r = ch.knot_rank;
-  if (!Number.isInteger(r) || r < 1 || r > S + 1) {
-    const got = JSON.stringify(r);
-    throw new ClipFormatError(`coefficients knot_rank must be an integer in 1..${S + 1}, got ${got}`);
-  }
+function knotsV3(ch, ca, S, C, r = knotRank(ch, S, 1)) {
   const { steps, codes: residual } = knotTracks(ch, ca, S, C);
   const z = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
   const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
@@ -259,9 +262,48 @@ function knotsV3(ch, ca, S, C) {
   return knots;
 }
 
+/** The header's knot_rank, an integer in min..S+1 (version 3: 1..S+1; version 4: 0..S+1). */
+function knotRank(ch, S, min) {
+  const r = ch.knot_rank;
+  if (!Number.isInteger(r) || r < min || r > S + 1) {
+    const got = JSON.stringify(r);
+    throw new ClipFormatError(`coefficients knot_rank must be an integer in ${min}..${S + 1}, got ${got}`);
+  }
+  return r;
+}
+
+/**
+ * Knots (S+1, C, 3, 4) float32 of a version 4 coefficients part (docs/format.md §3.10): knot_rank 0 has no
+ * shared basis (its arrays must be absent) and decodes as version 2; ranks 1..S+1 decode as version 3.
+ */
+function knotsV4(ch, ca, S, C) {
+  const r = knotRank(ch, S, 0);
+  if (r > 0) return knotsV3(ch, ca, S, C, r);
+  for (const name of ['knot_weights', 'knot_basis']) {
+    if (ca[name] !== undefined) {
+      throw new ClipFormatError(`coefficients knot_rank is 0 (no shared basis), but the part has '${name}'`);
+    }
+  }
+  return knotsV2(ch, ca, S, C);
+}
+
+/**
+ * The `tangents` (C, 3) of a version 4 coefficients part (docs/format.md §3.10): uint8, 1 where the item's
+ * linear segments use the Catmull-Rom cubic, 0 where they use the straight line.
+ */
+function tangentsV4(ca, C) {
+  const tangents = need(ca, 'tangents', [C, 3], 'coefficients', ['<u1']).data;
+  for (let i = 0; i < tangents.length; i++) {
+    if (tangents[i] > 1) {
+      throw new ClipFormatError(`coefficients tangents must be 0 or 1, got ${tangents[i]}`);
+    }
+  }
+  return tangents;
+}
+
 /**
  * Validate and decode the topology and coefficients containers of a dynamic-PDE clip (topology versions 1
- * and 2, coefficients versions 1, 2 and 3).
+ * and 2, coefficients versions 1, 2, 3 and 4).
  */
 export function decodeDynamic(topo, coef) {
   const th = topo.header;
@@ -327,7 +369,11 @@ export function decodeDynamic(topo, coef) {
       ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data
       : ch.format_version === 2
         ? knotsV2(ch, ca, S, C)
-        : knotsV3(ch, ca, S, C);
+        : ch.format_version === 3
+          ? knotsV3(ch, ca, S, C)
+          : knotsV4(ch, ca, S, C);
+  // version 4 only (in older versions an array of that name is an unknown addition, ignored)
+  const tangents = ch.format_version === 4 ? tangentsV4(ca, C) : null;
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
   let rigid = null;
   if (motion === 'rigid') {
@@ -364,6 +410,7 @@ export function decodeDynamic(topo, coef) {
     m,
     D,
     knots,
+    tangents,
     motion,
     looping: Boolean(ch.looping),
     rigid,
@@ -481,6 +528,24 @@ export class DynamicEvaluator {
     this.base = vertexBase(clip);
     this.phi0 = new Float64Array(C * 3);
     this.phi1 = new Float64Array(C * 3);
+    // Catmull-Rom time tangents (format version 4, docs/format.md §3.10): null unless some item has them
+    // (every other clip takes the plain path below). cubic (S, C, 3) is 1 where the item has tangents and a
+    // linear constant in the segment; cubicWeights are the segment's four knot weights (lo(s), s, s+1,
+    // hi(s+1); float32-rounded), the same for all its cubic items; cubicSegment (S) whether it has any
+    this.cubic = null;
+    const tangents = clip.tangents;
+    if (tangents && tangents.some((x) => x === 1)) {
+      this.cubic = new Uint8Array(S * C * 3);
+      this.cubicSegment = new Uint8Array(S);
+      for (let i = 0; i < this.cubic.length; i++) {
+        if (tangents[i % (C * 3)] === 1 && Math.abs(this.mu[i]) <= 1e-12) {
+          this.cubic[i] = 1;
+          this.cubicSegment[Math.floor(i / (C * 3))] = 1;
+        }
+      }
+      this.cubicWeights = new Float64Array(4);
+      this.weights = new Float64Array(C * 12); // per item, by prepare(): the four knot weights it applies
+    }
     this.pair = new Float64Array(2);
     this.pair2 = new Float64Array(2);
     if (clip.rigid) {
@@ -491,8 +556,9 @@ export class DynamicEvaluator {
 
   /**
    * The per-curve state at t (everything t changes before the per-vertex sums): fills this.phi0, this.phi1
-   * (C * 3 time pairs of the segment) and, for rigid clips, this.rot (C * 9) and this.trans (C * 3);
-   * returns the segment index.
+   * (C * 3 time pairs of the segment), for rigid clips this.rot (C * 9) and this.trans (C * 3), and for
+   * clips with tangents this.weights (C * 3 * 4: per item the weights of the knots lo(s), s, s+1, hi(s+1):
+   * the cubic's float32-rounded ones, or 0, phi0, phi1, 0); returns the segment index.
    */
   prepare(t) {
     if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -505,6 +571,16 @@ export class DynamicEvaluator {
       phi0[i] = uPhi0[k];
       phi1[i] = uPhi1[k];
     }
+    if (this.cubic !== null) {
+      const { cubic, cubicWeights: cw, weights } = this;
+      for (let i = 0, j = s * n; i < n; i++, j++) {
+        const cub = cubic[j] === 1;
+        weights[i * 4] = cub ? cw[0] : 0;
+        weights[i * 4 + 1] = cub ? cw[1] : phi0[i];
+        weights[i * 4 + 2] = cub ? cw[2] : phi1[i];
+        weights[i * 4 + 3] = cub ? cw[3] : 0;
+      }
+    }
     return s;
   }
 
@@ -516,7 +592,9 @@ export class DynamicEvaluator {
 
   /**
    * The state of this.loc that does not depend on the item: the distinct time pairs of the segment
-   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]) and, for rigid clips, rot and trans.
+   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]), for clips with tangents the cubic's knot weights
+   * (cubicWeights, computed in float64 and rounded to float32 as the reference evaluator does) and, for
+   * rigid clips, rot and trans.
    */
   segmentState() {
     const s = this.loc[0];
@@ -527,6 +605,10 @@ export class DynamicEvaluator {
       uPhi0[k] = pair[0];
       uPhi1[k] = pair[1];
     }
+    if (this.cubic !== null) {
+      const cw = hermiteWeights(this.clip.segmentT, s, tau, this.cubicWeights);
+      for (let i = 0; i < 4; i++) cw[i] = Math.fround(cw[i]);
+    }
     if (this.clip.rigid) this._rigidAt(this.loc[2]);
   }
 
@@ -536,6 +618,7 @@ export class DynamicEvaluator {
     if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
     const clip = this.clip;
     const s = this.prepare(t);
+    if (this.cubic !== null && this.cubicSegment[s] === 1) return this._evaluateCubic(s, out);
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
     const P0 = this.fields.subarray(s * N, (s + 1) * N);
@@ -554,6 +637,62 @@ export class DynamicEvaluator {
       const x = Math.fround(base[i] + Math.fround(phi0[kx] * P0[i] + phi1[kx] * P1[i]));
       const y = Math.fround(base[i + 1] + Math.fround(phi0[kx + 1] * P0[i + 1] + phi1[kx + 1] * P1[i + 1]));
       const z = Math.fround(base[i + 2] + Math.fround(phi0[kx + 2] * P0[i + 2] + phi1[kx + 2] * P1[i + 2]));
+      const c = curveOf[v];
+      const r = c * 9;
+      out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
+      out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
+      out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+    }
+    return out;
+  }
+
+  /**
+   * evaluate() in a segment where some item uses the Catmull-Rom cubic (docs/format.md §3.10): its values are
+   * ((w_lo P_lo + w_s P_s) + w_s+1 P_s+1) + w_hi P_hi + base in float32 (every product and sum rounded, as
+   * the reference evaluator), the other items' as in evaluate().
+   */
+  _evaluateCubic(s, out) {
+    const clip = this.clip;
+    const { phi0, phi1, item, base } = this;
+    const N = this.nVertices * 3;
+    const S = clip.nSegments;
+    const f = Math.fround;
+    const field = (j) => this.fields.subarray(j * N, (j + 1) * N);
+    const PL = field(Math.max(s - 1, 0));
+    const P0 = field(s);
+    const P1 = field(s + 1);
+    const PH = field(Math.min(s + 2, S));
+    const cw = this.cubicWeights;
+    const wl = cw[0];
+    const ws = cw[1];
+    const w1 = cw[2];
+    const wh = cw[3];
+    const cubic = this.cubic.subarray(s * clip.nCurves * 3, (s + 1) * clip.nCurves * 3);
+    if (!clip.rigid) {
+      for (let i = 0; i < N; i++) {
+        const k = item[i];
+        out[i] =
+          cubic[k] === 1
+            ? base[i] + f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
+            : base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
+      }
+      return out;
+    }
+    // the value before the rigid motion (float32), as in evaluate()
+    const value = (i, k) =>
+      f(
+        base[i] +
+          (cubic[k] === 1
+            ? f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
+            : f(phi0[k] * P0[i] + phi1[k] * P1[i])),
+      );
+    const { rot, trans } = this;
+    const curveOf = clip.curveOf;
+    for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {
+      const kx = item[i];
+      const x = value(i, kx);
+      const y = value(i + 1, kx + 1);
+      const z = value(i + 2, kx + 2);
       const c = curveOf[v];
       const r = c * 9;
       out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];

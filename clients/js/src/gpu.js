@@ -21,10 +21,13 @@ function texture(nTexels, width) {
 
 /**
  * Textures and constants of a decoded clip for the vertex shader (independent of the mesh):
- * {kind, mode, rigid, nCurves, nVertices, curveTexels, textures: {vertex, field | knot, curve}, maxHeight,
- * evaluator}. The `curve` texture is the per-frame table that timeUniforms() rewrites: per curve the time
- * pairs (phi0 xyz, phi1 xyz) of the current segment and, for rigid clips, the rows of R with the centroid
- * (R row i, c_i), all computed in float64 by the CPU evaluator's own code (a few us per frame).
+ * {kind, mode, rigid, tangents, nCurves, nVertices, nSegments, curveTexels, textures: {vertex, field | knot,
+ * curve}, maxHeight, evaluator}. The `curve` texture is the per-frame table that timeUniforms() rewrites: per
+ * curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for rigid clips, the rows of R with
+ * the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's own code (a few us per frame).
+ * Clips with Catmull-Rom time tangents (format version 4, some item with tangents 1: `tangents` true) carry
+ * four weights per item instead of the pair, on the knots lo(s), s, s+1, hi(s+1) (texels w_lo xyz, w_s xyz,
+ * w_s+1 xyz, w_hi xyz; for an item without the cubic in the segment 0, phi0, phi1, 0), then the rigid rows.
  *
  * mode "fields" (the default while (S+1) x V texels fit fieldsBudget bytes) stores every knot's per-vertex
  * contribution P_k = knots_k . S(u) (the CPU evaluator's float32 fields), so the shader only forms
@@ -66,14 +69,19 @@ export function gpuLayout(
     knot.data.set(knots);
     textures = { vertex, knot };
   }
-  const curveTexels = rigid ? 5 : 2;
+  const tangents = ev.cubic !== null;
+  const weightTexels = tangents ? 4 : 2;
+  const curveTexels = weightTexels + (rigid ? 3 : 0);
   textures.curve = texture(C * curveTexels, width);
   return {
     kind: clip.kind,
     mode: useFields ? 'fields' : 'coefficients',
     rigid: Boolean(rigid),
+    tangents,
     nCurves: C,
     nVertices: V,
+    nSegments: S,
+    weightTexels,
     width,
     curveTexels,
     textures,
@@ -101,8 +109,10 @@ function cyclicLayout(clip, width) {
     kind: clip.kind,
     mode: 'cyclic',
     rigid: false,
+    tangents: false,
     nCurves: 0,
     nVertices: V,
+    nSegments: 0,
     width,
     textures: { vertex },
     clip,
@@ -142,25 +152,47 @@ export function timeUniforms(layout, t) {
   const d = layout.textures.curve.data;
   const K = layout.curveTexels * 4;
   const C = layout.nCurves;
-  for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K, j += 3) {
-    const kx = muIndex[j];
-    const ky = muIndex[j + 1];
-    const kz = muIndex[j + 2];
-    d[o] = uPhi0[kx];
-    d[o + 1] = uPhi0[ky];
-    d[o + 2] = uPhi0[kz];
-    d[o + 4] = uPhi1[kx];
-    d[o + 5] = uPhi1[ky];
-    d[o + 6] = uPhi1[kz];
+  if (!layout.tangents) {
+    for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K, j += 3) {
+      const kx = muIndex[j];
+      const ky = muIndex[j + 1];
+      const kz = muIndex[j + 2];
+      d[o] = uPhi0[kx];
+      d[o + 1] = uPhi0[ky];
+      d[o + 2] = uPhi0[kz];
+      d[o + 4] = uPhi1[kx];
+      d[o + 5] = uPhi1[ky];
+      d[o + 6] = uPhi1[kz];
+    }
+  } else {
+    // four weights per item: the segment's cubic weights (docs/format.md §3.10) or (0, phi0, phi1, 0)
+    const { cubic, cubicWeights: cw } = ev;
+    for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K) {
+      for (let w = 0; w < 3; w++, j++) {
+        if (cubic[j] === 1) {
+          d[o + w] = cw[0];
+          d[o + 4 + w] = cw[1];
+          d[o + 8 + w] = cw[2];
+          d[o + 12 + w] = cw[3];
+        } else {
+          const k = muIndex[j];
+          d[o + w] = 0;
+          d[o + 4 + w] = uPhi0[k];
+          d[o + 8 + w] = uPhi1[k];
+          d[o + 12 + w] = 0;
+        }
+      }
+    }
   }
   if (layout.rigid) {
     const { rot, trans } = ev;
-    for (let c = 0, o = 0; c < C; c++, o += K) {
+    const R = layout.weightTexels * 4; // the rigid rows follow the weights
+    for (let c = 0, o = R; c < C; c++, o += K) {
       for (let i = 0; i < 3; i++) {
-        d[o + 8 + i * 4] = rot[c * 9 + i * 3];
-        d[o + 9 + i * 4] = rot[c * 9 + i * 3 + 1];
-        d[o + 10 + i * 4] = rot[c * 9 + i * 3 + 2];
-        d[o + 11 + i * 4] = trans[c * 3 + i];
+        d[o + i * 4] = rot[c * 9 + i * 3];
+        d[o + 1 + i * 4] = rot[c * 9 + i * 3 + 1];
+        d[o + 2 + i * 4] = rot[c * 9 + i * 3 + 2];
+        d[o + 3 + i * 4] = trans[c * 3 + i];
       }
     }
   }
@@ -320,8 +352,10 @@ export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass =
   if (pass) defs.push('#define PDEANIM_PASS');
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
+  if (layout.tangents) defs.push('#define PDEANIM_TANGENTS');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
+  defs.push(`#define PDEANIM_WEIGHT_TEXELS ${layout.weightTexels ?? 0}`);
   defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
   defs.push(`#define PDEANIM_WIDTH_MASK ${layout.width - 1}`);
   return `${defs.join('\n')}
@@ -341,6 +375,9 @@ uniform mat4 pdeClipToLocal;
 uniform mat3 pdeNormalToLocal;
 #ifdef PDEANIM_DYNAMIC
 uniform highp sampler2D pdeCurveTex;
+#ifdef PDEANIM_TANGENTS
+uniform int pdeSegments;
+#endif
 #ifdef PDEANIM_FIELDS
 uniform highp sampler2D pdeFieldTex;
 #else
@@ -367,6 +404,30 @@ vec3 pdeEval(int v) {
   vec4 head = pdeFetch(pdeVertexTex, v * 4);
 #endif
   int c = int(head.x + 0.5);
+#ifdef PDEANIM_TANGENTS
+  // Catmull-Rom time tangents: weights of the knots lo(s), s, s+1, hi(s+1) (0, phi0, phi1, 0 off the cubic)
+  int sl = max(pdeSeg - 1, 0);
+  int sh = min(pdeSeg + 2, pdeSegments);
+  vec3 fl = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
+  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
+  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2).xyz;
+  vec3 fh = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3).xyz;
+#ifdef PDEANIM_FIELDS
+  vec3 p = head.yzw + (((fl * pdeFetch(pdeFieldTex, sl * pdeVertices + v).xyz
+    + f0 * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz)
+    + f1 * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz)
+    + fh * pdeFetch(pdeFieldTex, sh * pdeVertices + v).xyz);
+#else
+  vec3 p = head.yzw;
+  for (int w = 0; w < 3; w++) {
+    vec4 kl = pdeFetch(pdeKnotTex, (sl * pdeCurves + c) * 3 + w);
+    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
+    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
+    vec4 kh = pdeFetch(pdeKnotTex, (sh * pdeCurves + c) * 3 + w);
+    p[w] += dot(fl[w] * kl + f0[w] * k0 + f1[w] * k1 + fh[w] * kh, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
+  }
+#endif
+#else
   vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
   vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
 #ifdef PDEANIM_FIELDS
@@ -380,10 +441,11 @@ vec3 pdeEval(int v) {
     p[w] += dot(f0[w] * k0 + f1[w] * k1, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
   }
 #endif
+#endif
 #ifdef PDEANIM_RIGID
-  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2);
-  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3);
-  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 4);
+  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS);
+  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 1);
+  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 2);
   p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
 #endif
   return p;

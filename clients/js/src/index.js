@@ -29,5 +29,5 @@ export {
   vertexBase,
 } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
-export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
+export { spaceBasis, timePair, rigidTimePair, hermiteWeights, locate } from './basis.js';
 export { computeNormals, boundingBoxDiagonal } from './geometry.js';

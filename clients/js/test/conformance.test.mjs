@@ -17,9 +17,12 @@ test('the fixture set covers every kind, motion, parameterisation and looping mo
   assert.deepEqual([...new Set(dyn.map((c) => c.motion))].sort(), ['absolute', 'displacement', 'rigid']);
   assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
   assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
-  // dynamic-pde format versions 1 (raw floats, container 1), 2 (integer codes, zstd in container 2) and 3
-  // (coefficients only: knots on a shared time basis; its topology part is a version 2 one, container 2)
-  assert.deepEqual([...new Set(dyn.map((c) => c.format_version))].sort(), [1, 2, 3]);
+  // dynamic-pde format versions 1 (raw floats, container 1), 2 (integer codes, zstd in container 2), 3
+  // (coefficients only: knots on a shared time basis; its topology part is a version 2 one, container 2) and,
+  // once the Python side writes them, 4 (3 or 2 plus Catmull-Rom time tangents, container 2)
+  const versions = [...new Set(dyn.map((c) => c.format_version))].sort();
+  assert.deepEqual(versions.filter((v) => v <= 3), [1, 2, 3]);
+  assert.ok(versions.every((v) => [1, 2, 3, 4].includes(v)), `${versions}`);
   for (const c of dyn) {
     const container = Math.min(c.format_version, 2);
     assert.deepEqual(c.container_versions, [container, container], c.name);
@@ -42,6 +45,21 @@ test('version 3 fixtures: a version 2 topology part, knots on a basis of rank be
       const n = clip.nCurves * 12;
       assert.deepEqual(clip.knots.subarray(0, n), clip.knots.subarray(clip.nSegments * n), c.name);
     }
+  }
+});
+
+test('version 4 fixtures: a version 2 topology part, knot_rank 0..S+1, tangents 0/1 on some item', () => {
+  for (const c of man.cases.filter((x) => x.format_version === 4)) {
+    const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+    const clip = decodeClip(topology, coefficients);
+    assert.equal(clip.topologyHeader.format_version, 2, c.name);
+    const r = clip.header.knot_rank;
+    assert.ok(Number.isInteger(r) && r >= 0 && r <= clip.nSegments + 1, c.name);
+    assert.ok([1, 2].includes(clip.header.knot_differences), c.name);
+    assert.equal(clip.tangents.length, clip.nCurves * 3, c.name);
+    // the writer uses version 4 only where some item has tangents
+    assert.ok(clip.tangents.some((x) => x === 1), c.name);
+    assert.ok(clip.tangents.every((x) => x === 0 || x === 1), c.name);
   }
 });
 

@@ -6,12 +6,14 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import * as THREE from 'three';
-import { computeNormals, createEvaluator, decodeClipFile } from '../src/index.js';
+import { computeNormals, createEvaluator, decodeClip, decodeClipFile, hermiteWeights } from '../src/index.js';
 import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from '../src/gpu.js';
 import { attachClip, attachClipToScene } from '../src/three.js';
-import { FIXTURES, manifest, readBytes } from './helpers.mjs';
+import { FIXTURES, coefficientsV4, manifest, readBytes, versionFourCases } from './helpers.mjs';
 
 const man = manifest();
+// version 4 clips (Catmull-Rom time tangents) re-encoded from the version 2 and 3 fixtures (helpers.mjs)
+const v4 = versionFourCases();
 
 /** texelFetch of texel i of a {data, width} texture, row-major as pdeFetch addresses it. */
 function fetch(tex, i) {
@@ -44,9 +46,31 @@ function emulate(layout, u, v) {
   const K = layout.curveTexels;
   const head = fetch(T.vertex, fields ? v : v * 4);
   const c = Math.round(head[0]);
+  const V = layout.nVertices;
+  if (layout.tangents) {
+    // four weights per item on the knots lo(s), s, s+1, hi(s+1), summed ((l + 0) + 1) + h, then + base
+    const sl = Math.max(u.seg - 1, 0);
+    const sh = Math.min(u.seg + 2, layout.nSegments); // the pdeSegments uniform
+    const knots = [sl, u.seg, u.seg + 1, sh];
+    const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * K + j));
+    let p = [0, 1, 2].map((w) => {
+      if (fields) {
+        const sum = knots.reduce((acc, j, i) => acc + f[i][w] * fetch(T.field, j * V + v)[w], 0);
+        return head[1 + w] + sum;
+      }
+      const kn = knots.map((j) => fetch(T.knot, (j * C + c) * 3 + w));
+      const b = fetch(T.vertex, v * 4 + 1 + w);
+      const dot = (k) => kn.reduce((a, kj, i) => a + f[i][w] * kj[k], 0) * b[k];
+      return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + dot(k), 0);
+    });
+    if (layout.rigid) {
+      const r = [0, 1, 2].map((i) => fetch(T.curve, c * K + layout.weightTexels + i));
+      p = r.map((row) => row[0] * p[0] + row[1] * p[1] + row[2] * p[2] + row[3]);
+    }
+    return p;
+  }
   const f0 = fetch(T.curve, c * K);
   const f1 = fetch(T.curve, c * K + 1);
-  const V = layout.nVertices;
   let p = [0, 1, 2].map((w) => {
     if (fields) {
       return (
@@ -73,6 +97,19 @@ function termMagnitude(layout, u, v) {
   const T = layout.textures;
   const C = layout.nCurves;
   const c = Math.round(fetch(T.vertex, v * 4)[0]);
+  if (layout.tangents) {
+    const knots = [Math.max(u.seg - 1, 0), u.seg, u.seg + 1, Math.min(u.seg + 2, layout.nSegments)];
+    const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * layout.curveTexels + j));
+    return [0, 1, 2].map((w) => {
+      const b = fetch(T.vertex, v * 4 + 1 + w);
+      let sum = 0;
+      knots.forEach((j, i) => {
+        const kn = fetch(T.knot, (j * C + c) * 3 + w);
+        for (let k = 0; k < 4; k++) sum += Math.abs(f[i][w] * kn[k] * b[k]);
+      });
+      return sum;
+    });
+  }
   const f0 = fetch(T.curve, c * layout.curveTexels);
   const f1 = fetch(T.curve, c * layout.curveTexels + 1);
   return [0, 1, 2].map((w) => {
@@ -86,12 +123,14 @@ function termMagnitude(layout, u, v) {
   });
 }
 
+/** A fixture's clip, or a version 4 case's (decoded from its two parts). */
 function loadCase(c) {
+  if (c.coefficients) return decodeClip(c.topology, c.coefficients);
   return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
 }
 
-for (const [c, mode] of man.cases.flatMap((x) =>
-  x.kind === 'dynamic-pde'
+for (const [c, mode] of [...man.cases, ...v4].flatMap((x) =>
+  x.kind === 'dynamic-pde' || x.coefficients
     ? [
         [x, 'fields'],
         [x, 'coefficients'],
@@ -100,6 +139,8 @@ for (const [c, mode] of man.cases.flatMap((x) =>
 )) {
   test(`emulated shader (${mode}) matches the CPU evaluator: ${c.name}`, () => {
     const clip = loadCase(c);
+    // version 4 clips: the table carries four weights per item, on knots lo(s), s, s+1, hi(s+1)
+    if (c.coefficients) assert.ok(gpuLayout(clip).tangents, c.name);
     const layout = gpuLayout(clip, { width: 64, mode }); // a narrow texture exercises the 2D texel addressing
     const ev = createEvaluator(clip);
     // Mode "fields" holds the CPU path's float32 P_k: 1e-6 of the diagonal. Mode "coefficients" holds the
@@ -476,7 +517,8 @@ test('with a renderer the clip is evaluated in a pass before drawing, once per t
 });
 
 test('the per-curve table equals every item time pair and is rewritten only when the state moves', () => {
-  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde')) {
+  // version 4 fixtures with tangents carry four knot weights per item (tested in its own test below)
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde' && x.format_version < 4)) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
     const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
@@ -522,4 +564,93 @@ test('a t with the same segment and local time uploads nothing', () => {
   player.setTime(0.5);
   assert.ok(player.textures.curve.version > version);
   player.detach();
+});
+
+test('version 4: the per-curve table holds each item four knot weights (the CPU ones), then rigid rows', () => {
+  for (const c of v4) {
+    const clip = loadCase(c);
+    const ev = createEvaluator(clip);
+    const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
+    assert.equal(layout.tangents, true);
+    assert.equal(layout.weightTexels, 4);
+    assert.equal(layout.curveTexels, layout.rigid ? 7 : 4);
+    assert.equal(layout.nSegments, clip.nSegments);
+    const ref = createEvaluator(clip);
+    const C = clip.nCurves;
+    const K = layout.curveTexels * 4;
+    const d = layout.textures.curve.data;
+    let cubicItems = 0;
+    for (const t of c.t) {
+      const u = timeUniforms(layout, t);
+      ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
+      const s = ref.prepare(t);
+      assert.equal(u.seg, s);
+      const cubic = hermiteWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
+      for (let cw = 0; cw < C * 3; cw++) {
+        const o = Math.floor(cw / 3) * K + (cw % 3);
+        const table = [0, 1, 2, 3].map((j) => d[o + j * 4]);
+        assert.deepEqual(table, Array.from(ref.weights.subarray(cw * 4, cw * 4 + 4), Math.fround));
+        if (ref.cubic[s * C * 3 + cw] === 1) {
+          cubicItems++;
+          assert.deepEqual(table, Array.from(cubic), `${c.name} t = ${t}`);
+        } else {
+          assert.deepEqual(table, [0, Math.fround(ref.phi0[cw]), Math.fround(ref.phi1[cw]), 0]);
+        }
+      }
+      if (layout.rigid) {
+        for (let k = 0; k < C; k++) {
+          for (let i = 0; i < 3; i++) {
+            assert.equal(d[k * K + 16 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
+            assert.equal(d[k * K + 19 + i * 4], Math.fround(ref.trans[k * 3 + i]));
+          }
+        }
+      }
+    }
+    assert.ok(cubicItems > 0, c.name);
+  }
+});
+
+test('version 4: GLSL and three.js materials get the tangents layout; other clips keep theirs', () => {
+  for (const motion of ['rigid', 'displacement']) {
+    const c = v4.find((x) => x.motion === motion);
+    const clip = loadCase(c);
+    const plainClip = loadCase(c.fixture);
+    const rigid = motion === 'rigid';
+    const layout = gpuLayout(clip);
+    const header = glslHeader(layout);
+    assert.match(header, /#define PDEANIM_TANGENTS/);
+    assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
+    assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
+    assert.match(header, /uniform int pdeSegments;/);
+    // without tangents (versions 1-3, or version 4 with tangents all 0): 2 texels (5 rigid), no tangents
+    const plain = gpuLayout(plainClip);
+    assert.equal(plain.tangents, false);
+    assert.equal(plain.curveTexels, rigid ? 5 : 2);
+    assert.doesNotMatch(glslHeader(plain), /#define PDEANIM_TANGENTS/);
+    assert.match(glslHeader(plain), new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 5 : 2}\\n`));
+    const zero = gpuLayout(decodeClip(c.topology, coefficientsV4(c.original)));
+    assert.equal(zero.tangents, false);
+    assert.equal(zero.curveTexels, rigid ? 5 : 2);
+    // three.js: the segment count as a uniform, a program cache key of its own
+    const mesh = meshOf(clip, THREE.MeshStandardMaterial);
+    const player = attachClip(mesh, clip);
+    assert.equal(player.uniforms.pdeSegments.value, clip.nSegments);
+    const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
+    mesh.material.onBeforeCompile(shader, null);
+    assert.match(shader.vertexShader, /#define PDEANIM_TANGENTS/);
+    assert.equal(shader.uniforms.pdeSegments.value, clip.nSegments);
+    assert.match(mesh.material.customProgramCacheKey(), /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+:tangents$/);
+    const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
+    assert.doesNotMatch(other.mesh.material.customProgramCacheKey(), /tangents/);
+    // the GPU path and the CPU fallback agree on the positions it shows
+    player.setTime(0.43);
+    const u = timeUniforms(player.layout, 0.43);
+    const cpu = createEvaluator(clip).evaluate(0.43);
+    for (let v = 0; v < clip.nVertices; v++) {
+      const g = emulate(player.layout, u, v);
+      for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * c.diagonal);
+    }
+    player.detach();
+    other.detach();
+  }
 });

@@ -3,6 +3,7 @@
 import { readFileSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
+import { decodeContainer, splitClipFile } from '../src/index.js';
 
 export const FIXTURES = join(dirname(fileURLToPath(import.meta.url)), 'fixtures');
 
@@ -114,6 +115,76 @@ export function storedArrays(bytes) {
   for (const [name, spec] of Object.entries(header.arrays)) {
     const lo = 16 + hl + spec.offset;
     out[name] = { ...spec, stored: bytes.slice(lo, lo + spec.nbytes) };
+  }
+  return out;
+}
+
+/**
+ * A version 4 coefficients part (docs/format.md §3.10) re-encoded from a version 2 or 3 one (bytes): header
+ * format_version 4, its knot_rank kept (0 for a version 2 part, whose knots then decode as before), and a
+ * `tangents` (C, 3) uint8 array from tangents(c, w) (0 or 1). Options: linear(s, c, w) true zeroes the signed
+ * m of that segment and item (a linear segment, where the cubic applies); edit({header, arrays}) changes
+ * anything else before encoding (to build broken parts). Encoded arrays stay encoded (container 2).
+ */
+export function coefficientsV4(bytes, { tangents = () => 0, linear = null, edit = null } = {}) {
+  const { header, arrays } = decodeContainer(bytes.slice());
+  if (header.format_version !== 2 && header.format_version !== 3) {
+    throw new Error(`expected a version 2 or 3 coefficients part, got ${header.format_version}`);
+  }
+  const C = header.n_curves;
+  const S = header.n_segments;
+  header.format_version = 4;
+  header.knot_rank ??= 0;
+  const t = new Uint8Array(C * 3);
+  for (let i = 0; i < t.length; i++) t[i] = tangents(Math.floor(i / 3), i % 3);
+  arrays.tangents = { dtype: '<u1', shape: [C, 3], data: t };
+  if (linear) {
+    const m = Float32Array.from(arrays.m.data);
+    for (let i = 0; i < m.length; i++) {
+      const item = i % (C * 3);
+      if (linear(Math.floor(i / (C * 3)), Math.floor(item / 3), item % 3)) m[i] = 0;
+    }
+    arrays.m = { ...arrays.m, data: m };
+  }
+  if (edit) edit({ header, arrays });
+  return encodeContainer(header, arrays);
+}
+
+/**
+ * Version 4 clips built from the version 2 and 3 dynamic-pde fixtures until the Python side writes some:
+ * [{name, fixture, motion, looping, diagonal, t, topology, coefficients, original}] where original is the
+ * fixture's coefficients part. Items get tangents in a mix (every item of some curves, one coordinate of
+ * others, none of the rest) and linear constants in every segment but one, so that the cubic, its
+ * neighbours' time pairs and cubic items in non-linear segments all occur; t lists every segment boundary,
+ * points just inside each segment, a grid, and times outside [0, 1].
+ */
+export function versionFourCases() {
+  const out = [];
+  for (const c of manifest().cases) {
+    if (c.kind !== 'dynamic-pde' || (c.format_version !== 2 && c.format_version !== 3)) continue;
+    const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+    const { header, arrays } = decodeContainer(coefficients.slice());
+    const S = header.n_segments;
+    const tangents = (cc, w) => (cc % 3 === 0 ? 1 : cc % 3 === 1 ? Number(w === 1) : 0);
+    const linear = (s, cc) => s !== (cc % S); // one non-linear segment per curve, the others linear
+    const segT = Array.from(arrays.segment_t.data);
+    const t = [...segT];
+    for (let s = 0; s < S; s++) {
+      for (const f of [1e-9, 0.013, 0.25, 0.5, 0.77, 1 - 1e-9]) t.push(segT[s] + f * (segT[s + 1] - segT[s]));
+    }
+    for (let k = 0; k <= 20; k++) t.push(k / 20);
+    t.push(-0.3, 1.2, 2.61);
+    out.push({
+      name: `${c.name}-v4`,
+      fixture: c,
+      motion: c.motion,
+      looping: c.looping,
+      diagonal: c.diagonal,
+      t,
+      topology,
+      coefficients: coefficientsV4(coefficients, { tangents, linear }),
+      original: coefficients,
+    });
   }
   return out;
 }

@@ -16,12 +16,25 @@ export interface GpuLayout {
   /** 'fields' | 'coefficients' for dynamic clips, 'cyclic' for cyclic ones. */
   mode: 'fields' | 'coefficients' | 'cyclic';
   rigid: boolean;
+  /**
+   * Whether some item has Catmull-Rom time tangents (format version 4): the curve table then holds four
+   * weight texels per curve (knots lo(s), s, s+1, hi(s+1)) instead of the pair, and the shader reads the
+   * pdeSegments uniform (nSegments).
+   */
+  tangents: boolean;
   nCurves: number;
   nVertices: number;
+  /** Segments S of a dynamic clip (0 for cyclic ones). */
+  nSegments: number;
   /** Texture row length in texels (a power of two). */
   width: number;
-  /** Texels per curve in the per-frame curve table (2, or 5 with rigid motion). */
+  /**
+   * Texels per curve in the per-frame curve table: the weights (2: phi0, phi1; 4 with tangents), then 3
+   * rows of the rigid motion (so 2, 5, 4 or 7).
+   */
   curveTexels?: number;
+  /** Weight texels per curve at the start of its table entry (2, or 4 with tangents). */
+  weightTexels?: number;
   textures: {
     vertex: FloatTexture;
     field?: FloatTexture;

@@ -11,11 +11,12 @@ export declare const CONTAINER_VERSIONS: readonly [1, 2];
 export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
 /**
  * The newest dynamic-pde format version read (of a coefficients part); DYNAMIC_FORMAT_VERSIONS lists all
- * (2: integer codes; 3: knots on a shared low-rank time basis plus residual tracks, coefficients part only).
+ * (2: integer codes; 3: knots on a shared low-rank time basis plus residual tracks, coefficients part only;
+ * 4: version 3, or 2 with knot_rank 0, plus Catmull-Rom time tangents per item, coefficients part only).
  */
-export declare const DYNAMIC_FORMAT_VERSION: 3;
-export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2, 3];
-/** The dynamic-pde format versions read in a topology part (version 3 changes the coefficients part only). */
+export declare const DYNAMIC_FORMAT_VERSION: 4;
+export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2, 3, 4];
+/** The dynamic-pde format versions read in a topology part (versions 3 and 4 change coefficients parts only). */
 export declare const DYNAMIC_TOPOLOGY_VERSIONS: readonly [1, 2];
 
 /** Thrown for anything that is not a valid pdeanim container, part, clip or CLIP file. */
@@ -90,8 +91,13 @@ export interface DynamicClip extends ClipBase {
   family: Uint8Array;
   m: Float32Array;
   D: Float32Array;
-  /** Knots (S+1, C, 3, 4) as float32, decoded (format versions 2 and 3 store them as integer codes). */
+  /** Knots (S+1, C, 3, 4) as float32, decoded (format versions 2 to 4 store them as integer codes). */
   knots: Float32Array;
+  /**
+   * Catmull-Rom time tangents (C, 3) of format version 4: 1 where the item's linear segments use the C1
+   * cubic through its knots (docs/format.md §3.10), else 0; null for versions 1 to 3 (none).
+   */
+  tangents: Uint8Array | null;
   rigid: RigidTracks | null;
 }
 
@@ -199,6 +205,17 @@ export declare function spaceBasis(
 export declare function timePair(
   tau: number,
   mu: number,
+  out: Float64Array | number[],
+  o?: number,
+): typeof out;
+/**
+ * The float64 weights of the version 4 cubic (docs/format.md §3.10) in segment s at local time tau, on the
+ * knots lo(s) = max(s - 1, 0), s, s + 1, hi(s + 1) = min(s + 2, S), into out[o..o+3] (not folded at the ends).
+ */
+export declare function hermiteWeights(
+  segmentT: ArrayLike<number>,
+  s: number,
+  tau: number,
   out: Float64Array | number[],
   o?: number,
 ): typeof out;

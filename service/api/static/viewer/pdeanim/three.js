@@ -206,6 +206,7 @@ function makePass(layout, textures, current) {
     pdeSinWt: { value: current?.sw ?? 0 },
     pdeCosWt: { value: current?.cw ?? 1 },
     pdeCurves: { value: layout.nCurves },
+    pdeSegments: { value: layout.nSegments ?? 0 },
     pdeVertices: { value: layout.nVertices },
     pdeVertexTex: { value: textures.vertex },
     pdeFieldTex: { value: textures.field ?? null },
@@ -294,6 +295,7 @@ export function attachClip(mesh, clip, options = {}) {
     pdeEnabled: { value: false },
     pdeSeg: { value: 0 },
     pdeCurves: { value: layout.nCurves },
+    pdeSegments: { value: layout.nSegments ?? 0 },
     pdeSinWt: { value: 0 },
     pdeCosWt: { value: 1 },
     pdeVertices: { value: layout.nVertices },
@@ -309,7 +311,10 @@ export function attachClip(mesh, clip, options = {}) {
     pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout, { normals, pass });
-  const key = `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}:${pass}`;
+  // the header's defines vary with all of these (clips with time tangents: another curve table and shader)
+  const tangents = layout.tangents ? ':tangents' : '';
+  const key =
+    `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}:${pass}${tangents}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;

@@ -1,0 +1,155 @@
+"""Catmull-Rom time tangents (format version 4, docs/format.md §3.10): C1 cubic knot tracks.
+
+An item with tangents interpolates its knots on linear segments with the cubic Hermite spline whose knot
+tangents are the central differences of the neighbouring knots (one-sided at the ends), so frames between
+knots follow the curvature of the motion instead of its chords. The cubic is the small-constant limit of the
+paper's sum of two time terms in one segment (span{cosh m1 t, sinh m1 t, cosh m2 t, sinh m2 t} tends to
+span{1, t, t^2, t^3}). Here: the weights of the four knots of a segment, the least-squares knots of such
+tracks (a banded system, solved by a QR sweep), and the per-item choice between cubic and linear tracks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import PdeanimError
+from .segments import Segmentation
+
+CUBIC_GAIN = 1.5
+"""An item gets tangents unless the cubic's held-out error (between every other frame) exceeds this multiple
+of the straight line's: the test is conservative, as it predicts over twice the spacing the clip is played
+at (elephant-gallop fitted from every 4th frame: lines win that test by up to 1.25x on most items, yet the
+cubic predicts the frames left out 13% better than lines). Items that do not move keep the linear pair."""
+
+
+def hermite_basis(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The cubic Hermite functions (h00, h01, h10, h11) at local times tau: value at the start and end, and
+    the start and end tangents' shares."""
+    omt, tt = 1.0 - tau, tau * tau
+    return (1.0 + 2.0 * tau) * omt * omt, tt * (3.0 - 2.0 * tau), tau * omt * omt, tt * (tau - 1.0)
+
+
+def hermite_weights(segment_t: np.ndarray, seg: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Knot indices (n, 4) and float64 weights (n, 4) of the cubic at local times tau (n,) in segments seg
+    (n,): knots lo(s), s, s+1, hi(s+1) with lo(s) = max(s - 1, 0), hi(s+1) = min(s + 2, S)."""
+    t = np.asarray(segment_t, np.float64)
+    S = len(t) - 1
+    seg = np.asarray(seg, np.int64)
+    tau = np.asarray(tau, np.float64)
+    lo, hi = np.maximum(seg - 1, 0), np.minimum(seg + 2, S)
+    delta = t[seg + 1] - t[seg]
+    span0, span1 = t[np.minimum(seg + 1, S)] - t[lo], t[hi] - t[seg]
+    a = np.divide(delta, span0, out=np.zeros_like(delta), where=span0 > 0)
+    b = np.divide(delta, span1, out=np.zeros_like(delta), where=span1 > 0)
+    h00, h01, h10, h11 = hermite_basis(tau)
+    idx = np.stack([lo, seg, seg + 1, hi], axis=-1)
+    w = np.stack([-a * h10, h00 - b * h11, h01 + a * h10, b * h11], axis=-1)
+    return idx, w
+
+
+def cubic_weights(segment_t: list[float], s: int, tau: float) -> tuple[int, int, tuple[float, ...]]:
+    """(lo, hi, (w_lo, w_s, w_s+1, w_hi)) of one segment s at local time tau, in pure Python (a frame's
+    evaluation): the same float64 arithmetic as :func:`hermite_weights`."""
+    S = len(segment_t) - 1
+    lo, hi = max(s - 1, 0), min(s + 2, S)
+    delta = segment_t[s + 1] - segment_t[s]
+    span0, span1 = segment_t[min(s + 1, S)] - segment_t[lo], segment_t[hi] - segment_t[s]
+    a = delta / span0 if span0 > 0 else 0.0
+    b = delta / span1 if span1 > 0 else 0.0
+    omt = 1.0 - tau
+    h00, h01 = (1.0 + 2.0 * tau) * omt * omt, tau * tau * (3.0 - 2.0 * tau)
+    h10, h11 = tau * omt * omt, tau * tau * (tau - 1.0)
+    return lo, hi, (-a * h10, h00 - b * h11, h01 + a * h10, b * h11)
+
+
+def band_weights(segm: Segmentation) -> np.ndarray:
+    """(F, 4) weights of every frame on the consecutive knots s-1, s, s+1, s+2 of its segment s (ends folded
+    onto the knots they clamp to, so a weight on a knot outside 0..S is 0)."""
+    seg = segm.frame_segment()
+    idx, w = hermite_weights(segm.segment_t, seg, segm.frame_tau())
+    out = np.zeros_like(w)
+    for j in range(4):  # column j of the band is knot s - 1 + j; a clamped index lands on its real column
+        np.add.at(out, (np.arange(len(seg)), idx[:, j] - seg + 1), w[:, j])
+    return out
+
+
+def solve_cubic_knots(b: np.ndarray, segm: Segmentation) -> np.ndarray:
+    """Least-squares knots z (K, S + 1, W) of tracks b (K, F, W) under the cubic model, by a QR sweep.
+
+    Every item shares the design (F rows, four consecutive knots each), so the sweep runs once with the
+    K * W tracks as right-hand sides. Knots -1 and S + 1 are padding unknowns pinned to 0.
+    """
+    K, F, W = b.shape
+    S = segm.n_segments
+    A = band_weights(segm)  # (F, 4) on padded unknowns s .. s + 3 (padded index = knot + 1)
+    rhs = np.moveaxis(b, 1, 0).reshape(F, K * W)
+    seg = segm.frame_segment()
+    n_cols = 4 + K * W
+    rows = np.empty((S + 3, n_cols))  # finished equation of padded unknown i: row i on unknowns i .. i + 3
+    carry = np.zeros((3, n_cols))  # pending rows on the next three unknowns (band columns 0..2)
+    carry[0, 0] = 1.0  # knot -1 = 0
+    starts = np.searchsorted(seg, np.arange(S + 1))
+    for s in range(S):
+        lo, hi = int(starts[s]), int(starts[s + 1])
+        block = np.zeros((3 + hi - lo, n_cols))
+        block[:3, :3], block[:3, 4:] = carry[:, :3], carry[:, 4:]
+        block[3:, :4], block[3:, 4:] = A[lo:hi], rhs[lo:hi]
+        R = np.linalg.qr(block, mode="r")
+        R = np.vstack([R, np.zeros((4 - len(R), n_cols))]) if len(R) < 4 else R[:4]
+        rows[s] = R[0]
+        carry = np.zeros((3, n_cols))
+        carry[:, :3], carry[:, 4:] = R[1:4, 1:4], R[1:4, 4:]
+    tail = np.zeros((4, n_cols))  # the last three unknowns: knots S - 1, S and the padding knot S + 1 = 0
+    tail[:3, :3], tail[:3, 4:] = carry[:, :3], carry[:, 4:]
+    tail[3, 2] = 1.0
+    R = np.linalg.qr(tail[:, [0, 1, 2, *range(4, n_cols)]], mode="r")
+    x = np.zeros((S + 3, K * W))
+    for i in (2, 1, 0):  # padded unknowns S, S + 1, S + 2
+        acc = R[i, 3:] - sum(R[i, j] * x[S + j] for j in range(i + 1, 3))
+        x[S + i] = _divide(acc, R[i, i], S + i - 1)
+    for i in range(S - 1, -1, -1):
+        acc = rows[i, 4:] - rows[i, 1] * x[i + 1] - rows[i, 2] * x[i + 2] - rows[i, 3] * x[i + 3]
+        x[i] = _divide(acc, rows[i, 0], i - 1)
+    return np.moveaxis(x[1:S + 2].reshape(S + 1, K, W), 1, 0)
+
+
+def _divide(num: np.ndarray, pivot: float, knot: int) -> np.ndarray:
+    """num / pivot in the back substitution; a zero pivot means no frame determines the knot."""
+    if not abs(pivot) > 1e-300:
+        raise PdeanimError(f"time fit: cubic knot {knot} is not determined by any frame (zero pivot)")
+    return num / pivot
+
+
+def predict_cubic(z: np.ndarray, segm: Segmentation) -> np.ndarray:
+    """Cubic model tracks (K, F, W) at the frames from knots z (K, S + 1, W)."""
+    idx, w = hermite_weights(segm.segment_t, segm.frame_segment(), segm.frame_tau())
+    out = np.take(z, idx[:, 0], axis=1) * w[None, :, 0, None]
+    for j in range(1, 4):
+        out += np.take(z, idx[:, j], axis=1) * w[None, :, j, None]
+    return out
+
+
+def prefer_tangents(b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(K,) bool: the moving items whose tracks b (K, F, W) at normalised times t (F,) the cubic predicts
+    between every other frame no worse than CUBIC_GAIN times straight lines do (each interior frame predicted
+    from the frames two apart around it)."""
+    K, F, _ = b.shape
+    if F < 4:
+        return np.zeros(K, bool)
+    t = np.asarray(t, np.float64)
+    f = np.arange(1, F - 1)
+    p0, p1 = f - 1, f + 1
+    lo, hi = np.where(f - 3 >= 0, f - 3, p0), np.where(f + 3 <= F - 1, f + 3, p1)
+    delta = t[p1] - t[p0]
+    tau = np.divide(t[f] - t[p0], delta, out=np.zeros_like(delta), where=delta > 0)
+    span0, span1 = t[p1] - t[lo], t[hi] - t[p0]
+    a = np.divide(delta, span0, out=np.zeros_like(delta), where=span0 > 0)
+    c = np.divide(delta, span1, out=np.zeros_like(delta), where=span1 > 0)
+    h00, h01, h10, h11 = hermite_basis(tau)
+    B0, B1, target = b[:, p0], b[:, p1], b[:, f]
+    lin = B0 * (1.0 - tau)[:, None] + B1 * tau[:, None] - target
+    cub = (B0 * h00[:, None] + B1 * h01[:, None] + (B1 - b[:, lo]) * (a * h10)[:, None]
+           + (b[:, hi] - B0) * (c * h11)[:, None] - target)
+    e_lin = np.einsum("kfw,kfw->k", lin, lin)
+    e_cub = np.einsum("kfw,kfw->k", cub, cub)
+    return (e_cub < CUBIC_GAIN * e_lin) & (e_lin > 0)
