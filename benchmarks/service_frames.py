@@ -104,15 +104,16 @@ def swaying_poses(vertices: np.ndarray, faces: np.ndarray, seconds: float = SECO
     return buf.getvalue()
 
 
-def fitted_clip(api: httpx.Client, n_vertices: int) -> dict:
-    """Upload a mesh of about ``n_vertices`` and generated poses, fit them with a job; the clip's metadata."""
+def fitted_clip(api: httpx.Client, n_vertices: int, format_version: int | None = None) -> dict:
+    """Upload a mesh of about ``n_vertices`` and generated poses, fit them with a job (in the default format,
+    or ``format_version``); the clip's metadata."""
     vertices, faces = subdivided_spot(n_vertices)
     obj = obj_bytes(vertices, faces)
     mesh = check(api.post("/v1/meshes", files={"file": (f"spot_{n_vertices}.obj", obj)}))
     poses = check(api.post(f"/v1/meshes/{mesh['id']}/poses",
                            files={"file": ("poses.npz", swaying_poses(vertices, faces))}))
-    job = check(api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses["id"],
-                                            "params": {"target_rel_rms": 0.002}}))
+    params = {"target_rel_rms": 0.002, **({"format_version": format_version} if format_version else {})}
+    job = check(api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses["id"], "params": params}))
     job = wait_job(api, job["id"], 600)
     return check(api.get(f"/v1/clips/{job['result']['clip_id']}"))
 
@@ -360,6 +361,8 @@ def main() -> int:
     ap.add_argument("--connections", type=int, default=16)
     ap.add_argument("--serve-args", default="", help="extra `pdeanim serve` arguments, e.g. '--workers 1'")
     ap.add_argument("--skip-busy", action="store_true", help="only the idle measurement")
+    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4],
+                    help="clip format of the fitted clips (default: the fit's default)")
     args = ap.parse_args()
     print(f"load average at start: {os.getloadavg()}, CPUs: {os.cpu_count()}", flush=True)
     rows: list[dict] = []
@@ -372,11 +375,12 @@ def main() -> int:
             services.start_service()
             with httpx.Client(base_url=services.url, headers={"Authorization": f"Bearer {key}"},
                               timeout=300) as api:
-                clip = fitted_clip(api, 20_000)
-                anim_clip = fitted_clip(api, 15_000)
+                clip = fitted_clip(api, 20_000, args.format_version)
+                anim_clip = fitted_clip(api, 15_000, args.format_version)
                 body = len(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5}).content)
                 print(f"frame clip {clip['id']}: {clip['info']['n_vertices']} vertices, "
-                      f"{clip['segments']} segments, frame GLB {body:,} B", flush=True)
+                      f"{clip['segments']} segments, format version {args.format_version or 'default'}, "
+                      f"frame GLB {body:,} B", flush=True)
                 services.start_bare(body)
                 anim = animation_ms(api, anim_clip["id"])
                 print(f"animation GLB over HTTP, {anim_clip['info']['n_vertices']} vertices, {FPS} fps over "

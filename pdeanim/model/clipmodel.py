@@ -139,8 +139,8 @@ class DynamicClip:
         lo, hi, w = cubic_weights(self._segment_list, s, tau)
         w32 = np.array(w, np.float32)
         if COMPILED:
-            _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32, fields[lo], fields[s], fields[s + 1],
-                           fields[hi], self._base_flat, flat)
+            _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32[0], w32[1], w32[2], w32[3], fields[lo],
+                           fields[s], fields[s + 1], fields[hi], self._base_flat, flat)
             return out
         phi = np.concatenate([phi, np.zeros((2, 1), np.float32)], axis=1)  # the cubic code: pair unused
         a, b = np.take(phi[0], code), np.take(phi[1], code)
@@ -285,15 +285,15 @@ def _combine(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, p0: np.ndarra
         out[v] = (phi0[i] * p0[v] + phi1[i] * p1[v]) + base[v]
 
 
-def _combine_cubic(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, cubic: int, w: np.ndarray,
-                   pl: np.ndarray, p0: np.ndarray, p1: np.ndarray, ph: np.ndarray, base: np.ndarray,
-                   out: np.ndarray) -> None:
-    """Compiled :func:`_combine` where values of code ``cubic`` sum four knot fields with weights w (4,)
-    float32 (docs/format.md §3.10), in the float32 order of the numpy path."""
+def _combine_cubic(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, cubic: int, w0: np.float32,
+                   w1: np.float32, w2: np.float32, w3: np.float32, pl: np.ndarray, p0: np.ndarray,
+                   p1: np.ndarray, ph: np.ndarray, base: np.ndarray, out: np.ndarray) -> None:
+    """Compiled :func:`_combine` where values of code ``cubic`` sum four knot fields with float32 weights
+    w0..w3 (docs/format.md §3.10), in the float32 order of the numpy path."""
     for v in range(out.shape[0]):
         i = code[v]
         if i == cubic:
-            out[v] = (((w[0] * pl[v] + w[1] * p0[v]) + w[2] * p1[v]) + w[3] * ph[v]) + base[v]
+            out[v] = (((w0 * pl[v] + w1 * p0[v]) + w2 * p1[v]) + w3 * ph[v]) + base[v]
         else:
             out[v] = (phi0[i] * p0[v] + phi1[i] * p1[v]) + base[v]
 
