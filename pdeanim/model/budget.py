@@ -7,9 +7,10 @@ from ..errors import LimitError
 
 FIT_BYTES_PER_FRAME_VERTEX = 480
 """Peak memory of ``fit_poses`` grows with frames x vertices: measured 205-229 bytes each (icospheres of 10k
-and 41k vertices, 100-400 frames, peak RSS over the start) with loose targets, and up to 455 above
-FIT_BASE_BYTES with tight ones (benchmarks/compression_peers.py, 2026-11-26: samba at rel-RMS 1e-3, 1,269 MiB
-peak for 175 frames x 9,971 vertices; pdance 341, elephant-gallop 238), rounded up for headroom."""
+and 41k vertices, 100-400 frames, peak RSS over the start) with loose targets, and up to 390 above
+FIT_BASE_BYTES with tight ones (benchmarks/compression_peers.py, 2026-11-26: samba at rel-RMS 1e-3, 1,161 MiB
+peak for 175 frames x 9,971 vertices, 455 while the encoder held all its knot-basis candidates at once;
+pdance 341, elephant-gallop 238), rounded up for headroom."""
 FIT_BASE_BYTES = 512 * 1024**2  # the interpreter, numpy/scipy/numba and the poses themselves at small sizes
 
 

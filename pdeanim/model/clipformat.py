@@ -205,14 +205,17 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     tracks, differences = quantise.encode_knot_tracks(codes)
     knot_arrays: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
     header.update(format_version=2, knot_differences=differences)
-    if version >= 3:
-        options = [(knot_arrays, differences, 0)]
+    if version >= 3:  # the smallest of the plain tracks and the basis encodings (plain on a tie), one held
+        best, rank = _trial_bytes(knot_arrays), 0  # at a time: each is as large as the knots
         for b in knotbasis.basis_candidates(topo.curves, topo.u, data.family, m, data.D, data.knots, steps,
                                             data.looping):
             residual, order = quantise.encode_knot_tracks(b.residual)
-            options.append(({"knot_step": steps, "knot_weights": quantise.zigzag(b.weights),
-                              "knot_basis": b.basis, "knots": residual}, order, b.rank))
-        knot_arrays, differences, rank = min(options, key=lambda o: _trial_bytes(o[0]))  # plain on a tie
+            option = {"knot_step": steps, "knot_weights": quantise.zigzag(b.weights), "knot_basis": b.basis,
+                      "knots": residual}
+            del b
+            size = _trial_bytes(option)
+            if size < best:
+                best, knot_arrays, differences, rank = size, option, order, option["knot_weights"].shape[0]
         if rank:
             header.update(format_version=3, knot_differences=differences, knot_rank=rank)
     if tangents is not None:

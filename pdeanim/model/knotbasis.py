@@ -11,6 +11,7 @@ and the residual takes whatever the basis misses, so every knot is rounded exact
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,14 +65,15 @@ def knots_from_basis(codes: np.ndarray, residual: np.ndarray, steps: np.ndarray,
 
 
 def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-                     knots: np.ndarray, steps: np.ndarray, loop: bool) -> list[KnotBasis]:
+                     knots: np.ndarray, steps: np.ndarray, loop: bool) -> Iterator[KnotBasis]:
     """Encodings of the knots on a basis, one per distinct rank of TRUNCATION_SHARES, below MAX_RANK_SHARE of
-    the knot count. Every knot decodes within half a step of ``steps`` (C, 3), as in version 2. ``loop``
-    keeps the basis's first and last columns equal, so equal first and last knots stay equal."""
+    the knot count, made one at a time (each holds integer tracks as large as the knots). Every knot decodes
+    within half a step of ``steps`` (C, 3), as in version 2. ``loop`` keeps the basis's first and last
+    columns equal, so equal first and last knots stay equal."""
     knots = np.asarray(knots, np.float64)
     K, C = knots.shape[0], curves.n_curves
     if K < 3 or C == 0:
-        return []
+        return
     cid, B = vertex_basis(curves, u, family, D)
     V = max(len(u), 1)
     weight = np.zeros((C, 3, 4))
@@ -82,15 +84,14 @@ def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.
     _, sigma, vt = np.linalg.svd(np.linalg.qr(root * tracks, mode="r"))  # QR first: (K, K), same spectrum
     tail = np.concatenate([np.cumsum((sigma**2)[::-1])[::-1], [0.0]]) / (V * K)  # tail[r]: drop r..
     rounding = float(np.sum(weight * (np.asarray(steps, np.float64) ** 2)[..., None])) / (12.0 * V)
-    out, ranks = [], set()
+    ranks = set()
     for share in TRUNCATION_SHARES:
         r = int(np.argmax(tail <= share**2 * rounding))
         if 1 <= r <= min(MAX_RANK_SHARE * K, MAX_RANK) and r not in ranks:
             ranks.add(r)
             found = _on_basis(knots, tracks, vt[:r], steps, loop)
             if found is not None:
-                out.append(found)
-    return out
+                yield found
 
 
 def _on_basis(knots: np.ndarray, tracks: np.ndarray, rows: np.ndarray, steps: np.ndarray, loop: bool

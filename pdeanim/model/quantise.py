@@ -191,10 +191,12 @@ def encode_knot_tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
     import zstandard
 
     tracks = np.ascontiguousarray(np.moveaxis(np.asarray(codes, np.int64), 0, -1))
+    size = zstandard.ZstdCompressor(level=3).compress  # reads the arrays' buffers in place
     first = zigzag_deltas(tracks, axis=-1)
+    first_size = len(size(first))
     second = zigzag_deltas(np.diff(tracks, axis=-1, prepend=0), axis=-1)
-    size = zstandard.ZstdCompressor(level=3).compress
-    return (first, 1) if len(size(first.tobytes())) <= len(size(second.tobytes())) else (second, 2)
+    del tracks
+    return (first, 1) if first_size <= len(size(second)) else (second, 2)
 
 
 def decode_knot_tracks(tracks: np.ndarray, order: int) -> np.ndarray:
