@@ -395,7 +395,7 @@ def _knots_v3(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: 
     """Knots (S+1, C, 3, 4) float32 of a version 3 coefficients part: zigzag weight codes (r, C, 3, 4) times
     knot_step on a shared time basis (r, S+1), plus residual tracks coded as the version 2 knots (§3.9)."""
     r = header.get("knot_rank")
-    low = 0 if header.get("format_version") == 4 else 1
+    low = 0 if header.get("format_version") == 4 else 1  # version 4's rank 0 decodes as version 2 (caller)
     if not isinstance(r, int) or isinstance(r, bool) or not 1 <= r <= S + 1:
         raise ClipFormatError(f"coefficients knot_rank must be an integer in {low}..{S + 1}, got {r!r}")
     steps, residual = _knot_tracks(header, arrays, S, C)

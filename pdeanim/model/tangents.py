@@ -10,6 +10,8 @@ tracks (a banded system, solved by a QR sweep), and the per-item choice between 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..errors import PdeanimError
@@ -22,9 +24,9 @@ at (elephant-gallop fitted from every 4th frame: lines win that test by up to 1.
 cubic predicts the frames left out 13% better than lines). Items that do not move keep the linear pair."""
 
 
-def hermite_basis(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The cubic Hermite functions (h00, h01, h10, h11) at local times tau: value at the start and end, and
-    the start and end tangents' shares."""
+def hermite_basis(tau: Any) -> tuple[Any, Any, Any, Any]:
+    """The cubic Hermite functions (h00, h01, h10, h11) at local times tau (an array or a float): value at the
+    start and end, and the start and end tangents' shares."""
     omt, tt = 1.0 - tau, tau * tau
     return (1.0 + 2.0 * tau) * omt * omt, tt * (3.0 - 2.0 * tau), tau * omt * omt, tt * (tau - 1.0)
 
@@ -56,9 +58,7 @@ def cubic_weights(segment_t: list[float], s: int, tau: float) -> tuple[int, int,
     span0, span1 = segment_t[min(s + 1, S)] - segment_t[lo], segment_t[hi] - segment_t[s]
     a = delta / span0 if span0 > 0 else 0.0
     b = delta / span1 if span1 > 0 else 0.0
-    omt = 1.0 - tau
-    h00, h01 = (1.0 + 2.0 * tau) * omt * omt, tau * tau * (3.0 - 2.0 * tau)
-    h10, h11 = tau * omt * omt, tau * tau * (tau - 1.0)
+    h00, h01, h10, h11 = hermite_basis(tau)  # plain floats in, plain floats out
     return lo, hi, (-a * h10, h00 - b * h11, h01 + a * h10, b * h11)
 
 

@@ -18,6 +18,7 @@ from pdeanim.model.segments import Segmentation
 from pdeanim.model.simplecurves import simple_curves
 from pdeanim.model.tangents import hermite_weights, predict_cubic, prefer_tangents, solve_cubic_knots
 from tests.conformance.generate import _synthetic_dynamic
+from tests.model.test_fast_paths import _plain_frame
 from tests.model.test_inbetween import synthetic
 
 
@@ -94,8 +95,7 @@ def test_version_4_round_trip_and_the_plain_definition():
     ts = np.linspace(-0.1, 1.1, 61)
     fast = clip.evaluate(ts)
     assert np.any(clip._cubic_items[0]) and fast.dtype == np.float32
-    # the plain definition in float64 (tests.model.test_fast_paths._plain_frame covers a fitted clip)
-    from tests.model.test_fast_paths import _plain_frame
+    # the plain definition in float64 (tests.model.test_fast_paths uses it on a fitted clip)
     scale = np.abs(fast).max()
     for k, t in enumerate(ts):
         np.testing.assert_allclose(fast[k], _plain_frame(clip, float(t)), atol=2e-6 * scale, rtol=0)
