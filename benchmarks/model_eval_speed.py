@@ -19,8 +19,8 @@ from pdeanim.model.fitclip import FitOptions, fit_poses  # noqa: E402
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4], default=None,
-                    help="clip format to fit (default: the fit's; 4 gives moving items time tangents)")
+    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5], default=None,
+                    help="clip format to fit (default: the fit's, 5; 4 and 5 give moving items tangents)")
     args = ap.parse_args()
     poses = torus_poses(150, 100, 40)
     options = FitOptions(segments=4) if args.format_version is None else FitOptions(

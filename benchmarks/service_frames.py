@@ -361,7 +361,7 @@ def main() -> int:
     ap.add_argument("--connections", type=int, default=16)
     ap.add_argument("--serve-args", default="", help="extra `pdeanim serve` arguments, e.g. '--workers 1'")
     ap.add_argument("--skip-busy", action="store_true", help="only the idle measurement")
-    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4],
+    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5],
                     help="clip format of the fitted clips (default: the fit's default)")
     args = ap.parse_args()
     print(f"load average at start: {os.getloadavg()}, CPUs: {os.cpu_count()}", flush=True)

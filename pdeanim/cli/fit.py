@@ -49,9 +49,10 @@ def register(subparsers) -> None:  # noqa: ANN001
         "(default: the first; the summary says which was used)",
     )
     p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
-    p.add_argument("--format-version", type=int, choices=[1, 2, 3, 4], default=4,
-                   help="newest clip format to write: 4 (default: Catmull-Rom time tangents for the items "
-                        "whose motion is smooth, else written as version 3), 3 (integer-coded and "
+    p.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5], default=5,
+                   help="newest clip format to write: 5 (default: natural-spline time tangents for the items "
+                        "whose motion is smooth, else written as version 3), 4 (the same with Catmull-Rom "
+                        "tangents, for readers that predate version 5), 3 (integer-coded and "
                         "compressed, knots on a shared time basis where that is smaller, else written as "
                         "version 2), 2 (for readers that predate version 3) or 1 (for readers that predate "
                         "version 2)")

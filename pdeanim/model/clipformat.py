@@ -68,18 +68,20 @@ from ..clip import topology_id
 from ..curveset import CurveSet
 from ..errors import ClipFormatError
 from . import knotbasis, quantise
+from .tangents import spline_weight_bound
 
 TRIAL_LEVEL = 3
 """zstd level of trial encodings (the fit's rounding search, its choice between fits, and the choice between
 knot encodings): fast, and about proportional to the final level 19 sizes; only the clip that is kept is
 compressed at container.ZSTD_LEVEL."""
 
-FORMAT_VERSION = 4
-FORMAT_VERSIONS = (1, 2, 3, 4)
+FORMAT_VERSION = 5
+FORMAT_VERSIONS = (1, 2, 3, 4, 5)
 """Versions a writer may be asked for. Version 3 adds the knot basis (§3.9) to the coefficients part only: a
 clip asked for in version 3 whose knots code smaller without a basis is written as version 2, and its
 topology part is version 2 either way. Version 4 adds Catmull-Rom time tangents (§3.10): a clip asked for in
-version 4 without any is written as version 3 (or 2)."""
+version 4 without any is written as version 3 (or 2). Version 5 (§3.11) has natural-spline tangents instead;
+the same rule."""
 TOPOLOGY_VERSIONS = (1, 2)
 MOTIONS = ("displacement", "absolute", "rigid")
 DEFAULT_TOLERANCE = 1e-5
@@ -112,7 +114,8 @@ class CoefficientData:
     looping: bool
     header: dict[str, Any]
     extra: dict[str, np.ndarray] = field(default_factory=dict)  # "rigid_*" arrays of motion "rigid"
-    tangents: np.ndarray | None = None  # (C, 3) uint8, 1: cubic linear segments (version 4); None: none
+    tangents: np.ndarray | None = None  # (C, 3) uint8, 1: cubic linear segments (versions 4, 5); None: none
+    spline_tangents: bool = False  # the cubic's tangents: natural spline (version 5), else Catmull-Rom (4)
 
 
 def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray,
@@ -177,8 +180,9 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     tangents = None
     if data.tangents is not None and np.any(data.tangents):
         tangents = np.asarray(data.tangents, np.uint8)
-    if tangents is not None and version < 4:
-        raise ValueError(f"time tangents need format version 4, not {version}")
+    if tangents is not None and version < (5 if data.spline_tangents else 4):
+        raise ValueError(f"these time tangents need format version {5 if data.spline_tangents else 4}, "
+                         f"not {version}")
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": version,
               "topology_id": topology_id(topology), "motion": data.motion, "looping": bool(data.looping),
               "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
@@ -195,12 +199,18 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
     topo = decode_topology(*container.unpack(topology))
     tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(topo.rest)
     m = np.asarray(data.m, np.float32)
+    cubic_max = quantise.CUBIC_PAIR_MAX
+    if tangents is not None and data.spline_tangents:  # the spline's weights at the clip's frames
+        ft = np.asarray(data.frame_times, np.float64)
+        span = ft[-1] - ft[0] if len(ft) > 1 and ft[-1] > ft[0] else 1.0
+        cubic_max = max(cubic_max, spline_weight_bound(data.segment_t, (ft - ft[0]) / span))
     arrays["space_kind"] = (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8)
     if knot_rms is not None:
         steps = quantise.knot_steps_rms(topo.curves, topo.u, data.family, m, data.D, data.knots, knot_rms,
-                                        4.0 * knot_rms if knot_cap is None else knot_cap, tangents)
+                                        4.0 * knot_rms if knot_cap is None else knot_cap, tangents, cubic_max)
     else:
-        steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol, tangents)
+        steps = quantise.knot_steps(topo.curves, topo.u, data.family, m, data.D, data.knots, tol, tangents,
+                                    cubic_max)
     codes = quantise.quantise_knots(data.knots, steps)
     tracks, differences = quantise.encode_knot_tracks(codes)
     knot_arrays: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
@@ -219,7 +229,7 @@ def encode_coefficients(topology: bytes, data: CoefficientData, version: int = F
         if rank:
             header.update(format_version=3, knot_differences=differences, knot_rank=rank)
     if tangents is not None:
-        header.update(format_version=4, knot_rank=header.get("knot_rank", 0))
+        header.update(format_version=5 if data.spline_tangents else 4, knot_rank=header.get("knot_rank", 0))
         knot_arrays["tangents"] = tangents
     arrays.update({
         "m": np.where((family >= 2) & (m > 0), -m, m), "D": np.asarray(data.D, np.float32),
@@ -346,13 +356,15 @@ def decode_coefficients(
         raise ClipFormatError("the space kind of a curve+coordinate must be the same in every segment")
     if version == 1:
         knots = _need(arrays, "knots", (S + 1, C, 3, 4), "coefficients")
-    elif version == 2 or (version == 4 and header.get("knot_rank") == 0):
-        if version == 4 and ("knot_weights" in arrays or "knot_basis" in arrays):
+    elif version == 2 or (version >= 4 and header.get("knot_rank") == 0):
+        if version >= 4 and ("knot_weights" in arrays or "knot_basis" in arrays):
             raise ClipFormatError("coefficients with knot_rank 0 must not hold knot_weights or knot_basis")
         knots = _knots_v2(header, arrays, S, C)
     else:
         knots = _knots_v3(header, arrays, S, C)
-    tangents = _tangents(arrays, C) if version == 4 else None
+    tangents = _tangents(arrays, C) if version >= 4 else None
+    if version == 5 and tangents.any() and np.any(np.diff(seg_t) <= 0):
+        raise ClipFormatError("natural-spline tangents (version 5) need strictly increasing segment times")
     if np.any(m < 0) or np.any((family >= 2) & (m >= np.pi)):
         raise ClipFormatError("time constants must be >= 0 (and < pi for trig families)")
     motion = str(header.get("motion"))
@@ -362,11 +374,11 @@ def decode_coefficients(
     return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients"), family, m,
                            _need(arrays, "D", (C, 3), "coefficients"),
                            knots, motion,
-                           bool(header.get("looping", False)), header, extra, tangents)
+                           bool(header.get("looping", False)), header, extra, tangents, version == 5)
 
 
 def _tangents(arrays: dict[str, np.ndarray], C: int) -> np.ndarray:
-    """The (C, 3) uint8 tangent flags of a version 4 coefficients part (0 or 1)."""
+    """The (C, 3) uint8 tangent flags of a version 4 or 5 coefficients part (0 or 1)."""
     tangents = _need(arrays, "tangents", (C, 3), "coefficients", "<u1")
     if tangents.size and tangents.max() > 1:
         raise ClipFormatError("coefficients tangents must be 0 or 1")

@@ -4,9 +4,10 @@ Everything that does not depend on t is precomputed when a clip is loaded: the p
 (V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), plus the item (curve, coordinate) of
 every value. A frame at t is then: find the segment (pure Python), evaluate the time pair of the items of
 that segment once per distinct mu (few in the integer-coded format) and compute positions = rest +
-phi0 * P[s] + phi1 * P[s+1] per value (items with time tangents, format version 4: a weighted sum of four
-knot fields, the weights shared by the segment). Both steps are one compiled pass each (numba: no BLAS, so
-no caller meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
+phi0 * P[s] + phi1 * P[s+1] per value (items with time tangents: a weighted sum of four fields, the weights
+shared by the segment: four knots for Catmull-Rom, format version 4; two knots and the natural spline's two
+tangents, precomputed per knot at load, for version 5). Both steps are one compiled pass each (numba: no
+BLAS, so no caller meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from ..errors import ClipFormatError
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
-from .tangents import cubic_weights
+from .tangents import cubic_weights, natural_tangents, spline_frame_weights
 from .timefit import SIN_COEF
 
 _ODD = 2.0 * np.arange(len(SIN_COEF)) + 1.0  # (P,) odd powers of the sine series
@@ -67,6 +68,9 @@ class DynamicClip:
             self._base = np.zeros((self.n_vertices, 3), np.float32)
         self._base_flat = self._base.ravel()
         self._init_gather(self._precompute(fam[0] % 2))
+        self._tangent_fields = None  # (S+1, V*3) float32 natural-spline tangents of the knot fields (§3.11)
+        if coef.spline_tangents and any(c is not None for c in self._cubic_values):
+            self._tangent_fields = _spline_tangent_fields(self._knot_fields, self.segment_t)
 
     def _init_gather(self, knot_fields: np.ndarray) -> None:
         """The flat (S+1, V * 3) knot fields and, per segment, the distinct time value of every value (its
@@ -134,20 +138,26 @@ class DynamicClip:
         return out
 
     def _cubic_frame(self, s: int, tau: float, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """:meth:`_frame` of a segment with cubic items: their values sum four knot fields (§3.10)."""
+        """:meth:`_frame` of a segment with cubic items: their values sum four fields, the knots lo(s), s,
+        s+1, hi(s+1) (Catmull-Rom, §3.10) or the tangents and knots at s and s+1 (natural spline, §3.11)."""
         flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
-        lo, hi, w = cubic_weights(self._segment_list, s, tau)
+        if self._tangent_fields is None:
+            lo, hi, w = cubic_weights(self._segment_list, s, tau)
+            first, last = fields[lo], fields[hi]
+        else:
+            w = spline_frame_weights(self._segment_list, s, tau)
+            first, last = self._tangent_fields[s], self._tangent_fields[s + 1]
         w32 = np.array(w, np.float32)
         if COMPILED:
-            _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32[0], w32[1], w32[2], w32[3], fields[lo],
-                           fields[s], fields[s + 1], fields[hi], self._base_flat, flat)
+            _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32[0], w32[1], w32[2], w32[3], first,
+                           fields[s], fields[s + 1], last, self._base_flat, flat)
             return out
         phi = np.concatenate([phi, np.zeros((2, 1), np.float32)], axis=1)  # the cubic code: pair unused
         a, b = np.take(phi[0], code), np.take(phi[1], code)
         np.add(a * fields[s] + b * fields[s + 1], self._base_flat, out=flat)
         i = self._cubic_values[s]
-        flat[i] = (((w32[0] * fields[lo][i] + w32[1] * fields[s][i]) + w32[2] * fields[s + 1][i])
-                   + w32[3] * fields[hi][i]) + self._base_flat[i]
+        flat[i] = (((w32[0] * first[i] + w32[1] * fields[s][i]) + w32[2] * fields[s + 1][i])
+                   + w32[3] * last[i]) + self._base_flat[i]
         return out
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
@@ -302,6 +312,18 @@ if COMPILED:
     _combine_cubic = njit(cache=True, nogil=True, boundscheck=False)(_combine_cubic)
     _pair = njit(cache=True, nogil=True, boundscheck=False)(_pair)
     _combine = njit(cache=True, nogil=True, boundscheck=False)(_combine)
+
+
+SPLINE_CHUNK = 1 << 16
+"""Values per block of the natural-spline tangent solve at load (bounds its float64 scratch)."""
+
+
+def _spline_tangent_fields(fields: np.ndarray, segment_t: np.ndarray) -> np.ndarray:
+    """(S+1, V*3) float32 natural-spline tangents of the float32 knot fields, solved in float64 (§3.11)."""
+    out = np.empty_like(fields)
+    for a in range(0, fields.shape[1], SPLINE_CHUNK):
+        out[:, a:a + SPLINE_CHUNK] = natural_tangents(fields[:, a:a + SPLINE_CHUNK], segment_t)
+    return out
 
 
 def clip_from_parts(topo_header: dict[str, Any], topo_arrays: dict[str, np.ndarray],

@@ -12,6 +12,7 @@ import numpy as np
 
 from .segments import Segmentation
 from .spacefit import SpaceProjection, project_items, search_D
+from .tangents import CATMULL_ROM
 from .timefit import fit_tracks, fit_tracks_cubic, predict
 
 
@@ -25,7 +26,8 @@ class SpaceStage:
     b: np.ndarray
     floor_frames: np.ndarray
     Yk: np.ndarray | None = None
-    tangents: np.ndarray | None = None  # (K,) bool: candidates for cubic tracks (format version 4)
+    tangents: np.ndarray | None = None  # (K,) bool: candidates for cubic tracks (format version 4 and 5)
+    tangent_rule: str = CATMULL_ROM  # their knot tangents: Catmull-Rom (version 4) or natural spline (5)
 
 
 @dataclass
@@ -37,7 +39,8 @@ class TimeStage:
     mu: np.ndarray
     err_frames: np.ndarray  # (K, F) squared error per item and frame (floor included)
     pred: np.ndarray  # (K, F, 4) model tracks in orthonormal coordinates
-    tangents: np.ndarray | None = None  # (K,) bool cubic tracks (format version 4), None: none
+    tangents: np.ndarray | None = None  # (K,) bool cubic tracks (format version 4 and 5), None: none
+    tangent_rule: str = CATMULL_ROM
 
 
 def items_from_curves(values: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -108,14 +111,15 @@ def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine
     item and frame include the spatial floor."""
     tangents = None
     if space.tangents is not None and space.tangents.any() and not loop:
-        z, mu, tangents = fit_tracks_cubic(space.b, segm, space.tangents, refine_iters=refine_iters)
+        z, mu, tangents = fit_tracks_cubic(space.b, segm, space.tangents, refine_iters=refine_iters,
+                                           rule=space.tangent_rule)
     else:
         z, mu = fit_tracks(space.b, segm, loop, refine_iters=refine_iters)
-    pred = predict(z, segm, mu, tangents)
+    pred = predict(z, segm, mu, tangents, space.tangent_rule)
     d = space.b - pred
     err = space.floor_frames + np.einsum("kfa,kfa->kf", d, d)  # einsum: a sum over axis -1 is ~5x slower
     knots = np.einsum("kab,ksb->ksa", space.proj.to_coef, z)
-    return TimeStage(segm, knots, mu, err, pred, tangents)
+    return TimeStage(segm, knots, mu, err, pred, tangents, space.tangent_rule)
 
 
 def reconstruct_items(space: SpaceStage, time: TimeStage) -> np.ndarray:

@@ -121,22 +121,25 @@ def vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.ndar
 
 
 CUBIC_PAIR_MAX = 1.5
-"""Bound of the summed absolute knot weights of a cubic track (format version 4): h00 + h01 = 1 and
-|h10| + |h11| = tau (1 - tau) <= 1/4, each entering twice with a factor of at most 1."""
+"""Bound of the summed absolute knot weights of a Catmull-Rom track (format version 4): h00 + h01 = 1 and
+|h10| + |h11| = tau (1 - tau) <= 1/4, each entering twice with a factor of at most 1. Natural-spline tracks
+(version 5) use the larger of this and their weights' sum at the clip's frames."""
 
 
-def pair_max(family: np.ndarray, m: np.ndarray, tangents: np.ndarray | None = None) -> np.ndarray:
+def pair_max(family: np.ndarray, m: np.ndarray, tangents: np.ndarray | None = None,
+             cubic_max: float = CUBIC_PAIR_MAX) -> np.ndarray:
     """(C, 3) bound of phi0 + phi1 over every segment: 1 for exp and linear time, 1 / cos(m/2) for trig, and
-    CUBIC_PAIR_MAX for items with tangents (C, 3)."""
+    ``cubic_max`` (the cubic's summed absolute knot weights) for items with tangents (C, 3)."""
     m_trig = np.where(np.asarray(family) >= 2, np.asarray(m, np.float64), 0.0).max(axis=0)
     bound = 1.0 / np.cos(np.minimum(m_trig, np.pi - 1e-6) / 2.0)
     if tangents is None:
         return bound
-    return np.where(np.asarray(tangents) > 0, np.maximum(bound, CUBIC_PAIR_MAX), bound)
+    return np.where(np.asarray(tangents) > 0, np.maximum(bound, cubic_max), bound)
 
 
 def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-               knots: np.ndarray, tolerance: float, tangents: np.ndarray | None = None) -> np.ndarray:
+               knots: np.ndarray, tolerance: float, tangents: np.ndarray | None = None,
+               cubic_max: float = CUBIC_PAIR_MAX) -> np.ndarray:
     """(C, 3) float32 power-of-two steps of the knots, per curve and coordinate, so that rounding every knot
     to a multiple moves no vertex coordinate by more than ``tolerance``.
 
@@ -145,12 +148,13 @@ def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarra
     cid, B = vertex_basis(curves, u, family, D)
     sens = np.zeros((curves.n_curves, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    return _power_of_two(2.0 * tolerance / np.maximum(sens * pair_max(family, m, tangents), 1e-30), knots)
+    return _power_of_two(2.0 * tolerance / np.maximum(sens * pair_max(family, m, tangents, cubic_max), 1e-30),
+                         knots)
 
 
 def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-                   knots: np.ndarray, rms: float, cap: float, tangents: np.ndarray | None = None
-                   ) -> np.ndarray:
+                   knots: np.ndarray, rms: float, cap: float, tangents: np.ndarray | None = None,
+                   cubic_max: float = CUBIC_PAIR_MAX) -> np.ndarray:
     """(C, 3) float32 power-of-two steps whose rounding adds at most ``rms`` to the RMS vertex distance, and
     moves no vertex coordinate by more than ``cap`` (so the max error stays near the unrounded one).
 
@@ -170,7 +174,7 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     steps = np.sqrt(2.0 * share / np.maximum(weight, 1e-300))
     sens = np.zeros((C, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    bound = pair_max(family, m, tangents)
+    bound = pair_max(family, m, tangents, cubic_max)
     return _power_of_two(np.minimum(steps, 2.0 * cap / np.maximum(sens * bound, 1e-30)), knots)
 
 

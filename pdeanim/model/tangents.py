@@ -1,8 +1,11 @@
-"""Catmull-Rom time tangents (format version 4, docs/format.md §3.10): C1 cubic knot tracks.
+"""Time tangents: cubic knot tracks, Catmull-Rom (format version 4, docs/format.md §3.10) or natural spline
+(version 5, §3.11).
 
-An item with tangents interpolates its knots on linear segments with the cubic Hermite spline whose knot
-tangents are the central differences of the neighbouring knots (one-sided at the ends), so frames between
-knots follow the curvature of the motion instead of its chords. The cubic is the small-constant limit of the
+An item with tangents interpolates its knots on linear segments with a cubic Hermite spline, so frames
+between knots follow the curvature of the motion instead of its chords. Its knot tangents are the central
+differences of the neighbouring knots (one-sided at the ends; C1, four knots per segment) or those of the
+natural cubic spline through all knots (C2; every knot weighs on every segment, through one tridiagonal
+solve shared by all items). The cubic is the small-constant limit of the
 paper's sum of two time terms in one segment (span{cosh m1 t, sinh m1 t, cosh m2 t, sinh m2 t} tends to
 span{1, t, t^2, t^3}). Here: the weights of the four knots of a segment, the least-squares knots of such
 tracks (a banded system, solved by a QR sweep), and the per-item choice between cubic and linear tracks.
@@ -13,9 +16,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from ..errors import PdeanimError
 from .segments import Segmentation
+
+CATMULL_ROM, NATURAL = "catmull-rom", "natural"
+TANGENT_RULES = (CATMULL_ROM, NATURAL)
 
 CUBIC_GAIN = 1.5
 """An item gets tangents unless the cubic's held-out error (between every other frame) exceeds this multiple
@@ -62,6 +69,14 @@ def cubic_weights(segment_t: list[float], s: int, tau: float) -> tuple[int, int,
     return lo, hi, (-a * h10, h00 - b * h11, h01 + a * h10, b * h11)
 
 
+def spline_frame_weights(segment_t: list[float], s: int, tau: float) -> tuple[float, ...]:
+    """(w_T_s, w_P_s, w_P_s+1, w_T_s+1) of the natural-spline cubic in segment s at local time tau (§3.11):
+    the Hermite functions, the tangents' scaled by the segment's length; pure Python floats."""
+    delta = segment_t[s + 1] - segment_t[s]
+    h00, h01, h10, h11 = hermite_basis(tau)
+    return delta * h10, h00, h01, delta * h11
+
+
 def band_weights(segm: Segmentation) -> np.ndarray:
     """(F, 4) weights of every frame on the consecutive knots s-1, s, s+1, s+2 of its segment s (ends folded
     onto the knots they clamp to, so a weight on a knot outside 0..S is 0)."""
@@ -73,8 +88,15 @@ def band_weights(segm: Segmentation) -> np.ndarray:
     return out
 
 
-def solve_cubic_knots(b: np.ndarray, segm: Segmentation) -> np.ndarray:
-    """Least-squares knots z (K, S + 1, W) of tracks b (K, F, W) under the cubic model, by a QR sweep.
+def solve_cubic_knots(b: np.ndarray, segm: Segmentation, rule: str = CATMULL_ROM) -> np.ndarray:
+    """Least-squares knots z (K, S + 1, W) of tracks b (K, F, W) under the cubic model of ``rule``."""
+    if rule == NATURAL:
+        return _solve_spline_knots(b, segm)
+    return _solve_catmull_rom_knots(b, segm)
+
+
+def _solve_catmull_rom_knots(b: np.ndarray, segm: Segmentation) -> np.ndarray:
+    """Least-squares Catmull-Rom knots z (K, S + 1, W) of tracks b (K, F, W), by a QR sweep.
 
     Every item shares the design (F rows, four consecutive knots each), so the sweep runs once with the
     K * W tracks as right-hand sides. Knots -1 and S + 1 are padding unknowns pinned to 0.
@@ -120,8 +142,10 @@ def _divide(num: np.ndarray, pivot: float, knot: int) -> np.ndarray:
     return num / pivot
 
 
-def predict_cubic(z: np.ndarray, segm: Segmentation) -> np.ndarray:
+def predict_cubic(z: np.ndarray, segm: Segmentation, rule: str = CATMULL_ROM) -> np.ndarray:
     """Cubic model tracks (K, F, W) at the frames from knots z (K, S + 1, W)."""
+    if rule == NATURAL:
+        return _on_frames(spline_design(segm.segment_t, segm.frame_segment(), segm.frame_tau()), z)
     idx, w = hermite_weights(segm.segment_t, segm.frame_segment(), segm.frame_tau())
     out = np.take(z, idx[:, 0], axis=1) * w[None, :, 0, None]
     for j in range(1, 4):
@@ -129,14 +153,17 @@ def predict_cubic(z: np.ndarray, segm: Segmentation) -> np.ndarray:
     return out
 
 
-def prefer_tangents(b: np.ndarray, t: np.ndarray) -> np.ndarray:
+def prefer_tangents(b: np.ndarray, t: np.ndarray, rule: str = CATMULL_ROM) -> np.ndarray:
     """(K,) bool: the moving items whose tracks b (K, F, W) at normalised times t (F,) the cubic predicts
     between every other frame no worse than CUBIC_GAIN times straight lines do (each interior frame predicted
-    from the frames two apart around it)."""
+    from the frames two apart around it; for the natural spline, from the spline through the other parity's
+    frames)."""
     K, F, _ = b.shape
     if F < 4:
         return np.zeros(K, bool)
     t = np.asarray(t, np.float64)
+    if rule == NATURAL:
+        return _prefer_spline(b, t)
     f = np.arange(1, F - 1)
     p0, p1 = f - 1, f + 1
     lo, hi = np.where(f - 3 >= 0, f - 3, p0), np.where(f + 3 <= F - 1, f + 3, p1)
@@ -152,4 +179,101 @@ def prefer_tangents(b: np.ndarray, t: np.ndarray) -> np.ndarray:
            + (b[:, hi] - B0) * (c * h11)[:, None] - target)
     e_lin = np.einsum("kfw,kfw->k", lin, lin)
     e_cub = np.einsum("kfw,kfw->k", cub, cub)
+    return (e_cub < CUBIC_GAIN * e_lin) & (e_lin > 0)
+
+
+def natural_tangents(P: np.ndarray, segment_t: np.ndarray) -> np.ndarray:
+    """Knot tangents (S + 1, ...) float64 of the natural cubic spline through per-knot data P (S + 1, ...) at
+    strictly increasing times segment_t (docs/format.md §3.11): the tridiagonal system solved by the Thomas
+    algorithm (strictly diagonally dominant), one sweep over the knots for every column at once."""
+    t = np.asarray(segment_t, np.float64)
+    S = len(t) - 1
+    P = np.asarray(P, np.float64)
+    dx = np.diff(t).reshape(-1, *([1] * (P.ndim - 1)))
+    if S < 1 or not np.all(dx > 0):
+        raise PdeanimError("natural-spline tangents need at least two strictly increasing knot times")
+    d = np.diff(P, axis=0) / dx
+    dx = np.diff(t)
+    lower = np.r_[0.0, dx[1:], 1.0]  # coefficient of T_{j-1} in row j
+    diag = np.r_[2.0, 2.0 * (dx[:-1] + dx[1:]), 2.0]
+    upper = np.r_[1.0, dx[:-1], 0.0]  # coefficient of T_{j+1}
+    out = np.empty_like(P)
+    out[0] = 3.0 * d[0]
+    for j in range(1, S):
+        out[j] = 3.0 * (dx[j] * d[j - 1] + dx[j - 1] * d[j])
+    out[S] = 3.0 * d[S - 1]
+    c = np.empty(S + 1)
+    c[0] = upper[0] / diag[0]
+    out[0] /= diag[0]
+    for j in range(1, S + 1):  # forward elimination
+        piv = diag[j] - lower[j] * c[j - 1]
+        c[j] = upper[j] / piv
+        out[j] -= lower[j] * out[j - 1]
+        out[j] /= piv
+    for j in range(S - 1, -1, -1):  # back substitution
+        out[j] -= c[j] * out[j + 1]
+    return out
+
+
+def spline_design(segment_t: np.ndarray, seg: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """(n, S + 1) float64 weights of every knot on the natural-spline cubic at local times tau (n,) in
+    segments seg (n,): value = h00 P_s + h01 P_s+1 + delta (h10 T_s + h11 T_s+1), with T = M P."""
+    t = np.asarray(segment_t, np.float64)
+    S = len(t) - 1
+    M = natural_tangents(np.eye(S + 1), t)  # T_j = sum_i M[j, i] P_i
+    seg = np.asarray(seg, np.int64)
+    h00, h01, h10, h11 = hermite_basis(np.asarray(tau, np.float64))
+    delta = t[seg + 1] - t[seg]
+    W = (delta * h10)[:, None] * M[seg] + (delta * h11)[:, None] * M[seg + 1]
+    rows = np.arange(len(seg))
+    W[rows, seg] += h00
+    W[rows, seg + 1] += h01
+    return W
+
+
+def spline_weight_bound(segment_t: np.ndarray, t: np.ndarray) -> float:
+    """Largest sum of absolute knot weights of the natural-spline cubic at normalised times t (n,): how far
+    a rounding of every knot by at most e can move a value (at most e times this)."""
+    seg_t = np.asarray(segment_t, np.float64)
+    t = np.clip(np.asarray(t, np.float64), seg_t[0], seg_t[-1])
+    seg = np.clip(np.searchsorted(seg_t, t, side="right") - 1, 0, len(seg_t) - 2)
+    tau = (t - seg_t[seg]) / (seg_t[seg + 1] - seg_t[seg])
+    return float(np.abs(spline_design(seg_t, seg, tau)).sum(axis=1).max(initial=1.0))
+
+
+def _on_frames(W: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Tracks (K, n, Wd) = W (n, S + 1) applied to knots z (K, S + 1, Wd), as one matrix product."""
+    K, S1, Wd = z.shape
+    flat = np.moveaxis(z, 1, 0).reshape(S1, K * Wd)
+    return np.moveaxis((W @ flat).reshape(len(W), K, Wd), 1, 0)
+
+
+def _solve_spline_knots(b: np.ndarray, segm: Segmentation) -> np.ndarray:
+    """Least-squares natural-spline knots z (K, S + 1, W) of tracks b (K, F, W): one QR of the dense design
+    (F, S + 1) for every item (full column rank: every knot is a frame, where its row is a unit vector)."""
+    K, F, Wd = b.shape
+    W = spline_design(segm.segment_t, segm.frame_segment(), segm.frame_tau())
+    Q, R = np.linalg.qr(W)
+    if not np.all(np.abs(np.diag(R)) > 1e-12):
+        raise PdeanimError("time fit: a natural-spline knot is not determined by any frame")
+    rhs = Q.T @ np.moveaxis(b, 1, 0).reshape(F, K * Wd)
+    z = solve_triangular(R, rhs)
+    return np.moveaxis(z.reshape(len(R), K, Wd), 1, 0)
+
+
+def _prefer_spline(b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """:func:`prefer_tangents` for the natural spline: each parity's interior frames predicted from the
+    other parity's frames, by the spline through them and by straight lines."""
+    K, F, _ = b.shape
+    e_lin, e_cub = np.zeros(K), np.zeros(K)
+    for parity in (0, 1):
+        kept = np.arange(parity, F, 2)
+        out = np.setdiff1d(np.arange(kept[0] + 1, kept[-1]), kept)
+        seg = np.clip(np.searchsorted(t[kept], t[out], side="right") - 1, 0, len(kept) - 2)
+        tau = (t[out] - t[kept][seg]) / (t[kept][seg + 1] - t[kept][seg])
+        target = b[:, out]
+        cub = _on_frames(spline_design(t[kept], seg, tau), b[:, kept]) - target
+        lin = (b[:, kept[seg]] * (1.0 - tau)[:, None] + b[:, kept[seg + 1]] * tau[:, None]) - target
+        e_lin += np.einsum("kfw,kfw->k", lin, lin)
+        e_cub += np.einsum("kfw,kfw->k", cub, cub)
     return (e_cub < CUBIC_GAIN * e_lin) & (e_lin > 0)

@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import PdeanimError
 from .families import MU_TRIG_MAX, time_pair
 from .segments import Segmentation
-from .tangents import predict_cubic, solve_cubic_knots
+from .tangents import CATMULL_ROM, predict_cubic, solve_cubic_knots
 
 MU_GRID = np.array([0.0, -MU_TRIG_MAX, -2.0, -1.0, -0.4, 0.4, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0])
 """Coarse grid of signed time constants per segment (0 first: ties keep the linear pair)."""
@@ -180,14 +180,14 @@ def _solve_knots_dense(b: np.ndarray, segm: Segmentation, mu: np.ndarray, loop: 
     return z
 
 
-def predict(z: np.ndarray, segm: Segmentation, mu: np.ndarray, tangents: np.ndarray | None = None
-            ) -> np.ndarray:
+def predict(z: np.ndarray, segm: Segmentation, mu: np.ndarray, tangents: np.ndarray | None = None,
+            rule: str = CATMULL_ROM) -> np.ndarray:
     """Model tracks (K, F, 4) from knots z (K, S + 1, 4) and constants mu (K, S); items flagged in
-    ``tangents`` (K,) bool are cubic tracks (:mod:`pdeanim.model.tangents`, their mu 0)."""
+    ``tangents`` (K,) bool are cubic tracks of ``rule`` (:mod:`pdeanim.model.tangents`, their mu 0)."""
     if tangents is not None and tangents.any():
         out = np.empty(z.shape[:1] + (len(segm.t),) + z.shape[2:])
         plain = ~tangents
-        out[tangents] = predict_cubic(z[tangents], segm)
+        out[tangents] = predict_cubic(z[tangents], segm, rule)
         if plain.any():
             out[plain] = predict(z[plain], segm, mu[plain])
         return out
@@ -400,19 +400,19 @@ follow a motion that the cubic cannot, while where both fit (a knot at every fra
 frames in between."""
 
 
-def fit_tracks_cubic(b: np.ndarray, segm: Segmentation, candidates: np.ndarray, refine_iters: int = 8
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fit_tracks_cubic(b: np.ndarray, segm: Segmentation, candidates: np.ndarray, refine_iters: int = 8,
+                     rule: str = CATMULL_ROM) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(knots z (K, S + 1, 4), constants mu (K, S), cubic (K,) bool) of an open clip's tracks b (K, F, 4):
-    every item gets its C0 fit; the ``candidates`` (K,) bool take the cubic track (mu 0) where it fits their
-    frames about as well (see CUBIC_SLACK)."""
+    every item gets its C0 fit; the ``candidates`` (K,) bool take the cubic track of ``rule`` (mu 0) where it
+    fits their frames about as well (see CUBIC_SLACK)."""
     z, mu = fit_tracks(b, segm, refine_iters=refine_iters)
     cubic = np.zeros(len(b), bool)
     rows = np.flatnonzero(candidates)
     if len(rows) == 0:
         return z, mu, cubic
     bc = b[rows]
-    zc = solve_cubic_knots(bc, segm)
-    d0, dc = bc - predict(z[rows], segm, mu[rows]), bc - predict_cubic(zc, segm)
+    zc = solve_cubic_knots(bc, segm, rule)
+    d0, dc = bc - predict(z[rows], segm, mu[rows]), bc - predict_cubic(zc, segm, rule)
     e0, ec = np.einsum("kfw,kfw->k", d0, d0), np.einsum("kfw,kfw->k", dc, dc)
     keep = ec <= CUBIC_SLACK * e0 + 1e-9 * np.einsum("kfw,kfw->k", bc, bc)
     z[rows[keep]], mu[rows[keep]] = zc[keep], 0.0

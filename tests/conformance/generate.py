@@ -10,8 +10,9 @@ zero-length segment, large and tiny rigid rotations). Cases without a suffix are
 (dynamic-pde version 2: integer codes in zstd-compressed container version 2 arrays, or version 3 where the
 writer finds the knot basis smaller); the "-v1" cases keep version 1 (raw float arrays in container version
 1) covered, the "-v3" cases are morph-target blends whose coefficients part is version 3 (knots on a shared
-low-rank time basis, docs/format.md §3.9), and the "-v4" cases have Catmull-Rom time tangents on some items
-(§3.10), with and without a knot basis (the generator checks that the writer did choose what each covers).
+low-rank time basis, docs/format.md §3.9), the "-v4" cases have Catmull-Rom time tangents on some items
+(§3.10) and the "-v5" cases natural-spline time tangents (§3.11), with and without a knot basis (the generator
+checks that the writer did choose what each covers).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 5
+FIXTURE_VERSION = 6
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 PLAIN = 3
 """Format version of the cases without a suffix: version 2, or 3 where the knot basis is smaller."""
@@ -67,9 +68,11 @@ def _smooth_many_segments() -> ClipParts:
     return fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12, format_version=PLAIN))
 
 
-def _smooth_tangents(motion: str) -> Callable[[], ClipParts]:
-    """The smooth 12-segment fit in the default format: its moving items get time tangents (version 4)."""
-    return lambda: _assert_v4(fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12, motion=motion)))
+def _smooth_tangents(motion: str, version: int) -> Callable[[], ClipParts]:
+    """The smooth 12-segment fit: its moving items get time tangents (version 4 or 5)."""
+    return lambda: _assert_v4(fit_poses(_sphere_poses(n_frames=25),
+                                        FitOptions(segments=12, motion=motion, format_version=version)),
+                              version=version)
 
 
 def _single_frame_rigid() -> ClipParts:
@@ -117,13 +120,13 @@ def _synthetic_topology(param_mode: str, version: int = PLAIN) -> tuple[bytes, i
 
 def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
                        version: int = PLAIN) -> Callable[[], ClipParts]:
-    """Hand-chosen coefficients reaching every branch; version 4 adds tangents on a random half of the items
-    (which then take the cubic in their linear segments)."""
+    """Hand-chosen coefficients reaching every branch; versions 4 and 5 add tangents on a random half of the
+    items (which then take the cubic in their linear segments; version 5 has no zero-length segment)."""
     def make() -> ClipParts:
         topo, C, _ = _synthetic_topology(param_mode, version)
         rng = np.random.default_rng(11)
         S = 4
-        seg_t = np.array([0.0, 0.3, 0.3, 0.55, 1.0])  # a zero-length segment at t = 0.3
+        seg_t = np.array([0.0, 0.3, 0.3 if version < 5 else 0.36, 0.55, 1.0])  # a zero-length segment
         space = rng.integers(0, 2, (C, 3))
         trig = rng.integers(0, 2, (S, C, 3))
         family = (2 * trig + space[None]).astype(np.uint8)
@@ -149,11 +152,11 @@ def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
             if loop:
                 for k in ("rigid_rot_knots", "rigid_trans_knots"):
                     extra[k][-1] = extra[k][0]
-        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version == 4 else None
+        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version >= 4 else None
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, 9), family, m, D, knots, motion, loop,
-                               {"errors": {}}, extra, tangents)
+                               {"errors": {}}, extra, tangents, version == 5)
         parts = ClipParts(topo, encode_coefficients(topo, data, version))
-        return _assert_v4(parts, rank=False) if version == 4 else parts
+        return _assert_v4(parts, rank=False, version=version) if version >= 4 else parts
     return make
 
 
@@ -186,11 +189,11 @@ def _assert_v3(parts: ClipParts) -> ClipParts:
     return parts
 
 
-def _assert_v4(parts: ClipParts, rank: bool | None = None) -> ClipParts:
-    """The case has a version 4 coefficients part with tangents on some items (and a knot basis when ``rank``
-    is True, none when False)."""
+def _assert_v4(parts: ClipParts, rank: bool | None = None, version: int = 4) -> ClipParts:
+    """The case has a version 4 (or ``version``) coefficients part with tangents on some items (and a knot
+    basis when ``rank`` is True, none when False)."""
     header, arrays = container.unpack(parts.coefficients)
-    assert header["format_version"] == 4, header
+    assert header["format_version"] == version, header
     tangents = arrays["tangents"]
     assert tangents.dtype == np.uint8 and tangents.shape == (header["n_curves"], 3) and tangents.any()
     if rank is not None:
@@ -207,14 +210,15 @@ def _fit_blend(loop: bool) -> Callable[[], ClipParts]:
 
 def _synthetic_blend(motion: str, param_mode: str, loop: bool, version: int = 3) -> Callable[[], ClipParts]:
     """A morph-target blend: knots that are exactly a blend of three shapes with weights that vary over 11
-    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins (format version 3; 4 adds
-    tangents on a random half of the items)."""
+    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins (format version 3; 4
+    and 5 add tangents on a random half of the items; version 5 has no zero-length segment)."""
     def make() -> ClipParts:
         topo, C, _ = _synthetic_topology(param_mode)
         rng = np.random.default_rng(13)
         S = 11
         seg_t = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 1.0, S - 1)), [1.0]])
-        seg_t[5] = seg_t[4]  # a zero-length segment
+        if version < 5:
+            seg_t[5] = seg_t[4]  # a zero-length segment
         space = rng.integers(0, 2, (C, 3))
         trig = rng.integers(0, 2, (S, C, 3))
         family = (2 * trig + space[None]).astype(np.uint8)
@@ -242,11 +246,11 @@ def _synthetic_blend(motion: str, param_mode: str, loop: bool, version: int = 3)
             if loop:
                 for k in ("rigid_rot_knots", "rigid_trans_knots"):
                     extra[k][-1] = extra[k][0]
-        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version == 4 else None
+        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version >= 4 else None
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, S + 1), family, m, D, knots, motion, loop,
-                               {"errors": {}}, extra, tangents)
+                               {"errors": {}}, extra, tangents, version == 5)
         parts = ClipParts(topo, encode_coefficients(topo, data, version, knot_rms=2e-4))
-        return _assert_v4(parts, rank=True) if version == 4 else _assert_v3(parts)
+        return _assert_v4(parts, rank=True, version=version) if version >= 4 else _assert_v3(parts)
     return make
 
 
@@ -267,12 +271,18 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "synthetic-blend-displacement-paper-v3": (_synthetic_blend("displacement", "paper", False), {}),
     "synthetic-blend-rigid-chord-loop-v3": (_synthetic_blend("rigid", "chord", True), {}),
     "fit-blend-displacement-chord-loop-v3": (_fit_blend(True), {}),
-    "fit-displacement-chord-smooth-v4": (_smooth_tangents("displacement"), {}),
-    "fit-rigid-chord-smooth-v4": (_smooth_tangents("rigid"), {}),
+    "fit-displacement-chord-smooth-v4": (_smooth_tangents("displacement", 4), {}),
+    "fit-rigid-chord-smooth-v4": (_smooth_tangents("rigid", 4), {}),
     "synthetic-displacement-chord-v4": (_synthetic_dynamic("displacement", "chord", False, version=4), {}),
     "synthetic-rigid-paper-v4": (_synthetic_dynamic("rigid", "paper", False, version=4), {}),
     "synthetic-absolute-paper-loop-v4": (_synthetic_dynamic("absolute", "paper", True, version=4), {}),
     "synthetic-blend-absolute-chord-v4": (_synthetic_blend("absolute", "chord", False, version=4), {}),
+    "fit-displacement-chord-smooth-v5": (_smooth_tangents("displacement", 5), {}),
+    "fit-absolute-chord-smooth-v5": (_smooth_tangents("absolute", 5), {}),
+    "synthetic-displacement-chord-v5": (_synthetic_dynamic("displacement", "chord", False, version=5), {}),
+    "synthetic-rigid-paper-v5": (_synthetic_dynamic("rigid", "paper", False, version=5), {}),
+    "synthetic-absolute-paper-loop-v5": (_synthetic_dynamic("absolute", "paper", True, version=5), {}),
+    "synthetic-blend-absolute-chord-v5": (_synthetic_blend("absolute", "chord", False, version=5), {}),
     "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),

@@ -33,10 +33,10 @@ def test_future_container_version_is_refused():
 
 
 @pytest.mark.parametrize(("name", "future_coefficients", "future_topology"),
-                         [("fit-displacement-chord", 5, 3), ("synthetic-blend-displacement-paper-v3", 5, 3),
+                         [("fit-displacement-chord", 6, 3), ("synthetic-blend-displacement-paper-v3", 6, 3),
                           ("cyclic-eel-standing-rotate", 2, 2)])
 def test_future_format_versions_are_refused(name, future_coefficients, future_topology):
-    """dynamic-pde coefficients read versions 1-4 but topology parts only 1-2 (versions 3 and 4 change the
+    """dynamic-pde coefficients read versions 1-5 but topology parts only 1-2 (versions 3 to 5 change the
     coefficients part only); cyclic-spine parts read version 1."""
     topo, coef = _parts(name)
     with pytest.raises(ClipFormatError, match=f"coefficients version {future_coefficients}"):

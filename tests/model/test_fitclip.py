@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -11,6 +12,7 @@ from pdeanim import container
 from pdeanim.clip import load_clip, read_clip_file, write_clip_file
 from pdeanim.curveset import CurveSet
 from pdeanim.errors import ClipFormatError, ParameterError, PosesInputError
+from pdeanim.model import fitclip
 from pdeanim.model.fitclip import FitOptions, curve_errors, fit_poses
 from pdeanim.model.metrics import error_summary
 from pdeanim.poses import make_poses
@@ -264,3 +266,45 @@ def test_rounding_growth_aims_at_the_target():
     assert 0.09 + (0.25 - 0.09) * g**2 == pytest.approx(QUANT_AIM**2)
     assert _growth(stored=0.09, exact=0.09, target=1.0) == 4.0  # rounding added nothing measurable
     assert _growth(stored=0.9, exact=0.1, target=1.0) == 1.2  # already close: the smallest step
+
+
+@pytest.fixture(scope="module")
+def moving_bump():
+    """An icosphere whose vertices near one point bulge out and back (a detail 10-point curves cannot
+    follow) while the whole sphere shears a little."""
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    r = np.asarray(mesh.vertices)
+    bump = np.exp(-30 * ((r - np.array([0.6, 0.6, 0.5])) ** 2).sum(1))[:, None] * r
+    F = 12
+    X = np.stack([r + 0.3 * np.sin(np.pi * f / (F - 1)) * bump
+                  + 0.05 * np.sin(2 * np.pi * f / (F - 1)) * r[:, [1, 2, 0]] for f in range(F)])
+    return make_poses(X, np.asarray(mesh.faces), np.arange(F) / 24.0)
+
+
+def test_curves_whose_floor_exceeds_the_per_vertex_bound_are_split(moving_bump, monkeypatch):
+    """With an RMS target, automatic curves whose floor leaves more than SPLIT_RMS_RATIO x the target at a
+    vertex are halved until it does not (the max error drops); a max target splits to FLOOR_MAX_SHARE of it
+    instead of shortening every curve."""
+    target = 3e-3
+    split = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
+    assert split["curve_splits"] > 0 and split["target_met"]
+    assert split["floor_max"] <= fitclip.SPLIT_RMS_RATIO * target * split["diagonal"]
+    monkeypatch.setattr(fitclip, "SPLIT_RMS_RATIO", None)
+    whole = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
+    assert whole["curve_splits"] == 0 and whole["curves"] < split["curves"]
+    assert whole["floor_max"] > split["floor_max"] and whole["rel_max"] > split["rel_max"]
+    by_max = fit_poses(moving_bump, FitOptions(target_rel_max=0.01)).report
+    assert by_max["curve_points"] == 10 and by_max["curve_splits"] > 0 and by_max["target_met"]
+    assert by_max["floor_max"] <= fitclip.FLOOR_MAX_SHARE * 0.01 * by_max["diagonal"]
+
+
+def test_rms_target_keeps_the_rounding_within_the_soft_max_bound(moving_bump, monkeypatch):
+    """With an RMS target alone, the knots' rounding grows only while no vertex is off by more than
+    SOFT_MAX_RATIO x the target (the first rounding being within it); without the bound it grows further."""
+    target, ratio = 3e-3, fitclip.SOFT_MAX_RATIO
+    soft = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
+    assert soft["target_met"] and soft["rel_max"] <= ratio * target
+    monkeypatch.setattr(fitclip, "SOFT_MAX_RATIO", None)
+    free = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
+    assert free["target_met"] and free["rel_max"] > ratio * target
+    assert free["sizes"]["coefficients_bytes"] < soft["sizes"]["coefficients_bytes"]

@@ -150,7 +150,7 @@ def test_rounding_of_cubic_knots_stays_within_the_tolerance():
 def test_version_3_or_a_looping_fit_writes_no_tangents():
     poses = synthetic("wave", frames=21)
     curves = simple_curves(poses.vertices[0], max_points=4)
-    v4 = fit_poses(poses, FitOptions(segments=10), curves=curves)
+    v4 = fit_poses(poses, FitOptions(segments=10, format_version=4), curves=curves)
     v3 = fit_poses(poses, FitOptions(segments=10, format_version=3), curves=curves)
     loop = fit_poses(poses, FitOptions(segments=10, loop=True), curves=curves)
     assert container.unpack(v4.coefficients)[0]["format_version"] == 4 and v4.report["tangent_items"] > 0
@@ -168,6 +168,7 @@ def test_heldout_frames_follow_catmull_rom_of_the_kept_frames(kind):
     the kept frames and clearly better than straight lines (version 3: equal to the lines)."""
     poses = synthetic(kind)
     curves = simple_curves(poses.vertices[0], max_points=4)
-    res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=3e-4, best_effort=True), curves=curves)
+    res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=3e-4, best_effort=True, format_version=4),
+                             curves=curves)
     assert res["pde"]["rel_rms"] <= 1.1 * res["catmull_rom"]["rel_rms"], res
     assert res["pde"]["rel_rms"] <= 0.8 * res["linear"]["rel_rms"], res

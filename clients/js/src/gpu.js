@@ -2,7 +2,7 @@
 // the GLSL that evaluates a clip in a vertex shader (docs/format.md has the math; this mirrors the CPU path).
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, vertexBasis } from './dynamic.js';
+import { DynamicEvaluator, naturalSplineTangents, vertexBasis } from './dynamic.js';
 
 export const TEXTURE_WIDTH = 4096;
 export const FIELDS_BUDGET_BYTES = 64 * 1024 * 1024;
@@ -21,17 +21,22 @@ function texture(nTexels, width) {
 
 /**
  * Textures and constants of a decoded clip for the vertex shader (independent of the mesh):
- * {kind, mode, rigid, tangents, nCurves, nVertices, nSegments, curveTexels, textures: {vertex, field | knot,
- * curve}, maxHeight, evaluator}. The `curve` texture is the per-frame table that timeUniforms() rewrites: per
- * curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for rigid clips, the rows of R with
- * the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's own code (a few us per frame).
- * Clips with Catmull-Rom time tangents (format version 4, some item with tangents 1: `tangents` true) carry
- * four weights per item instead of the pair, on the knots lo(s), s, s+1, hi(s+1) (texels w_lo xyz, w_s xyz,
- * w_s+1 xyz, w_hi xyz; for an item without the cubic in the segment 0, phi0, phi1, 0), then the rigid rows.
+ * {kind, mode, rigid, tangents, spline, nCurves, nVertices, nSegments, curveTexels, textures: {vertex,
+ * field | knot, tangent?, curve}, maxHeight, evaluator}. The `curve` texture is the per-frame table that
+ * timeUniforms() rewrites: per curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for
+ * rigid clips, the rows of R with the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's
+ * own code (a few us per frame). Clips with time tangents (format version 4 or 5, some item with tangents 1:
+ * `tangents` true) carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz, w_2 xyz, w_3
+ * xyz; for an item without the cubic in the segment 0, phi0, phi1, 0), then the rigid rows. In version 4
+ * (Catmull-Rom, docs/format.md §3.10) they weigh the knots lo(s), s, s+1, hi(s+1). In version 5 (natural
+ * spline, §3.11: `spline` true) they weigh T_s, P_s, P_s+1, T_s+1, and the `tangent` texture holds the
+ * tangents T_j of every knot in the layout of the `field` or `knot` texture (the spline's tridiagonal solve
+ * applied to the per-vertex fields, or to the knot coefficients, once per clip).
  *
- * mode "fields" (the default while (S+1) x V texels fit fieldsBudget bytes) stores every knot's per-vertex
- * contribution P_k = knots_k . S(u) (the CPU evaluator's float32 fields), so the shader only forms
- * base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the knots and the per-vertex space basis (far
+ * mode "fields" (the default while (S+1) x V texels, twice that with natural-spline tangents, fit
+ * fieldsBudget bytes) stores every knot's per-vertex contribution P_k = knots_k . S(u) (the CPU evaluator's
+ * float32 fields), so the shader only forms base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the
+ * knots and the per-vertex space basis (far
  * smaller, but the shader then sums knot x basis terms in float32, and fitted clips' terms can be ~1e3 times
  * the result: ~1e-5 of the diagonal instead of ~1e-7).
  */
@@ -43,8 +48,12 @@ export function gpuLayout(
   if (clip.kind === 'cyclic-spine') return cyclicLayout(clip, width);
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
   if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
-  const useFields = mode === 'fields' || (mode === 'auto' && (S + 1) * V * 16 <= fieldsBudget);
   const ev = evaluator ?? new DynamicEvaluator(clip);
+  const tangents = ev.cubic !== null;
+  const spline = tangents && ev.natural;
+  // natural-spline clips keep a tangent texture of the same size beside the fields
+  const fieldBytes = (S + 1) * V * 16 * (spline ? 2 : 1);
+  const useFields = mode === 'fields' || (mode === 'auto' && fieldBytes <= fieldsBudget);
   const base = ev.base;
   let textures;
   if (useFields) {
@@ -69,7 +78,19 @@ export function gpuLayout(
     knot.data.set(knots);
     textures = { vertex, knot };
   }
-  const tangents = ev.cubic !== null;
+  if (spline) {
+    // natural-spline tangents of every knot, in the layout of the field or knot texture
+    if (useFields) {
+      const tangent = texture((S + 1) * V, width); // per (knot, vertex): T xyz
+      const T = ev.tangentFields;
+      for (let i = 0; i < (S + 1) * V; i++) tangent.data.set(T.subarray(i * 3, i * 3 + 3), i * 4);
+      textures.tangent = tangent;
+    } else {
+      const tangent = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 coefficients
+      naturalSplineTangents(clip.segmentT, knots, C * 12, tangent.data);
+      textures.tangent = tangent;
+    }
+  }
   const weightTexels = tangents ? 4 : 2;
   const curveTexels = weightTexels + (rigid ? 3 : 0);
   textures.curve = texture(C * curveTexels, width);
@@ -78,6 +99,7 @@ export function gpuLayout(
     mode: useFields ? 'fields' : 'coefficients',
     rigid: Boolean(rigid),
     tangents,
+    spline,
     nCurves: C,
     nVertices: V,
     nSegments: S,
@@ -110,6 +132,7 @@ function cyclicLayout(clip, width) {
     mode: 'cyclic',
     rigid: false,
     tangents: false,
+    spline: false,
     nCurves: 0,
     nVertices: V,
     nSegments: 0,
@@ -165,7 +188,8 @@ export function timeUniforms(layout, t) {
       d[o + 6] = uPhi1[kz];
     }
   } else {
-    // four weights per item: the segment's cubic weights (docs/format.md §3.10) or (0, phi0, phi1, 0)
+    // four weights per item: the segment's cubic weights (docs/format.md §3.10 in version 4, §3.11 in
+    // version 5) or (0, phi0, phi1, 0)
     const { cubic, cubicWeights: cw } = ev;
     for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K) {
       for (let w = 0; w < 3; w++, j++) {
@@ -353,6 +377,7 @@ export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass =
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.tangents) defs.push('#define PDEANIM_TANGENTS');
+  if (layout.spline) defs.push('#define PDEANIM_SPLINE');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
   defs.push(`#define PDEANIM_WEIGHT_TEXELS ${layout.weightTexels ?? 0}`);
@@ -383,6 +408,15 @@ uniform highp sampler2D pdeFieldTex;
 #else
 uniform highp sampler2D pdeKnotTex;
 #endif
+// the texture of the outer two of the four weighted terms: the tangents T (natural spline), else the knots
+#ifdef PDEANIM_SPLINE
+uniform highp sampler2D pdeTangentTex;
+#define PDEANIM_OUTER_TEX pdeTangentTex
+#elif defined(PDEANIM_FIELDS)
+#define PDEANIM_OUTER_TEX pdeFieldTex
+#else
+#define PDEANIM_OUTER_TEX pdeKnotTex
+#endif
 #endif
 #ifdef PDEANIM_CYCLIC
 uniform float pdeSinWt;
@@ -405,25 +439,31 @@ vec3 pdeEval(int v) {
 #endif
   int c = int(head.x + 0.5);
 #ifdef PDEANIM_TANGENTS
+#ifdef PDEANIM_SPLINE
+  // natural-spline time tangents: weights of T_s, P_s, P_s+1, T_s+1 (0, phi0, phi1, 0 off the cubic)
+  int sl = pdeSeg;
+  int sh = pdeSeg + 1;
+#else
   // Catmull-Rom time tangents: weights of the knots lo(s), s, s+1, hi(s+1) (0, phi0, phi1, 0 off the cubic)
   int sl = max(pdeSeg - 1, 0);
   int sh = min(pdeSeg + 2, pdeSegments);
+#endif
   vec3 fl = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
   vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
   vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2).xyz;
   vec3 fh = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3).xyz;
 #ifdef PDEANIM_FIELDS
-  vec3 p = head.yzw + (((fl * pdeFetch(pdeFieldTex, sl * pdeVertices + v).xyz
+  vec3 p = head.yzw + (((fl * pdeFetch(PDEANIM_OUTER_TEX, sl * pdeVertices + v).xyz
     + f0 * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz)
     + f1 * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz)
-    + fh * pdeFetch(pdeFieldTex, sh * pdeVertices + v).xyz);
+    + fh * pdeFetch(PDEANIM_OUTER_TEX, sh * pdeVertices + v).xyz);
 #else
   vec3 p = head.yzw;
   for (int w = 0; w < 3; w++) {
-    vec4 kl = pdeFetch(pdeKnotTex, (sl * pdeCurves + c) * 3 + w);
+    vec4 kl = pdeFetch(PDEANIM_OUTER_TEX, (sl * pdeCurves + c) * 3 + w);
     vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
     vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-    vec4 kh = pdeFetch(pdeKnotTex, (sh * pdeCurves + c) * 3 + w);
+    vec4 kh = pdeFetch(PDEANIM_OUTER_TEX, (sh * pdeCurves + c) * 3 + w);
     p[w] += dot(fl[w] * kl + f0[w] * k0 + f1[w] * k1 + fh[w] * kh, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
   }
 #endif

@@ -211,6 +211,7 @@ function makePass(layout, textures, current) {
     pdeVertexTex: { value: textures.vertex },
     pdeFieldTex: { value: textures.field ?? null },
     pdeKnotTex: { value: textures.knot ?? null },
+    pdeTangentTex: { value: textures.tangent ?? null },
     pdeCurveTex: { value: textures.curve ?? null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
     pdeBend: { value: layout.bend ? [...layout.bend] : [0, 1, 0] },
@@ -304,6 +305,7 @@ export function attachClip(mesh, clip, options = {}) {
     pdeFieldTex: { value: textures.field ?? null },
     pdeVertexTex: { value: textures.vertex },
     pdeKnotTex: { value: textures.knot ?? null },
+    pdeTangentTex: { value: textures.tangent ?? null },
     pdeCurveTex: { value: textures.curve ?? null },
     pdePosTex: { value: pass ? res.positionTexture() : null },
     pdeAxis: { value: layout.axis ? [...layout.axis] : [1, 0, 0] },
@@ -311,8 +313,9 @@ export function attachClip(mesh, clip, options = {}) {
     pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout, { normals, pass });
-  // the header's defines vary with all of these (clips with time tangents: another curve table and shader)
-  const tangents = layout.tangents ? ':tangents' : '';
+  // the header's defines vary with all of these (clips with time tangents: another curve table and shader;
+  // natural-spline ones, format version 5: also a tangent texture)
+  const tangents = layout.tangents ? (layout.spline ? ':tangents:spline' : ':tangents') : '';
   const key =
     `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}:${pass}${tangents}`;
   const patch = (material) => {

@@ -3,7 +3,14 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
-import { createEvaluator, decodeClip, decodeClipFile, loadClipFile, splitClipFile } from '../src/index.js';
+import {
+  DYNAMIC_FORMAT_VERSIONS,
+  createEvaluator,
+  decodeClip,
+  decodeClipFile,
+  loadClipFile,
+  splitClipFile,
+} from '../src/index.js';
 import { FIXTURES, expected, manifest, readBytes } from './helpers.mjs';
 
 const man = manifest();
@@ -18,11 +25,12 @@ test('the fixture set covers every kind, motion, parameterisation and looping mo
   assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
   assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
   // dynamic-pde format versions 1 (raw floats, container 1), 2 (integer codes, zstd in container 2), 3
-  // (coefficients only: knots on a shared time basis; its topology part is a version 2 one, container 2) and,
-  // once the Python side writes them, 4 (3 or 2 plus Catmull-Rom time tangents, container 2)
+  // (coefficients only: knots on a shared time basis; its topology part is a version 2 one, container 2), 4
+  // (3 or 2 plus Catmull-Rom time tangents, container 2) and, once the Python side writes them, 5 (natural-
+  // spline time tangents) or any later version this build reads
   const versions = [...new Set(dyn.map((c) => c.format_version))].sort();
   assert.deepEqual(versions.filter((v) => v <= 3), [1, 2, 3]);
-  assert.ok(versions.every((v) => [1, 2, 3, 4].includes(v)), `${versions}`);
+  assert.ok(versions.every((v) => DYNAMIC_FORMAT_VERSIONS.includes(v)), `${versions}`);
   for (const c of dyn) {
     const container = Math.min(c.format_version, 2);
     assert.deepEqual(c.container_versions, [container, container], c.name);
@@ -48,8 +56,8 @@ test('version 3 fixtures: a version 2 topology part, knots on a basis of rank be
   }
 });
 
-test('version 4 fixtures: a version 2 topology part, knot_rank 0..S+1, tangents 0/1 on some item', () => {
-  for (const c of man.cases.filter((x) => x.format_version === 4)) {
+test('version 4 and 5 fixtures: a version 2 topology part, knot_rank 0..S+1, tangents 0/1 on some item', () => {
+  for (const c of man.cases.filter((x) => x.format_version === 4 || x.format_version === 5)) {
     const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
     const clip = decodeClip(topology, coefficients);
     assert.equal(clip.topologyHeader.format_version, 2, c.name);
@@ -57,9 +65,14 @@ test('version 4 fixtures: a version 2 topology part, knot_rank 0..S+1, tangents 
     assert.ok(Number.isInteger(r) && r >= 0 && r <= clip.nSegments + 1, c.name);
     assert.ok([1, 2].includes(clip.header.knot_differences), c.name);
     assert.equal(clip.tangents.length, clip.nCurves * 3, c.name);
-    // the writer uses version 4 only where some item has tangents
+    // the writer uses version 4 or 5 only where some item has tangents
     assert.ok(clip.tangents.some((x) => x === 1), c.name);
     assert.ok(clip.tangents.every((x) => x === 0 || x === 1), c.name);
+    assert.equal(clip.tangentSpline, c.format_version === 5 ? 'natural' : 'catmull-rom', c.name);
+    if (c.format_version === 5) {
+      // natural-spline tangents: strictly increasing segment boundaries
+      assert.ok(clip.segmentT.every((x, j) => j === 0 || x > clip.segmentT[j - 1]), c.name);
+    }
   }
 });
 

@@ -12,7 +12,14 @@ import {
   loadClip,
   splitClipFile,
 } from '../src/index.js';
-import { FIXTURES, coefficientsV4, encodeContainer, manifest, readBytes } from './helpers.mjs';
+import {
+  FIXTURES,
+  coefficientsV4,
+  encodeContainer,
+  manifest,
+  readBytes,
+  strictlyIncreasing,
+} from './helpers.mjs';
 
 const man = manifest();
 const dynamicCase = (version) =>
@@ -42,18 +49,19 @@ test('truncated, foreign and future containers are rejected with a reason', () =
 
 test('unknown format versions, kinds and motions are rejected', () => {
   for (const p of [parts, parts2, parts3]) {
-    for (const future of [0, 5, '4', '3', 4.5, null]) {
+    for (const future of [0, 6, '5', '4', '3', 4.5, null]) {
       const v = edited(p.coefficients, ({ header }) => {
         header.format_version = future;
       });
       const version = JSON.stringify(future).replace('.', '\\.');
+      const reads = '1, 2, 3, 4 and 5';
       assert.throws(
         () => decodeClip(p.topology, v),
-        new RegExp(`unsupported dynamic-pde coefficients version ${version} \\(this build reads 1, 2, 3 and 4\\)`),
+        new RegExp(`unsupported dynamic-pde coefficients version ${version} \\(this build reads ${reads}\\)`),
       );
     }
-    // versions 3 and 4 change the coefficients part only: a topology part claiming them is refused
-    for (const version of [3, 4]) {
+    // versions 3 to 5 change the coefficients part only: a topology part claiming them is refused
+    for (const version of [3, 4, 5]) {
       const t = edited(p.topology, ({ header }) => {
         header.format_version = version;
       });
@@ -310,7 +318,8 @@ test('version 2 signed m gives the family: < 0 trig, > 0 exp, 0 linear', () => {
   });
   const clip = decodeClip(parts2.topology, c);
   assert.ok(clip.family[0] >= 2 && clip.family[1] < 2 && clip.family[2] < 2); // trig, exp, (linear) exp
-  assert.equal(clip.family[0] % 2, clip.family[1] % 2); // one space kind per item
+  const plain = decodeClip(parts2.topology, parts2.coefficients);
+  for (const i of [0, 1, 2]) assert.equal(clip.family[i] % 2, plain.family[i] % 2); // the item's space kind
   assert.deepEqual(Array.from(clip.m.slice(0, 3)), [0.5, 0.5, 0]);
 });
 
@@ -621,94 +630,130 @@ test('version 3 coefficients with a bad knot_rank, weights, basis, steps or resi
   bad(badKind, /space kinds must be 0 or 1/);
 });
 
-test('version 4 coefficients with a bad knot_rank, basis arrays at rank 0, or bad tangents are rejected', () => {
-  // docs/format.md §3.10: besides what §3.9 rejects, a knot_rank that is not an integer in 0..S+1, arrays of
-  // the basis present with rank 0, and a tangents array that is missing, of another shape or dtype, or holds
-  // a value other than 0 and 1
-  const tangents = (c, w) => Number((c + w) % 2 === 0);
-  for (const p of [parts2, parts3]) {
-    const v4 = (edit) => coefficientsV4(p.coefficients, { tangents, edit });
-    const bad = (coef, pattern) => {
-      assert.throws(
-        () => decodeClip(p.topology, coef),
-        (e) => e instanceof ClipFormatError && pattern.test(e.message),
-        `${pattern}`,
-      );
-    };
-    const ok = decodeClip(p.topology, v4());
-    assert.equal(ok.header.format_version, 4);
-    const S = ok.nSegments;
-    const C = ok.nCurves;
-    const rank = ok.header.knot_rank; // 0 from version 2, >= 1 from version 3
-    // knot_rank: not an integer in 0..S+1 (missing too)
-    const rankError = new RegExp(`coefficients knot_rank must be an integer in 0\\.\\.${S + 1}, got`);
-    for (const r of [-1, S + 2, 0.5, 1.5, '0', '1', null, true, false, [0], undefined]) {
-      bad(v4(({ header }) => {
-        if (r === undefined) delete header.knot_rank;
-        else header.knot_rank = r;
-      }), rankError);
-    }
-    if (rank === 0) {
-      // rank 0 with either basis array present (even of a consistent shape) is refused
-      for (const name of ['knot_weights', 'knot_basis']) {
-        const c = v4(({ arrays }) => {
-          arrays[name] = name === 'knot_weights'
-            ? { dtype: '<u4', shape: [0, C, 3, 4], data: new Uint32Array(0) }
-            : { dtype: '<f4', shape: [0, S + 1], data: new Float32Array(0) };
-        });
-        bad(c, new RegExp(`knot_rank is 0 \\(no shared basis\\), but the part has '${name}'`));
+for (const version of [4, 5]) {
+  const what = 'a bad knot_rank, basis arrays at rank 0, or bad tangents';
+  test(`version ${version} coefficients with ${what} are rejected`, () => {
+    // docs/format.md §3.10: besides what §3.9 rejects, a knot_rank that is not an integer in 0..S+1, arrays of
+    // the basis present with rank 0, and a tangents array that is missing, of another shape or dtype, or holds
+    // a value other than 0 and 1; version 5 (§3.11) rejects the same (its segment boundaries here strictly
+    // increasing: the rejection of repeated ones has a test of its own)
+    const tangents = (c, w) => Number((c + w) % 2 === 0);
+    for (const p of [parts2, parts3]) {
+      const segT = decodeContainer(p.coefficients.slice()).arrays.segment_t.data;
+      const segmentT = version === 5 ? strictlyIncreasing(segT) : null;
+      const v4 = (edit) => coefficientsV4(p.coefficients, { version, tangents, segmentT, edit });
+      const bad = (coef, pattern) => {
+        assert.throws(
+          () => decodeClip(p.topology, coef),
+          (e) => e instanceof ClipFormatError && pattern.test(e.message),
+          `${pattern}`,
+        );
+      };
+      const ok = decodeClip(p.topology, v4());
+      assert.equal(ok.header.format_version, version);
+      const S = ok.nSegments;
+      const C = ok.nCurves;
+      const rank = ok.header.knot_rank; // 0 from version 2, >= 1 from version 3
+      // knot_rank: not an integer in 0..S+1 (missing too)
+      const rankError = new RegExp(`coefficients knot_rank must be an integer in 0\\.\\.${S + 1}, got`);
+      for (const r of [-1, S + 2, 0.5, 1.5, '0', '1', null, true, false, [0], undefined]) {
+        bad(v4(({ header }) => {
+          if (r === undefined) delete header.knot_rank;
+          else header.knot_rank = r;
+        }), rankError);
       }
-      // a rank >= 1 on a part without the basis: its arrays are missing
-      bad(v4(({ header }) => { header.knot_rank = 1; }), /coefficients part has no 'knot_weights' array/);
-    } else {
-      // rank 0 on a part with a basis: the arrays of the basis are present
-      bad(v4(({ header }) => { header.knot_rank = 0; }), /knot_rank is 0 \(no shared basis\), but the part has/);
-      // the version 3 rules still apply: a basis of the wrong rank, a missing or non-finite basis
-      bad(v4(({ header }) => { header.knot_rank = rank === 1 ? 2 : rank - 1; }), /array 'knot_weights' has shape/);
-      bad(v4(({ arrays }) => { delete arrays.knot_basis; }), /coefficients part has no 'knot_basis' array/);
+      if (rank === 0) {
+        // rank 0 with either basis array present (even of a consistent shape) is refused
+        for (const name of ['knot_weights', 'knot_basis']) {
+          const c = v4(({ arrays }) => {
+            arrays[name] = name === 'knot_weights'
+              ? { dtype: '<u4', shape: [0, C, 3, 4], data: new Uint32Array(0) }
+              : { dtype: '<f4', shape: [0, S + 1], data: new Float32Array(0) };
+          });
+          bad(c, new RegExp(`knot_rank is 0 \\(no shared basis\\), but the part has '${name}'`));
+        }
+        // a rank >= 1 on a part without the basis: its arrays are missing
+        bad(v4(({ header }) => { header.knot_rank = 1; }), /coefficients part has no 'knot_weights' array/);
+      } else {
+        // rank 0 on a part with a basis: the arrays of the basis are present
+        bad(v4(({ header }) => { header.knot_rank = 0; }), /knot_rank is 0 \(no shared basis\), but the part has/);
+        // the version 3 rules still apply: a basis of the wrong rank, a missing or non-finite basis
+        bad(v4(({ header }) => { header.knot_rank = rank === 1 ? 2 : rank - 1; }), /array 'knot_weights' has shape/);
+        bad(v4(({ arrays }) => { delete arrays.knot_basis; }), /coefficients part has no 'knot_basis' array/);
+        bad(v4(({ arrays }) => {
+          const d = Float32Array.from(arrays.knot_basis.data);
+          d[0] = NaN;
+          arrays.knot_basis = { ...arrays.knot_basis, data: d };
+        }), /array 'knot_basis' has non-finite values/);
+      }
+      // the version 2 rules too: knot_differences, knot steps, space kinds
+      bad(v4(({ header }) => { header.knot_differences = 3; }), /knot_differences must be 1 or 2, got 3/);
       bad(v4(({ arrays }) => {
-        const d = Float32Array.from(arrays.knot_basis.data);
-        d[0] = NaN;
-        arrays.knot_basis = { ...arrays.knot_basis, data: d };
-      }), /array 'knot_basis' has non-finite values/);
+        const d = Float32Array.from(arrays.knot_step.data);
+        d[0] = 0;
+        arrays.knot_step = { ...arrays.knot_step, data: d };
+      }), /knot steps must be positive/);
+      // tangents: missing, another shape, another dtype, values other than 0 and 1
+      bad(v4(({ arrays }) => { delete arrays.tangents; }), /coefficients part has no 'tangents' array/);
+      for (const shape of [[C * 3], [3, C], [C, 3, 1], [C + 1, 3], [C, 4]]) {
+        const n = shape.reduce((a, b) => a * b, 1);
+        bad(v4(({ arrays }) => {
+          arrays.tangents = { dtype: '<u1', shape, data: new Uint8Array(n) };
+        }), /array 'tangents' has shape/);
+      }
+      for (const [dtype, Type] of [
+        ['<i1', Int8Array],
+        ['<u2', Uint16Array],
+        ['<u4', Uint32Array],
+        ['<f4', Float32Array],
+      ]) {
+        bad(v4(({ arrays }) => {
+          arrays.tangents = { dtype, shape: [C, 3], data: Type.from(arrays.tangents.data) };
+        }), new RegExp(`array 'tangents' has dtype ${dtype}, expected <u1`));
+      }
+      for (const value of [2, 255]) {
+        bad(v4(({ arrays }) => {
+          const d = Uint8Array.from(arrays.tangents.data);
+          d[d.length - 1] = value;
+          arrays.tangents = { ...arrays.tangents, data: d };
+        }), new RegExp(`coefficients tangents must be 0 or 1, got ${value}`));
+      }
+      // a version 2 or 3 part that claims version 4 or 5 keeps its basis and needs its tangents
+      const claimed = edited(p.coefficients, ({ header }) => {
+        header.format_version = version;
+        header.knot_rank ??= 0;
+      });
+      bad(claimed, /coefficients part has no 'tangents' array/);
     }
-    // the version 2 rules too: knot_differences, knot steps, space kinds
-    bad(v4(({ header }) => { header.knot_differences = 3; }), /knot_differences must be 1 or 2, got 3/);
-    bad(v4(({ arrays }) => {
-      const d = Float32Array.from(arrays.knot_step.data);
-      d[0] = 0;
-      arrays.knot_step = { ...arrays.knot_step, data: d };
-    }), /knot steps must be positive/);
-    // tangents: missing, another shape, another dtype, values other than 0 and 1
-    bad(v4(({ arrays }) => { delete arrays.tangents; }), /coefficients part has no 'tangents' array/);
-    for (const shape of [[C * 3], [3, C], [C, 3, 1], [C + 1, 3], [C, 4]]) {
-      const n = shape.reduce((a, b) => a * b, 1);
-      bad(v4(({ arrays }) => {
-        arrays.tangents = { dtype: '<u1', shape, data: new Uint8Array(n) };
-      }), /array 'tangents' has shape/);
+  });
+}
+
+test('version 5 rejects segment boundaries that are not strictly increasing where some item has tangents', () => {
+  // docs/format.md §3.11: a segment of zero length cannot occur in a version 5 clip with tangents (its
+  // natural-spline tangents divide by every segment's length); without tangents, and in version 4, it can
+  for (const p of [parts2, parts3]) {
+    const S = decodeContainer(p.coefficients.slice()).header.n_segments;
+    const even = Array.from({ length: S + 1 }, (_, j) => j / S);
+    for (const j of [0, 1, S - 1]) {
+      // segment j of length 0 (the first, an inner one, the last)
+      const segmentT = even.map((x, i) => (i === j + 1 ? even[j] : x));
+      const tangents = (c, w) => Number(c === 1 && w === 2);
+      const coef = (version, tg = tangents) =>
+        coefficientsV4(p.coefficients, { version, tangents: tg, segmentT });
+      assert.throws(
+        () => decodeClip(p.topology, coef(5)),
+        (e) =>
+          e instanceof ClipFormatError &&
+          e.message ===
+            'segment boundaries must be strictly increasing in a version 5 clip with tangents' +
+              ` (segment ${j} has length 0)`,
+      );
+      assert.equal(decodeClip(p.topology, coef(5, () => 0)).header.format_version, 5);
+      assert.equal(decodeClip(p.topology, coef(4)).header.format_version, 4);
+      // decreasing boundaries stay refused in every version, with the message of every version
+      const back = even.map((x, i) => (i === j + 1 ? -1 : x));
+      const down = coefficientsV4(p.coefficients, { version: 5, tangents, segmentT: back });
+      assert.throws(() => decodeClip(p.topology, down), /segment boundaries must be non-decreasing/);
     }
-    for (const [dtype, Type] of [
-      ['<i1', Int8Array],
-      ['<u2', Uint16Array],
-      ['<u4', Uint32Array],
-      ['<f4', Float32Array],
-    ]) {
-      bad(v4(({ arrays }) => {
-        arrays.tangents = { dtype, shape: [C, 3], data: Type.from(arrays.tangents.data) };
-      }), new RegExp(`array 'tangents' has dtype ${dtype}, expected <u1`));
-    }
-    for (const value of [2, 255]) {
-      bad(v4(({ arrays }) => {
-        const d = Uint8Array.from(arrays.tangents.data);
-        d[d.length - 1] = value;
-        arrays.tangents = { ...arrays.tangents, data: d };
-      }), new RegExp(`coefficients tangents must be 0 or 1, got ${value}`));
-    }
-    // a version 3 part that claims version 4 keeps its basis and needs its tangents
-    const claimed = edited(p.coefficients, ({ header }) => {
-      header.format_version = 4;
-      header.knot_rank ??= 0;
-    });
-    bad(claimed, /coefficients part has no 'tangents' array/);
   }
 });

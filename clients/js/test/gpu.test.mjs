@@ -7,13 +7,48 @@ import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import * as THREE from 'three';
 import { computeNormals, createEvaluator, decodeClip, decodeClipFile, hermiteWeights } from '../src/index.js';
+import { naturalSplineTangents, splineWeights } from '../src/dynamic.js';
 import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from '../src/gpu.js';
 import { attachClip, attachClipToScene } from '../src/three.js';
-import { FIXTURES, coefficientsV4, manifest, readBytes, versionFourCases } from './helpers.mjs';
+import {
+  FIXTURES,
+  coefficientsV4,
+  manifest,
+  readBytes,
+  versionFiveCases,
+  versionFourCases,
+} from './helpers.mjs';
 
 const man = manifest();
-// version 4 clips (Catmull-Rom time tangents) re-encoded from the version 2 and 3 fixtures (helpers.mjs)
+// version 4 clips (Catmull-Rom time tangents) and version 5 ones (natural-spline tangents) re-encoded from
+// the version 2 and 3 fixtures (helpers.mjs)
 const v4 = versionFourCases();
+const v5 = versionFiveCases();
+
+/**
+ * The four weighted terms' (knot, texture) with time tangents: version 4 the knots lo(s), s, s+1, hi(s+1) of
+ * the field or knot texture; version 5 (spline) T_s and T_s+1 from the tangent texture around P_s, P_s+1.
+ */
+function tangentTerms(layout, seg) {
+  const T = layout.textures;
+  const main = layout.mode === 'fields' ? T.field : T.knot;
+  if (layout.spline) {
+    return [
+      [seg, T.tangent],
+      [seg, main],
+      [seg + 1, main],
+      [seg + 1, T.tangent],
+    ];
+  }
+  const sl = Math.max(seg - 1, 0);
+  const sh = Math.min(seg + 2, layout.nSegments); // the pdeSegments uniform
+  return [
+    [sl, main],
+    [seg, main],
+    [seg + 1, main],
+    [sh, main],
+  ];
+}
 
 /** texelFetch of texel i of a {data, width} texture, row-major as pdeFetch addresses it. */
 function fetch(tex, i) {
@@ -48,17 +83,16 @@ function emulate(layout, u, v) {
   const c = Math.round(head[0]);
   const V = layout.nVertices;
   if (layout.tangents) {
-    // four weights per item on the knots lo(s), s, s+1, hi(s+1), summed ((l + 0) + 1) + h, then + base
-    const sl = Math.max(u.seg - 1, 0);
-    const sh = Math.min(u.seg + 2, layout.nSegments); // the pdeSegments uniform
-    const knots = [sl, u.seg, u.seg + 1, sh];
+    // four weights per item on the knots lo(s), s, s+1, hi(s+1) (version 5: on T_s, P_s, P_s+1, T_s+1),
+    // summed ((l + 0) + 1) + h, then + base
+    const terms = tangentTerms(layout, u.seg);
     const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * K + j));
     let p = [0, 1, 2].map((w) => {
       if (fields) {
-        const sum = knots.reduce((acc, j, i) => acc + f[i][w] * fetch(T.field, j * V + v)[w], 0);
+        const sum = terms.reduce((acc, [j, tex], i) => acc + f[i][w] * fetch(tex, j * V + v)[w], 0);
         return head[1 + w] + sum;
       }
-      const kn = knots.map((j) => fetch(T.knot, (j * C + c) * 3 + w));
+      const kn = terms.map(([j, tex]) => fetch(tex, (j * C + c) * 3 + w));
       const b = fetch(T.vertex, v * 4 + 1 + w);
       const dot = (k) => kn.reduce((a, kj, i) => a + f[i][w] * kj[k], 0) * b[k];
       return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + dot(k), 0);
@@ -98,13 +132,13 @@ function termMagnitude(layout, u, v) {
   const C = layout.nCurves;
   const c = Math.round(fetch(T.vertex, v * 4)[0]);
   if (layout.tangents) {
-    const knots = [Math.max(u.seg - 1, 0), u.seg, u.seg + 1, Math.min(u.seg + 2, layout.nSegments)];
+    const terms = tangentTerms(layout, u.seg);
     const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * layout.curveTexels + j));
     return [0, 1, 2].map((w) => {
       const b = fetch(T.vertex, v * 4 + 1 + w);
       let sum = 0;
-      knots.forEach((j, i) => {
-        const kn = fetch(T.knot, (j * C + c) * 3 + w);
+      terms.forEach(([j, tex], i) => {
+        const kn = fetch(tex, (j * C + c) * 3 + w);
         for (let k = 0; k < 4; k++) sum += Math.abs(f[i][w] * kn[k] * b[k]);
       });
       return sum;
@@ -123,13 +157,13 @@ function termMagnitude(layout, u, v) {
   });
 }
 
-/** A fixture's clip, or a version 4 case's (decoded from its two parts). */
+/** A fixture's clip, or a version 4 or 5 case's (decoded from its two parts). */
 function loadCase(c) {
   if (c.coefficients) return decodeClip(c.topology, c.coefficients);
   return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
 }
 
-for (const [c, mode] of [...man.cases, ...v4].flatMap((x) =>
+for (const [c, mode] of [...man.cases, ...v4, ...v5].flatMap((x) =>
   x.kind === 'dynamic-pde' || x.coefficients
     ? [
         [x, 'fields'],
@@ -139,8 +173,11 @@ for (const [c, mode] of [...man.cases, ...v4].flatMap((x) =>
 )) {
   test(`emulated shader (${mode}) matches the CPU evaluator: ${c.name}`, () => {
     const clip = loadCase(c);
-    // version 4 clips: the table carries four weights per item, on knots lo(s), s, s+1, hi(s+1)
+    // version 4 clips: the table carries four weights per item, on knots lo(s), s, s+1, hi(s+1); version 5
+    // ones on T_s, P_s, P_s+1, T_s+1, with a tangent texture
     if (c.coefficients) assert.ok(gpuLayout(clip).tangents, c.name);
+    const spline = clip.tangentSpline === 'natural' && clip.tangents.includes(1);
+    assert.equal(gpuLayout(clip).spline, spline, c.name);
     const layout = gpuLayout(clip, { width: 64, mode }); // a narrow texture exercises the 2D texel addressing
     const ev = createEvaluator(clip);
     // Mode "fields" holds the CPU path's float32 P_k: 1e-6 of the diagonal. Mode "coefficients" holds the
@@ -652,5 +689,145 @@ test('version 4: GLSL and three.js materials get the tangents layout; other clip
     }
     player.detach();
     other.detach();
+  }
+});
+
+test('version 5: the table holds each item the spline weights on T_s, P_s, P_s+1, T_s+1 (the CPU ones)', () => {
+  for (const c of v5) {
+    const clip = loadCase(c);
+    const ev = createEvaluator(clip);
+    const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
+    assert.equal(layout.tangents, true);
+    assert.equal(layout.spline, true);
+    assert.equal(layout.weightTexels, 4);
+    assert.equal(layout.curveTexels, layout.rigid ? 7 : 4);
+    const ref = createEvaluator(clip);
+    const C = clip.nCurves;
+    const K = layout.curveTexels * 4;
+    const d = layout.textures.curve.data;
+    let cubicItems = 0;
+    for (const t of c.t) {
+      const u = timeUniforms(layout, t);
+      ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
+      const s = ref.prepare(t);
+      assert.equal(u.seg, s);
+      const cubic = splineWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
+      for (let cw = 0; cw < C * 3; cw++) {
+        const o = Math.floor(cw / 3) * K + (cw % 3);
+        const table = [0, 1, 2, 3].map((j) => d[o + j * 4]);
+        assert.deepEqual(table, Array.from(ref.weights.subarray(cw * 4, cw * 4 + 4), Math.fround));
+        if (ref.cubic[s * C * 3 + cw] === 1) {
+          cubicItems++;
+          assert.deepEqual(table, Array.from(cubic), `${c.name} t = ${t}`);
+        } else {
+          assert.deepEqual(table, [0, Math.fround(ref.phi0[cw]), Math.fround(ref.phi1[cw]), 0]);
+        }
+      }
+    }
+    assert.ok(cubicItems > 0, c.name);
+  }
+});
+
+test('version 5: a tangent texture in the layout of the field or knot texture, the spline of its data', () => {
+  for (const c of v5) {
+    const clip = loadCase(c);
+    const { nVertices: V, nCurves: C, nSegments: S } = clip;
+    // mode "fields": per (knot, vertex) the evaluator's float32 tangent fields T xyz
+    const fields = gpuLayout(clip, { width: 64, mode: 'fields' });
+    const T = fields.evaluator.tangentFields;
+    assert.equal(fields.textures.tangent.width, fields.textures.field.width);
+    assert.equal(fields.textures.tangent.height, fields.textures.field.height);
+    for (let i = 0; i < (S + 1) * V; i++) {
+      assert.deepEqual(fetch(fields.textures.tangent, i), [...T.subarray(i * 3, i * 3 + 3), 0], c.name);
+    }
+    // mode "coefficients": per (knot, curve, coordinate) the spline's tangents of the 4 knot coefficients
+    const coef = gpuLayout(clip, { width: 64, mode: 'coefficients' });
+    const want = naturalSplineTangents(clip.segmentT, clip.knots, C * 12, new Float32Array(clip.knots.length));
+    assert.equal(coef.textures.tangent.height, coef.textures.knot.height);
+    assert.deepEqual(coef.textures.tangent.data.subarray(0, want.length), want, c.name);
+    assert.ok(coef.maxHeight >= coef.textures.tangent.height);
+    // version 4 and plain clips have none
+    assert.equal(gpuLayout(loadCase(c.fixture)).textures.tangent, undefined);
+    // mode auto counts the tangent texture: fields while both fit the budget
+    const bytes = (S + 1) * V * 16;
+    assert.equal(gpuLayout(clip, { fieldsBudget: 2 * bytes }).mode, 'fields');
+    assert.equal(gpuLayout(clip, { fieldsBudget: 2 * bytes - 1 }).mode, 'coefficients');
+    const c4 = v4.find((x) => x.fixture.name === c.fixture.name);
+    assert.equal(gpuLayout(loadCase(c4), { fieldsBudget: bytes }).mode, 'fields');
+  }
+  for (const c of v4) assert.equal(gpuLayout(loadCase(c)).textures.tangent, undefined);
+});
+
+test('version 5: GLSL and three.js materials get the spline layout, another program than version 4', () => {
+  for (const motion of ['rigid', 'displacement']) {
+    const c = v5.find((x) => x.motion === motion);
+    const c4 = v4.find((x) => x.fixture.name === c.fixture.name);
+    const clip = loadCase(c);
+    const clip4 = loadCase(c4);
+    const rigid = motion === 'rigid';
+    for (const mode of ['fields', 'coefficients']) {
+      const header = glslHeader(gpuLayout(clip, { mode }));
+      assert.match(header, /#define PDEANIM_TANGENTS\n#define PDEANIM_SPLINE\n/);
+      assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
+      assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
+      assert.match(header, /uniform highp sampler2D pdeTangentTex;\n#define PDEANIM_OUTER_TEX pdeTangentTex/);
+      // version 4: the same weights layout, the knot or field texture for all four terms
+      const header4 = glslHeader(gpuLayout(clip4, { mode }));
+      assert.match(header4, /#define PDEANIM_TANGENTS\n/);
+      assert.doesNotMatch(header4, /#define PDEANIM_SPLINE/);
+    }
+    // version 5 with tangents all 0: the plain layout
+    const zeroCoef = coefficientsV4(c.original, { version: 5, segmentT: c.segmentT });
+    const zero = gpuLayout(decodeClip(c.topology, zeroCoef));
+    assert.equal(zero.tangents, false);
+    assert.equal(zero.spline, false);
+    assert.equal(zero.textures.tangent, undefined);
+    // three.js: the tangent texture as a uniform, a program cache key of its own
+    const mesh = meshOf(clip, THREE.MeshStandardMaterial);
+    const player = attachClip(mesh, clip);
+    assert.equal(player.uniforms.pdeTangentTex.value, player.textures.tangent);
+    assert.ok(player.textures.tangent.isDataTexture);
+    const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
+    mesh.material.onBeforeCompile(shader, null);
+    assert.match(shader.vertexShader, /#define PDEANIM_SPLINE/);
+    assert.equal(shader.uniforms.pdeTangentTex.value, player.textures.tangent);
+    const key = mesh.material.customProgramCacheKey();
+    assert.match(key, /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+:tangents:spline$/);
+    const other = attachClip(meshOf(clip4, THREE.MeshStandardMaterial), clip4);
+    const key4 = other.mesh.material.customProgramCacheKey();
+    assert.match(key4, /:tangents$/);
+    assert.notEqual(key, key4);
+    assert.equal(other.uniforms.pdeTangentTex.value, null);
+    // the evaluation pass gets the tangent texture too
+    let scene = null;
+    const renderer = {
+      extensions: { has: (name) => name === 'EXT_color_buffer_float' },
+      xr: { enabled: false },
+      getRenderTarget: () => null,
+      setRenderTarget: () => {},
+      render: (x) => {
+        scene = x;
+      },
+    };
+    const passMesh = meshOf(clip, THREE.MeshStandardMaterial);
+    const passed = attachClip(passMesh, clip, { renderer });
+    assert.equal(passed.pass, true);
+    passed.setTime(0.2);
+    passMesh.onBeforeRender(renderer, null, null, passMesh.geometry, passMesh.material, null);
+    const quad = scene.children[0].material;
+    assert.equal(quad.uniforms.pdeTangentTex.value, passed.textures.tangent);
+    assert.ok(quad.uniforms.pdeTangentTex.value.isDataTexture);
+    assert.match(quad.fragmentShader, /#define PDEANIM_SPLINE/);
+    // the GPU path and the CPU fallback agree on the positions it shows
+    player.setTime(0.43);
+    const u = timeUniforms(player.layout, 0.43);
+    const cpu = createEvaluator(clip).evaluate(0.43);
+    for (let v = 0; v < clip.nVertices; v++) {
+      const g = emulate(player.layout, u, v);
+      for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * c.diagonal);
+    }
+    player.detach();
+    other.detach();
+    passed.detach();
   }
 });

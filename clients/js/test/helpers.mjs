@@ -3,7 +3,7 @@
 import { readFileSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
-import { decodeContainer, splitClipFile } from '../src/index.js';
+import { createEvaluator, decodeContainer, splitClipFile, timePair, vertexBasis } from '../src/index.js';
 
 export const FIXTURES = join(dirname(fileURLToPath(import.meta.url)), 'fixtures');
 
@@ -122,19 +122,25 @@ export function storedArrays(bytes) {
 /**
  * A version 4 coefficients part (docs/format.md §3.10) re-encoded from a version 2 or 3 one (bytes): header
  * format_version 4, its knot_rank kept (0 for a version 2 part, whose knots then decode as before), and a
- * `tangents` (C, 3) uint8 array from tangents(c, w) (0 or 1). Options: linear(s, c, w) true zeroes the signed
- * m of that segment and item (a linear segment, where the cubic applies); edit({header, arrays}) changes
- * anything else before encoding (to build broken parts). Encoded arrays stay encoded (container 2).
+ * `tangents` (C, 3) uint8 array from tangents(c, w) (0 or 1). Options: version 5 writes a version 5 part
+ * instead (§3.11: the same arrays, natural-spline tangents); linear(s, c, w) true zeroes the signed m of that
+ * segment and item (a linear segment, where the cubic applies); segmentT replaces segment_t (float64);
+ * edit({header, arrays}) changes anything else before encoding (to build broken parts). Encoded arrays stay
+ * encoded (container 2).
  */
-export function coefficientsV4(bytes, { tangents = () => 0, linear = null, edit = null } = {}) {
+export function coefficientsV4(
+  bytes,
+  { version = 4, tangents = () => 0, linear = null, segmentT = null, edit = null } = {},
+) {
   const { header, arrays } = decodeContainer(bytes.slice());
   if (header.format_version !== 2 && header.format_version !== 3) {
     throw new Error(`expected a version 2 or 3 coefficients part, got ${header.format_version}`);
   }
   const C = header.n_curves;
   const S = header.n_segments;
-  header.format_version = 4;
+  header.format_version = version;
   header.knot_rank ??= 0;
+  if (segmentT) arrays.segment_t = { dtype: '<f8', shape: [S + 1], data: Float64Array.from(segmentT) };
   const t = new Uint8Array(C * 3);
   for (let i = 0; i < t.length; i++) t[i] = tangents(Math.floor(i / 3), i % 3);
   arrays.tangents = { dtype: '<u1', shape: [C, 3], data: t };
@@ -158,7 +164,7 @@ export function coefficientsV4(bytes, { tangents = () => 0, linear = null, edit 
  * neighbours' time pairs and cubic items in non-linear segments all occur; t lists every segment boundary,
  * points just inside each segment, a grid, and times outside [0, 1].
  */
-export function versionFourCases() {
+export function versionFourCases({ version = 4 } = {}) {
   const out = [];
   for (const c of manifest().cases) {
     if (c.kind !== 'dynamic-pde' || (c.format_version !== 2 && c.format_version !== 3)) continue;
@@ -167,7 +173,9 @@ export function versionFourCases() {
     const S = header.n_segments;
     const tangents = (cc, w) => (cc % 3 === 0 ? 1 : cc % 3 === 1 ? Number(w === 1) : 0);
     const linear = (s, cc) => s !== (cc % S); // one non-linear segment per curve, the others linear
-    const segT = Array.from(arrays.segment_t.data);
+    // version 5 with tangents needs strictly increasing boundaries: a repeated one moves to the middle
+    const segT = version === 5 ? strictlyIncreasing(arrays.segment_t.data) : Array.from(arrays.segment_t.data);
+    const written = version === 5 ? segT : null; // (version 4 keeps the fixture's segment_t)
     const t = [...segT];
     for (let s = 0; s < S; s++) {
       for (const f of [1e-9, 0.013, 0.25, 0.5, 0.77, 1 - 1e-9]) t.push(segT[s] + f * (segT[s + 1] - segT[s]));
@@ -175,16 +183,128 @@ export function versionFourCases() {
     for (let k = 0; k <= 20; k++) t.push(k / 20);
     t.push(-0.3, 1.2, 2.61);
     out.push({
-      name: `${c.name}-v4`,
+      name: `${c.name}-v${version}`,
       fixture: c,
       motion: c.motion,
       looping: c.looping,
       diagonal: c.diagonal,
       t,
       topology,
-      coefficients: coefficientsV4(coefficients, { tangents, linear }),
+      coefficients: coefficientsV4(coefficients, { version, tangents, linear, segmentT: written }),
       original: coefficients,
+      segmentT: written,
     });
+  }
+  return out;
+}
+
+/**
+ * Version 5 clips (natural-spline time tangents, docs/format.md §3.11) built as versionFourCases() builds
+ * version 4 ones, with strictly increasing segment boundaries (the synthetic fixtures' repeated boundary
+ * moved halfway to the next): [{..., name: '<fixture>-v5', segmentT}] (segmentT: the boundaries written; pass
+ * it to coefficientsV4 to build the same clip with other options).
+ */
+export function versionFiveCases() {
+  return versionFourCases({ version: 5 });
+}
+
+/** Boundaries (array of numbers) with each repeated one moved halfway to the next (or last) distinct one. */
+export function strictlyIncreasing(segT) {
+  const out = Array.from(segT);
+  for (let j = 1; j < out.length; j++) {
+    if (out[j] > out[j - 1]) continue;
+    let k = j;
+    while (k < out.length && !(out[k] > out[j - 1])) k++;
+    if (k === out.length) throw new Error('the last boundaries are equal');
+    out[j] = (out[j - 1] + out[k]) / 2;
+  }
+  return out;
+}
+
+/** The largest absolute difference between two equal-length arrays. */
+export function worstDeviation(a, b) {
+  let worst = 0;
+  for (let i = 0; i < a.length; i++) worst = Math.max(worst, Math.abs(a[i] - b[i]));
+  return worst;
+}
+
+/** Segment, local time and wrapped time of t (docs/format.md §2, §3.6 step 1), written out naively. */
+export function naiveLocate(segT, t, looping) {
+  const tw = looping ? t - Math.floor(t) : Math.min(Math.max(t, 0), 1);
+  const S = segT.length - 1;
+  let s = 0;
+  for (let j = 0; j <= S; j++) if (segT[j] <= tw) s = j;
+  s = Math.min(s, S - 1);
+  const len = segT[s + 1] - segT[s];
+  const tau = Math.min(Math.max((tw - segT[s]) / (len > 0 ? len : 1), 0), 1);
+  return [s, tau, tw];
+}
+
+/** Catmull-Rom knot tangents of §3.10 (one-sided at the ends, 0 where the times are equal) of values P. */
+export function centralTangents(segT, P) {
+  const S = segT.length - 1;
+  return P.map((_, j) => {
+    const lo = Math.max(j - 1, 0);
+    const hi = Math.min(j + 1, S);
+    const dt = segT[hi] - segT[lo];
+    return dt === 0 ? 0 : (P[hi] - P[lo]) / dt;
+  });
+}
+
+/**
+ * Positions (V * 3, float64) of a decoded clip at t from the Hermite form of §3.10, in float64 throughout:
+ * the knot values P_j per vertex coordinate, their tangents T = tangentsOf(segmentT, P) (central differences
+ * for version 4, the natural spline's for version 5), value = h00 P_s + h01 P_s+1 + Δ (h10 T_s + h11 T_s+1)
+ * for items with tangents 1 in segments with a linear constant, the time pair of §3.4 otherwise. The space
+ * basis and the rigid motion are the library's (checked by the conformance fixtures).
+ */
+export function naiveEvaluate(clip, t, tangentsOf) {
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, segmentT: segT, family, m } = clip;
+  const B = vertexBasis(clip);
+  const knotValues = (v, w) =>
+    Array.from({ length: S + 1 }, (_, j) => {
+      let acc = 0;
+      for (let k = 0; k < 4; k++) acc += knots[((j * C + curveOf[v]) * 3 + w) * 4 + k] * B[v * 12 + w * 4 + k];
+      return acc;
+    });
+  const [s, tau, tw] = naiveLocate(segT, t, clip.looping);
+  const delta = segT[s + 1] - segT[s];
+  const h00 = (1 + 2 * tau) * (1 - tau) ** 2;
+  const h01 = tau * tau * (3 - 2 * tau);
+  const h10 = tau * (1 - tau) ** 2;
+  const h11 = tau * tau * (tau - 1);
+  let rot = null;
+  let trans = null;
+  if (clip.rigid) {
+    const ev = createEvaluator(clip);
+    ev.prepare(tw);
+    rot = ev.rot;
+    trans = ev.trans;
+  }
+  const out = new Float64Array(V * 3);
+  for (let v = 0; v < V; v++) {
+    const c = curveOf[v];
+    const x = [0, 1, 2].map((w) => {
+      const i = (s * C + c) * 3 + w;
+      const mu = (family[i] >= 2 ? -1 : 1) * m[i];
+      const P = knotValues(v, w);
+      let value;
+      if (clip.tangents?.[c * 3 + w] === 1 && Math.abs(mu) <= 1e-12) {
+        const T = tangentsOf(segT, P);
+        value = h00 * P[s] + h01 * P[s + 1] + delta * (h10 * T[s] + h11 * T[s + 1]);
+      } else {
+        const pair = timePair(tau, mu, [0, 0]);
+        value = pair[0] * P[s] + pair[1] * P[s + 1];
+      }
+      const rest = clip.rest[v * 3 + w];
+      if (clip.motion === 'displacement') return rest + value;
+      if (clip.motion === 'absolute') return value;
+      return rest - clip.rigid.centre[c * 3 + w] + value;
+    });
+    for (let w = 0; w < 3; w++) {
+      const r = c * 9 + w * 3;
+      out[v * 3 + w] = rot ? rot[r] * x[0] + rot[r + 1] * x[1] + rot[r + 2] * x[2] + trans[c * 3 + w] : x[w];
+    }
   }
   return out;
 }

@@ -17,11 +17,16 @@ export interface GpuLayout {
   mode: 'fields' | 'coefficients' | 'cyclic';
   rigid: boolean;
   /**
-   * Whether some item has Catmull-Rom time tangents (format version 4): the curve table then holds four
-   * weight texels per curve (knots lo(s), s, s+1, hi(s+1)) instead of the pair, and the shader reads the
-   * pdeSegments uniform (nSegments).
+   * Whether some item has time tangents (format version 4 or 5): the curve table then holds four weight
+   * texels per curve instead of the pair; in version 4 (Catmull-Rom) on the knots lo(s), s, s+1, hi(s+1), and
+   * the shader reads the pdeSegments uniform (nSegments).
    */
   tangents: boolean;
+  /**
+   * Whether the tangents are the natural spline's (format version 5): the four weights are on T_s, P_s,
+   * P_s+1, T_s+1 and textures.tangent holds the tangents T (the pdeTangentTex uniform).
+   */
+  spline: boolean;
   nCurves: number;
   nVertices: number;
   /** Segments S of a dynamic clip (0 for cyclic ones). */
@@ -39,6 +44,8 @@ export interface GpuLayout {
     vertex: FloatTexture;
     field?: FloatTexture;
     knot?: FloatTexture;
+    /** Natural-spline tangents of every knot (format version 5), in the layout of field or knot. */
+    tangent?: FloatTexture;
     /** Per-frame table rewritten by timeUniforms(). */
     curve?: FloatTexture;
   };

@@ -12,11 +12,12 @@ export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
 /**
  * The newest dynamic-pde format version read (of a coefficients part); DYNAMIC_FORMAT_VERSIONS lists all
  * (2: integer codes; 3: knots on a shared low-rank time basis plus residual tracks, coefficients part only;
- * 4: version 3, or 2 with knot_rank 0, plus Catmull-Rom time tangents per item, coefficients part only).
+ * 4: version 3, or 2 with knot_rank 0, plus Catmull-Rom time tangents per item, coefficients part only;
+ * 5: as 4 with natural-spline time tangents).
  */
-export declare const DYNAMIC_FORMAT_VERSION: 4;
-export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2, 3, 4];
-/** The dynamic-pde format versions read in a topology part (versions 3 and 4 change coefficients parts only). */
+export declare const DYNAMIC_FORMAT_VERSION: 5;
+export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2, 3, 4, 5];
+/** The dynamic-pde format versions read in a topology part (versions 3 to 5 change coefficients parts only). */
 export declare const DYNAMIC_TOPOLOGY_VERSIONS: readonly [1, 2];
 
 /** Thrown for anything that is not a valid pdeanim container, part, clip or CLIP file. */
@@ -91,13 +92,18 @@ export interface DynamicClip extends ClipBase {
   family: Uint8Array;
   m: Float32Array;
   D: Float32Array;
-  /** Knots (S+1, C, 3, 4) as float32, decoded (format versions 2 to 4 store them as integer codes). */
+  /** Knots (S+1, C, 3, 4) as float32, decoded (format versions 2 to 5 store them as integer codes). */
   knots: Float32Array;
   /**
-   * Catmull-Rom time tangents (C, 3) of format version 4: 1 where the item's linear segments use the C1
-   * cubic through its knots (docs/format.md §3.10), else 0; null for versions 1 to 3 (none).
+   * Time tangents (C, 3) of format versions 4 and 5: 1 where the item's linear segments use the cubic
+   * through its knots (docs/format.md §3.10, §3.11), else 0; null for versions 1 to 3 (none).
    */
   tangents: Uint8Array | null;
+  /**
+   * Which tangents the cubic uses: 'catmull-rom' (version 4, C1), 'natural' (version 5: the natural cubic
+   * spline's, C2), null for versions 1 to 3.
+   */
+  tangentSpline: 'catmull-rom' | 'natural' | null;
   rigid: RigidTracks | null;
 }
 

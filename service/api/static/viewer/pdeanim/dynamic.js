@@ -4,15 +4,16 @@ import { ClipFormatError } from './container.js';
 import { hermiteWeights, locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
 
 /** The newest dynamic-pde format version this build reads (of a coefficients part). */
-export const DYNAMIC_FORMAT_VERSION = 4;
+export const DYNAMIC_FORMAT_VERSION = 5;
 /**
  * Every dynamic-pde format version this build reads in a coefficients part (1: float arrays; 2: integer
  * codes, docs/format.md §3.7; 3: knots on a shared low-rank time basis plus residual tracks, §3.9; 4: as 3
- * (or as 2 with knot_rank 0) plus Catmull-Rom time tangents per item, §3.10).
+ * (or as 2 with knot_rank 0) plus Catmull-Rom time tangents per item, §3.10; 5: as 4 with natural-spline
+ * time tangents, §3.11).
  */
-export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2, 3, 4]);
+export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2, 3, 4, 5]);
 /**
- * Every dynamic-pde format version this build reads in a topology part (versions 3 and 4 change the
+ * Every dynamic-pde format version this build reads in a topology part (versions 3 to 5 change the
  * coefficients part only).
  */
 export const DYNAMIC_TOPOLOGY_VERSIONS = Object.freeze([1, 2]);
@@ -172,7 +173,7 @@ function toVertexOrder(rows, cols, order) {
 }
 
 /**
- * Family codes and m >= 0 (S, C, 3) of a version 2, 3 or 4 coefficients part: space kind per item, m signed
+ * Family codes and m >= 0 (S, C, 3) of a version 2 to 5 coefficients part: space kind per item, m signed
  * (< 0: trig with |m|, > 0: exp, 0: linear).
  */
 function familyV2(ca, S, C) {
@@ -191,9 +192,9 @@ function familyV2(ca, S, C) {
 
 /**
  * knot_step (C, 3) and the integer codes (S+1, C, 3, 4) as float64 (exact integers) of the `knots` time
- * tracks of a version 2, 3 or 4 coefficients part: tracks (C, 3, 4, S+1) of zigzag differences of order
- * knot_differences (1 or 2) along time (docs/format.md §3.7). Versions 3 and 4 store their residual tracks so
- * (§3.9, §3.10).
+ * tracks of a version 2 to 5 coefficients part: tracks (C, 3, 4, S+1) of zigzag differences of order
+ * knot_differences (1 or 2) along time (docs/format.md §3.7). Versions 3 to 5 store their residual tracks so
+ * (§3.9, §3.10, §3.11).
  */
 function knotTracks(ch, ca, S, C) {
   const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data;
@@ -222,7 +223,7 @@ function knotTracks(ch, ca, S, C) {
 }
 
 /**
- * Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part (or a version 4 one of knot_rank 0):
+ * Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part (or a version 4 or 5 one of knot_rank 0):
  * float32(q * knot_step) of its tracks.
  */
 function knotsV2(ch, ca, S, C) {
@@ -262,7 +263,7 @@ function knotsV3(ch, ca, S, C, r = knotRank(ch, S, 1)) {
   return knots;
 }
 
-/** The header's knot_rank, an integer in min..S+1 (version 3: 1..S+1; version 4: 0..S+1). */
+/** The header's knot_rank, an integer in min..S+1 (version 3: 1..S+1; versions 4 and 5: 0..S+1). */
 function knotRank(ch, S, min) {
   const r = ch.knot_rank;
   if (!Number.isInteger(r) || r < min || r > S + 1) {
@@ -273,8 +274,9 @@ function knotRank(ch, S, min) {
 }
 
 /**
- * Knots (S+1, C, 3, 4) float32 of a version 4 coefficients part (docs/format.md §3.10): knot_rank 0 has no
- * shared basis (its arrays must be absent) and decodes as version 2; ranks 1..S+1 decode as version 3.
+ * Knots (S+1, C, 3, 4) float32 of a version 4 or 5 coefficients part (docs/format.md §3.10, §3.11): knot_rank
+ * 0 has no shared basis (its arrays must be absent) and decodes as version 2; ranks 1..S+1 decode as
+ * version 3.
  */
 function knotsV4(ch, ca, S, C) {
   const r = knotRank(ch, S, 0);
@@ -288,8 +290,9 @@ function knotsV4(ch, ca, S, C) {
 }
 
 /**
- * The `tangents` (C, 3) of a version 4 coefficients part (docs/format.md §3.10): uint8, 1 where the item's
- * linear segments use the Catmull-Rom cubic, 0 where they use the straight line.
+ * The `tangents` (C, 3) of a version 4 or 5 coefficients part (docs/format.md §3.10, §3.11): uint8, 1 where
+ * the item's linear segments use the cubic (Catmull-Rom in version 4, the natural spline in version 5), 0
+ * where they use the straight line.
  */
 function tangentsV4(ca, C) {
   const tangents = need(ca, 'tangents', [C, 3], 'coefficients', ['<u1']).data;
@@ -303,7 +306,7 @@ function tangentsV4(ca, C) {
 
 /**
  * Validate and decode the topology and coefficients containers of a dynamic-PDE clip (topology versions 1
- * and 2, coefficients versions 1, 2, 3 and 4).
+ * and 2, coefficients versions 1 to 5).
  */
 export function decodeDynamic(topo, coef) {
   const th = topo.header;
@@ -371,9 +374,21 @@ export function decodeDynamic(topo, coef) {
         ? knotsV2(ch, ca, S, C)
         : ch.format_version === 3
           ? knotsV3(ch, ca, S, C)
-          : knotsV4(ch, ca, S, C);
-  // version 4 only (in older versions an array of that name is an unknown addition, ignored)
-  const tangents = ch.format_version === 4 ? tangentsV4(ca, C) : null;
+          : knotsV4(ch, ca, S, C); // versions 4 and 5
+  // versions 4 and 5 only (in older versions an array of that name is an unknown addition, ignored)
+  const tangents = ch.format_version >= 4 ? tangentsV4(ca, C) : null;
+  const tangentSpline = ch.format_version === 5 ? 'natural' : ch.format_version === 4 ? 'catmull-rom' : null;
+  if (tangentSpline === 'natural' && tangents.includes(1)) {
+    // natural-spline tangents divide by every segment's length (docs/format.md §3.11)
+    for (let j = 1; j <= S; j++) {
+      if (!(segT[j] > segT[j - 1])) {
+        throw new ClipFormatError(
+          'segment boundaries must be strictly increasing in a version 5 clip with tangents' +
+            ` (segment ${j - 1} has length 0)`,
+        );
+      }
+    }
+  }
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
   let rigid = null;
   if (motion === 'rigid') {
@@ -411,6 +426,7 @@ export function decodeDynamic(topo, coef) {
     D,
     knots,
     tangents,
+    tangentSpline,
     motion,
     looping: Boolean(ch.looping),
     rigid,
@@ -473,6 +489,96 @@ export function rodrigues(rx, ry, rz, out, o = 0) {
   return out;
 }
 
+/** Values per column block of naturalSplineTangents (bounds its float64 scratch to 8 MiB). */
+const SPLINE_BLOCK = 1 << 20;
+
+/**
+ * The knot tangents of the natural cubic spline (format version 5, docs/format.md §3.11) through per-knot
+ * data values ((S+1) x cols, row-major: row j holds every column's value at knot j, e.g. the per-vertex knot
+ * fields P_j or the knot coefficients) over the boundaries segmentT (S+1, strictly increasing), into out (the
+ * same layout; a Float32Array rounds the tangents to float32). Solves, per column and in float64, the
+ * tridiagonal system
+ *
+ *   2 T_0 + T_1 = 3 d_0,
+ *   Δ_j T_j-1 + 2 (Δ_j-1 + Δ_j) T_j + Δ_j-1 T_j+1 = 3 (Δ_j d_j-1 + Δ_j-1 d_j)   (j = 1..S-1),
+ *   T_S-1 + 2 T_S = 3 d_S-1,
+ *
+ * with Δ_j = t_j+1 - t_j and d_j = (P_j+1 - P_j) / Δ_j, by the Thomas algorithm (no pivoting: the system is
+ * strictly diagonally dominant). Its matrix depends on segmentT only: the forward elimination's pivots are
+ * computed once and applied to all columns together (in blocks of columns, to bound the scratch memory).
+ */
+export function naturalSplineTangents(segmentT, values, cols, out = new Float64Array(values.length)) {
+  const S = segmentT.length - 1;
+  const n = S + 1;
+  if (!(S >= 1) || values.length !== n * cols || out.length < n * cols) {
+    throw new RangeError(`natural spline tangents need (S+1) x cols = ${n} x ${cols} values, S >= 1`);
+  }
+  const delta = new Float64Array(S);
+  for (let j = 0; j < S; j++) delta[j] = segmentT[j + 1] - segmentT[j];
+  // row j: sub[j] T_j-1 + diagonal T_j + upper T_j+1; after elimination the pivot piv[j] of T_j and
+  // upper[j] = super-diagonal / piv[j]
+  const sub = new Float64Array(n);
+  const piv = new Float64Array(n);
+  const upper = new Float64Array(n);
+  piv[0] = 2;
+  upper[0] = 1 / 2;
+  for (let j = 1; j < S; j++) {
+    sub[j] = delta[j];
+    piv[j] = 2 * (delta[j - 1] + delta[j]) - delta[j] * upper[j - 1];
+    upper[j] = delta[j - 1] / piv[j];
+  }
+  sub[S] = 1;
+  piv[S] = 2 - upper[S - 1];
+  const block = Math.max(1, Math.min(cols, Math.floor(SPLINE_BLOCK / n)));
+  const y = new Float64Array(n * block); // the eliminated right-hand sides, then the tangents
+  for (let c0 = 0; c0 < cols; c0 += block) {
+    const nc = Math.min(block, cols - c0);
+    for (let j = 0; j <= S; j++) {
+      const yo = j * block;
+      const prev = yo - block;
+      const vo = j * cols + c0; // value at knot j of the block's first column
+      for (let k = 0; k < nc; k++) {
+        const p = values[vo + k];
+        let rhs;
+        if (j === 0) rhs = 3 * ((values[vo + cols + k] - p) / delta[0]);
+        else if (j === S) rhs = 3 * ((p - values[vo - cols + k]) / delta[S - 1]);
+        else {
+          const dl = (p - values[vo - cols + k]) / delta[j - 1];
+          const dr = (values[vo + cols + k] - p) / delta[j];
+          rhs = 3 * (delta[j] * dl + delta[j - 1] * dr);
+        }
+        y[yo + k] = j === 0 ? rhs / piv[0] : (rhs - sub[j] * y[prev + k]) / piv[j];
+      }
+    }
+    for (let k = 0; k < nc; k++) out[S * cols + c0 + k] = y[S * block + k];
+    for (let j = S - 1; j >= 0; j--) {
+      const yo = j * block;
+      const vo = j * cols + c0;
+      for (let k = 0; k < nc; k++) {
+        const tj = y[yo + k] - upper[j] * y[yo + block + k];
+        y[yo + k] = tj;
+        out[vo + k] = tj;
+      }
+    }
+  }
+  return out;
+}
+
+/**
+ * The float64 weights of the version 5 cubic (docs/format.md §3.11) in segment s of boundaries segmentT at
+ * local time tau, on T_s, P_s, P_s+1 and T_s+1 in that order (Δ h10, h00, h01, Δ h11 with
+ * Δ = t_s+1 - t_s), into out[o..o+3].
+ */
+export function splineWeights(segmentT, s, tau, out, o = 0) {
+  const delta = segmentT[s + 1] - segmentT[s];
+  const omt = 1 - tau;
+  out[o] = delta * (tau * omt * omt);
+  out[o + 1] = (1 + 2 * tau) * omt * omt;
+  out[o + 2] = tau * tau * (3 - 2 * tau);
+  out[o + 3] = delta * (tau * tau * (tau - 1));
+  return out;
+}
+
 /** CPU evaluator of a decoded dynamic-PDE clip; everything independent of t is computed here once. */
 export class DynamicEvaluator {
   constructor(clip) {
@@ -528,11 +634,16 @@ export class DynamicEvaluator {
     this.base = vertexBase(clip);
     this.phi0 = new Float64Array(C * 3);
     this.phi1 = new Float64Array(C * 3);
-    // Catmull-Rom time tangents (format version 4, docs/format.md §3.10): null unless some item has them
+    // Time tangents (format versions 4 and 5, docs/format.md §3.10, §3.11): null unless some item has them
     // (every other clip takes the plain path below). cubic (S, C, 3) is 1 where the item has tangents and a
-    // linear constant in the segment; cubicWeights are the segment's four knot weights (lo(s), s, s+1,
-    // hi(s+1); float32-rounded), the same for all its cubic items; cubicSegment (S) whether it has any
+    // linear constant in the segment; cubicWeights are the segment's four weights (float32-rounded), the
+    // same for all its cubic items; cubicSegment (S) whether it has any. Version 4 (Catmull-Rom): weights of
+    // the knot fields lo(s), s, s+1, hi(s+1). Version 5 (natural spline, `natural` true): weights of T_s,
+    // P_s, P_s+1, T_s+1, with tangentFields ((S+1) x V x 3 float32, the layout of fields) the tangents T_j
+    // of every knot, solved once here
     this.cubic = null;
+    this.natural = false;
+    this.tangentFields = null;
     const tangents = clip.tangents;
     if (tangents && tangents.some((x) => x === 1)) {
       this.cubic = new Uint8Array(S * C * 3);
@@ -544,7 +655,13 @@ export class DynamicEvaluator {
         }
       }
       this.cubicWeights = new Float64Array(4);
-      this.weights = new Float64Array(C * 12); // per item, by prepare(): the four knot weights it applies
+      this.weights = new Float64Array(C * 12); // per item, by prepare(): the four weights it applies
+      if (clip.tangentSpline === 'natural') {
+        this.natural = true;
+        // from the float32 fields, in float64, rounded to float32 (as the reference evaluator)
+        const out = new Float32Array(this.fields.length);
+        this.tangentFields = naturalSplineTangents(clip.segmentT, this.fields, V * 3, out);
+      }
     }
     this.pair = new Float64Array(2);
     this.pair2 = new Float64Array(2);
@@ -557,8 +674,9 @@ export class DynamicEvaluator {
   /**
    * The per-curve state at t (everything t changes before the per-vertex sums): fills this.phi0, this.phi1
    * (C * 3 time pairs of the segment), for rigid clips this.rot (C * 9) and this.trans (C * 3), and for
-   * clips with tangents this.weights (C * 3 * 4: per item the weights of the knots lo(s), s, s+1, hi(s+1):
-   * the cubic's float32-rounded ones, or 0, phi0, phi1, 0); returns the segment index.
+   * clips with tangents this.weights (C * 3 * 4: per item the four weights, on the knots lo(s), s, s+1,
+   * hi(s+1) in version 4 and on T_s, P_s, P_s+1, T_s+1 in version 5: the cubic's float32-rounded ones, or
+   * 0, phi0, phi1, 0); returns the segment index.
    */
   prepare(t) {
     if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -592,9 +710,9 @@ export class DynamicEvaluator {
 
   /**
    * The state of this.loc that does not depend on the item: the distinct time pairs of the segment
-   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]), for clips with tangents the cubic's knot weights
-   * (cubicWeights, computed in float64 and rounded to float32 as the reference evaluator does) and, for
-   * rigid clips, rot and trans.
+   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]), for clips with tangents the cubic's four weights
+   * (cubicWeights: hermiteWeights in version 4, splineWeights in version 5, computed in float64 and rounded
+   * to float32 as the reference evaluator does) and, for rigid clips, rot and trans.
    */
   segmentState() {
     const s = this.loc[0];
@@ -606,7 +724,8 @@ export class DynamicEvaluator {
       uPhi1[k] = pair[1];
     }
     if (this.cubic !== null) {
-      const cw = hermiteWeights(this.clip.segmentT, s, tau, this.cubicWeights);
+      const weights = this.natural ? splineWeights : hermiteWeights;
+      const cw = weights(this.clip.segmentT, s, tau, this.cubicWeights);
       for (let i = 0; i < 4; i++) cw[i] = Math.fround(cw[i]);
     }
     if (this.clip.rigid) this._rigidAt(this.loc[2]);
@@ -647,9 +766,10 @@ export class DynamicEvaluator {
   }
 
   /**
-   * evaluate() in a segment where some item uses the Catmull-Rom cubic (docs/format.md §3.10): its values are
-   * ((w_lo P_lo + w_s P_s) + w_s+1 P_s+1) + w_hi P_hi + base in float32 (every product and sum rounded, as
-   * the reference evaluator), the other items' as in evaluate().
+   * evaluate() in a segment where some item uses the cubic: its values are ((w_lo P_lo + w_s P_s) +
+   * w_s+1 P_s+1) + w_hi P_hi + base in float32 for the Catmull-Rom cubic of version 4 (docs/format.md §3.10),
+   * ((w_0 T_s + w_1 P_s) + w_2 P_s+1) + w_3 T_s+1 + base for the natural spline of version 5 (§3.11), every
+   * product and sum rounded, as the reference evaluator; the other items' as in evaluate().
    */
   _evaluateCubic(s, out) {
     const clip = this.clip;
@@ -658,10 +778,12 @@ export class DynamicEvaluator {
     const S = clip.nSegments;
     const f = Math.fround;
     const field = (j) => this.fields.subarray(j * N, (j + 1) * N);
-    const PL = field(Math.max(s - 1, 0));
+    const tangent = (j) => this.tangentFields.subarray(j * N, (j + 1) * N);
+    // the outer two terms: knot fields lo(s), hi(s+1) (version 4) or tangent fields s, s+1 (version 5)
+    const PL = this.natural ? tangent(s) : field(Math.max(s - 1, 0));
     const P0 = field(s);
     const P1 = field(s + 1);
-    const PH = field(Math.min(s + 2, S));
+    const PH = this.natural ? tangent(s + 1) : field(Math.min(s + 2, S));
     const cw = this.cubicWeights;
     const wl = cw[0];
     const ws = cw[1];
