@@ -18,6 +18,7 @@ from ..errors import ParameterError
 from ..poses import Poses
 from .extract import extract_curves
 from .floor import MOTIONS, bbox_diagonal, curve_floor
+from .split import distinct_rank, split_curves
 
 CurveErrors = Callable[[CurveSet], np.ndarray]
 """Given a curve set over all vertices, (C,) relative RMS error of each curve."""
@@ -54,30 +55,10 @@ def _subset(curves: CurveSet, sel: np.ndarray) -> CurveSet:
     return CurveSet(curves.order[pos], np.r_[0, np.cumsum(lengths)].astype(np.int32))
 
 
-def _distinct_rank(rest: np.ndarray, curves: CurveSet) -> tuple[np.ndarray, np.ndarray]:
-    """(V,) index of each position in the order among its curve's distinct points, (C,) distinct count."""
-    p = rest[curves.order]
-    cid = np.repeat(np.arange(curves.n_curves), curves.lengths)
-    new = np.r_[True, (cid[1:] != cid[:-1]) | np.any(p[1:] != p[:-1], axis=1)]
-    rank = np.cumsum(new) - 1
-    rank -= np.repeat(rank[curves.offsets[:-1]], curves.lengths)
-    return rank, np.bincount(cid, new, curves.n_curves).astype(np.int64)
-
-
-def split_curves(rest: np.ndarray, curves: CurveSet, bad: np.ndarray) -> CurveSet:
-    """Split every curve flagged in bad (C,) with 2+ distinct points in two halves of distinct points."""
-    rank, distinct = _distinct_rank(rest, curves)
-    cid = np.repeat(np.arange(curves.n_curves), curves.lengths)
-    half = (distinct + 1) // 2
-    cut = bad[cid] & (distinct[cid] >= 2) & (rank == half[cid]) & np.r_[True, rank[1:] != rank[:-1]]
-    offsets = np.union1d(curves.offsets, np.flatnonzero(cut))
-    return CurveSet(curves.order, offsets.astype(np.int32))
-
-
 def merge_candidates(rest: np.ndarray, curves: CurveSet, ok: np.ndarray, min_points: int,
                      max_points: int, max_gap: float) -> np.ndarray:
     """(C,) bool: curve c may merge with c + 1 (both meet the bound, one is short, ends within max_gap)."""
-    _, distinct = _distinct_rank(rest, curves)
+    _, distinct = distinct_rank(rest, curves)
     if curves.n_curves < 2:
         return np.zeros(curves.n_curves, bool)
     first, last = rest[curves.order[curves.offsets[:-1]]], rest[curves.order[curves.offsets[1:] - 1]]
@@ -165,7 +146,7 @@ def _report(frames, curves, err, bound, motion, rounds, splits, merges) -> dict:
     """JSON-ready summary of a refinement."""
     count = curves.lengths * len(frames)
     total = float(np.sqrt(np.sum(err**2 * count) / max(1, count.sum())))
-    _, distinct = _distinct_rank(frames[0], curves)
+    _, distinct = distinct_rank(frames[0], curves)
     return {"curves": curves.n_curves, "mean_points": float(distinct.mean()) if curves.n_curves else 0.0,
             "mean_vertices": float(curves.lengths.mean()) if curves.n_curves else 0.0,
             "rel_rms": total, "worst_curve_rel_rms": float(err.max()) if len(err) else 0.0,

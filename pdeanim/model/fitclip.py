@@ -15,7 +15,7 @@ import numpy as np
 from .. import container
 from ..clip import ClipParts
 from ..container import ZSTD_LEVEL
-from ..curves.bounded import split_curves
+from ..curves.split import split_curves
 from ..curveset import CurveSet
 from ..errors import ParameterError, PosesInputError
 from ..poses import Poses

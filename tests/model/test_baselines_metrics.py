@@ -64,8 +64,9 @@ def test_heldout_comparison_runs_on_real_sequence(morph_small, short_curves):
     r = heldout_comparison(morph_small, 3, FitOptions(target_rel_rms=3e-3), curves=short_curves)
     assert r["heldout_frames"] > 0 and r["kept_frames"] + r["heldout_frames"] == morph_small.n_frames
     assert np.isfinite(r["pde"]["rms"]) and np.isfinite(r["linear"]["rms"])
-    # achieved: PDE 2.4e-3 at the held-out frames (fit target 3e-3); linear interpolation of the same bytes
-    # (15 frames) 5.5e-3. Linear interpolation of all 25 kept frames (1.9e-3) beats it, with 1.9x the bytes.
-    assert r["pde"]["rel_rms"] < 6e-3
+    # achieved: PDE 1.5e-3 at the held-out frames (fit target 3e-3; the natural-spline tangents of format
+    # version 5 and the soft max bound on the rounding); linear interpolation of all 25 kept frames 1.9e-3,
+    # of the same bytes (15 frames) 5.5e-3
+    assert r["pde"]["rel_rms"] < 4e-3
     assert r["pde"]["rel_rms"] < r["linear_equal_bytes"]["rel_rms"]
-    assert r["linear"]["rel_rms"] < r["pde"]["rel_rms"] and r["kept_raw_bytes"] > r["coefficients_bytes"]
+    assert r["pde"]["rel_rms"] < r["linear"]["rel_rms"] and r["kept_raw_bytes"] > r["coefficients_bytes"]
