@@ -438,9 +438,10 @@ def _curve_point_ladder(start: int | None) -> list[int | None]:
 SPLIT_RMS_RATIO: float | None = 2.0
 """With an RMS target, an automatically extracted curve whose spatial floor leaves more than this times the
 target at some vertex is split in two (repeatedly): an RMS-driven fit bounds no single vertex, and the
-curves' floor is where the largest errors come from (one-off fits at 1e-3 with 2.5: rel-max horse-collapse
-0.0064 -> 0.0031, samba 0.0096 -> 0.0041, pdance 0.0071 -> 0.0046, elephant-gallop 0.0056 -> 0.0046, for 1-6%
-more bytes; the rest of the max error is the knots' rounding). None: no such split."""
+curves' floor is where the largest errors come from (one-off fits at 1e-3 with 2.5, before the soft max
+bound: rel-max horse-collapse 0.0064 -> 0.0031, samba 0.0096 -> 0.0041, pdance 0.0071 -> 0.0046,
+elephant-gallop 0.0056 -> 0.0046, for 1-6% more bytes; the rest of the max error is the knots' rounding).
+None: no such split."""
 SPLIT_ROUNDS = 12
 """Rounds of splitting at most (each halves the offending curves; 12 reach single points from 4096)."""
 FLOOR_MAX_SHARE = 0.7

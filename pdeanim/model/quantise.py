@@ -164,7 +164,7 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     """
     cid, B = vertex_basis(curves, u, family, D)
     V, C = len(u), curves.n_curves
-    pair = pair_max(family, m)  # the cubic's squared weights sum to at most 1 too (1 at the knots)
+    pair = pair_max(family, m)  # the cubics' squared weights: 1 at the knots, about 1 or less between them
     weight = np.zeros((C, 3))
     np.add.at(weight, cid, (B * B).sum(-1))  # sum over the curve's vertices of sum_k S_k^2
     weight *= pair**2 / (12.0 * max(V, 1))

@@ -603,12 +603,18 @@ test('a t with the same segment and local time uploads nothing', () => {
   player.detach();
 });
 
-test('version 4: the per-curve table holds each item four knot weights (the CPU ones), then rigid rows', () => {
-  for (const c of v4) {
+/**
+ * The per-curve table of clips with time tangents holds each item the CPU evaluator's four weights: the
+ * segment's cubic weights (weightsOf: Catmull-Rom's on four knots in version 4, the spline's on T_s, P_s,
+ * P_s+1, T_s+1 in version 5) or 0, phi0, phi1, 0 off the cubic, then the rigid rows.
+ */
+function checkWeightTable(cases, weightsOf, spline) {
+  for (const c of cases) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
     const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
     assert.equal(layout.tangents, true);
+    assert.equal(layout.spline, spline);
     assert.equal(layout.weightTexels, 4);
     assert.equal(layout.curveTexels, layout.rigid ? 7 : 4);
     assert.equal(layout.nSegments, clip.nSegments);
@@ -622,7 +628,7 @@ test('version 4: the per-curve table holds each item four knot weights (the CPU 
       ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
       const s = ref.prepare(t);
       assert.equal(u.seg, s);
-      const cubic = hermiteWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
+      const cubic = weightsOf(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
       for (let cw = 0; cw < C * 3; cw++) {
         const o = Math.floor(cw / 3) * K + (cw % 3);
         const table = [0, 1, 2, 3].map((j) => d[o + j * 4]);
@@ -645,6 +651,10 @@ test('version 4: the per-curve table holds each item four knot weights (the CPU 
     }
     assert.ok(cubicItems > 0, c.name);
   }
+}
+
+test('version 4: the per-curve table holds each item four knot weights (the CPU ones), then rigid rows', () => {
+  checkWeightTable(v4, hermiteWeights, false);
 });
 
 test('version 4: GLSL and three.js materials get the tangents layout; other clips keep theirs', () => {
@@ -693,39 +703,7 @@ test('version 4: GLSL and three.js materials get the tangents layout; other clip
 });
 
 test('version 5: the table holds each item the spline weights on T_s, P_s, P_s+1, T_s+1 (the CPU ones)', () => {
-  for (const c of v5) {
-    const clip = loadCase(c);
-    const ev = createEvaluator(clip);
-    const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
-    assert.equal(layout.tangents, true);
-    assert.equal(layout.spline, true);
-    assert.equal(layout.weightTexels, 4);
-    assert.equal(layout.curveTexels, layout.rigid ? 7 : 4);
-    const ref = createEvaluator(clip);
-    const C = clip.nCurves;
-    const K = layout.curveTexels * 4;
-    const d = layout.textures.curve.data;
-    let cubicItems = 0;
-    for (const t of c.t) {
-      const u = timeUniforms(layout, t);
-      ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
-      const s = ref.prepare(t);
-      assert.equal(u.seg, s);
-      const cubic = splineWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
-      for (let cw = 0; cw < C * 3; cw++) {
-        const o = Math.floor(cw / 3) * K + (cw % 3);
-        const table = [0, 1, 2, 3].map((j) => d[o + j * 4]);
-        assert.deepEqual(table, Array.from(ref.weights.subarray(cw * 4, cw * 4 + 4), Math.fround));
-        if (ref.cubic[s * C * 3 + cw] === 1) {
-          cubicItems++;
-          assert.deepEqual(table, Array.from(cubic), `${c.name} t = ${t}`);
-        } else {
-          assert.deepEqual(table, [0, Math.fround(ref.phi0[cw]), Math.fround(ref.phi1[cw]), 0]);
-        }
-      }
-    }
-    assert.ok(cubicItems > 0, c.name);
-  }
+  checkWeightTable(v5, splineWeights, true);
 });
 
 test('version 5: a tangent texture in the layout of the field or knot texture, the spline of its data', () => {
