@@ -226,15 +226,15 @@ def match_vertices(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return cKDTree(feat(Y)).query(feat(X), workers=1)[1]
 
 
+GLTFPACK_CLI = PEERS_DIR / "node_modules" / "gltfpack" / "cli.js"
+
+
 def method_gltfpack(X: np.ndarray, faces: np.ndarray, work: Path, timeout: float) -> list[dict]:
     """Morph-target GLB -> gltfpack -cc -vp N -> meshopt decode -> our reader -> score."""
     from pdeanim.gltf.read import read_animated_poses
     from pdeanim.gltf.write import animation_glb
 
-    cli = PEERS_DIR / "node_modules" / "gltfpack" / "cli.js"
-    if not cli.exists():
-        log(f"gltfpack: {cli} missing: run (cd benchmarks/peers && npm ci)")
-        return []
+    cli = GLTFPACK_CLI
     src = work / "frames.glb"
     src.write_bytes(animation_glb(X, np.arange(len(X)) / FPS, faces, normals=False))
     rows = []
@@ -656,6 +656,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = args.methods - set(ALL_METHODS)
     if unknown:
         ap.error(f"unknown methods: {', '.join(sorted(unknown))}")
+    if "gltfpack" in args.methods and not GLTFPACK_CLI.exists():  # a peer left out would look like a win
+        ap.error(f"{GLTFPACK_CLI} is missing: run (cd benchmarks/peers && npm ci), or leave gltfpack out of "
+                 "--methods")
     folder = find_sequences(args.data)
     seqs = sorted(folder.glob("*.npz"))
     if args.sequences:

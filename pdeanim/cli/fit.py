@@ -48,7 +48,9 @@ def register(subparsers) -> None:  # noqa: ANN001
         help="glTF input: the animation to fit, by name or index "
         "(default: the first; the summary says which was used)",
     )
-    p.add_argument("--max-segments", type=int, default=64, help="cap on segments chosen for a target")
+    p.add_argument("--max-segments", type=int,
+                   help="cap on segments chosen for a target (default 256, FitOptions.max_segments; reaching "
+                        "it is reported)")
     p.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5], default=5,
                    help="newest clip format to write: 5 (default: natural-spline time tangents for the items "
                         "whose motion is smooth, else written as version 3), 4 (the same with Catmull-Rom "
@@ -82,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         param_mode=args.param,
         motion=args.motion,
         loop=args.loop,
-        max_segments=args.max_segments,
+        **({} if args.max_segments is None else {"max_segments": args.max_segments}),
         best_effort=args.best_effort,
         format_version=args.format_version,
     )

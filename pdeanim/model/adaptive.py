@@ -99,18 +99,35 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
         if segm.n_segments >= max_segments:
             cap_reached = True
             break
-        n_split = max(1, min(segm.n_segments // 3, max_segments - segm.n_segments))
+        n_split = max(1, min(_split_count(segm.n_segments, d, floor_targets), max_segments - segm.n_segments))
         new = _splits(segm, badness, n_split)
         if new.n_segments == segm.n_segments:
             unsplittable = True
             break
         segm = new
-    if met and not floor_high:
+    if met and not floor_high and segm.n_segments <= MERGE_MAX_SEGMENTS:
         time, d = _merge(space, time, d, floor_targets, distances, loop, history)
     time, d = _polish(space, time, d, distances, loop, floor_targets)
     _, met_real = _frame_badness(d, targets)
     return AdaptiveResult(time, met_real, floor_high, history, cap_reached and not met_real,
                           unsplittable and not met_real)
+
+
+GROWTH_MIN, GROWTH_MAX = 4.0 / 3.0, 2.0
+"""Bounds of the factor by which a search round multiplies the number of segments."""
+
+
+def _split_count(n_segments: int, d: np.ndarray, targets: Targets) -> int:
+    """Segments to split in the next round: the count grows by sqrt(error / target) (the error of a
+    piecewise-linear track falls with the square of the number of segments), between GROWTH_MIN and
+    GROWTH_MAX: far from the target the search doubles, so long clips need a few rounds, not dozens."""
+    ratio = 1.0
+    if targets.rms is not None:
+        ratio = max(ratio, float(np.sqrt(np.mean(d * d))) / max(targets.rms, 1e-300))
+    if targets.max is not None:
+        ratio = max(ratio, float(d.max(initial=0.0)) / max(targets.max, 1e-300))
+    growth = float(np.clip(np.sqrt(ratio), GROWTH_MIN, GROWTH_MAX))
+    return int(np.floor(n_segments * (growth - 1.0) + 1e-9))
 
 
 def _progress_errors(d: np.ndarray, targets: Targets) -> str:
@@ -124,6 +141,10 @@ def _progress_errors(d: np.ndarray, targets: Targets) -> str:
 
 
 MAX_MERGE_TRIES = 3
+MERGE_MAX_SEGMENTS = 16
+"""Boundaries are removed only from searches that ended with at most this many segments: each try is a whole
+time fit, and removing one of many segments saves little (on a 401-frame clip ending at 256 segments the
+three tries took 15 of 105 s and could remove at most 3 of 257 knots per track)."""
 SEARCH_REFINE = 3
 """Golden steps for the time constants while searching segmentations (the chosen one gets the full count)."""
 

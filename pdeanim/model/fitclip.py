@@ -44,7 +44,7 @@ from .metrics import bbox_diagonal, error_summary
 from .parameterisation import PARAM_MODES, curve_parameters
 from .quantise import power_of_two_step
 from .rigid import RigidTracks, fit_rigid, local_residual
-from .segments import Segmentation, normalised_times, uniform_segmentation
+from .segments import DEFAULT_MAX_SEGMENTS, Segmentation, normalised_times, uniform_segmentation
 from .tangents import CATMULL_ROM, NATURAL, prefer_tangents
 
 MOTIONS = ("displacement", "absolute", "rigid")
@@ -75,7 +75,7 @@ class FitOptions:
     param_mode: str = "chord"
     motion: str = "displacement"
     loop: bool = False
-    max_segments: int = 64
+    max_segments: int = DEFAULT_MAX_SEGMENTS
     curve_points: int = 10
     best_effort: bool = False
     format_version: int = FORMAT_VERSION

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -136,3 +138,25 @@ def test_trailing_bytes_after_the_zstd_frame_and_null_encodings_are_refused():
     blob = container.pack({"part": "x"}, {"a": np.arange(64, dtype=np.uint32)}, {"a": "zstd"})
     with pytest.raises(ClipFormatError, match="unknown encoding"):
         container.unpack(_table_edit(blob, "a", encoding=None))
+
+
+def test_smallest_compresses_only_the_chosen_encoding_at_the_writers_level(monkeypatch):
+    """SMALLEST compares the encodings at CHOICE_LEVEL and compresses just the winner at the final level."""
+    a = np.cumsum(np.random.default_rng(3).integers(-3, 4, container.CHOICE_BYTES // 4)).astype(np.int32)
+    levels = []
+    real = container._encode
+    monkeypatch.setattr(container, "_encode",
+                        lambda arr, e, level=19: levels.append(level) or real(arr, e, level))
+    blob = container.pack({"part": "x"}, {"a": a}, {"a": container.SMALLEST}, level=19)
+    assert sorted(levels) == [container.CHOICE_LEVEL] * 2 + [19]
+    np.testing.assert_array_equal(container.unpack(blob)[1]["a"], a)
+    entry = json.loads(blob[16:16 + int.from_bytes(blob[12:16], "little")])["arrays"]["a"]
+    trial = {e: len(real(a, e, container.CHOICE_LEVEL)) for e in container.ENCODINGS}
+    assert entry["encoding"] == min(trial, key=trial.get)
+    assert entry["nbytes"] == len(real(a, entry["encoding"], 19))
+    levels.clear()
+    small = container.pack({"part": "x"}, {"a": a[:1000]}, {"a": container.SMALLEST}, level=19)
+    assert levels == [19, 19]  # small arrays: both encodings at the final level, the smaller kept
+    final = {e: len(real(a[:1000], e, 19)) for e in container.ENCODINGS}
+    assert len(small) - len(container.pack({"part": "x"}, {"a": a[:1000]},
+                                           {"a": min(final, key=final.get)}, level=19)) == 0

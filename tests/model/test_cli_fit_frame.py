@@ -109,3 +109,15 @@ def test_missed_target_exits_3_after_writing_the_best_clip(poses_file, tmp_path,
     assert main([*args, "--best-effort", "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "target not met" in err and not any(progress.match(line) for line in err.splitlines())
+
+
+def test_segment_cap_defaults_to_the_library_default(capsys):
+    """Without --max-segments the CLI leaves FitOptions' cap alone, and its help names that default."""
+    from pdeanim.model.fitclip import FitOptions
+    from pdeanim.model.segments import DEFAULT_MAX_SEGMENTS
+
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert FitOptions().max_segments == DEFAULT_MAX_SEGMENTS
+    assert f"(default {DEFAULT_MAX_SEGMENTS}, FitOptions.max_segments" in help_text
