@@ -49,8 +49,8 @@ def register(subparsers) -> None:  # noqa: ANN001
         "(default: the first; the summary says which was used)",
     )
     p.add_argument("--max-segments", type=int,
-                   help="cap on segments chosen for a target (default 256, FitOptions.max_segments; reaching "
-                        "it is reported)")
+                   help="cap on segments chosen for a target (default 4096, FitOptions.max_segments; "
+                        "reaching it is reported)")
     p.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5], default=5,
                    help="newest clip format to write: 5 (default: natural-spline time tangents for the items "
                         "whose motion is smooth, else written as version 3), 4 (the same with Catmull-Rom "

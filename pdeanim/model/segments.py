@@ -80,8 +80,12 @@ def uniform_segmentation(times: np.ndarray, n_segments: int) -> Segmentation:
     return Segmentation(bounds.astype(np.int64), t)
 
 
-DEFAULT_MAX_SEGMENTS = 256
-"""Default cap on the time segments of a fit (every frame interval may be one below it). 64 until
-2026-11-27: a 401-frame travelling dance then stopped at rel-RMS 7.5e-3 against a 1e-3 target (met with 256
-segments; 1.94 MB), and samba at 1e-3 took 1.25 MB with 61 segments against 985 KB with a knot at every
-frame."""
+DEFAULT_MAX_SEGMENTS = 4096
+"""Default cap on the time segments of a fit: clips up to 4,097 frames may put a knot at every frame, which is
+often both what meets a tight target and the smallest clip (its knot tracks are smooth). The cap bounds the
+natural-spline knot solve on longer clips, a dense frames x (segments + 1) design. Measured on 2026-11-27
+(`pdeanim fit`, load 1.1-1.4): 64 (the default until then) stopped a 401-frame travelling dance at rel-RMS
+7.9e-3 against a 1e-3 target, met with 256 segments (1.94 MB); samba at 1e-3 took 1.25 MB with 61 segments
+against 985 KB with a knot at every frame. The same dance played four times (1,601 frames x 7,061 vertices)
+at 3e-3: cap 256 stopped at rel-RMS 0.0147 (3.9 MB, 75 s); cap 1,024 met it with 1,024 segments (1.37 MB,
+193 s, 3.5 GB peak); a knot at every frame met it in 584 KB (199 s, 4.4 GB)."""

@@ -252,6 +252,8 @@ def _solve_spline_knots(b: np.ndarray, segm: Segmentation) -> np.ndarray:
     """Least-squares natural-spline knots z (K, S + 1, W) of tracks b (K, F, W): one QR of the dense design
     (F, S + 1) for every item (full column rank: every knot is a frame, where its row is a unit vector)."""
     K, F, Wd = b.shape
+    if segm.n_segments == F - 1:  # a knot at every frame: the spline interpolates them, the design is I
+        return np.array(b, dtype=np.float64)
     W = spline_design(segm.segment_t, segm.frame_segment(), segm.frame_tau())
     Q, R = np.linalg.qr(W)
     if not np.all(np.abs(np.diag(R)) > 1e-12):

@@ -54,6 +54,20 @@ def test_tangents_and_design_are_scipys_natural_spline(n_knots, seed):
     np.testing.assert_allclose(W.sum(1), 1.0, atol=1e-12)  # constants are reproduced
 
 
+@settings(max_examples=20, deadline=None)
+@given(st.integers(2, 40), st.integers(0, 2**32 - 1))
+def test_a_knot_at_every_frame_solves_to_the_frames(n_frames, seed):
+    """With every frame a knot the spline design is the identity: the knots are the frames, as the dense QR
+    least squares of that design gives them (the solve skips it)."""
+    rng = np.random.default_rng(seed)
+    t = _times(rng, n_frames)
+    segm = Segmentation(np.arange(n_frames), t)
+    W = spline_design(segm.segment_t, segm.frame_segment(), segm.frame_tau())
+    np.testing.assert_allclose(W, np.eye(n_frames), atol=1e-12)
+    b = rng.normal(size=(5, n_frames, 4))
+    np.testing.assert_array_equal(solve_cubic_knots(b, segm, NATURAL), b)
+
+
 def test_two_knots_give_the_straight_line_and_zero_length_segments_are_refused():
     t = np.array([0.0, 1.0])
     np.testing.assert_allclose(natural_tangents(np.array([1.0, 3.0]), t), [2.0, 2.0])
