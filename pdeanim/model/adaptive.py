@@ -99,7 +99,8 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
         if segm.n_segments >= max_segments:
             cap_reached = True
             break
-        n_split = max(1, min(_split_count(segm.n_segments, d, floor_targets), max_segments - segm.n_segments))
+        n_split = max(1, min(_split_count(segm.n_segments, history[-1]["rms"], history[-1]["max"],
+                                          floor_targets), max_segments - segm.n_segments))
         new = _splits(segm, badness, n_split)
         if new.n_segments == segm.n_segments:
             unsplittable = True
@@ -117,15 +118,16 @@ GROWTH_MIN, GROWTH_MAX = 4.0 / 3.0, 2.0
 """Bounds of the factor by which a search round multiplies the number of segments."""
 
 
-def _split_count(n_segments: int, d: np.ndarray, targets: Targets) -> int:
-    """Segments to split in the next round: the count grows by sqrt(error / target) (the error of a
-    piecewise-linear track falls with the square of the number of segments), between GROWTH_MIN and
-    GROWTH_MAX: far from the target the search doubles, so long clips need a few rounds, not dozens."""
+def _split_count(n_segments: int, rms: float, largest: float, targets: Targets) -> int:
+    """Segments to split in the next round, given the round's RMS and largest distance: the count grows by
+    sqrt(error / target) (the error of a piecewise-linear track falls with the square of the number of
+    segments), between GROWTH_MIN and GROWTH_MAX: far from the target the search doubles, so long clips need a
+    few rounds, not dozens."""
     ratio = 1.0
     if targets.rms is not None:
-        ratio = max(ratio, float(np.sqrt(np.mean(d * d))) / max(targets.rms, 1e-300))
+        ratio = max(ratio, rms / max(targets.rms, 1e-300))
     if targets.max is not None:
-        ratio = max(ratio, float(d.max(initial=0.0)) / max(targets.max, 1e-300))
+        ratio = max(ratio, largest / max(targets.max, 1e-300))
     growth = float(np.clip(np.sqrt(ratio), GROWTH_MIN, GROWTH_MAX))
     return int(np.floor(n_segments * (growth - 1.0) + 1e-9))
 

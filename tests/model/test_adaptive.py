@@ -14,15 +14,14 @@ from pdeanim.poses import make_poses
 
 @given(st.integers(1, 5000), st.floats(1e-3, 1e4))
 def test_split_count_grows_with_the_square_root_of_the_error_ratio(n, ratio):
-    d = np.full((3, 4), ratio)  # every distance ratio x an RMS target of 1
-    k = _split_count(n, d, Targets(rms=1.0))
+    k = _split_count(n, ratio, ratio, Targets(rms=1.0))  # RMS and largest distance: ratio x the target
     growth = float(np.clip(np.sqrt(ratio), GROWTH_MIN, GROWTH_MAX))
     assert 0 <= k <= n and abs(k - n * (growth - 1.0)) < 1.0
     if ratio >= GROWTH_MAX**2:
         assert k == n  # far from the target: every segment splits
     if ratio <= GROWTH_MIN**2:
         assert k == n // 3  # close to it: a third of them, as before the growth was error-driven
-    assert _split_count(n, d, Targets(rms=1.0, max=0.5 * ratio)) >= k  # a missed max target counts too
+    assert _split_count(n, ratio, ratio, Targets(rms=1.0, max=0.5 * ratio)) >= k  # a missed max target counts
 
 
 def _travelling_wave(frames: int = 121) -> tuple:

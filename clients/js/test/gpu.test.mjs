@@ -126,6 +126,17 @@ function emulate(layout, u, v) {
 }
 
 /** Sum over the 8 terms of |phi * knot * basis| per coordinate (the scale of float32 rounding on the GPU). */
+function agreesWithCpu(player, clip, t, diagonal) {
+  // the shader's positions (emulated from its uniforms and textures) at t are the CPU evaluator's
+  player.setTime(t);
+  const u = timeUniforms(player.layout, t);
+  const cpu = createEvaluator(clip).evaluate(t);
+  for (let v = 0; v < clip.nVertices; v++) {
+    const g = emulate(player.layout, u, v);
+    for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * diagonal);
+  }
+}
+
 function termMagnitude(layout, u, v) {
   if (layout.mode !== 'coefficients') return [0, 0, 0];
   const T = layout.textures;
@@ -690,13 +701,7 @@ test('version 4: GLSL and three.js materials get the tangents layout; other clip
     const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
     assert.doesNotMatch(other.mesh.material.customProgramCacheKey(), /tangents/);
     // the GPU path and the CPU fallback agree on the positions it shows
-    player.setTime(0.43);
-    const u = timeUniforms(player.layout, 0.43);
-    const cpu = createEvaluator(clip).evaluate(0.43);
-    for (let v = 0; v < clip.nVertices; v++) {
-      const g = emulate(player.layout, u, v);
-      for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * c.diagonal);
-    }
+    agreesWithCpu(player, clip, 0.43, c.diagonal);
     player.detach();
     other.detach();
   }
@@ -797,13 +802,7 @@ test('version 5: GLSL and three.js materials get the spline layout, another prog
     assert.ok(quad.uniforms.pdeTangentTex.value.isDataTexture);
     assert.match(quad.fragmentShader, /#define PDEANIM_SPLINE/);
     // the GPU path and the CPU fallback agree on the positions it shows
-    player.setTime(0.43);
-    const u = timeUniforms(player.layout, 0.43);
-    const cpu = createEvaluator(clip).evaluate(0.43);
-    for (let v = 0; v < clip.nVertices; v++) {
-      const g = emulate(player.layout, u, v);
-      for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * c.diagonal);
-    }
+    agreesWithCpu(player, clip, 0.43, c.diagonal);
     player.detach();
     other.detach();
     passed.detach();
