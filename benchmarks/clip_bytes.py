@@ -27,13 +27,16 @@ from pathlib import Path
 
 import httpx
 import numpy as np
+import zstandard
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
-from service_frames import SPOT, run_job  # noqa: E402
+from service_frames import SPOT, check, wait_job  # noqa: E402
 
-from service.demo import FIT, SCENE, DemoServices, _key  # noqa: E402
+from service.demo import FIT, SCENE, DemoServices  # noqa: E402
+from service.settings import Settings  # noqa: E402
+from service.store.tenants import issue_key  # noqa: E402
 
 SEQUENCES = next((p / "shared" / "data" / "sequences" for p in (ROOT.parent, ROOT.parent.parent)
                   if (p / "shared" / "data" / "sequences").is_dir()), Path("/work/shared/data/sequences"))
@@ -41,23 +44,28 @@ GLTFPACK = ROOT / "tools" / "gltfpack" / "node_modules" / ".bin" / "gltfpack"
 FPS = 30.0  # the sequences' frame rate (their README); the demo simulates at 30 fps too
 
 
-def wire(api: httpx.Client, path: str, **params) -> tuple[int, int]:
-    """(bytes on the wire with gzip accepted, bytes decoded) of a GET."""
-    with api.stream("GET", path, params=params, headers={"Accept-Encoding": "gzip"}) as r:
+def wire(api: httpx.Client, path: str, accept: str = "gzip", **params) -> tuple[int, int]:
+    """(bytes on the wire with ``accept`` as Accept-Encoding, bytes decoded) of a GET."""
+    with api.stream("GET", path, params=params, headers={"Accept-Encoding": accept}) as r:
         if r.status_code != 200:
             r.read()
             raise RuntimeError(f"GET {path}: {r.status_code} {r.text[:300]}")
         raw = b"".join(r.iter_raw())
-    decoded = gzip.decompress(raw) if r.headers.get("content-encoding") == "gzip" else raw
+    coding = r.headers.get("content-encoding")
+    decoded = {"gzip": gzip.decompress, "zstd": lambda b: zstandard.ZstdDecompressor().decompressobj()
+               .decompress(b)}.get(coding, lambda b: b)(raw)
     return len(raw), len(decoded)
 
 
-def animation(api: httpx.Client, clip_id: str, fps: float) -> tuple[int, int, str]:
-    """The animation GLB as served: the route, or an export job when the route says it is too large."""
+def animation(api: httpx.Client, clip_id: str, fps: float) -> tuple[int, int, int, str]:
+    """The animation GLB's bytes as served to a client accepting gzip, one accepting zstd, and decoded: from
+    the route, or from an export job when the route says it is too large."""
     r = api.get(f"/v1/clips/{clip_id}/animation", params={"fps": fps},
                 headers={"Accept-Encoding": "identity"})
     if r.status_code == 200:
-        return (*wire(api, f"/v1/clips/{clip_id}/animation", fps=fps), "route")
+        path = f"/v1/clips/{clip_id}/animation"
+        gz, glb = wire(api, path, fps=fps)
+        return gz, wire(api, path, "zstd", fps=fps)[0], glb, "route"
     if r.status_code != 413:
         raise RuntimeError(f"animation: {r.status_code} {r.text[:300]}")
     job = api.post("/v1/jobs", json={"kind": "export", "clip_id": clip_id, "fps": fps}).json()
@@ -66,7 +74,8 @@ def animation(api: httpx.Client, clip_id: str, fps: float) -> tuple[int, int, st
         job = api.get(f"/v1/jobs/{job['id']}").json()
     if job["state"] != "succeeded":
         raise RuntimeError(f"export job failed: {job['error']}")
-    return (*wire(api, f"/v1/exports/{job['id']}"), "export job")
+    gz, glb = wire(api, f"/v1/exports/{job['id']}")
+    return gz, wire(api, f"/v1/exports/{job['id']}", "zstd")[0], glb, "export job"
 
 
 def gltfpack_cc(api: httpx.Client, clip_id: str, fps: float, tmp: Path) -> tuple[int, int]:
@@ -126,19 +135,24 @@ def main() -> int:
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
     print(f"fit options {FIT}; animation GLB and gltfpack at {FPS:g} fps; sizes in KiB; "
-          "'gz' = gzip as served (level 6)")
+          "'gz' = gzip as served (level 6; animation GLBs level 1), 'zstd' = the animation GLB as served "
+          "to a client that accepts zstd")
     head = (f"{'case':<18} {'frames x verts':>14} {'raw f32':>9} {'clip gz':>8} {'(topo+coef)':>15} "
             f"{'clip raw':>8} "
-            f"{'anim GLB gz':>11} {'GLB raw':>8} {'gltfpack':>8} {'gp gz':>7} {'clip/GLB':>8} {'clip/gp':>7} "
+            f"{'anim GLB gz':>11} {'GLB zstd':>8} {'GLB raw':>8} {'gltfpack':>8} {'gp gz':>7} "
+            f"{'clip/GLB':>8} {'clip/gp':>7} "
             f"{'clip/raw':>8}")
     print(head)
     with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as tmp:
         services = DemoServices(Path(tmp))
         try:
-            key, url = _key(Path(tmp)), services.start()
+            key, url = issue_key(Settings(data_dir=Path(tmp)), "bench"), services.start()
             with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=900) as api:
-                def demo() -> dict:
-                    return run_job(api, "spot.obj", SPOT.read_bytes(), SCENE, FIT)[0]
+                def demo() -> dict:  # what `pdeanim demo` submits: spot simulated, then fitted
+                    mesh = check(api.post("/v1/meshes", files={"file": ("spot.obj", SPOT.read_bytes())}))
+                    job = check(api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
+                                                           "params": SCENE, "then_fit": True, "fit": FIT}))
+                    return wait_job(api, job["id"], 900)
 
                 cases = [] if args.no_demo else [("demo (spot)", demo)]
                 cases += [(name, lambda n=name: sequence_upload(api, n)) for name in args.sequences]
@@ -148,14 +162,14 @@ def main() -> int:
                     meta = api.get(f"/v1/clips/{cid}").json()
                     topo_gz, topo = wire(api, f"/v1/clips/{cid}/topology")
                     coef_gz, coef = wire(api, f"/v1/clips/{cid}/coefficients")
-                    glb_gz, glb, how = animation(api, cid, FPS)
+                    glb_gz, glb_zstd, glb, how = animation(api, cid, FPS)
                     gp, gp_gz = gltfpack_cc(api, cid, FPS, Path(tmp))
                     raw = meta["sizes"]["raw_float32_bytes"]
                     clip_gz = topo_gz + coef_gz
                     verts = meta["info"].get("n_vertices", 0)
                     print(f"{label:<18} {meta['frames']:>5} x {verts:>6} {kib(raw):>9} "
                           f"{kib(clip_gz):>8} {kib(topo_gz) + '+' + kib(coef_gz):>15} {kib(topo + coef):>8} "
-                          f"{kib(glb_gz):>11} {kib(glb):>8} {kib(gp):>8} {kib(gp_gz):>7} "
+                          f"{kib(glb_gz):>11} {kib(glb_zstd):>8} {kib(glb):>8} {kib(gp):>8} {kib(gp_gz):>7} "
                           f"{clip_gz / glb_gz:>8.2f} {clip_gz / gp_gz:>7.2f} {clip_gz / raw:>8.3f}"
                           + ("" if how == "route" else f"  (GLB from an {how})"), flush=True)
         finally:

@@ -59,7 +59,8 @@ class Settings(BaseSettings):
     frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0, description="encoded frame and animation GLBs "
                                    "kept per API process (LRU by (clip, t) and (clip, fps)); 0 = off")
     key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long "
-                                     "without a database query (a revoked key stops working within it); "
+                                     "without a database query (a revoked key stops working within it; a "
+                                     "key in use is re-verified in the background in the second half); "
                                      "0 = always ask")
     max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
@@ -76,6 +77,10 @@ class Settings(BaseSettings):
     job_timeout_seconds: float = Field(3600.0, gt=0, description="an attempt running longer is killed")
     job_nice: int = Field(10, ge=0, le=19, description="nice increment of a job's process (the API keeps "
                           "its latency while jobs run); 0 = same priority")
+    job_sched_idle: bool = Field(True, description="run job processes under Linux's SCHED_IDLE policy: "
+                                 "they get the CPU time that the API and other processes leave (niced "
+                                 "alone, a busy job still takes a share of a core from a busy API); "
+                                 "false = nice only")
     job_cpu_shares: int = Field(0, ge=0, description="cgroup v1 cpu.shares of the group `pdeanim-jobs` that "
                                 "job processes join where /sys/fs/cgroup/cpu is writable; 0 = no cgroup")
 

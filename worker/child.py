@@ -51,11 +51,19 @@ def _warm_blas() -> None:
 CGROUP_V1_CPU = Path("/sys/fs/cgroup/cpu")
 
 
-def lower_priority(nice: int, cpu_shares: int = 0, cgroup_root: Path = CGROUP_V1_CPU) -> str | None:
-    """Let the API keep its latency while jobs run: nice this process by ``nice`` and, with ``cpu_shares``
-    > 0 where a cgroup v1 cpu hierarchy is writable (Linux, root), move it into the group ``pdeanim-jobs``
-    with that ``cpu.shares`` (1024 = one ordinary process), so all job children together weigh that much.
+def lower_priority(nice: int, cpu_shares: int = 0, cgroup_root: Path = CGROUP_V1_CPU,
+                   sched_idle: bool = False) -> str | None:
+    """Let the API keep its latency while jobs run: nice this process by ``nice``; with ``sched_idle`` (Linux)
+    put it under SCHED_IDLE, so it runs only on CPU time nothing else wants; and with ``cpu_shares`` > 0
+    where a cgroup v1 cpu hierarchy is writable (Linux, root), move it into the group ``pdeanim-jobs`` with
+    that ``cpu.shares`` (1024 = one ordinary process), so all job children together weigh that much. Called
+    before the job starts threads (BLAS, numba), which inherit the calling thread's nice and policy.
     Returns the cgroup joined, or None (cgroup v2 needs a delegated subtree and is not attempted)."""
+    if sched_idle and hasattr(os, "SCHED_IDLE"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        except OSError:  # refused by a sandbox (seccomp): nice alone
+            pass
     if nice > 0:
         os.nice(nice)
     if cpu_shares <= 0 or not os.access(cgroup_root / "cgroup.procs", os.W_OK):
@@ -95,7 +103,7 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
     from .stages import STAGES
 
     settings = Settings.model_validate_json(settings_json)
-    lower_priority(settings.job_nice, settings.job_cpu_shares)
+    lower_priority(settings.job_nice, settings.job_cpu_shares, sched_idle=settings.job_sched_idle)
     memory = settings.job_memory_limit()
     workdir = Path(job["workdir"]) if job.get("workdir") else \
         Path(tempfile.mkdtemp(prefix=f"{job['id']}-", dir=settings.tmp_dir()))

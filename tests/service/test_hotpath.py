@@ -144,7 +144,16 @@ def _descendants(root: int, table: dict[int, tuple[int, int, str]]) -> list[int]
     return out
 
 
-def test_the_job_process_runs_niced(api, services, data_dir):
+def _policy(pid: int) -> int | None:
+    """The scheduling policy of ``pid`` (field 41 of /proc/PID/stat: 0 normal, 5 SCHED_IDLE), or None."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return int(stat[stat.rindex(")") + 2:].split()[38])
+
+
+def test_the_job_process_runs_niced_under_sched_idle(api, services, data_dir):
     if not Path("/proc/self/stat").exists():
         missing("reads process priorities from /proc (Linux)")
     worker = services.workers[0].pid
@@ -154,6 +163,7 @@ def test_the_job_process_runs_niced(api, services, data_dir):
     job = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
                                      "params": {"frames": 40, "target_tets": 1500}}).json()
     seen: dict[int, int] = {}  # job process -> its nice value (set as the process starts its stage)
+    policies: dict[int, int | None] = {}
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and expected not in seen.values():
         table = _processes()
@@ -161,11 +171,15 @@ def test_the_job_process_runs_niced(api, services, data_dir):
             ppid, nice, _ = table[pid]
             if "forkserver" in table.get(ppid, (0, 0, ""))[2]:  # a job process (forked by the forkserver)
                 seen[pid] = nice
+                if nice == expected:
+                    policies[pid] = _policy(pid)
         if api.get(f"/v1/jobs/{job['id']}").json()["state"] in ("succeeded", "failed"):
             break
         time.sleep(0.05)
     assert expected in seen.values(), f"job processes seen: {seen} ({services.logs()})"
+    assert set(policies.values()) <= {getattr(os, "SCHED_IDLE", 5), None} and any(policies.values()), policies
     assert _processes()[worker][1] == base  # the worker itself keeps its priority
+    assert _policy(worker) == 0
     assert wait_job(api, job["id"], 300)["state"] == "succeeded"
 
 

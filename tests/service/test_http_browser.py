@@ -1,5 +1,6 @@
-"""HTTP for browsers, through real servers: CORS (off by default, preflight and refusal), gzip with working
-ETags/304, private immutable caching, /docs and /redoc from local files, and topology tied to a clip."""
+"""HTTP for browsers, through real servers: CORS (off by default, preflight and refusal), gzip (and zstd
+for animation GLBs) with working ETags/304, private immutable caching, /docs and /redoc from local files,
+and topology tied to a clip."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import re
 import httpx
 import numpy as np
 import pytest
+import zstandard
 
 from .harness import Services, client, make_key, wait_job
 
@@ -160,6 +162,27 @@ def test_gzip_when_accepted_with_weak_etag_and_304(services, key, sphere, route)
         for enc in ("gzip", "identity"):
             again, body = raw_get(svc.url, path, {**auth, "Accept-Encoding": enc, "If-None-Match": tag})
             assert again.status_code == 304 and body == b"", (tag, enc)
+
+
+@pytest.mark.parametrize("accept, coding", [("gzip, deflate, br, zstd", "zstd"), ("zstd;q=0, gzip", "gzip"),
+                                             ("gzip;q=0", None), ("*", "zstd"), ("identity", None)])
+def test_animation_glb_content_coding_follows_accept_encoding(services, key, sphere, accept, coding):
+    """zstd where accepted (a third of gzip's CPU for a smaller body), else gzip, else the GLB as it is."""
+    svc, _ = services
+    path = f"/v1/clips/{sphere['fit']['id']}/animation?fps=12"
+    auth = {"Authorization": f"Bearer {key}"}
+    plain, plain_body = raw_get(svc.url, path, {**auth, "Accept-Encoding": "identity"})
+    r, wire = raw_get(svc.url, path, {**auth, "Accept-Encoding": accept})
+    assert r.status_code == 200 and r.headers.get("content-encoding") == coding, r.headers
+    assert int(r.headers["content-length"]) == len(wire)
+    assert "accept-encoding" in r.headers["vary"].lower()
+    decode = {"zstd": lambda b: zstandard.ZstdDecompressor().decompressobj().decompress(b),
+              "gzip": gzip.decompress, None: lambda b: b}[coding]
+    assert (decode(wire) == plain_body and wire[:4] != b"glTF") if coding else wire == plain_body
+    assert r.headers["etag"] == (f"W/{plain.headers['etag']}" if coding else plain.headers["etag"])
+    again, empty = raw_get(svc.url, path,
+                           {**auth, "Accept-Encoding": accept, "If-None-Match": r.headers["etag"]})
+    assert again.status_code == 304 and empty == b""
 
 
 @pytest.mark.parametrize("route", ["frame", "poses"])
