@@ -73,8 +73,10 @@ def test_committed_expected_positions_match_python_evaluator(name):
 def test_regenerated_positions_match_committed(fresh, name):
     old = next(c for c in _manifest(FIXTURES)["cases"] if c["name"] == name)
     new = next(c for c in _manifest(fresh)["cases"] if c["name"] == name)
-    # fits are deterministic; 1e-5 of the diagonal leaves room for BLAS rounding on another machine
-    assert np.abs(_expected(FIXTURES, old) - _expected(fresh, new)).max() <= 1e-5 * old["diagonal"], \
+    # fits are deterministic on one machine, but on another CPU OpenBLAS's rounding can flip a near-tie in a
+    # curve coordinate's choice of space (seen on 2026-11-27: 2 of 36 coordinates of fit-displacement-chord,
+    # positions 3.1e-5 of the diagonal apart, 0.13% of the fit's own RMS error); 1e-4 leaves room for that
+    assert np.abs(_expected(FIXTURES, old) - _expected(fresh, new)).max() <= 1e-4 * old["diagonal"], \
         f"the fit or cyclic pipeline changed its output: run {REGEN}"
 
 

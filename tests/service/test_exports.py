@@ -118,6 +118,10 @@ def test_large_export_is_a_job_with_a_downloadable_glb(api, other, scene, servic
     glb = api.get(url)
     assert glb.status_code == 200 and glb.headers["content-type"] == "model/gltf-binary"
     assert len(glb.content) == job["result"]["export_bytes"]
+    assert glb.headers["content-encoding"] == "zstd"  # httpx with zstandard accepts it; decoded above
+    for accept, coding in (("gzip", "gzip"), ("identity", None)):
+        again = api.get(url, headers={"Accept-Encoding": accept})
+        assert again.headers.get("content-encoding") == coding and again.content == glb.content
     check_look(glb.content, scene["src"])
     assert read_animated_poses(glb.content, fps=MAX_FPS).n_frames == 19  # 0.3 s at 60 fps, both ends
     assert_clean(validate_many([glb.content])[0], "export job GLB")

@@ -17,7 +17,7 @@ from ...store.models import ClipRecord
 from ..access import owned, responses
 from ..cache import CachedClip
 from ..deps import ClipCacheDep, SessionDep, StoreDep, TenantDep
-from ..encoding import accepted_coding, encode
+from ..encoding import negotiated_response
 from ..errors import ApiError
 from ..exports import FrameWriter, check_fps, export_job_hint, source_layout_loader
 from ..httpcache import IMMUTABLE, NO_COMPRESSION, etag_matches, immutable_response
@@ -208,18 +208,5 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
             cache.put(("animation", clip_id, fps), data)
         return data
 
-    def encoded(coding: str) -> bytes:  # compressed copies are kept in the LRU too
-        cache = request.app.state.frame_cache
-        data = cache.get(("animation", coding, clip_id, fps))
-        if data is None:
-            data = encode(body(), coding)
-            cache.put(("animation", coding, clip_id, fps), data)
-        return data
-
-    vary = {"Vary": "Accept-Encoding"}
-    coding = accepted_coding(request.headers.get("accept-encoding", ""))
-    if coding and not etag_matches(request, f'"{tag}"'):
-        # passed through by the gzip middleware (Content-Encoding set), and given a weak ETag
-        return immutable_response(request, tag, lambda: encoded(coding), GLB,
-                                  {"Content-Encoding": coding, **vary})
-    return immutable_response(request, tag, body, GLB, vary, compress=False)
+    return negotiated_response(request, tag, body, GLB, request.app.state.frame_cache,
+                               ("animation", clip_id, fps))

@@ -179,8 +179,9 @@ def cancel_job(job_id: str, tenant: TenantDep, store: StoreDep) -> JobOut:
                        **responses(304, 401, 404, 409, 422)})
 def get_export(job_id: str, request: Request, tenant: TenantDep, session: SessionDep,
                store: StoreDep) -> Response:
-    """The animation GLB an ``export`` job built (409 while the job has not succeeded)."""
-    from ..httpcache import immutable_response
+    """The animation GLB an ``export`` job built (409 while the job has not succeeded); zstd- or gzip-encoded
+    where Accept-Encoding allows, as the animation route."""
+    from ..encoding import negotiated_response
 
     job = owned(session, Job, job_id, tenant, "job")
     if job.kind != "export":
@@ -189,4 +190,5 @@ def get_export(job_id: str, request: Request, tenant: TenantDep, session: Sessio
     if job.state != "succeeded" or not key:
         raise ApiError(409, "not_ready",
                        f"export job {job_id} is {job.state}; download it when it has succeeded")
-    return immutable_response(request, key, lambda: store.blobs.get(key), "model/gltf-binary")
+    return negotiated_response(request, key, lambda: store.blobs.get(key), "model/gltf-binary",
+                               request.app.state.frame_cache, ("export", key))
