@@ -15,6 +15,7 @@ evaluates a new frame). Starts and stops everything itself in a temporary data d
 from __future__ import annotations
 
 import argparse
+import gzip
 import io
 import json
 import os
@@ -32,6 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from service.api.encoding import GZIP_LEVEL as GZIP_ROUTE_LEVEL  # noqa: E402
 from service.cli import CONSOLE  # noqa: E402
 from service.settings import Settings  # noqa: E402
 from service.store.tenants import issue_key  # noqa: E402
@@ -293,7 +295,7 @@ def animation_ms(api: httpx.Client, clip_id: str, n: int = 7) -> dict:
     before (30 + i * 1e-6, so no cache can answer: evaluate, normals, GLB, content coding, transfer) with
     httpx's Accept-Encoding (gzip, deflate, zstd: zstd is chosen, as by current browsers), ``gzip`` the same
     for a client that accepts only gzip, and ``repeat`` (the first request's fps again: the encoded-body
-    cache); ``bytes`` on the wire of each."""
+    cache); the bytes on the wire of the zstd and gzip answers, and of the decoded GLB."""
     times: dict[str, list[float]] = {"first": [], "gzip": [], "repeat": []}
     wire: dict[str, int] = {}
     for i in range(n):
@@ -313,11 +315,15 @@ def animation_ms(api: httpx.Client, clip_id: str, n: int = 7) -> dict:
 
 def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
     """Median wall and CPU times here of what a route computes (``which``), with one BLAS thread as in the
-    API process: a frame GLB at a new t (evaluate + normals + GLB) or the 30 fps animation GLB (evaluate all
-    frames + normals + quantised, meshopt-compressed GLB, the route's default)."""
+    API process, and of its parts: a frame GLB at a new t (evaluate + normals + GLB; the evaluation and the
+    normals alone) or the 30 fps animation GLB (evaluate all frames + normals + quantised, meshopt-compressed
+    GLB, the route's default; and each content coding the route may apply to it, with the share of the GLB
+    it leaves)."""
     from pdeanim.clip import load_clip
     from pdeanim.gltf.clipexport import clip_animation_glb
+    from pdeanim.gltf.normals import FaceNormals
     from pdeanim.gltf.write import FrameGlb
+    from service.api import encoding
     from service.api.threads import single_threaded_blas
     from service.settings import Settings
     from service.store.context import Store
@@ -331,20 +337,34 @@ def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
         clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
     finally:
         store.close()
-    writer = FrameGlb(clip.faces, clip.n_vertices)
-    out = {}
-    jobs = {"frame": (lambda i: writer(clip.evaluate((i + 0.5) / (20 * n))), 20 * n),
-            "animation": (lambda i: clip_animation_glb(clip, FPS, max_frames=10_000), n)}
-    for name, (fn, k) in ((which, jobs[which]),):
+    out: dict = {}
+    if which == "frame":
+        writer, normals = FrameGlb(clip.faces, clip.n_vertices), FaceNormals(clip.faces, clip.n_vertices)
+        at = np.asarray(clip.evaluate(0.5), np.float32).reshape(-1, 3)
+        scratch = np.empty_like(at)
+        k = 20 * n
+        parts = {"frame": (lambda i: writer(clip.evaluate((i + 0.5) / k)), k),
+                 "evaluate": (lambda i: clip.evaluate((i + 0.5) / k), k),
+                 "normals": (lambda i: normals(at, out=scratch), k)}
+    else:
+        glb = clip_animation_glb(clip, FPS, max_frames=10_000)
+        parts = {"animation": (lambda i: clip_animation_glb(clip, FPS, max_frames=10_000), n),
+                 "zstd": (lambda i: encoding.encode(glb, "zstd"), n),
+                 "gzip": (lambda i: encoding.encode(glb, "gzip"), n),
+                 "gzip6": (lambda i: gzip.compress(glb, 6, mtime=0), n)}
+        out["coded_share"] = {"zstd": round(len(encoding.encode(glb, "zstd")) / len(glb), 3),
+                              "gzip": round(len(encoding.encode(glb, "gzip")) / len(glb), 3),
+                              "gzip6": round(len(gzip.compress(glb, 6, mtime=0)) / len(glb), 3)}
+    for name, (fn, count) in parts.items():
         fn(0)  # warm (numba kernels load from their cache)
         wall, cpu = [], []
-        for i in range(k):
+        for i in range(count):
             w0, c0 = time.perf_counter(), time.process_time()
             fn(i)
             wall.append((time.perf_counter() - w0) * 1000)
             cpu.append((time.process_time() - c0) * 1000)
-        out[f"{name}_ms"] = round(statistics.median(wall), 2)
-        out[f"{name}_cpu_ms"] = round(statistics.median(cpu), 2)
+        out[f"{name}_ms"] = round(statistics.median(wall), 3)
+        out[f"{name}_cpu_ms"] = round(statistics.median(cpu), 3)
     return out
 
 
@@ -393,7 +413,8 @@ def main() -> int:
                       f"{SECONDS_OF_CLIP:g} s: {anim}", flush=True)
                 here = in_process_ms(Path(tmp), clip["id"], "frame")
                 here |= in_process_ms(Path(tmp), anim_clip["id"], "animation")
-                print(f"in process, 20k-vertex frame and 15k-vertex animation: {here} "
+                print(f"in process, 20k-vertex frame and 15k-vertex animation (gzip: the route's level "
+                      f"{GZIP_ROUTE_LEVEL}, gzip6: the middleware's): {here} "
                       f"(load {os.getloadavg()[0]:.1f})", flush=True)
                 rows += measure(services, key, clip, args, script, "idle (1 job worker idle)")
                 if not args.skip_busy:

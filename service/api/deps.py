@@ -79,7 +79,8 @@ class KeyCache:
         from the query's start; an unknown or revoked key is forgotten."""
         h = hash_key(key)
         expires = time.monotonic() + self.ttl
-        self.queries += 1
+        with self._lock:
+            self.queries += 1  # queries run on pool threads
         with store.sessions() as session:
             tenant = tenant_for_key(session, key)
         with self._lock:
