@@ -341,7 +341,7 @@ def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path) ->
 
 def method_keyframes(X: np.ndarray, faces: np.ndarray) -> list[dict]:
     """Linear interpolation of K evenly spaced float32 keyframes."""
-    from pdeanim.model.heldout import linear_interpolation
+    from pdeanim.fit.heldout import linear_interpolation
 
     F = len(X)
     times = np.arange(F, dtype=np.float64)
@@ -364,8 +364,8 @@ def method_heldout(X: np.ndarray, faces: np.ndarray, target: float) -> list[dict
     The fit's target on the kept frames is the tighter of ``target`` and a quarter of the held-out error of
     the better interpolant (a fit that misses the kept frames by more than the interpolants miss the others
     cannot match them)."""
-    from pdeanim.model.fitclip import FitOptions
-    from pdeanim.model.heldout import (
+    from pdeanim.fit import FitOptions
+    from pdeanim.fit.heldout import (
         catmull_rom_interpolation,
         heldout_comparison,
         kept_frames,

@@ -2,7 +2,7 @@
 
 1. Spatial floor (relative RMS / relative max, per motion variant) of the extracted curves against greedy
    edge paths with about the same mean points per curve, with median / 90th percentile turning angles.
-2. Error-bounded curves + fit (``pdeanim.model.fitclip.fit_poses``) for target relative RMS 1e-2, 3e-3, 1e-3:
+2. Error-bounded curves + fit (``pdeanim.fit.fit_poses``) for target relative RMS 1e-2, 3e-3, 1e-3:
    curves, mean points per curve, segments, achieved RMS and max error, total bytes (topology + coefficients)
    against raw float32 and against a PCA baseline (mean + k bases + per-frame weights, float32, plus the same
    int32 faces; k is the smallest reaching the clip's achieved RMS), and the fit's own automatic curves.
@@ -29,7 +29,7 @@ from pdeanim.curves.deform import bend_twist
 from pdeanim.curves.floor import spatial_floor
 from pdeanim.curves.naive import greedy_edge_curves
 from pdeanim.curves.quality import quality_summary
-from pdeanim.model.fitclip import FitOptions, fit_poses
+from pdeanim.fit import FitOptions, fit_poses
 from pdeanim.poses import Poses, make_poses
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"

@@ -40,9 +40,9 @@ GLTFPACK = ROOT / "tools" / "gltfpack" / "node_modules" / ".bin" / "gltfpack"
 def demo_frames(fps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Frames of the demo clip (spot, simulated and fitted with the demo's settings) sampled at ``fps``."""
     from pdeanim.clip import load_clip
+    from pdeanim.fit import FitOptions, fit_poses
     from pdeanim.gltf.clipexport import clip_duration, export_times
     from pdeanim.mesh.io import load_mesh
-    from pdeanim.model.fitclip import FitOptions, fit_poses
     from pdeanim.sim.scene import SceneParams
     from pdeanim.sim.simulate import simulate_mesh
     from service.demo import FIT, SAMPLE_MESH, SCENE

@@ -19,8 +19,8 @@ from model_common import ring_curves, torus_poses  # noqa: E402
 
 from pdeanim.clip import write_clip_file  # noqa: E402
 from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip  # noqa: E402
+from pdeanim.fit import FitOptions, fit_poses  # noqa: E402
 from pdeanim.mesh.io import load_mesh  # noqa: E402
-from pdeanim.model.fitclip import FitOptions, fit_poses  # noqa: E402
 
 CASES = {"displacement": {}, "rigid": {"motion": "rigid"}, "loop": {"loop": True}}
 

@@ -14,17 +14,16 @@ sys.path.insert(0, str(Path(__file__).parent))
 from model_common import ring_curves, torus_poses  # noqa: E402
 
 from pdeanim.clip import load_clip  # noqa: E402
-from pdeanim.model.fitclip import FitOptions, fit_poses  # noqa: E402
+from pdeanim.fit import FitOptions, fit_poses  # noqa: E402
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5], default=None,
-                    help="clip format to fit (default: the fit's, 5; 4 and 5 give moving items tangents)")
+    ap.add_argument("--time-model", choices=["auto", "pde", "spline"], default="auto",
+                    help="time model of the fit (default: the fit's, auto)")
     args = ap.parse_args()
     poses = torus_poses(150, 100, 40)
-    options = FitOptions(segments=4) if args.format_version is None else FitOptions(
-        segments=4, format_version=args.format_version)
+    options = FitOptions(segments=4, time_model=args.time_model)
     parts = fit_poses(poses, options, curves=ring_curves(150, 100))
     clip = load_clip(parts.topology, parts.coefficients)
     rng = np.random.default_rng(0)
@@ -38,8 +37,8 @@ def main() -> None:
         samples.append(time.perf_counter() - t0)
     s = np.array(samples) * 1e3
     print(f"vertices {clip.n_vertices}, curves {clip.info()['n_curves']}, segments "
-          f"{clip.info()['n_segments']}, format version {parts.report['format_version']}, "
-          f"{parts.report['tangent_items']} curve coordinates with time tangents")
+          f"{clip.info()['n_segments']}, format {parts.report['format_version']}, time models of the curve "
+          f"coordinates {parts.report['time_models']}")
     print(f"evaluate one frame: median {np.median(s):.4f} ms, p10 {np.percentile(s, 10):.4f} ms, "
           f"p90 {np.percentile(s, 90):.4f} ms over {len(s)} frames (target < 0.2 ms; shared 2-core machine, "
           f"load average {os.getloadavg()[0]:.1f})")

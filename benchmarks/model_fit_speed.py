@@ -17,7 +17,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 from model_common import ring_curves, torus_poses  # noqa: E402
 
-from pdeanim.model.fitclip import FitOptions, _prepare, fit_poses  # noqa: E402
+from pdeanim.fit import FitOptions, fit_poses  # noqa: E402
+from pdeanim.fit.problem import prepare  # noqa: E402
 from pdeanim.model.fitcore import space_stage, time_stage  # noqa: E402
 from pdeanim.model.segments import uniform_segmentation  # noqa: E402
 
@@ -26,7 +27,7 @@ def main(repeats: int = 5) -> None:
     poses = torus_poses(150, 100, 100)
     curves = ring_curves(150, 100)
     opts = FitOptions(segments=4)
-    p = _prepare(poses, opts, curves)
+    p = prepare(poses, opts, curves)
     K, N = p.Y.shape[1], p.Y.shape[2]
     mask = np.repeat(p.mask, 3, axis=0)
     spaces, times = [], []

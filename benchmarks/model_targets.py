@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pdeanim.model.fitclip import FitOptions, fit_poses
-from pdeanim.model.heldout import heldout_comparison
+from pdeanim.fit import FitOptions, fit_poses
+from pdeanim.fit.heldout import heldout_comparison
 from pdeanim.posefiles import load_poses
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "AnimatedMorphSphere.npz"

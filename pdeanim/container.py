@@ -3,12 +3,12 @@
 Layout, all integers little-endian::
 
     0   8 bytes   magic b"PDEANIM\\0"
-    8   uint32    container version (1, or 2 when an array is stored with an ``encoding``)
+    8   uint32    container version, 1
     12  uint32    H, length of the JSON header in bytes (UTF-8, space-padded to a multiple of 8)
     16  H bytes   JSON header: {"part": ..., ..., "arrays": {name: {"dtype", "shape", "offset", "nbytes"}}}
     16+H          array data; each array starts at ``offset`` bytes after the data start, 8-byte aligned
 
-Arrays are C-ordered with dtypes from ALLOWED_DTYPES. Version 2 adds an optional ``"encoding"`` per array:
+Arrays are C-ordered with dtypes from ALLOWED_DTYPES. An array may carry an ``"encoding"``:
 ``"zstd"`` (the stored bytes are one zstd frame of the array's bytes) or ``"shuffle-zstd"`` (the same, of the
 array's bytes grouped by byte plane: byte j of element i at j * n + i); ``nbytes`` is then the stored
 size. The JSON form (for debugging) is the same header with each array's values inlined as a flat list
@@ -27,9 +27,6 @@ from .errors import ClipFormatError
 
 MAGIC = b"PDEANIM\0"
 VERSION = 1
-ENCODED_VERSION = 2
-"""Container version written when an array carries an ``encoding`` (readers of version 1 refuse it)."""
-VERSIONS = (VERSION, ENCODED_VERSION)
 ENCODINGS = ("zstd", "shuffle-zstd")
 SMALLEST = "smallest"
 """Writer's choice (never stored): whichever of ENCODINGS gives fewer bytes for the array; arrays of at least
@@ -62,7 +59,7 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
          encodings: dict[str, str] | None = None, level: int = ZSTD_LEVEL) -> bytes:
     """Encode ``header`` (JSON-able, without "arrays") and named arrays into container bytes; arrays named
     in ``encodings`` are stored compressed (``"zstd"``, ``"shuffle-zstd"`` or SMALLEST of the two) at zstd
-    ``level``, which makes it version 2."""
+    ``level``."""
     encodings = encodings or {}
     table: dict[str, dict] = {}
     chunks: list[bytes] = []
@@ -83,8 +80,7 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
     except ValueError as exc:
         raise ValueError(f"container header must not hold NaN or infinity (use null): {exc}") from exc
     meta += b" " * (_pad8(len(meta)) - len(meta))
-    version = ENCODED_VERSION if any(name in encodings for name in arrays) else VERSION
-    return _PREFIX.pack(MAGIC, version, len(meta)) + meta + b"".join(chunks)
+    return _PREFIX.pack(MAGIC, VERSION, len(meta)) + meta + b"".join(chunks)
 
 
 def _encode_chosen(a: np.ndarray, encoding: str, level: int) -> tuple[bytes, str]:
@@ -142,8 +138,8 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
     if magic != MAGIC:
         raise ClipFormatError("not a pdeanim container (bad magic bytes)")
-    if version not in VERSIONS:
-        raise ClipFormatError(f"unsupported container version {version} (this build reads 1 and 2)")
+    if version != VERSION:
+        raise ClipFormatError(f"unsupported container version {version} (this build reads {VERSION})")
     start = _PREFIX.size + hlen
     if start > len(blob):
         raise ClipFormatError("truncated container header")
@@ -163,8 +159,6 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         encoding = spec.get("encoding")
         if "encoding" in spec and not isinstance(encoding, str):
             raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
-        if encoding is not None and version == VERSION:
-            raise ClipFormatError(f"array {name!r} has an encoding, which container version 1 does not allow")
         if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (
                 encoding is None and n != count * dtype.itemsize):
             raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")

@@ -1,6 +1,8 @@
-"""Write or check the lock files: exact versions of every distribution pdeanim needs (requirements.lock) and
-what its dev extra adds (requirements-dev.lock), as installed in the running environment, so setup, CI and the
-image install what the tests ran with. Usage: python script/lockfile.py write|check (script/lock writes)."""
+"""Write or check the lock files: exact versions of every distribution the domain library needs
+(requirements.lock), what the service extra adds (requirements-service.lock: the API and the worker, what the
+image installs) and what the dev extra adds on top (requirements-dev.lock), as installed in the running
+environment, so setup, CI and the image install what the tests ran with. Usage: python script/lockfile.py
+write|check (script/lock writes)."""
 
 from __future__ import annotations
 
@@ -14,14 +16,26 @@ from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parents[1]
-RUNTIME, DEV = ROOT / "requirements.lock", ROOT / "requirements-dev.lock"
+RUNTIME, SERVICE, DEV = (ROOT / "requirements.lock", ROOT / "requirements-service.lock",
+                         ROOT / "requirements-dev.lock")
+SELF = "pdeanim"
 
 
-def project_requirements() -> tuple[list[Requirement], list[Requirement]]:
-    """(runtime, dev) requirements declared in pyproject.toml."""
+def project_requirements() -> tuple[list[Requirement], list[Requirement], list[Requirement]]:
+    """(library, service extra, dev extra) requirements declared in pyproject.toml (an extra's reference to
+    pdeanim itself, e.g. pdeanim[service], is expanded into that extra's requirements)."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    dev = project.get("optional-dependencies", {}).get("dev", [])
-    return [Requirement(r) for r in project["dependencies"]], [Requirement(r) for r in dev]
+    extras = project.get("optional-dependencies", {})
+
+    def expand(names: list[str]) -> list[Requirement]:
+        out = []
+        for req in map(Requirement, names):
+            if canonicalize_name(req.name) == SELF:
+                out += [r for e in sorted(req.extras) for r in expand(extras.get(e, []))]
+            else:
+                out.append(req)
+        return out
+    return (expand(project["dependencies"]), expand(extras.get("service", [])), expand(extras.get("dev", [])))
 
 
 def applies(req: Requirement, extras: set[str]) -> bool:
@@ -62,15 +76,19 @@ def render(pins: dict[str, str], header: str, include: str | None = None) -> str
 
 
 def write() -> None:
-    runtime, dev = project_requirements()
-    base = closure(runtime)
-    base.pop("pdeanim", None)
-    extra = {k: v for k, v in closure(dev).items() if k not in base and k != "pdeanim"}
-    RUNTIME.write_text(render(base, "Exact versions of pdeanim's runtime dependencies "
+    library, service, dev = project_requirements()
+    base = closure(library)
+    base.pop(SELF, None)
+    served = {k: v for k, v in closure(service).items() if k not in base and k != SELF}
+    extra = {k: v for k, v in closure(dev).items() if k not in base and k not in served and k != SELF}
+    RUNTIME.write_text(render(base, "Exact versions of the pdeanim library's dependencies "
                                     "(pyproject.toml has ranges)."))
-    DEV.write_text(render(extra, "The dev extra's exact versions, on top of requirements.lock.",
-                          RUNTIME.name))
-    print(f"lock: {len(base)} runtime and {len(extra)} dev pins written to {RUNTIME.name} and {DEV.name}")
+    SERVICE.write_text(render(served, "The service extra's exact versions (API and worker), on top of "
+                                      "requirements.lock.", RUNTIME.name))
+    DEV.write_text(render(extra, "The dev extra's exact versions, on top of requirements-service.lock.",
+                          SERVICE.name))
+    print(f"lock: {len(base)} library, {len(served)} service and {len(extra)} dev pins written to "
+          f"{RUNTIME.name}, {SERVICE.name} and {DEV.name}")
 
 
 def read(path: Path) -> dict[str, str]:
@@ -84,13 +102,13 @@ def read(path: Path) -> dict[str, str]:
 
 def check() -> int:
     """0 when every requirement in pyproject.toml is pinned, within its range, in the lock files."""
-    runtime, dev = project_requirements()
-    pins = {**read(RUNTIME), **read(DEV)}
-    stale = [str(r) for r in runtime + dev if applies(r, set()) and
+    library, service, dev = project_requirements()
+    pins = {**read(RUNTIME), **read(SERVICE), **read(DEV)}
+    stale = [str(r) for r in library + service + dev if applies(r, set()) and
              (canonicalize_name(r.name) not in pins or
               not r.specifier.contains(pins[canonicalize_name(r.name)], prereleases=True))]
     if stale:
-        print("lock: requirements.lock / requirements-dev.lock do not cover: " + ", ".join(stale)
+        print("lock: the lock files do not cover: " + ", ".join(stale)
               + " (run script/lock)", file=sys.stderr)
         return 1
     return 0

@@ -11,7 +11,7 @@ from pdeanim.errors import ParameterError
 
 OPTIONS = {
     "simulate": "pdeanim.sim.scene:SceneParams",
-    "fit": "pdeanim.model.fitclip:FitOptions",
+    "fit": "pdeanim.fit.options:FitOptions",
     "cyclic": "pdeanim.cyclic.job:CyclicOptions",
     "export": "pdeanim.gltf.clipexport:ExportOptions",
 }

@@ -40,7 +40,7 @@ def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int
     options ask for ``best_effort``."""
     from pdeanim.errors import TargetNotMetError
     from pdeanim.model.budget import check_fit_memory
-    from pdeanim.model.fitclip import FitOptions, fit_poses, target_shortfall
+    from pdeanim.fit import FitOptions, fit_poses, target_shortfall
 
     check_fit_memory(poses.n_frames, poses.n_vertices, memory)  # refused now, not after minutes of work
 

@@ -6,18 +6,28 @@ service-side commands (serve, worker, keys, demo) live with the service and are 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, Protocol
 
 from ..errors import InputError, ParameterError, PdeanimError
+from . import cyclic, export, fit, frame, simulate
 
-COMMANDS = [f"{__name__}.{name}" for name in ("simulate", "fit", "frame", "export", "cyclic")]
+
+class Command(Protocol):
+    """A sub-command: a module (or object) whose ``register(subparsers)`` adds its parser."""
+
+    def register(self, subparsers: Any) -> None: ...
 
 
-def build_parser(extra_commands: Sequence[str] = ()) -> argparse.ArgumentParser:
-    """The argument parser with the library's sub-commands plus the modules named in ``extra_commands``."""
+COMMANDS: tuple[Command, ...] = (simulate, fit, frame, export, cyclic)
+LIBRARY_COMMANDS = frozenset({"simulate", "fit", "frame", "export", "cyclic"})
+"""Names of the library's sub-commands (their ``--out`` is checked before any work starts)."""
+
+
+def build_parser(extra_commands: Sequence[Command] = ()) -> argparse.ArgumentParser:
+    """The argument parser with the library's sub-commands plus ``extra_commands``."""
     from .. import __version__
 
     parser = argparse.ArgumentParser(
@@ -26,8 +36,8 @@ def build_parser(extra_commands: Sequence[str] = ()) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"pdeanim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in [*COMMANDS, *extra_commands]:
-        importlib.import_module(module).register(sub)
+    for command in (*COMMANDS, *extra_commands):
+        command.register(sub)
     return parser
 
 
@@ -47,7 +57,7 @@ def check_writable(path: str) -> None:
         target.unlink()
 
 
-def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> int:
+def main(argv: list[str] | None = None, extra_commands: Sequence[Command] = ()) -> int:
     """Entry point: parse, run the sub-command, and turn library errors into a message and exit code 2."""
     parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
@@ -55,7 +65,7 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[str] = ()) -> i
         parser.print_help()
         return 2
     try:
-        if args.command in {m.rpartition(".")[2] for m in COMMANDS} and getattr(args, "out", None):
+        if args.command in LIBRARY_COMMANDS and getattr(args, "out", None):
             check_writable(args.out)  # before any work: a long fit must not end in an unwritable path
         return int(args.func(args) or 0)
     except InputError as exc:

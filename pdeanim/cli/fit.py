@@ -51,13 +51,12 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--max-segments", type=int,
                    help="cap on segments chosen for a target (default 4096, FitOptions.max_segments; "
                         "reaching it is reported)")
-    p.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5], default=5,
-                   help="newest clip format to write: 5 (default: natural-spline time tangents for the items "
-                        "whose motion is smooth, else written as version 3), 4 (the same with Catmull-Rom "
-                        "tangents, for readers that predate version 5), 3 (integer-coded and "
-                        "compressed, knots on a shared time basis where that is smaller, else written as "
-                        "version 2), 2 (for readers that predate version 3) or 1 (for readers that predate "
-                        "version 2)")
+    p.add_argument("--time-model", choices=["auto", "pde", "spline"], default="auto",
+                   help="time model of the curves: auto (default: per curve coordinate, the natural cubic "
+                        "spline where it predicts and fits the motion as well as the paper's time solution, "
+                        "else the paper's), pde (the paper's time solution alone: families with a constant "
+                        "m per segment) or spline (every moving curve coordinate of an open clip on the "
+                        "spline)")
     p.add_argument("--best-effort", action="store_true",
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",
@@ -69,7 +68,7 @@ def register(subparsers) -> None:  # noqa: ANN001
 def run(args: argparse.Namespace) -> int:
     """Load, fit, write the clip, print a short summary."""
     from ..clip import write_clip_file
-    from ..model.fitclip import FitOptions, fit_poses, target_shortfall
+    from ..fit import FitOptions, fit_poses, target_shortfall
     from ..posefiles import load_poses
     from ..progress import cli_progress
 
@@ -86,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         loop=args.loop,
         **({} if args.max_segments is None else {"max_segments": args.max_segments}),
         best_effort=args.best_effort,
-        format_version=args.format_version,
+        time_model=args.time_model,
     )
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
@@ -128,6 +127,14 @@ def _fmt(v: float | None) -> str:
     return "-" if v is None else f"{v:.4g}"
 
 
+def _time_models_line(counts: dict | None) -> str:
+    """Which time model the curve coordinates use: "time models: spline 12, pde 3, linear 0"."""
+    if not counts:
+        return "time models: -"
+    return ("time models (curve coordinates): natural spline {spline}, paper's pairs with a constant "
+            "{pde}, paper's linear pair {linear}".format(**counts))
+
+
 def summary_text(r: dict, seconds: float, out: str) -> str:
     """A few lines: achieved errors, target, sizes against raw, time."""
     s = r["sizes"]
@@ -143,9 +150,9 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         + (" (the curves' spatial floor is above the target)" if r.get("floor_exceeds_target") else ""),
         f"bytes: topology {s['topology_bytes']}, coefficients {s['coefficients_bytes']}, "
         f"raw float32 {s['raw_float32_bytes']} (coefficients {100 * s['ratio_coefficients_to_raw']:.2f}% "
-        f"of raw, total {100 * s['ratio_total_to_raw']:.2f}%), format version {r.get('format_version')}"
-        + (f" (knots on {r['knot_rank']} shared time tracks)" if r.get("knot_rank") else "")
-        + (f" ({r['tangent_items']} curve coordinates with time tangents)" if r.get("tangent_items") else ""),
+        f"of raw, total {100 * s['ratio_total_to_raw']:.2f}%), format {r.get('format_version')}"
+        + (f", knots on {r['knot_rank']} shared time tracks" if r.get("knot_rank") else ""),
+        _time_models_line(r.get("time_models")),
         f"time {seconds:.2f} s -> {out}",
     ]
     return "\n".join(lines)

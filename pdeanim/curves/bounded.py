@@ -39,14 +39,6 @@ def floor_errors(frames: np.ndarray, motion: str) -> Measure:
     return errors
 
 
-def fit_errors(poses: Poses, options=None) -> CurveErrors:
-    """Per-curve relative RMS of the model's fit (``pdeanim.model.fitclip.curve_errors``) as CurveErrors."""
-    from ..model.fitclip import curve_errors
-
-    diag = bbox_diagonal(np.asarray(poses.vertices[0], np.float64))
-    return lambda curves: np.asarray(curve_errors(poses, curves, options)["rms"]) / diag
-
-
 def _subset(curves: CurveSet, sel: np.ndarray) -> CurveSet:
     """CurveSet of the selected curves only (their vertices, in order)."""
     lengths = curves.lengths[sel]

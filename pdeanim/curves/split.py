@@ -1,5 +1,5 @@
 """Halving curves: the split step shared by error-bounded curves (:mod:`pdeanim.curves.bounded`) and the fit
-(:mod:`pdeanim.model.fitclip`), which splits the curves whose spatial floor is too large.
+(:mod:`pdeanim.fit.spacestage`), which splits the curves whose spatial floor is too large.
 
 Splits never separate the copies of a welded (seam) vertex: a curve is cut between distinct points only.
 """

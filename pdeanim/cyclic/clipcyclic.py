@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from .. import container
-from ..clip import ClipParts, topology_id
+from ..clipparts import FORMAT_VERSION, ClipParts, check_format_version, topology_id
 from ..errors import ClipFormatError, ParameterError
 from .body import BodyFrame
 from .retarget import VertexMap
@@ -30,6 +30,7 @@ def encode_topology(faces: np.ndarray, rest: np.ndarray, vmap: VertexMap, n_patc
     patch, u = vmap.patch_u(n_patches)
     header = {
         "part": "topology",
+        "format_version": FORMAT_VERSION,
         "producer": KIND,
         "n_vertices": int(len(rest)),
         "n_patches": int(n_patches),
@@ -49,7 +50,8 @@ def encode_topology(faces: np.ndarray, rest: np.ndarray, vmap: VertexMap, n_patc
 
 def encode_coefficients(topology: bytes, spine: Spine, params: SwimParams, frames: int) -> bytes:
     """Coefficients part bytes: spine (B, 2N, 3) f64 and the swim parameters in the header."""
-    header = {"part": "coefficients", "kind": KIND, "topology_id": topology_id(topology),
+    header = {"part": "coefficients", "format_version": FORMAT_VERSION, "kind": KIND,
+              "topology_id": topology_id(topology),
               "swim": params.to_dict(), "period": params.period, "frames": int(frames)}
     return container.pack(header, {"spine": np.asarray(spine.coef, dtype=np.float64)})
 
@@ -151,9 +153,8 @@ def _need(arrays: dict[str, np.ndarray], names: tuple[str, ...], part: str) -> N
 
 def clip_from_parts(th: dict, ta: dict[str, np.ndarray], ch: dict, ca: dict[str, np.ndarray]) -> CyclicClip:
     """Decode both parts (headers and arrays from :func:`pdeanim.container.unpack`) into a CyclicClip."""
-    for part, header in (("topology", th), ("coefficients", ch)):
-        if header.get("format_version", 1) != 1:  # no key means version 1 (docs/format.md, section 5)
-            raise ClipFormatError(f"unsupported cyclic-spine {part} version {header.get('format_version')!r}")
+    check_format_version(th, "topology")
+    check_format_version(ch, "coefficients")
     _need(ta, ("faces", "rest", "vertex_patch", "vertex_uv"), "topology")
     _need(ca, ("spine",), "coefficients")
     try:

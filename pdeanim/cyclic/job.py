@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..clip import ClipParts
+from ..clipparts import ClipParts
 from ..errors import MeshInputError, ParameterError
 from ..progress import Progress, no_progress, sub_progress
 from .body import body_frame, cut_body

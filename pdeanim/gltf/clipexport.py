@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..clip import Clip
+from ..clipparts import Clip
 from ..errors import LimitError, ParameterError
 from ..progress import Progress
 from .compact import PackOptions, layout_animation_glb, layout_frame_glb

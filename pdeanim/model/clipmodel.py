@@ -1,12 +1,12 @@
-"""Evaluation of "dynamic-pde" clips: the loader registered in :data:`pdeanim.clip.LOADERS`.
+"""Evaluation of "dynamic-pde" clips (the decoder :data:`pdeanim.clip.DECODERS` maps the kind to).
 
 Everything that does not depend on t is precomputed when a clip is loaded: the per-vertex space basis
 (V, 3, 4) and, per knot, its per-vertex contribution P (S+1, V, 3), plus the item (curve, coordinate) of
 every value. A frame at t is then: find the segment (pure Python), evaluate the time pair of the items of
 that segment once per distinct mu (few in the integer-coded format) and compute positions = rest +
-phi0 * P[s] + phi1 * P[s+1] per value (items with time tangents: a weighted sum of four fields, the weights
-shared by the segment: four knots for Catmull-Rom, format version 4; two knots and the natural spline's two
-tangents, precomputed per knot at load, for version 5). Both steps are one compiled pass each (numba: no
+phi0 * P[s] + phi1 * P[s+1] per value (items on the natural spline: a weighted sum of four fields, two knots
+and the spline's two tangents, precomputed per knot at load, with weights shared by the segment). Both steps
+are one compiled pass each (numba: no
 BLAS, so no caller meets BLAS threading, and no temporaries; the numpy path below stays as the fallback).
 """
 
@@ -29,7 +29,7 @@ from ..errors import ClipFormatError
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
-from .tangents import cubic_weights, natural_tangents, spline_frame_weights
+from .spline import natural_tangents, spline_frame_weights
 from .timefit import SIN_COEF
 
 _ODD = 2.0 * np.arange(len(SIN_COEF)) + 1.0  # (P,) odd powers of the sine series
@@ -54,11 +54,9 @@ class DynamicClip:
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
         self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
-        tangents = np.zeros(self._mu[0].size, bool)
-        if coef.tangents is not None:
-            tangents = coef.tangents.reshape(-1) > 0
-        # per segment, the items on the cubic (tangents and a linear constant there): docs/format.md §3.10
-        self._cubic_items = [tangents & (np.abs(mu.ravel()) <= 1e-12) for mu in self._mu]
+        spline = coef.spline_items().reshape(-1)
+        self._cubic_items = [spline] * len(self._mu)  # per segment, the items on the spline (§3.5): all
+
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
@@ -68,8 +66,8 @@ class DynamicClip:
             self._base = np.zeros((self.n_vertices, 3), np.float32)
         self._base_flat = self._base.ravel()
         self._init_gather(self._precompute(fam[0] % 2))
-        self._tangent_fields = None  # (S+1, V*3) float32 natural-spline tangents of the knot fields (§3.11)
-        if coef.spline_tangents and any(c is not None for c in self._cubic_values):
+        self._tangent_fields = None  # (S+1, V*3) float32 natural-spline tangents of the knot fields (§3.5)
+        if spline.any():
             self._tangent_fields = _spline_tangent_fields(self._knot_fields, self.segment_t)
 
     def _init_gather(self, knot_fields: np.ndarray) -> None:
@@ -138,15 +136,11 @@ class DynamicClip:
         return out
 
     def _cubic_frame(self, s: int, tau: float, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """:meth:`_frame` of a segment with cubic items: their values sum four fields, the knots lo(s), s,
-        s+1, hi(s+1) (Catmull-Rom, §3.10) or the tangents and knots at s and s+1 (natural spline, §3.11)."""
+        """:meth:`_frame` of a segment with spline items: their values sum four fields, the tangents and
+        knots at s and s+1 (§3.5)."""
         flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
-        if self._tangent_fields is None:
-            lo, hi, w = cubic_weights(self._segment_list, s, tau)
-            first, last = fields[lo], fields[hi]
-        else:
-            w = spline_frame_weights(self._segment_list, s, tau)
-            first, last = self._tangent_fields[s], self._tangent_fields[s + 1]
+        w = spline_frame_weights(self._segment_list, s, tau)
+        first, last = self._tangent_fields[s], self._tangent_fields[s + 1]
         w32 = np.array(w, np.float32)
         if COMPILED:
             _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32[0], w32[1], w32[2], w32[3], first,
@@ -298,8 +292,8 @@ def _combine(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, p0: np.ndarra
 def _combine_cubic(phi0: np.ndarray, phi1: np.ndarray, code: np.ndarray, cubic: int, w0: np.float32,
                    w1: np.float32, w2: np.float32, w3: np.float32, pl: np.ndarray, p0: np.ndarray,
                    p1: np.ndarray, ph: np.ndarray, base: np.ndarray, out: np.ndarray) -> None:
-    """Compiled :func:`_combine` where values of code ``cubic`` sum four knot fields with float32 weights
-    w0..w3 (docs/format.md §3.10), in the float32 order of the numpy path."""
+    """Compiled :func:`_combine` where values of code ``cubic`` sum four fields (tangent, knot, knot, tangent)
+    with float32 weights w0..w3 (docs/format.md §3.5), in the float32 order of the numpy path."""
     for v in range(out.shape[0]):
         i = code[v]
         if i == cubic:
@@ -319,7 +313,7 @@ SPLINE_CHUNK = 1 << 16
 
 
 def _spline_tangent_fields(fields: np.ndarray, segment_t: np.ndarray) -> np.ndarray:
-    """(S+1, V*3) float32 natural-spline tangents of the float32 knot fields, solved in float64 (§3.11)."""
+    """(S+1, V*3) float32 natural-spline tangents of the float32 knot fields, solved in float64 (§3.5)."""
     out = np.empty_like(fields)
     for a in range(0, fields.shape[1], SPLINE_CHUNK):
         out[:, a:a + SPLINE_CHUNK] = natural_tangents(fields[:, a:a + SPLINE_CHUNK], segment_t)

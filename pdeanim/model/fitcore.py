@@ -12,22 +12,21 @@ import numpy as np
 
 from .segments import Segmentation
 from .spacefit import SpaceProjection, project_items, search_D
-from .tangents import CATMULL_ROM
-from .timefit import fit_tracks, fit_tracks_cubic, predict
+from .timefit import CUBIC_SLACK, fit_tracks, fit_tracks_spline, predict
 
 
 @dataclass
 class SpaceStage:
     """Per-item space fit: projection, projected tracks b (K, F, 4), floor energy per item and frame (K, F),
     the item data Yk (K, F, N) float64 it was fitted to (for per-point residuals; may be a strided view),
-    and which items the time stage may fit as cubic tracks."""
+    and which items the time stage may fit as natural-spline tracks (and the slack they get)."""
 
     proj: SpaceProjection
     b: np.ndarray
     floor_frames: np.ndarray
     Yk: np.ndarray | None = None
-    tangents: np.ndarray | None = None  # (K,) bool: candidates for cubic tracks (format version 4 and 5)
-    tangent_rule: str = CATMULL_ROM  # their knot tangents: Catmull-Rom (version 4) or natural spline (5)
+    spline_candidates: np.ndarray | None = None  # (K,) bool; None: the paper's time model only
+    spline_slack: float = CUBIC_SLACK
 
 
 @dataclass
@@ -39,8 +38,7 @@ class TimeStage:
     mu: np.ndarray
     err_frames: np.ndarray  # (K, F) squared error per item and frame (floor included)
     pred: np.ndarray  # (K, F, 4) model tracks in orthonormal coordinates
-    tangents: np.ndarray | None = None  # (K,) bool cubic tracks (format version 4 and 5), None: none
-    tangent_rule: str = CATMULL_ROM
+    spline: np.ndarray | None = None  # (K,) bool natural-spline tracks, None: none
 
 
 def items_from_curves(values: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -107,19 +105,19 @@ def space_stage(Y: np.ndarray, u: np.ndarray, mask: np.ndarray) -> SpaceStage:
 
 
 def time_stage(space: SpaceStage, segm: Segmentation, loop: bool = False, refine_iters: int = 5) -> TimeStage:
-    """Fit knot tracks (C0, or cubic for the space stage's tangent items) for one segmentation; errors per
-    item and frame include the spatial floor."""
-    tangents = None
-    if space.tangents is not None and space.tangents.any() and not loop:
-        z, mu, tangents = fit_tracks_cubic(space.b, segm, space.tangents, refine_iters=refine_iters,
-                                           rule=space.tangent_rule)
+    """Fit knot tracks (the paper's time pairs, or the natural spline for the space stage's candidates where
+    it fits as well) for one segmentation; errors per item and frame include the spatial floor."""
+    spline = None
+    if space.spline_candidates is not None and space.spline_candidates.any() and not loop:
+        z, mu, spline = fit_tracks_spline(space.b, segm, space.spline_candidates, refine_iters=refine_iters,
+                                          slack=space.spline_slack)
     else:
         z, mu = fit_tracks(space.b, segm, loop, refine_iters=refine_iters)
-    pred = predict(z, segm, mu, tangents, space.tangent_rule)
+    pred = predict(z, segm, mu, spline)
     d = space.b - pred
     err = space.floor_frames + np.einsum("kfa,kfa->kf", d, d)  # einsum: a sum over axis -1 is ~5x slower
     knots = np.einsum("kab,ksb->ksa", space.proj.to_coef, z)
-    return TimeStage(segm, knots, mu, err, pred, tangents, space.tangent_rule)
+    return TimeStage(segm, knots, mu, err, pred, spline)
 
 
 def reconstruct_items(space: SpaceStage, time: TimeStage) -> np.ndarray:

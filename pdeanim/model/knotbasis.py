@@ -1,11 +1,11 @@
-"""A low-rank time basis shared by the knot tracks of all curves (format version 3, docs/format.md §3.9).
+"""A low-rank time basis shared by the knot tracks of all curves (docs/format.md §3.4).
 
 The knots (S+1, C, 3, 4) are C * 12 time tracks of S+1 values. Where the motion is a blend of a few shapes
 (morph targets, a few dominant modes), the tracks span only a few directions in time, so ``knots[s, c, w, k]
 ~ sum_j weights[j, c, w, k] * basis[j, s]`` with r << S+1 stores r values per track plus r * (S+1) shared
 ones. The basis is the leading right singular vectors of the tracks weighted by how much each moves the
-vertices. Weights and a residual track are integer codes on the same power-of-two step as version 2 knots,
-and the residual takes whatever the basis misses, so every knot is rounded exactly as well as in version 2
+vertices. Weights and a residual track are integer codes on the same power-of-two step as plain knot tracks,
+and the residual takes whatever the basis misses, so every knot is rounded exactly as well as in plain tracks
 (at most half a step) while tracks that follow the basis store residual codes of about zero.
 """
 
@@ -58,7 +58,7 @@ def basis_part(codes: np.ndarray, steps: np.ndarray, basis: np.ndarray) -> np.nd
 
 def knots_from_basis(codes: np.ndarray, residual: np.ndarray, steps: np.ndarray, basis: np.ndarray
                      ) -> np.ndarray:
-    """Knots (S+1, C, 3, 4) float32 = float32(basis part + residual * step), in doubles (§3.9)."""
+    """Knots (S+1, C, 3, 4) float32 = float32(basis part + residual * step), in doubles (§3.4)."""
     acc = basis_part(codes, steps, basis)
     acc += np.asarray(residual, np.float64) * np.asarray(steps, np.float64)[None, :, :, None]
     with np.errstate(over="ignore"):  # a value beyond float32 becomes inf, which the reader refuses
@@ -69,7 +69,7 @@ def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.
                      knots: np.ndarray, steps: np.ndarray, loop: bool) -> Iterator[KnotBasis]:
     """Encodings of the knots on a basis, one per distinct rank of TRUNCATION_SHARES, below MAX_RANK_SHARE of
     the knot count, made one at a time (each holds integer tracks as large as the knots). Every knot decodes
-    within half a step of ``steps`` (C, 3), as in version 2. ``loop`` keeps the basis's first and last
+    within half a step of ``steps`` (C, 3), as plain tracks do. ``loop`` keeps the basis's first and last
     columns equal, so equal first and last knots stay equal."""
     knots = np.asarray(knots, np.float64)
     K, C = knots.shape[0], curves.n_curves

@@ -1,4 +1,4 @@
-"""Error-bounded integer coding of the dynamic-PDE arrays for format versions 2 and 3 (docs/format.md §3.7).
+"""Error-bounded integer coding of the dynamic-PDE arrays (docs/format.md §3.2-3.4).
 
 Every quantised quantity is an integer times a step; the steps are chosen so that rounding moves no vertex
 coordinate by more than a tolerance. Integer tracks are stored as zigzag-coded differences, which are small
@@ -121,9 +121,9 @@ def vertex_basis(curves: CurveSet, u: np.ndarray, family: np.ndarray, D: np.ndar
 
 
 CUBIC_PAIR_MAX = 1.5
-"""Bound of the summed absolute knot weights of a Catmull-Rom track (format version 4): h00 + h01 = 1 and
-|h10| + |h11| = tau (1 - tau) <= 1/4, each entering twice with a factor of at most 1. Natural-spline tracks
-(version 5) use the larger of this and their weights' sum at the clip's frames."""
+"""Least bound taken for the summed absolute knot weights of a natural-spline track (h00 + h01 = 1 and the
+tangent terms add up to about half of it); the writer uses the larger of this and the weights' sum at the
+clip's frames."""
 
 
 def pair_max(family: np.ndarray, m: np.ndarray, tangents: np.ndarray | None = None,

@@ -1,5 +1,5 @@
-"""The time half of the variable projection: C0 knot tracks with a time constant per segment (and cubic C1
-tracks for the items that :mod:`pdeanim.model.tangents` gives tangents).
+"""The time half of the variable projection: C0 knot tracks with a time constant per segment (the paper's
+time model), and natural-spline tracks (:mod:`pdeanim.model.spline`) for the items where they fit as well.
 
 Every item (curve x coordinate) has a 4-vector track z(t) (its frames projected on the orthonormal space
 basis). On segment s the model is z(tau) = z_s phi0(tau; mu_s) + z_{s+1} phi1(tau; mu_s), so adjacent
@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import PdeanimError
 from .families import MU_TRIG_MAX, time_pair
 from .segments import Segmentation
-from .tangents import CATMULL_ROM, predict_cubic, solve_cubic_knots
+from .spline import predict_spline, solve_spline_knots
 
 MU_GRID = np.array([0.0, -MU_TRIG_MAX, -2.0, -1.0, -0.4, 0.4, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0])
 """Coarse grid of signed time constants per segment (0 first: ties keep the linear pair)."""
@@ -180,14 +180,14 @@ def _solve_knots_dense(b: np.ndarray, segm: Segmentation, mu: np.ndarray, loop: 
     return z
 
 
-def predict(z: np.ndarray, segm: Segmentation, mu: np.ndarray, tangents: np.ndarray | None = None,
-            rule: str = CATMULL_ROM) -> np.ndarray:
+def predict(z: np.ndarray, segm: Segmentation, mu: np.ndarray, spline: np.ndarray | None = None
+            ) -> np.ndarray:
     """Model tracks (K, F, 4) from knots z (K, S + 1, 4) and constants mu (K, S); items flagged in
-    ``tangents`` (K,) bool are cubic tracks of ``rule`` (:mod:`pdeanim.model.tangents`, their mu 0)."""
-    if tangents is not None and tangents.any():
+    ``spline`` (K,) bool are natural-spline tracks (:mod:`pdeanim.model.spline`, their mu 0)."""
+    if spline is not None and spline.any():
         out = np.empty(z.shape[:1] + (len(segm.t),) + z.shape[2:])
-        plain = ~tangents
-        out[tangents] = predict_cubic(z[tangents], segm, rule)
+        plain = ~spline
+        out[spline] = predict_spline(z[spline], segm)
         if plain.any():
             out[plain] = predict(z[plain], segm, mu[plain])
         return out
@@ -394,27 +394,29 @@ def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_ite
 
 
 CUBIC_SLACK = 1.05
-"""A candidate item keeps its cubic track unless the C0 track with time constants fits its frames clearly
-better (residual below 1 / CUBIC_SLACK of the cubic's): on few long segments the exp and trig pairs can
-follow a motion that the cubic cannot, while where both fit (a knot at every frame) the cubic predicts the
-frames in between."""
+"""A spline candidate keeps its spline track unless the paper's C0 track with time constants fits its frames
+clearly better (residual below 1 / CUBIC_SLACK of the spline's): on few long segments the exp and trig pairs
+can follow a motion that the spline cannot, while where both fit (a knot at every frame) the spline predicts
+the frames in between."""
 
 
-def fit_tracks_cubic(b: np.ndarray, segm: Segmentation, candidates: np.ndarray, refine_iters: int = 8,
-                     rule: str = CATMULL_ROM) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(knots z (K, S + 1, 4), constants mu (K, S), cubic (K,) bool) of an open clip's tracks b (K, F, 4):
-    every item gets its C0 fit; the ``candidates`` (K,) bool take the cubic track of ``rule`` (mu 0) where it
-    fits their frames about as well (see CUBIC_SLACK)."""
+def fit_tracks_spline(b: np.ndarray, segm: Segmentation, candidates: np.ndarray, refine_iters: int = 8,
+                      slack: float = CUBIC_SLACK) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(knots z (K, S + 1, 4), constants mu (K, S), spline (K,) bool) of an open clip's tracks b (K, F, 4):
+    every item gets the paper's fit; the ``candidates`` (K,) bool take the natural-spline track (mu 0) where
+    it fits their frames about as well (within ``slack``)."""
     z, mu = fit_tracks(b, segm, refine_iters=refine_iters)
-    cubic = np.zeros(len(b), bool)
+    spline = np.zeros(len(b), bool)
     rows = np.flatnonzero(candidates)
     if len(rows) == 0:
-        return z, mu, cubic
+        return z, mu, spline
     bc = b[rows]
-    zc = solve_cubic_knots(bc, segm, rule)
-    d0, dc = bc - predict(z[rows], segm, mu[rows]), bc - predict_cubic(zc, segm, rule)
+    zc = solve_spline_knots(bc, segm)
+    d0, dc = bc - predict(z[rows], segm, mu[rows]), bc - predict_spline(zc, segm)
     e0, ec = np.einsum("kfw,kfw->k", d0, d0), np.einsum("kfw,kfw->k", dc, dc)
-    keep = ec <= CUBIC_SLACK * e0 + 1e-9 * np.einsum("kfw,kfw->k", bc, bc)
+    keep = np.ones(len(rows), bool)  # an infinite slack keeps every candidate on the spline
+    if np.isfinite(slack):
+        keep = ec <= slack * e0 + 1e-9 * np.einsum("kfw,kfw->k", bc, bc)
     z[rows[keep]], mu[rows[keep]] = zc[keep], 0.0
-    cubic[rows[keep]] = True
-    return z, mu, cubic
+    spline[rows[keep]] = True
+    return z, mu, spline

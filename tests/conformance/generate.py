@@ -6,13 +6,10 @@ and looping mode, with the positions the Python evaluator gives at chosen times.
 vertex count, bounding-box diagonal and what it covers. Fitted cases go through the real fit and cyclic
 pipelines on tiny meshes; synthetic cases encode hand-chosen coefficients that reach every branch of the
 evaluator (all four families, D on both sides of D_SWITCH and near 0, trig constants at their cap, a
-zero-length segment, large and tiny rigid rotations). Cases without a suffix are written as version 3 is
-(dynamic-pde version 2: integer codes in zstd-compressed container version 2 arrays, or version 3 where the
-writer finds the knot basis smaller); the "-v1" cases keep version 1 (raw float arrays in container version
-1) covered, the "-v3" cases are morph-target blends whose coefficients part is version 3 (knots on a shared
-low-rank time basis, docs/format.md §3.9), the "-v4" cases have Catmull-Rom time tangents on some items
-(§3.10) and the "-v5" cases natural-spline time tangents (§3.11), with and without a knot basis (the generator
-checks that the writer did choose what each covers).
+zero-length segment, large and tiny rigid rotations). Every case is format 1.0; the name says which of its
+optional features it covers: "-spline" cases have items on the natural-spline time model (docs/format.md
+§3.5), "-basis" cases store their knots on a shared low-rank time basis (§3.4), "-pde" cases were fitted with
+the paper's time model alone (the generator checks that the writer did choose what each covers).
 """
 
 from __future__ import annotations
@@ -29,15 +26,13 @@ from pdeanim import container
 from pdeanim.clip import ClipParts, load_clip, write_clip_file
 from pdeanim.curveset import CurveSet
 from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
-from pdeanim.model.clipformat import CoefficientData, encode_coefficients, encode_topology
+from pdeanim.fit import FitOptions, fit_poses
+from pdeanim.model.clipformat import TIME_SPLINE, CoefficientData, encode_coefficients, encode_topology
 from pdeanim.model.families import MU_TRIG_MAX
-from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 6
+FIXTURE_VERSION = 7
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
-PLAIN = 3
-"""Format version of the cases without a suffix: version 2, or 3 where the knot basis is smaller."""
 
 
 def _sphere_poses(n_frames: int = 13, loop: bool = False):
@@ -57,29 +52,31 @@ def _sphere_poses(n_frames: int = 13, loop: bool = False):
     return make_poses(np.stack(frames), np.asarray(mesh.faces), np.arange(n_frames) / 24.0)
 
 
-def _fit(motion: str, param_mode: str, loop: bool, version: int = PLAIN) -> Callable[[], ClipParts]:
-    return lambda: fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion,
-                                                                   param_mode=param_mode, loop=loop,
-                                                                   format_version=version))
+def _fit(motion: str, param_mode: str, loop: bool, time_model: str = "auto") -> Callable[[], ClipParts]:
+    return lambda: _assert_features(
+        fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion, param_mode=param_mode,
+                                                       loop=loop, time_model=time_model)),
+        spline=False if loop or time_model == "pde" else None)
 
 
-def _smooth_many_segments() -> ClipParts:
-    """12 segments over 25 frames of smooth motion: the writer codes the knots as second differences."""
-    return fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12, format_version=PLAIN))
+def _smooth_pde() -> ClipParts:
+    """12 segments over 25 frames of smooth motion with the paper's time model alone: the writer codes the
+    knots as second differences."""
+    return _assert_features(fit_poses(_sphere_poses(n_frames=25), FitOptions(segments=12, time_model="pde")),
+                            spline=False)
 
 
-def _smooth_tangents(motion: str, version: int) -> Callable[[], ClipParts]:
-    """The smooth 12-segment fit: its moving items get time tangents (version 4 or 5)."""
-    return lambda: _assert_v4(fit_poses(_sphere_poses(n_frames=25),
-                                        FitOptions(segments=12, motion=motion, format_version=version)),
-                              version=version)
+def _smooth_spline(motion: str, time_model: str = "auto") -> Callable[[], ClipParts]:
+    """The smooth 12-segment fit: its moving items take the natural spline (chosen, or asked for)."""
+    return lambda: _assert_features(fit_poses(_sphere_poses(n_frames=25),
+                                              FitOptions(segments=12, motion=motion, time_model=time_model)),
+                                    spline=True)
 
 
 def _single_frame_rigid() -> ClipParts:
     """A one-frame clip (rigid motion): every t shows that frame."""
     p = _sphere_poses()
-    return fit_poses(make_poses(p.vertices[:1], p.faces, p.times[:1]),
-                     FitOptions(motion="rigid", format_version=PLAIN))
+    return fit_poses(make_poses(p.vertices[:1], p.faces, p.times[:1]), FitOptions(motion="rigid"))
 
 
 def _capsule():
@@ -91,7 +88,7 @@ def _cyclic(mode: str, **overrides) -> Callable[[], ClipParts]:
     return lambda: make_cyclic_clip(_capsule(), opts)
 
 
-def _synthetic_topology(param_mode: str, version: int = PLAIN) -> tuple[bytes, int, np.ndarray]:
+def _synthetic_topology(param_mode: str) -> tuple[bytes, int, np.ndarray]:
     """A 5 x 6 grid of 30 vertices in 5 curves (vertex order shuffled against curve order)."""
     rng = np.random.default_rng(7)
     gx, gy = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-0.5, 0.5, 5))
@@ -114,19 +111,19 @@ def _synthetic_topology(param_mode: str, version: int = PLAIN) -> tuple[bytes, i
         u[perm, 2] = 1.0 - u[perm, 0]
     pos = np.zeros((V, 3))
     pos[perm] = rest
-    topo = encode_topology(CurveSet(order, offsets), u, faces, pos, param_mode, version)
+    topo = encode_topology(CurveSet(order, offsets), u, faces, pos, param_mode)
     return topo, 5, pos
 
 
-def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
-                       version: int = PLAIN) -> Callable[[], ClipParts]:
-    """Hand-chosen coefficients reaching every branch; versions 4 and 5 add tangents on a random half of the
-    items (which then take the cubic in their linear segments; version 5 has no zero-length segment)."""
+def _synthetic_dynamic(motion: str, param_mode: str, loop: bool, spline: bool = False
+                       ) -> Callable[[], ClipParts]:
+    """Hand-chosen coefficients reaching every branch; ``spline`` puts a random half of the items on the
+    natural spline (their constants 0; no zero-length segment then)."""
     def make() -> ClipParts:
-        topo, C, _ = _synthetic_topology(param_mode, version)
+        topo, C, _ = _synthetic_topology(param_mode)
         rng = np.random.default_rng(11)
         S = 4
-        seg_t = np.array([0.0, 0.3, 0.3 if version < 5 else 0.36, 0.55, 1.0])  # a zero-length segment
+        seg_t = np.array([0.0, 0.3, 0.36 if spline else 0.3, 0.55, 1.0])  # else a zero-length segment
         space = rng.integers(0, 2, (C, 3))
         trig = rng.integers(0, 2, (S, C, 3))
         family = (2 * trig + space[None]).astype(np.uint8)
@@ -152,12 +149,17 @@ def _synthetic_dynamic(motion: str, param_mode: str, loop: bool,
             if loop:
                 for k in ("rigid_rot_knots", "rigid_trans_knots"):
                     extra[k][-1] = extra[k][0]
-        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version >= 4 else None
+        model = _time_models(rng, C, spline)
+        m = np.where(model[None] == TIME_SPLINE, 0.0, m)
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, 9), family, m, D, knots, motion, loop,
-                               {"errors": {}}, extra, tangents, version == 5)
-        parts = ClipParts(topo, encode_coefficients(topo, data, version))
-        return _assert_v4(parts, rank=False, version=version) if version >= 4 else parts
+                               {"errors": {}}, extra, model)
+        return _assert_features(ClipParts(topo, encode_coefficients(topo, data)), basis=False, spline=spline)
     return make
+
+
+def _time_models(rng: np.random.Generator, C: int, spline: bool) -> np.ndarray:
+    """(C, 3) uint8 time models: a random half of the items on the spline when ``spline``, else none."""
+    return (rng.integers(0, 2, (C, 3)) if spline else np.zeros((C, 3))).astype(np.uint8)
 
 
 def _blend_poses(n_frames: int = 25, loop: bool = False):
@@ -175,49 +177,44 @@ def _blend_poses(n_frames: int = 25, loop: bool = False):
     return make_poses(np.stack(frames), np.asarray(mesh.faces), np.arange(n_frames) / 24.0)
 
 
-def _assert_v3(parts: ClipParts) -> ClipParts:
-    """The case really is what it covers: a version 3 coefficients part (knots on a basis of rank r < S+1
-    plus residual tracks coded as version 2 knots) with a version 2 topology part."""
+def _assert_features(parts: ClipParts, basis: bool | None = None, spline: bool | None = None) -> ClipParts:
+    """The case really covers what it says: a 1.0 clip whose knots are (or are not) on a shared basis of rank
+    r < S+1 plus residual tracks, and with (or without) items on the natural spline (None: either)."""
     header, arrays = container.unpack(parts.coefficients)
     S, C = header["n_segments"], header["n_curves"]
-    assert header["format_version"] == 3 and header["knot_differences"] in (1, 2), header
+    assert header["format_version"] == "1.0" and header["knot_differences"] in (1, 2), header
+    assert container.unpack(parts.topology)[0]["format_version"] == "1.0"
     assert arrays["knots"].dtype == np.uint32 and arrays["knots"].shape == (C, 3, 4, S + 1)
     r = header["knot_rank"]
-    assert arrays["knot_weights"].dtype == np.uint32 and arrays["knot_weights"].shape == (r, C, 3, 4)
-    assert 1 <= r < S + 1 and arrays["knot_basis"].shape == (r, S + 1)
-    assert container.unpack(parts.topology)[0]["format_version"] == 2
-    return parts
-
-
-def _assert_v4(parts: ClipParts, rank: bool | None = None, version: int = 4) -> ClipParts:
-    """The case has a version 4 (or ``version``) coefficients part with tangents on some items (and a knot
-    basis when ``rank`` is True, none when False)."""
-    header, arrays = container.unpack(parts.coefficients)
-    assert header["format_version"] == version, header
-    tangents = arrays["tangents"]
-    assert tangents.dtype == np.uint8 and tangents.shape == (header["n_curves"], 3) and tangents.any()
-    if rank is not None:
-        assert (header["knot_rank"] >= 1) == rank and (("knot_basis" in arrays) == rank), header
-    assert container.unpack(parts.topology)[0]["format_version"] == 2
+    if basis is not None:
+        assert (r >= 1) == basis and ("knot_basis" in arrays) == basis, header
+    if r:
+        assert arrays["knot_weights"].dtype == np.uint32 and arrays["knot_weights"].shape == (r, C, 3, 4)
+        assert 1 <= r < S + 1 and arrays["knot_basis"].shape == (r, S + 1)
+    model = arrays["time_model"]
+    assert model.dtype == np.uint8 and model.shape == (C, 3)
+    if spline is not None:
+        assert bool((model == TIME_SPLINE).any()) == spline, model
     return parts
 
 
 def _fit_blend(loop: bool) -> Callable[[], ClipParts]:
     """A fit with an RMS target of a morph-target blend: the fit's own encoder picks the knot basis."""
-    return lambda: _assert_v3(fit_poses(_blend_poses(loop=loop),
-                                        FitOptions(target_rel_rms=1e-3, loop=loop, format_version=3)))
+    return lambda: _assert_features(
+        fit_poses(_blend_poses(loop=loop), FitOptions(target_rel_rms=1e-3, loop=loop)), basis=True)
 
 
-def _synthetic_blend(motion: str, param_mode: str, loop: bool, version: int = 3) -> Callable[[], ClipParts]:
+def _synthetic_blend(motion: str, param_mode: str, loop: bool, spline: bool = False
+                     ) -> Callable[[], ClipParts]:
     """A morph-target blend: knots that are exactly a blend of three shapes with weights that vary over 11
-    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins (format version 3; 4
-    and 5 add tangents on a random half of the items; version 5 has no zero-length segment)."""
+    segments (rank 3 tracks), encoded with an RMS budget so that the knot basis wins; ``spline`` puts a
+    random half of the items on the natural spline (no zero-length segment then)."""
     def make() -> ClipParts:
         topo, C, _ = _synthetic_topology(param_mode)
         rng = np.random.default_rng(13)
         S = 11
         seg_t = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 1.0, S - 1)), [1.0]])
-        if version < 5:
+        if not spline:
             seg_t[5] = seg_t[4]  # a zero-length segment
         space = rng.integers(0, 2, (C, 3))
         trig = rng.integers(0, 2, (S, C, 3))
@@ -246,11 +243,12 @@ def _synthetic_blend(motion: str, param_mode: str, loop: bool, version: int = 3)
             if loop:
                 for k in ("rigid_rot_knots", "rigid_trans_knots"):
                     extra[k][-1] = extra[k][0]
-        tangents = rng.integers(0, 2, (C, 3)).astype(np.uint8) if version >= 4 else None
+        model = _time_models(rng, C, spline)
+        m = np.where(model[None] == TIME_SPLINE, 0.0, m)
         data = CoefficientData(seg_t, np.linspace(0.0, 2.0, S + 1), family, m, D, knots, motion, loop,
-                               {"errors": {}}, extra, tangents, version == 5)
-        parts = ClipParts(topo, encode_coefficients(topo, data, version, knot_rms=2e-4))
-        return _assert_v4(parts, rank=True, version=version) if version >= 4 else _assert_v3(parts)
+                               {"errors": {}}, extra, model)
+        parts = ClipParts(topo, encode_coefficients(topo, data, knot_rms=2e-4))
+        return _assert_features(parts, basis=True, spline=spline)
     return make
 
 
@@ -261,28 +259,22 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "fit-displacement-chord-loop": (_fit("displacement", "chord", True), {}),
     "fit-rigid-paper-loop": (_fit("rigid", "paper", True), {}),
     "fit-rigid-single-frame": (_single_frame_rigid, {}),
-    "fit-displacement-chord-smooth": (_smooth_many_segments, {}),
+    "fit-absolute-chord-pde": (_fit("absolute", "chord", False, time_model="pde"), {}),
+    "fit-displacement-chord-smooth-pde": (_smooth_pde, {}),
+    "fit-displacement-chord-smooth-spline": (_smooth_spline("displacement"), {}),
+    "fit-absolute-chord-smooth-spline": (_smooth_spline("absolute"), {}),
+    "fit-rigid-chord-smooth-spline": (_smooth_spline("rigid", "spline"), {}),
+    "fit-blend-displacement-chord-loop-basis": (_fit_blend(True), {}),
     "synthetic-displacement-paper": (_synthetic_dynamic("displacement", "paper", False), {}),
     "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
     "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),
     "synthetic-rigid-chord-loop": (_synthetic_dynamic("rigid", "chord", True), {}),
-    "fit-rigid-paper-loop-v1": (_fit("rigid", "paper", True, version=1), {}),
-    "synthetic-displacement-paper-v1": (_synthetic_dynamic("displacement", "paper", False, version=1), {}),
-    "synthetic-blend-displacement-paper-v3": (_synthetic_blend("displacement", "paper", False), {}),
-    "synthetic-blend-rigid-chord-loop-v3": (_synthetic_blend("rigid", "chord", True), {}),
-    "fit-blend-displacement-chord-loop-v3": (_fit_blend(True), {}),
-    "fit-displacement-chord-smooth-v4": (_smooth_tangents("displacement", 4), {}),
-    "fit-rigid-chord-smooth-v4": (_smooth_tangents("rigid", 4), {}),
-    "synthetic-displacement-chord-v4": (_synthetic_dynamic("displacement", "chord", False, version=4), {}),
-    "synthetic-rigid-paper-v4": (_synthetic_dynamic("rigid", "paper", False, version=4), {}),
-    "synthetic-absolute-paper-loop-v4": (_synthetic_dynamic("absolute", "paper", True, version=4), {}),
-    "synthetic-blend-absolute-chord-v4": (_synthetic_blend("absolute", "chord", False, version=4), {}),
-    "fit-displacement-chord-smooth-v5": (_smooth_tangents("displacement", 5), {}),
-    "fit-absolute-chord-smooth-v5": (_smooth_tangents("absolute", 5), {}),
-    "synthetic-displacement-chord-v5": (_synthetic_dynamic("displacement", "chord", False, version=5), {}),
-    "synthetic-rigid-paper-v5": (_synthetic_dynamic("rigid", "paper", False, version=5), {}),
-    "synthetic-absolute-paper-loop-v5": (_synthetic_dynamic("absolute", "paper", True, version=5), {}),
-    "synthetic-blend-absolute-chord-v5": (_synthetic_blend("absolute", "chord", False, version=5), {}),
+    "synthetic-displacement-chord-spline": (_synthetic_dynamic("displacement", "chord", False, True), {}),
+    "synthetic-rigid-paper-spline": (_synthetic_dynamic("rigid", "paper", False, True), {}),
+    "synthetic-absolute-paper-loop-spline": (_synthetic_dynamic("absolute", "paper", True, True), {}),
+    "synthetic-blend-displacement-paper-basis": (_synthetic_blend("displacement", "paper", False), {}),
+    "synthetic-blend-rigid-chord-loop-basis": (_synthetic_blend("rigid", "chord", True), {}),
+    "synthetic-blend-absolute-chord-basis-spline": (_synthetic_blend("absolute", "chord", False, True), {}),
     "cyclic-eel-standing-rotate": (_cyclic("eel"), {}),
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
@@ -304,11 +296,6 @@ def case_times(parts: ClipParts) -> list[float]:
     return sorted(ts)
 
 
-def _container_version(blob: bytes) -> int:
-    """The container version field of a part (1: raw arrays, 2: arrays may be zstd-encoded)."""
-    return int.from_bytes(blob[8:12], "little")
-
-
 def generate(out: Path, names: list[str] | None = None) -> dict:
     """Write the fixture files of the chosen cases (all by default) into out; returns the manifest."""
     out.mkdir(parents=True, exist_ok=True)
@@ -324,13 +311,13 @@ def generate(out: Path, names: list[str] | None = None) -> dict:
         pos = np.asarray(clip.evaluate(np.asarray(ts)), np.float32)
         (out / f"{name}.expected.bin").write_bytes(pos.astype("<f4").tobytes())
         th, _ = container.unpack(parts.topology)
-        ch, _ = container.unpack(parts.coefficients)
+        ch, ca = container.unpack(parts.coefficients)
         rest = np.asarray(clip.evaluate(0.0), np.float64)
         manifest["cases"].append({
             "name": name, "clip": f"{name}.clip", "expected": f"{name}.expected.bin", "kind": clip.kind,
             "motion": ch.get("motion"), "param_mode": th.get("param_mode"), "looping": bool(clip.looping),
-            "format_version": ch.get("format_version"),
-            "container_versions": [_container_version(p) for p in (parts.topology, parts.coefficients)],
+            "format_version": ch.get("format_version"), "knot_rank": ch.get("knot_rank"),
+            "spline_items": int((ca["time_model"] == TIME_SPLINE).sum()) if "time_model" in ca else None,
             "n_vertices": int(clip.n_vertices), "t": ts,
             "diagonal": float(np.linalg.norm(np.ptp(rest, axis=0)))})
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")

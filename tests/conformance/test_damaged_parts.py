@@ -41,8 +41,8 @@ def _mutated(rng: np.random.Generator, header: dict, arrays: dict) -> tuple[dict
     return header, arrays
 
 
-@pytest.mark.parametrize("name", ["fit-displacement-chord-smooth", "fit-rigid-chord",
-                                  "fit-rigid-paper-loop-v1", "synthetic-blend-rigid-chord-loop-v3",
+@pytest.mark.parametrize("name", ["fit-displacement-chord-smooth-spline", "fit-rigid-chord",
+                                  "fit-rigid-paper-loop", "synthetic-blend-rigid-chord-loop-basis",
                                   "cyclic-dolphin-travelling-translate"])
 def test_damaged_parts_load_or_raise_clip_format_error(name):
     parts = read_clip_file(FIXTURES / f"{name}.clip")

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from pdeanim.clip import load_clip, write_clip_file
+from pdeanim.fit import FitOptions, fit_poses
 from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb
 from pdeanim.gltf.layout import gltf_layout
 from pdeanim.gltf.read import read_static_mesh
-from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 from tests.ci import missing
 from tests.gltf.builders import textured_scene_glb

@@ -1,5 +1,6 @@
-"""Readers refuse what they do not implement (docs/format.md, section 5): future container, dynamic-PDE and
-cyclic-spine versions and unknown kinds, while unknown extra header keys are ignored."""
+"""Readers refuse what they do not implement (docs/format.md §1-2): another container version, another major
+format version (any "1.x" is read: minor versions only add what readers may ignore) and unknown kinds, while
+unknown extra header keys and arrays are ignored."""
 
 from __future__ import annotations
 
@@ -27,23 +28,31 @@ def _edit(blob: bytes, **changes) -> bytes:
 
 def test_future_container_version_is_refused():
     topo, _ = _parts("fit-displacement-chord")
-    future = topo[:8] + struct.pack("<I", 3) + topo[12:]
-    with pytest.raises(ClipFormatError, match="unsupported container version 3"):
-        container.unpack(future)
+    for version in (0, 2):
+        other = topo[:8] + struct.pack("<I", version) + topo[12:]
+        with pytest.raises(ClipFormatError, match=f"unsupported container version {version}"):
+            container.unpack(other)
 
 
-@pytest.mark.parametrize(("name", "future_coefficients", "future_topology"),
-                         [("fit-displacement-chord", 6, 3), ("synthetic-blend-displacement-paper-v3", 6, 3),
-                          ("cyclic-eel-standing-rotate", 2, 2)])
-def test_future_format_versions_are_refused(name, future_coefficients, future_topology):
-    """dynamic-pde coefficients read versions 1-5 but topology parts only 1-2 (versions 3 to 5 change the
-    coefficients part only); cyclic-spine parts read version 1."""
+@pytest.mark.parametrize("name", ["fit-displacement-chord", "synthetic-blend-displacement-paper-basis",
+                                  "fit-displacement-chord-smooth-spline", "cyclic-eel-standing-rotate"])
+def test_other_major_versions_are_refused_and_minor_ones_read(name):
     topo, coef = _parts(name)
-    with pytest.raises(ClipFormatError, match=f"coefficients version {future_coefficients}"):
-        load_clip(topo, _edit(coef, format_version=future_coefficients))
-    new_topo = _edit(topo, format_version=future_topology)
-    with pytest.raises(ClipFormatError, match=f"topology version {future_topology}"):
-        load_clip(new_topo, _edit(coef, topology_id=None))
+    for bad in ("2.0", "0.9", 1, "1", "1.x", None):
+        with pytest.raises(ClipFormatError, match="unsupported clip format version"):
+            load_clip(topo, _edit(coef, format_version=bad))
+        with pytest.raises(ClipFormatError, match="unsupported clip format version"):
+            load_clip(_edit(topo, format_version=bad), _edit(coef, topology_id=None))
+    plain = load_clip(topo, coef).evaluate(0.3)
+    minor = load_clip(_edit(topo, format_version="1.7"), _edit(coef, format_version="1.12", topology_id=None))
+    assert (minor.evaluate(0.3) == plain).all()
+
+
+def test_unknown_extra_arrays_are_ignored():
+    topo, coef = _parts("fit-displacement-chord-smooth-spline")
+    header, arrays = container.unpack(coef)
+    extended = container.pack(header, {**arrays, "some_future_array": arrays["D"] * 2})
+    assert (load_clip(topo, extended).evaluate(0.6) == load_clip(topo, coef).evaluate(0.6)).all()
 
 
 @pytest.mark.parametrize("name", ["fit-rigid-chord", "cyclic-dolphin-travelling-translate"])

@@ -80,9 +80,9 @@ def test_poses_round_trip_and_validation(morph_sphere_path):
                hnp.array_shapes(min_dims=1, max_dims=3, min_side=0, max_side=6)),
     st.sampled_from(["zstd", "shuffle-zstd", container.SMALLEST]),
 )
-def test_encoded_arrays_round_trip_in_container_version_2(a, encoding):
+def test_encoded_arrays_round_trip(a, encoding):
     blob = container.pack({"part": "test"}, {"a": a, "raw": np.arange(3, dtype=np.int32)}, {"a": encoding})
-    assert int.from_bytes(blob[8:12], "little") == 2
+    assert int.from_bytes(blob[8:12], "little") == 1
     header, arrays = container.unpack(blob)
     np.testing.assert_array_equal(arrays["a"], a)
     assert arrays["a"].dtype == a.dtype.newbyteorder("<") and arrays["a"].shape == a.shape
@@ -117,14 +117,15 @@ def test_bad_encoded_arrays_raise_clear_errors():
         container.unpack(bytes(garbled))
     with pytest.raises(ClipFormatError, match="truncated|outside"):
         container.unpack(blob[:-16])
-    v1 = blob[:8] + (1).to_bytes(4, "little") + blob[12:]
-    with pytest.raises(ClipFormatError, match="container version 1 does not allow"):
-        container.unpack(v1)
+    v2 = blob[:8] + (2).to_bytes(4, "little") + blob[12:]
+    with pytest.raises(ClipFormatError, match="unsupported container version 2"):
+        container.unpack(v2)
 
 
-def test_version_1_writer_output_is_unchanged_without_encodings():
-    blob = container.pack({"part": "x"}, {"a": np.arange(4, dtype=np.int32)})
-    assert int.from_bytes(blob[8:12], "little") == 1
+def test_the_container_version_is_1_with_and_without_encodings():
+    for encodings in (None, {"a": "zstd"}):
+        blob = container.pack({"part": "x"}, {"a": np.arange(4, dtype=np.int32)}, encodings)
+        assert int.from_bytes(blob[8:12], "little") == 1
 
 
 def test_trailing_bytes_after_the_zstd_frame_and_null_encodings_are_refused():

@@ -4,6 +4,7 @@ layer and makes import order matter."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import networkx as nx
@@ -54,3 +55,41 @@ def test_graph_sees_the_imports() -> None:
 def test_library_has_no_import_cycles() -> None:
     cycles = sorted(sorted(c) for c in nx.simple_cycles(import_graph()))
     assert cycles == [], cycles
+
+
+def _subpackage(module: str) -> str:
+    """pdeanim.model.spline -> pdeanim.model; top-level modules (pdeanim.clip) stand for themselves."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def test_subpackages_import_one_way():
+    """Between subpackages (model, curves, fit, cyclic, gltf, sim, cli, ...) and top-level modules, imports
+    run one way: the graph of who imports whom has no cycle (e.g. curves may use the model, then the model
+    never uses curves)."""
+    graph = import_graph()
+    packages = nx.DiGraph()
+    packages.add_edges_from((_subpackage(a), _subpackage(b)) for a, b in graph.edges
+                            if _subpackage(a) != _subpackage(b))
+    cycles = sorted(sorted(c) for c in nx.simple_cycles(packages))
+    assert cycles == [], cycles
+    assert packages.has_edge("pdeanim.curves", "pdeanim.model")  # the floor uses the model's space basis
+    assert packages.has_edge("pdeanim.fit", "pdeanim.curves")
+    assert packages.has_edge("pdeanim.fit", "pdeanim.model")
+
+
+def test_no_module_is_imported_by_name():
+    """Every import is a plain import statement the graph above sees: no importlib.import_module, __import__
+    or "module:callable" strings (a registry of names hides its edges from the cycle tests)."""
+    dynamic = []
+    for path in PKG.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                f = node.func
+                name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+                if name in ("import_module", "__import__", "spec_from_file_location"):
+                    dynamic.append(f"{path.relative_to(PKG.parent)}:{node.lineno}")
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                if re.fullmatch(r"pdeanim(\.\w+)+:\w+", node.value):
+                    dynamic.append(f"{path.relative_to(PKG.parent)}:{node.lineno} {node.value!r}")
+    assert dynamic == [], dynamic

@@ -99,7 +99,7 @@ def test_bounded_curves_end_to_end_and_bad_args(bent_spot):
 
 @pytest.mark.slow
 def test_refine_with_model_fit_errors(morph):
-    from pdeanim.curves.bounded import fit_errors
+    from pdeanim.fit.pipeline import fit_errors
 
     x, f = morph
     poses = make_poses(x[::18], f)  # 12 frames keep the fits quick

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from pdeanim import fit as fitclip
 from pdeanim.cli import main
 from pdeanim.clip import Clip, load_clip, write_clip_file
 from pdeanim.cyclic import job
@@ -16,7 +17,6 @@ from pdeanim.gltf.compact import PackOptions
 from pdeanim.gltf.read import read_animated_poses
 from pdeanim.gltf.validate import assert_clean, validate_many
 from pdeanim.gltf.write import animation_glb
-from pdeanim.model import fitclip
 from pdeanim.pictures import fit_error_pictures
 
 
@@ -120,7 +120,6 @@ def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
     materials, texture and node names; options are checked (exit 2 with a message)."""
     from pdeanim.gltf.glb import unpack_glb
     from pdeanim.gltf.read import read_static_mesh
-    from pdeanim.model import fitclip
     from pdeanim.poses import make_poses
 
     from .builders import textured_scene_glb

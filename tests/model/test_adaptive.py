@@ -6,9 +6,9 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+from pdeanim.fit import FitOptions, FitTolerances, fit_poses
 from pdeanim.model import adaptive
 from pdeanim.model.adaptive import GROWTH_MAX, GROWTH_MIN, Targets, _split_count
-from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.poses import make_poses
 
 
@@ -42,7 +42,8 @@ def test_search_doubles_far_from_the_target_and_skips_merging_many_segments(monk
     merges = []
     real = adaptive._merge
     monkeypatch.setattr(adaptive, "_merge", lambda *a, **k: merges.append(1) or real(*a, **k))
-    r = fit_poses(_travelling_wave(), FitOptions(target_rel_rms=1e-3, format_version=1)).report
+    r = fit_poses(_travelling_wave(), FitOptions(target_rel_rms=1e-3, time_model="pde"),
+                  tolerances=FitTolerances(dense_from=np.inf)).report  # the search alone
     counts = [h["segments"] for h in r["adaptive_history"] if not h.get("merged")]
     assert r["target_met"] is True and counts[-1] > adaptive.MERGE_MAX_SEGMENTS
     steps = np.diff(counts)

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pdeanim.errors import ParameterError
+from pdeanim.fit import FitOptions
+from pdeanim.fit.heldout import heldout_comparison, kept_frames, linear_interpolation
 from pdeanim.model.baselines import bernstein_basis, bspline_basis, fit_bezier, fit_bspline
-from pdeanim.model.fitclip import FitOptions
-from pdeanim.model.heldout import heldout_comparison, kept_frames, linear_interpolation
 from pdeanim.model.metrics import error_summary, kg_error, paper_errors
 
 
@@ -64,8 +64,8 @@ def test_heldout_comparison_runs_on_real_sequence(morph_small, short_curves):
     r = heldout_comparison(morph_small, 3, FitOptions(target_rel_rms=3e-3), curves=short_curves)
     assert r["heldout_frames"] > 0 and r["kept_frames"] + r["heldout_frames"] == morph_small.n_frames
     assert np.isfinite(r["pde"]["rms"]) and np.isfinite(r["linear"]["rms"])
-    # achieved: PDE 1.5e-3 at the held-out frames (fit target 3e-3; the natural-spline tangents of format
-    # version 5 and the soft max bound on the rounding); linear interpolation of all 25 kept frames 1.9e-3,
+    # achieved: PDE 1.5e-3 at the held-out frames (fit target 3e-3; the natural-spline time model and the
+    # soft max bound on the rounding); linear interpolation of all 25 kept frames 1.9e-3,
     # of the same bytes (15 frames) 5.5e-3
     assert r["pde"]["rel_rms"] < 4e-3
     assert r["pde"]["rel_rms"] < r["linear_equal_bytes"]["rel_rms"]

@@ -53,8 +53,9 @@ def test_fit_meets_target_and_prints_summary(fit_run, poses_file):
                                f"coefficients {len(parts.coefficients)}, "
                                f"raw float32 {frames * vertices * 12} ")
     version = container.unpack(parts.coefficients)[0]["format_version"]
-    assert f"), format version {version}" in lines[3]
-    assert lines[4].startswith("time ") and lines[4].endswith(f" s -> {clip_file}")
+    assert f"), format {version}" in lines[3]
+    assert lines[4].startswith("time models (curve coordinates): natural spline ")
+    assert lines[5].startswith("time ") and lines[5].endswith(f" s -> {clip_file}")
 
 
 def test_frame_single_list_and_all(clip_file, poses_file, tmp_path):
@@ -113,7 +114,7 @@ def test_missed_target_exits_3_after_writing_the_best_clip(poses_file, tmp_path,
 
 def test_segment_cap_defaults_to_the_library_default(capsys):
     """Without --max-segments the CLI leaves FitOptions' cap alone, and its help names that default."""
-    from pdeanim.model.fitclip import FitOptions
+    from pdeanim.fit import FitOptions
     from pdeanim.model.segments import DEFAULT_MAX_SEGMENTS
 
     with pytest.raises(SystemExit):

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.interpolate import CubicSpline
 
 from pdeanim.clip import load_clip
+from pdeanim.fit import FitOptions, fit_poses
 from pdeanim.model import families as fam
 from pdeanim.model.clipmodel import _SegmentTime
-from pdeanim.model.fitclip import FitOptions, fit_poses
 from pdeanim.model.fitcore import (
     SpaceStage,
     floor_distances,
@@ -158,7 +159,7 @@ def small_clip(morph_small, short_curves):
 
 def _plain_frame(clip, t: float) -> np.ndarray:
     """A frame from the definitions: per value, time_pair of its item times (space basis . knots), or the
-    cubic of items with time tangents."""
+    natural spline of the knot values for items on it (scipy's)."""
     coef, topo = clip.coef, clip.topo
     tw = min(max(t, 0.0), 1.0) if not clip.looping else t - np.floor(t)
     st = np.asarray(coef.segment_t, np.float64)
@@ -175,18 +176,10 @@ def _plain_frame(clip, t: float) -> np.ndarray:
     P = [(B * coef.knots[j][cid].astype(np.float64)).sum(-1) for j in range(len(st))]
     phi = fam.time_pair(np.full(mu.shape, tau), mu)
     value = phi[..., 0] * P[s] + phi[..., 1] * P[s + 1]
-    if coef.tangents is not None:  # docs/format.md §3.10: the Hermite form with central-difference tangents
-        S = len(st) - 1
-
-        def tangent(j: int) -> np.ndarray:
-            lo, hi = max(j - 1, 0), min(j + 1, S)
-            return (P[hi] - P[lo]) / (st[hi] - st[lo]) if st[hi] > st[lo] else 0.0 * P[j]
-
-        h00, h01 = (1 + 2 * tau) * (1 - tau) ** 2, tau**2 * (3 - 2 * tau)
-        h10, h11 = tau * (1 - tau) ** 2, tau**2 * (tau - 1)
-        cubic = h00 * P[s] + h01 * P[s + 1] + (st[s + 1] - st[s]) * (h10 * tangent(s) + h11 * tangent(s + 1))
-        on = (coef.tangents[cid] > 0) & (np.abs(mu) <= 1e-12)
-        value = np.where(on, cubic, value)
+    on = coef.spline_items()[cid]
+    if on.any():  # docs/format.md §3.5: the natural cubic spline through the knot values
+        spline = CubicSpline(st, np.stack(P), bc_type="natural")
+        value = np.where(on, spline(st[s] + tau * (st[s + 1] - st[s])), value)
     return topo.rest.astype(np.float64) + value
 
 

@@ -12,8 +12,7 @@ from pdeanim import container
 from pdeanim.clip import load_clip, read_clip_file, write_clip_file
 from pdeanim.curveset import CurveSet
 from pdeanim.errors import ClipFormatError, ParameterError, PosesInputError
-from pdeanim.model import fitclip
-from pdeanim.model.fitclip import FitOptions, curve_errors, fit_poses
+from pdeanim.fit import FitOptions, FitTolerances, curve_errors, fit_poses
 from pdeanim.model.metrics import error_summary
 from pdeanim.poses import make_poses
 
@@ -46,15 +45,10 @@ def test_segments_join_exactly_c0(fixed_fit):
 
 
 def test_stored_clip_stays_within_the_quantisation_bound(fixed_fit):
-    """Version 2 rounds rest and knots by at most DEFAULT_TOLERANCE of the diagonal per coordinate each:
-    the stored clip is within 2 sqrt(3) of that (distance) of the float64 model."""
+    """A fit without targets rounds rest and knots by at most DEFAULT_TOLERANCE of the diagonal per
+    coordinate each: the stored clip is within 2 sqrt(3) of that (distance) of the float64 model."""
     r = fixed_fit.report
     assert r["float32_vs_float64_max"] < 2 * np.sqrt(3) * 1e-5 * r["diagonal"]
-
-
-def test_float32_wire_error_is_tiny_in_version_1(morph_small, short_curves):
-    r = fit_poses(morph_small, FitOptions(segments=6, format_version=1), curves=short_curves).report
-    assert r["float32_vs_float64_max"] < 1e-5 * r["diagonal"]
 
 
 @pytest.mark.parametrize("target", [1e-2, 3e-3])
@@ -66,13 +60,14 @@ def test_relative_rms_target_is_met(morph_small, short_curves, target):
 
 
 def test_max_target_is_met_and_tighter_needs_more_segments(morph_small, short_curves):
-    for version in (1, 3):  # version 1: the error-driven search alone (no dense fit is tried)
-        loose = fit_poses(morph_small, FitOptions(target_rel_max=0.05, format_version=version),
-                          curves=short_curves).report
-        tight = fit_poses(morph_small, FitOptions(target_rel_max=0.01, format_version=version),
-                          curves=short_curves).report
+    for search_only in (True, False):  # True: the error-driven search alone (no dense fit is tried)
+        tol = FitTolerances(dense_from=np.inf) if search_only else None
+        loose = fit_poses(morph_small, FitOptions(target_rel_max=0.05), curves=short_curves,
+                          tolerances=tol).report
+        tight = fit_poses(morph_small, FitOptions(target_rel_max=0.01), curves=short_curves,
+                          tolerances=tol).report
         assert loose["rel_max"] <= 0.05 and tight["rel_max"] <= 0.01
-        if version == 1:
+        if search_only:
             assert tight["segments"] > loose["segments"]
 
 
@@ -257,15 +252,16 @@ def test_topology_whose_curves_miss_a_vertex_is_an_error(fixed_fit):
 
 
 def test_rounding_growth_aims_at_the_target():
-    """The knots' budget grows by the factor that would bring the stored MSE to QUANT_AIM of the target
+    """The knots' budget grows by the factor that would bring the stored MSE to quant_aim of the target
     (the rounding's share of the MSE taken as proportional to the budget squared), within [1.2, 4]."""
-    from pdeanim.model.fitclip import QUANT_AIM, _growth
+    from pdeanim.fit.ratecontrol import growth
 
-    g = _growth(stored=0.5**2, exact=0.3**2, target=1.0)
-    assert g == pytest.approx(np.sqrt(((QUANT_AIM**2) - 0.09) / (0.25 - 0.09)))
-    assert 0.09 + (0.25 - 0.09) * g**2 == pytest.approx(QUANT_AIM**2)
-    assert _growth(stored=0.09, exact=0.09, target=1.0) == 4.0  # rounding added nothing measurable
-    assert _growth(stored=0.9, exact=0.1, target=1.0) == 1.2  # already close: the smallest step
+    tol = FitTolerances()
+    g = growth(stored=0.5**2, exact=0.3**2, target=1.0, tol=tol)
+    assert g == pytest.approx(np.sqrt(((tol.quant_aim**2) - 0.09) / (0.25 - 0.09)))
+    assert 0.09 + (0.25 - 0.09) * g**2 == pytest.approx(tol.quant_aim**2)
+    assert growth(stored=0.09, exact=0.09, target=1.0, tol=tol) == 4.0  # rounding added nothing measurable
+    assert growth(stored=0.9, exact=0.1, target=1.0, tol=tol) == 1.2  # already close: the smallest step
 
 
 @pytest.fixture(scope="module")
@@ -281,30 +277,31 @@ def moving_bump():
     return make_poses(X, np.asarray(mesh.faces), np.arange(F) / 24.0)
 
 
-def test_curves_whose_floor_exceeds_the_per_vertex_bound_are_split(moving_bump, monkeypatch):
-    """With an RMS target, automatic curves whose floor leaves more than SPLIT_RMS_RATIO x the target at a
-    vertex are halved until it does not (the max error drops); a max target splits to FLOOR_MAX_SHARE of it
+def test_curves_whose_floor_exceeds_the_per_vertex_bound_are_split(moving_bump):
+    """With an RMS target, automatic curves whose floor leaves more than split_rms_ratio x the target at a
+    vertex are halved until it does not (the max error drops); a max target splits to floor_max_share of it
     instead of shortening every curve."""
-    target = 3e-3
+    target, tol = 3e-3, FitTolerances()
     split = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
     assert split["curve_splits"] > 0 and split["target_met"]
-    assert split["floor_max"] <= fitclip.SPLIT_RMS_RATIO * target * split["diagonal"]
-    monkeypatch.setattr(fitclip, "SPLIT_RMS_RATIO", None)
-    whole = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
+    assert split["floor_max"] <= tol.split_rms_ratio * target * split["diagonal"]
+    assert split["tolerances"] == tol.to_dict()  # the report echoes the constants it ran with
+    whole = fit_poses(moving_bump, FitOptions(target_rel_rms=target),
+                      tolerances=FitTolerances(split_rms_ratio=None)).report
     assert whole["curve_splits"] == 0 and whole["curves"] < split["curves"]
     assert whole["floor_max"] > split["floor_max"] and whole["rel_max"] > split["rel_max"]
     by_max = fit_poses(moving_bump, FitOptions(target_rel_max=0.01)).report
     assert by_max["curve_points"] == 10 and by_max["curve_splits"] > 0 and by_max["target_met"]
-    assert by_max["floor_max"] <= fitclip.FLOOR_MAX_SHARE * 0.01 * by_max["diagonal"]
+    assert by_max["floor_max"] <= tol.floor_max_share * 0.01 * by_max["diagonal"]
 
 
-def test_rms_target_keeps_the_rounding_within_the_soft_max_bound(moving_bump, monkeypatch):
+def test_rms_target_keeps_the_rounding_within_the_soft_max_bound(moving_bump):
     """With an RMS target alone, the knots' rounding grows only while no vertex is off by more than
-    SOFT_MAX_RATIO x the target (the first rounding being within it); without the bound it grows further."""
-    target, ratio = 3e-3, fitclip.SOFT_MAX_RATIO
+    soft_max_ratio x the target (the first rounding being within it); without the bound it grows further."""
+    target, ratio = 3e-3, FitTolerances().soft_max_ratio
     soft = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
     assert soft["target_met"] and soft["rel_max"] <= ratio * target
-    monkeypatch.setattr(fitclip, "SOFT_MAX_RATIO", None)
-    free = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
+    free = fit_poses(moving_bump, FitOptions(target_rel_rms=target),
+                     tolerances=FitTolerances(soft_max_ratio=None)).report
     assert free["target_met"] and free["rel_max"] > ratio * target
     assert free["sizes"]["coefficients_bytes"] < soft["sizes"]["coefficients_bytes"]

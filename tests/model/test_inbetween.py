@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from pdeanim.model import fitclip, timefit
-from pdeanim.model.fitclip import FitOptions
-from pdeanim.model.heldout import heldout_comparison
+from pdeanim.fit import FitOptions, FitTolerances
+from pdeanim.fit.heldout import heldout_comparison
+from pdeanim.model import timefit
 from pdeanim.model.simplecurves import simple_curves
 from pdeanim.poses import Poses, make_poses
 
@@ -39,7 +39,7 @@ def test_heldout_frames_no_worse_than_linear_interpolation(kind, target):
     # measured up to 2.5% here): 6% slack, far below the 2x excess the uncapped fit showed
     assert res["pde"]["rel_rms"] <= res["linear"]["rel_rms"] * 1.06, res
     # measured <= 1.38x (1.06x before rounding): the stored clip's rounding may move a vertex by up to 4x its
-    # RMS budget (pdeanim.model.fitclip.KNOT_CAP); still well apart from the uncapped fit's 2x pull
+    # RMS budget (FitTolerances.knot_cap); still well apart from the uncapped fit's 2x pull
     assert res["pde"]["rel_max"] <= res["linear"]["rel_max"] * 1.6, res
 
 
@@ -47,8 +47,8 @@ def test_uncapped_time_constants_overshoot_between_frames(monkeypatch):
     """The same wave without the cap (as before): 2x worse than linear at the left-out frames, so the test
     above does detect the pull toward the rest pose."""
     monkeypatch.setattr(timefit, "MU_CAP_PER_INTERVAL", np.inf)
-    monkeypatch.setattr(fitclip, "DENSE_FROM", np.inf)  # the error-driven fit alone (a dense one hides it)
     poses = synthetic("wave")
-    res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=3e-3, best_effort=True),
-                             curves=simple_curves(poses.vertices[0], max_points=4))
+    res = heldout_comparison(poses, 4, FitOptions(target_rel_rms=3e-3, best_effort=True, time_model="pde"),
+                             curves=simple_curves(poses.vertices[0], max_points=4),
+                             tolerances=FitTolerances(dense_from=np.inf))  # the error-driven fit alone
     assert res["pde"]["rel_rms"] > 1.3 * res["linear"]["rel_rms"], res  # measured 2.1x

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pdeanim.clip import load_clip
-from pdeanim.model.fitclip import FitOptions, fit_poses
+from pdeanim.fit import FitOptions, fit_poses
 from pdeanim.model.metrics import error_summary
 from pdeanim.model.rigid import continuous_rotvec, kabsch, rodrigues
 from pdeanim.model.simplecurves import simple_curves

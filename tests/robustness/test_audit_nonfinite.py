@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pdeanim.container import pack, unpack
-from pdeanim.model.fitclip import FitOptions, fit_poses
+from pdeanim.fit import FitOptions, fit_poses
 from pdeanim.model.metrics import error_summary
 from pdeanim.poses import make_poses
 

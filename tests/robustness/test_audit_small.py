@@ -22,7 +22,7 @@ def cyclic_clip(data_dir):
 
 @pytest.fixture(scope="module")
 def looping_fit_clip():
-    from pdeanim.model.fitclip import FitOptions, fit_poses
+    from pdeanim.fit import FitOptions, fit_poses
     from pdeanim.poses import make_poses
 
     base = np.random.default_rng(1).normal(size=(30, 3))

@@ -112,7 +112,7 @@ def test_bad_inputs_exit_2_with_a_message(tmp_path, capsys, ico) -> None:
 def test_unwritable_out_exits_2_before_any_work(tmp_path, capsys, ico, monkeypatch) -> None:
     """A missing directory, a directory, and a path below a file: exit 2 with a message, checked before the
     fit (the fit is made to fail the test if it runs) and leaving no file behind."""
-    import pdeanim.model.fitclip as fitclip
+    import pdeanim.fit as fit
 
     poses = sphere_poses(tmp_path / "p.npz", 3, np.asarray(ico.vertices), np.asarray(ico.faces))
     (tmp_path / "file").write_bytes(b"x")
@@ -120,7 +120,7 @@ def test_unwritable_out_exits_2_before_any_work(tmp_path, capsys, ico, monkeypat
     def no_fit(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         raise AssertionError("the fit ran although --out cannot be written")
 
-    monkeypatch.setattr(fitclip, "fit_poses", no_fit)
+    monkeypatch.setattr(fit, "fit_poses", no_fit)
     for out in (tmp_path / "missing" / "c.clip", tmp_path, tmp_path / "file" / "c.clip"):
         rc, err = cli(capsys, "fit", poses, "--out", out)
         assert rc == 2 and f"--out {out}" in err, err

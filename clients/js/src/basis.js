@@ -138,34 +138,6 @@ export function timePair(tau, mu, out, o = 0) {
   return out;
 }
 
-/**
- * The weights (float64) of the Catmull-Rom cubic of format version 4 (docs/format.md §3.10) in segment s of
- * boundaries segmentT (S+1,) at local time tau, on the knots lo(s) = max(s - 1, 0), s, s + 1 and
- * hi(s + 1) = min(s + 2, S), in that order, into out[o..o+3]. Not folded: where lo(s) = s or
- * hi(s + 1) = s + 1 (the ends) the same knot appears twice, with both weights (the reference evaluator's
- * pdeanim.model.tangents.hermite_weights does the same).
- */
-export function hermiteWeights(segmentT, s, tau, out, o = 0) {
-  const S = segmentT.length - 1;
-  const t0 = segmentT[s];
-  const t1 = segmentT[s + 1];
-  const delta = t1 - t0;
-  const span0 = t1 - segmentT[Math.max(s - 1, 0)]; // t_hi(s) - t_lo(s)
-  const span1 = segmentT[Math.min(s + 2, S)] - t0; // t_hi(s+1) - t_lo(s+1)
-  const a = span0 > 0 ? delta / span0 : 0;
-  const b = span1 > 0 ? delta / span1 : 0;
-  const omt = 1 - tau;
-  const h00 = (1 + 2 * tau) * omt * omt;
-  const h01 = tau * tau * (3 - 2 * tau);
-  const h10 = tau * omt * omt;
-  const h11 = tau * tau * (tau - 1);
-  out[o] = -a * h10;
-  out[o + 1] = h00 - b * h11;
-  out[o + 2] = h01 + a * h10;
-  out[o + 3] = b * h11;
-  return out;
-}
-
 /** Time pair of the rigid tracks (docs/format.md §3.6): like timePair, any mu < 0 is trig. */
 export function rigidTimePair(tau, mu, out, o = 0) {
   if (mu < 0) {

@@ -1,6 +1,6 @@
 // Clips: the two parts (topology + coefficients), the CLIP file, fetching, and the evaluator factory.
 
-import { ClipFormatError, decodeContainer } from './container.js';
+import { ClipFormatError, checkFormatVersion, decodeContainer } from './container.js';
 import { CyclicEvaluator, decodeCyclic } from './cyclic.js';
 import { DynamicEvaluator, decodeDynamic } from './dynamic.js';
 
@@ -51,6 +51,7 @@ export function splitClipFile(data) {
   ) {
     throw new ClipFormatError('not a pdeanim CLIP file');
   }
+  checkFormatVersion(header, 'clip-file');
   return { topology: arrays.topology.data, coefficients: arrays.coefficients.data, header };
 }
 

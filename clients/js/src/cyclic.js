@@ -1,6 +1,6 @@
 // Decode and evaluate "cyclic-spine" clips (docs/format.md §4) on the CPU.
 
-import { ClipFormatError } from './container.js';
+import { ClipFormatError, checkFormatVersion } from './container.js';
 
 const WAVES = ['standing', 'travelling'];
 const RADIAL = ['rotate', 'translate'];
@@ -48,17 +48,8 @@ function swimParams(d) {
 
 /** Validate and decode the topology and coefficients containers of a cyclic-spine clip. */
 export function decodeCyclic(topo, coef) {
-  for (const [part, h] of [
-    ['topology', topo.header],
-    ['coefficients', coef.header],
-  ]) {
-    if (h.format_version !== undefined && h.format_version !== 1) {
-      throw new ClipFormatError(
-        `unsupported cyclic-spine ${part} version ${JSON.stringify(h.format_version)}` +
-          ' (this build reads 1)',
-      );
-    }
-  }
+  checkFormatVersion(topo.header, 'topology');
+  checkFormatVersion(coef.header, 'coefficients');
   const ta = topo.arrays;
   const ca = coef.arrays;
   const missing = ['faces', 'rest', 'vertex_patch', 'vertex_uv'].filter((n) => !ta[n]);

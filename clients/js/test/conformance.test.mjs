@@ -4,7 +4,8 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import {
-  DYNAMIC_FORMAT_VERSIONS,
+  FORMAT_VERSION,
+  TIME_SPLINE,
   createEvaluator,
   decodeClip,
   decodeClipFile,
@@ -15,7 +16,7 @@ import { FIXTURES, expected, manifest, readBytes } from './helpers.mjs';
 
 const man = manifest();
 
-test('the fixture set covers every kind, motion, parameterisation and looping mode', () => {
+test('the fixture set covers every kind, motion, parameterisation, looping mode and feature', () => {
   const cases = man.cases;
   assert.ok(cases.length >= 10);
   const kinds = new Set(cases.map((c) => c.kind));
@@ -24,53 +25,35 @@ test('the fixture set covers every kind, motion, parameterisation and looping mo
   assert.deepEqual([...new Set(dyn.map((c) => c.motion))].sort(), ['absolute', 'displacement', 'rigid']);
   assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
   assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
-  // dynamic-pde format versions 1 (raw floats, container 1), 2 (integer codes, zstd in container 2), 3
-  // (coefficients only: knots on a shared time basis; its topology part is a version 2 one, container 2), 4
-  // (3 or 2 plus Catmull-Rom time tangents, container 2) and, once the Python side writes them, 5 (natural-
-  // spline time tangents) or any later version this build reads
-  const versions = [...new Set(dyn.map((c) => c.format_version))].sort();
-  assert.deepEqual(versions.filter((v) => v <= 3), [1, 2, 3]);
-  assert.ok(versions.every((v) => DYNAMIC_FORMAT_VERSIONS.includes(v)), `${versions}`);
-  for (const c of dyn) {
-    const container = Math.min(c.format_version, 2);
-    assert.deepEqual(c.container_versions, [container, container], c.name);
-  }
-  const v3 = dyn.filter((c) => c.format_version === 3);
-  assert.ok(v3.some((c) => c.looping) && v3.some((c) => !c.looping));
+  assert.ok(cases.every((c) => c.format_version === FORMAT_VERSION), 'every fixture is format 1.0');
+  // every optional feature of the layout, alone and together, each in looping and open clips where the
+  // writer allows it: a fixture the tests below rely on must exist (a vanished file fails here)
+  const basis = dyn.filter((c) => c.knot_rank > 0);
+  const spline = dyn.filter((c) => c.spline_items > 0);
+  assert.ok(basis.some((c) => c.looping) && basis.some((c) => !c.looping), 'knot basis fixtures');
+  assert.ok(spline.some((c) => c.motion === 'rigid') && spline.some((c) => c.looping), 'spline fixtures');
+  assert.ok(dyn.some((c) => c.knot_rank > 0 && c.spline_items > 0), 'basis and spline together');
+  assert.ok(dyn.some((c) => c.knot_rank === 0 && c.spline_items === 0), 'neither');
 });
 
-test('version 3 fixtures: a version 2 topology part, knots on a basis of rank below S + 1 plus residuals', () => {
-  for (const c of man.cases.filter((x) => x.format_version === 3)) {
+test('fixtures decode to their manifest features: knot rank below S + 1, time models 0/1', () => {
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde')) {
     const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
     const clip = decodeClip(topology, coefficients);
-    assert.equal(clip.topologyHeader.format_version, 2, c.name);
+    assert.equal(clip.topologyHeader.format_version, FORMAT_VERSION, c.name);
     const r = clip.header.knot_rank;
-    assert.ok(Number.isInteger(r) && r >= 1 && r < clip.nSegments + 1, c.name);
-    // the residual tracks are coded as version 2 knots: differences of order 1 or 2
+    assert.equal(r, c.knot_rank, c.name);
+    assert.ok(Number.isInteger(r) && r >= 0 && r < clip.nSegments + 1, c.name);
     assert.ok([1, 2].includes(clip.header.knot_differences), c.name);
-    if (c.looping) {
+    if (r > 0 && c.looping) {
       // a looping clip's basis has equal first and last columns: its first and last knots are equal
       const n = clip.nCurves * 12;
       assert.deepEqual(clip.knots.subarray(0, n), clip.knots.subarray(clip.nSegments * n), c.name);
     }
-  }
-});
-
-test('version 4 and 5 fixtures: a version 2 topology part, knot_rank 0..S+1, tangents 0/1 on some item', () => {
-  for (const c of man.cases.filter((x) => x.format_version === 4 || x.format_version === 5)) {
-    const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
-    const clip = decodeClip(topology, coefficients);
-    assert.equal(clip.topologyHeader.format_version, 2, c.name);
-    const r = clip.header.knot_rank;
-    assert.ok(Number.isInteger(r) && r >= 0 && r <= clip.nSegments + 1, c.name);
-    assert.ok([1, 2].includes(clip.header.knot_differences), c.name);
-    assert.equal(clip.tangents.length, clip.nCurves * 3, c.name);
-    // the writer uses version 4 or 5 only where some item has tangents
-    assert.ok(clip.tangents.some((x) => x === 1), c.name);
-    assert.ok(clip.tangents.every((x) => x === 0 || x === 1), c.name);
-    assert.equal(clip.tangentSpline, c.format_version === 5 ? 'natural' : 'catmull-rom', c.name);
-    if (c.format_version === 5) {
-      // natural-spline tangents: strictly increasing segment boundaries
+    const splineItems = clip.timeModel ? clip.timeModel.reduce((a, x) => a + (x === TIME_SPLINE), 0) : 0;
+    assert.equal(splineItems, c.spline_items, c.name);
+    if (splineItems) {
+      assert.ok(clip.timeModel.every((x) => x === 0 || x === 1), c.name);
       assert.ok(clip.segmentT.every((x, j) => j === 0 || x > clip.segmentT[j - 1]), c.name);
     }
   }

@@ -17,14 +17,9 @@ export interface GpuLayout {
   mode: 'fields' | 'coefficients' | 'cyclic';
   rigid: boolean;
   /**
-   * Whether some item has time tangents (format version 4 or 5): the curve table then holds four weight
-   * texels per curve instead of the pair; in version 4 (Catmull-Rom) on the knots lo(s), s, s+1, hi(s+1), and
-   * the shader reads the pdeSegments uniform (nSegments).
-   */
-  tangents: boolean;
-  /**
-   * Whether the tangents are the natural spline's (format version 5): the four weights are on T_s, P_s,
-   * P_s+1, T_s+1 and textures.tangent holds the tangents T (the pdeTangentTex uniform).
+   * Whether some item is on the natural spline (docs/format.md §3.5): the curve table then holds four weight
+   * texels per curve instead of the pair, on T_s, P_s, P_s+1, T_s+1, and textures.tangent holds the tangents
+   * T (the pdeTangentTex uniform).
    */
   spline: boolean;
   nCurves: number;
@@ -34,17 +29,17 @@ export interface GpuLayout {
   /** Texture row length in texels (a power of two). */
   width: number;
   /**
-   * Texels per curve in the per-frame curve table: the weights (2: phi0, phi1; 4 with tangents), then 3
+   * Texels per curve in the per-frame curve table: the weights (2: phi0, phi1; 4 with spline items), then 3
    * rows of the rigid motion (so 2, 5, 4 or 7).
    */
   curveTexels?: number;
-  /** Weight texels per curve at the start of its table entry (2, or 4 with tangents). */
+  /** Weight texels per curve at the start of its table entry (2, or 4 with spline items). */
   weightTexels?: number;
   textures: {
     vertex: FloatTexture;
     field?: FloatTexture;
     knot?: FloatTexture;
-    /** Natural-spline tangents of every knot (format version 5), in the layout of field or knot. */
+    /** Natural-spline tangents of every knot, in the layout of field or knot. */
     tangent?: FloatTexture;
     /** Per-frame table rewritten by timeUniforms(). */
     curve?: FloatTexture;

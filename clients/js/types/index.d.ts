@@ -4,21 +4,17 @@ export type BytesLike = ArrayBuffer | ArrayBufferView;
 export type TypedArray =
   Float32Array | Float64Array | Int32Array | Uint32Array | Int16Array | Uint16Array | Uint8Array | Int8Array;
 
-/** The newest container version read; CONTAINER_VERSIONS lists all (2 adds zstd-encoded arrays). */
-export declare const CONTAINER_VERSION: 2;
-export declare const CONTAINER_VERSIONS: readonly [1, 2];
-/** Array encodings of container version 2 (decoded with the fzstd package). */
+/** The container version read (the uint32 at byte 8). */
+export declare const CONTAINER_VERSION: 1;
+/** Array encodings a container may use (decoded with the fzstd package). */
 export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
-/**
- * The newest dynamic-pde format version read (of a coefficients part); DYNAMIC_FORMAT_VERSIONS lists all
- * (2: integer codes; 3: knots on a shared low-rank time basis plus residual tracks, coefficients part only;
- * 4: version 3, or 2 with knot_rank 0, plus Catmull-Rom time tangents per item, coefficients part only;
- * 5: as 4 with natural-spline time tangents).
- */
-export declare const DYNAMIC_FORMAT_VERSION: 5;
-export declare const DYNAMIC_FORMAT_VERSIONS: readonly [1, 2, 3, 4, 5];
-/** The dynamic-pde format versions read in a topology part (versions 3 to 5 change coefficients parts only). */
-export declare const DYNAMIC_TOPOLOGY_VERSIONS: readonly [1, 2];
+/** The clip format written and read (docs/format.md): readers accept any "1.<minor>". */
+export declare const FORMAT_VERSION: '1.0';
+/** Throws ClipFormatError unless header.format_version is "1.<minor>". */
+export declare function checkFormatVersion(header: { format_version?: unknown }, part: string): void;
+/** Time models of an item (`time_model`): the paper's time pairs (0), the natural cubic spline (1). */
+export declare const TIME_PDE: 0;
+export declare const TIME_SPLINE: 1;
 
 /** Thrown for anything that is not a valid pdeanim container, part, clip or CLIP file. */
 export declare class ClipFormatError extends Error {
@@ -92,18 +88,13 @@ export interface DynamicClip extends ClipBase {
   family: Uint8Array;
   m: Float32Array;
   D: Float32Array;
-  /** Knots (S+1, C, 3, 4) as float32, decoded (format versions 2 to 5 store them as integer codes). */
+  /** Knots (S+1, C, 3, 4) as float32, decoded from their integer codes. */
   knots: Float32Array;
   /**
-   * Time tangents (C, 3) of format versions 4 and 5: 1 where the item's linear segments use the cubic
-   * through its knots (docs/format.md §3.10, §3.11), else 0; null for versions 1 to 3 (none).
+   * Time models (C, 3): 1 where the item is on the natural cubic spline through its knots in every segment
+   * (docs/format.md §3.5), else 0 (the paper's time pairs); null when no item is on the spline.
    */
-  tangents: Uint8Array | null;
-  /**
-   * Which tangents the cubic uses: 'catmull-rom' (version 4, C1), 'natural' (version 5: the natural cubic
-   * spline's, C2), null for versions 1 to 3.
-   */
-  tangentSpline: 'catmull-rom' | 'natural' | null;
+  timeModel: Uint8Array | null;
   rigid: RigidTracks | null;
 }
 
@@ -211,17 +202,6 @@ export declare function spaceBasis(
 export declare function timePair(
   tau: number,
   mu: number,
-  out: Float64Array | number[],
-  o?: number,
-): typeof out;
-/**
- * The float64 weights of the version 4 cubic (docs/format.md §3.10) in segment s at local time tau, on the
- * knots lo(s) = max(s - 1, 0), s, s + 1, hi(s + 1) = min(s + 2, S), into out[o..o+3] (not folded at the ends).
- */
-export declare function hermiteWeights(
-  segmentT: ArrayLike<number>,
-  s: number,
-  tau: number,
   out: Float64Array | number[],
   o?: number,
 ): typeof out;

@@ -1,15 +1,29 @@
 // Decode the pdeanim binary container: magic, version, JSON header, little-endian arrays (docs/format.md §1);
-// version 2 arrays may be stored as one zstd frame ("zstd") or byte planes in one zstd frame ("shuffle-zstd").
+// an array may be stored as one zstd frame ("zstd") or byte planes in one zstd frame ("shuffle-zstd").
 
 import { Decompress } from 'fzstd';
 
 export const MAGIC = 'PDEANIM\0';
-/** The newest container version this build reads. */
-export const CONTAINER_VERSION = 2;
-/** Every container version this build reads (1: raw arrays; 2: arrays may carry an "encoding"). */
-export const CONTAINER_VERSIONS = Object.freeze([1, 2]);
-/** The array encodings of container version 2. */
+/** The container version this build reads (the uint32 at byte 8). */
+export const CONTAINER_VERSION = 1;
+/** The array encodings a container may use. */
 export const ENCODINGS = Object.freeze(['zstd', 'shuffle-zstd']);
+/** The clip format every part and CLIP file is written in (docs/format.md): readers accept any "1.<minor>". */
+export const FORMAT_VERSION = '1.0';
+
+/**
+ * Throw ClipFormatError unless a part's header.format_version is "1.<minor>" (minor versions only add header
+ * keys or arrays that readers ignore; another major version changes the layout).
+ */
+export function checkFormatVersion(header, part) {
+  const version = header?.format_version;
+  const ok = typeof version === 'string' && /^1\.[0-9]+$/.test(version);
+  if (!ok) {
+    throw new ClipFormatError(
+      `unsupported clip format version ${JSON.stringify(version ?? null)} in the ${part} part (this build reads 1.x)`,
+    );
+  }
+}
 
 /** Error thrown for anything that is not a valid pdeanim clip, part or container. */
 export class ClipFormatError extends Error {
@@ -151,9 +165,9 @@ export function decodeContainer(data) {
   }
   const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
   const version = view.getUint32(8, true);
-  if (!CONTAINER_VERSIONS.includes(version)) {
+  if (version !== CONTAINER_VERSION) {
     throw new ClipFormatError(
-      `unsupported container version ${version} (this build reads ${CONTAINER_VERSIONS.join(' and ')})`,
+      `unsupported container version ${version} (this build reads ${CONTAINER_VERSION})`,
     );
   }
   const hlen = view.getUint32(12, true);
@@ -188,9 +202,6 @@ export function decodeContainer(data) {
     const label = `array ${JSON.stringify(name)}`;
     const encoded = Object.hasOwn(spec, 'encoding');
     const encoding = spec.encoding;
-    if (encoded && version === 1) {
-      throw new ClipFormatError(`${label} has an encoding, which container version 1 does not allow`);
-    }
     if (encoded && !ENCODINGS.includes(encoding)) {
       throw new ClipFormatError(
         `${label} has an unknown encoding ${JSON.stringify(encoding)} (known: ${ENCODINGS.join(', ')})`,

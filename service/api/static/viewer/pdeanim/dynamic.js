@@ -1,22 +1,11 @@
 // Decode and evaluate "dynamic-pde" clips (docs/format.md §3) on the CPU.
 
-import { ClipFormatError } from './container.js';
-import { hermiteWeights, locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
+import { ClipFormatError, checkFormatVersion } from './container.js';
+import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
 
-/** The newest dynamic-pde format version this build reads (of a coefficients part). */
-export const DYNAMIC_FORMAT_VERSION = 5;
-/**
- * Every dynamic-pde format version this build reads in a coefficients part (1: float arrays; 2: integer
- * codes, docs/format.md §3.7; 3: knots on a shared low-rank time basis plus residual tracks, §3.9; 4: as 3
- * (or as 2 with knot_rank 0) plus Catmull-Rom time tangents per item, §3.10; 5: as 4 with natural-spline
- * time tangents, §3.11).
- */
-export const DYNAMIC_FORMAT_VERSIONS = Object.freeze([1, 2, 3, 4, 5]);
-/**
- * Every dynamic-pde format version this build reads in a topology part (versions 3 to 5 change the
- * coefficients part only).
- */
-export const DYNAMIC_TOPOLOGY_VERSIONS = Object.freeze([1, 2]);
+/** Time models of an item (`time_model`, docs/format.md §3.2): the paper's time pairs, the natural spline. */
+export const TIME_PDE = 0;
+export const TIME_SPLINE = 1;
 const MOTIONS = ['displacement', 'absolute', 'rigid'];
 
 function need(arrays, name, shape, part, dtype = null) {
@@ -37,20 +26,6 @@ function need(arrays, name, shape, part, dtype = null) {
     }
   }
   return a;
-}
-
-/** "1", "1 and 2", "1, 2 and 3". */
-function listed(versions) {
-  return versions.length < 2 ? versions.join('') : `${versions.slice(0, -1).join(', ')} and ${versions.at(-1)}`;
-}
-
-function checkVersion(header, part, versions) {
-  if (!versions.includes(header.format_version)) {
-    throw new ClipFormatError(
-      `unsupported dynamic-pde ${part} version ${JSON.stringify(header.format_version)}` +
-        ` (this build reads ${listed(versions)})`,
-    );
-  }
 }
 
 function nondecreasing(a) {
@@ -90,22 +65,12 @@ function checkFinite(a, what) {
   }
 }
 
-/** order, offsets, u (original vertex order), faces, rest of a version 1 topology part (stored as is). */
-function topologyV1(ta, V) {
-  const order = need(ta, 'order', [V], 'topology').data;
-  const offsets = need(ta, 'offsets', [null], 'topology').data;
-  const faces = need(ta, 'faces', [null, 3], 'topology').data;
-  const u = need(ta, 'u', [V, null], 'topology');
-  const rest = need(ta, 'rest', [V, 3], 'topology').data;
-  return { order, offsets, faces, u: u.data, uColumns: u.shape[1], rest };
-}
-
 /**
- * The same arrays from a version 2 topology part: curve lengths, zigzag differences of order, faces in
+ * The arrays of a topology part (docs/format.md §3.1): curve lengths, zigzag differences of order, faces in
  * curve-rank space, u and rest as integer codes in curve order (differences along the curves) times u_step /
  * rest_step.
  */
-function topologyV2(th, ta, V) {
+function topologyArrays(th, ta, V) {
   const lengths = need(ta, 'curve_lengths', [null], 'topology', U4).data;
   const C = lengths.length;
   const offsets = new Int32Array(C + 1);
@@ -122,7 +87,7 @@ function topologyV2(th, ta, V) {
   const order = new Int32Array(V);
   undoZigzag(zo, 1, (q) => (q >= 0 && q < V ? q : -1), order);
   if (order.includes(-1)) throw new ClipFormatError('topology order holds an index outside the vertices');
-  const faces = facesV2(need(ta, 'faces', [null, 3], 'topology', U4).data, order);
+  const faces = decodeFaces(need(ta, 'faces', [null, 3], 'topology', U4).data, order);
   if (faces.includes(-1)) throw new ClipFormatError('topology faces index outside the vertices');
   const uStep = positiveStep(th.u_step, 'u_step');
   const restStep = positiveStep(th.rest_step, 'rest_step');
@@ -144,11 +109,11 @@ function topologyV2(th, ta, V) {
 }
 
 /**
- * Triangles (T * 3 vertex indices, -1 for a rank outside the vertices) of version 2 face codes, which are in
+ * Triangles (T * 3 vertex indices, -1 for a rank outside the vertices) of face codes, which are in
  * curve-rank space (rank i = vertex order[i]): per row, column 0 is the zigzag difference of its first rank
  * from the previous row's, columns 1 and 2 the zigzag offsets of the other two ranks from the first.
  */
-function facesV2(codes, order) {
+function decodeFaces(codes, order) {
   const V = order.length;
   const faces = new Int32Array(codes.length);
   let first = 0;
@@ -173,10 +138,10 @@ function toVertexOrder(rows, cols, order) {
 }
 
 /**
- * Family codes and m >= 0 (S, C, 3) of a version 2 to 5 coefficients part: space kind per item, m signed
- * (< 0: trig with |m|, > 0: exp, 0: linear).
+ * Family codes and m >= 0 (S, C, 3) of a coefficients part: space kind per item, m signed (< 0: trig with
+ * |m| < pi, > 0: exp, 0: linear).
  */
-function familyV2(ca, S, C) {
+function familyOf(ca, S, C) {
   const kind = need(ca, 'space_kind', [C, 3], 'coefficients', ['<u1']).data;
   const signed = need(ca, 'm', [S, C, 3], 'coefficients', ['<f4']).data;
   const family = new Uint8Array(signed.length);
@@ -184,6 +149,7 @@ function familyV2(ca, S, C) {
   for (let i = 0; i < signed.length; i++) {
     const k = kind[i % (C * 3)];
     if (k > 1) throw new ClipFormatError('space kinds must be 0 or 1');
+    if (signed[i] <= -Math.PI) throw new ClipFormatError('trig time constants must be above -pi');
     family[i] = k + (signed[i] < 0 ? 2 : 0);
     m[i] = Math.abs(signed[i]);
   }
@@ -192,9 +158,8 @@ function familyV2(ca, S, C) {
 
 /**
  * knot_step (C, 3) and the integer codes (S+1, C, 3, 4) as float64 (exact integers) of the `knots` time
- * tracks of a version 2 to 5 coefficients part: tracks (C, 3, 4, S+1) of zigzag differences of order
- * knot_differences (1 or 2) along time (docs/format.md §3.7). Versions 3 to 5 store their residual tracks so
- * (§3.9, §3.10, §3.11).
+ * tracks: tracks (C, 3, 4, S+1) of zigzag differences of order knot_differences (1 or 2) along time
+ * (docs/format.md §3.3).
  */
 function knotTracks(ch, ca, S, C) {
   const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data;
@@ -223,101 +188,101 @@ function knotTracks(ch, ca, S, C) {
 }
 
 /**
- * Knots (S+1, C, 3, 4) float32 of a version 2 coefficients part (or a version 4 or 5 one of knot_rank 0):
- * float32(q * knot_step) of its tracks.
+ * Knots (S+1, C, 3, 4) float32 (docs/format.md §3.3-3.4). With knot_rank r = 0: float32(q * h) of the
+ * `knots` tracks (h = knot_step[c, w]). With r >= 1: integer weights q (r, C, 3, 4), stored as plain zigzag
+ * codes (not differences), on r shared time tracks knot_basis (r, S+1), plus residual integers p from the
+ * `knots` tracks: float32(sum over j = 0..r-1, in this order from 0, of (q[j, c, w, k] * h) *
+ * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double (no fused multiply-add:
+ * bit for bit the knots of every other reader).
  */
-function knotsV2(ch, ca, S, C) {
-  const { steps, codes } = knotTracks(ch, ca, S, C);
-  const knots = new Float32Array(codes.length);
-  for (let i = 0; i < codes.length; i++) knots[i] = Math.fround(codes[i] * steps[(i % (C * 12)) >> 2]);
-  checkFinite(knots, 'coefficients knots');
-  return knots;
-}
-
-/**
- * Knots (S+1, C, 3, 4) float32 of a version 3 coefficients part (docs/format.md §3.9): integer weights
- * q (r, C, 3, 4), stored as plain zigzag codes (not differences), on r shared time tracks knot_basis
- * (r, S+1), plus residual integers p (S+1, C, 3, 4) from the `knots` tracks, coded as in version 2. With
- * h = knot_step[c, w]: knots[s, c, w, k] = float32(sum over j = 0..r-1, in this order from 0, of
- * (q[j, c, w, k] * h) * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double
- * (no fused multiply-add: bit for bit the knots of every other reader).
- */
-function knotsV3(ch, ca, S, C, r = knotRank(ch, S, 1)) {
+function decodeKnots(ch, ca, S, C) {
+  const r = ch.knot_rank;
+  if (!Number.isInteger(r) || r < 0 || r > S + 1) {
+    throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${S + 1}, got ${JSON.stringify(r)}`);
+  }
   const { steps, codes: residual } = knotTracks(ch, ca, S, C);
-  const z = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
-  const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
   const n = S + 1;
   const T = C * 12; // one track per curve, coordinate and coefficient
-  const weights = new Float64Array(r * T); // q * h
-  for (let i = 0; i < weights.length; i++) weights[i] = ((z[i] >>> 1) ^ -(z[i] & 1)) * steps[(i % T) >> 2];
   const knots = new Float32Array(n * T);
-  for (let s = 0; s < n; s++) {
-    for (let track = 0; track < T; track++) {
-      let acc = 0;
-      for (let j = 0; j < r; j++) acc += weights[j * T + track] * basis[j * n + s];
-      acc += residual[s * T + track] * steps[track >> 2];
-      knots[s * T + track] = Math.fround(acc);
+  if (r === 0) {
+    for (const name of ['knot_weights', 'knot_basis']) {
+      if (ca[name] !== undefined) {
+        throw new ClipFormatError(`coefficients with knot_rank 0 must not hold '${name}'`);
+      }
+    }
+    for (let i = 0; i < knots.length; i++) knots[i] = Math.fround(residual[i] * steps[(i % T) >> 2]);
+  } else {
+    const z = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
+    const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
+    const weights = new Float64Array(r * T); // q * h
+    for (let i = 0; i < weights.length; i++) weights[i] = ((z[i] >>> 1) ^ -(z[i] & 1)) * steps[(i % T) >> 2];
+    for (let s = 0; s < n; s++) {
+      for (let track = 0; track < T; track++) {
+        let acc = 0;
+        for (let j = 0; j < r; j++) acc += weights[j * T + track] * basis[j * n + s];
+        acc += residual[s * T + track] * steps[track >> 2];
+        knots[s * T + track] = Math.fround(acc);
+      }
     }
   }
   checkFinite(knots, 'coefficients knots');
   return knots;
 }
 
-/** The header's knot_rank, an integer in min..S+1 (version 3: 1..S+1; versions 4 and 5: 0..S+1). */
-function knotRank(ch, S, min) {
-  const r = ch.knot_rank;
-  if (!Number.isInteger(r) || r < min || r > S + 1) {
-    const got = JSON.stringify(r);
-    throw new ClipFormatError(`coefficients knot_rank must be an integer in ${min}..${S + 1}, got ${got}`);
-  }
-  return r;
-}
-
 /**
- * Knots (S+1, C, 3, 4) float32 of a version 4 or 5 coefficients part (docs/format.md §3.10, §3.11): knot_rank
- * 0 has no shared basis (its arrays must be absent) and decodes as version 2; ranks 1..S+1 decode as
- * version 3.
+ * The `time_model` (C, 3) of a coefficients part (docs/format.md §3.2, §3.5): uint8, 1 where the item is on
+ * the natural spline in every segment (its constants must then be 0), 0 where it uses the paper's time pairs.
  */
-function knotsV4(ch, ca, S, C) {
-  const r = knotRank(ch, S, 0);
-  if (r > 0) return knotsV3(ch, ca, S, C, r);
-  for (const name of ['knot_weights', 'knot_basis']) {
-    if (ca[name] !== undefined) {
-      throw new ClipFormatError(`coefficients knot_rank is 0 (no shared basis), but the part has '${name}'`);
+function timeModelOf(ca, C, m, S, segT) {
+  const model = need(ca, 'time_model', [C, 3], 'coefficients', ['<u1']).data;
+  let spline = false;
+  for (let i = 0; i < model.length; i++) {
+    if (model[i] > TIME_SPLINE) {
+      throw new ClipFormatError(`coefficients time_model must be 0 (paper) or 1 (natural spline), got ${model[i]}`);
+    }
+    if (model[i] === TIME_SPLINE) {
+      spline = true;
+      for (let s = 0; s < S; s++) {
+        if (m[s * C * 3 + i] !== 0) {
+          throw new ClipFormatError('items on the natural spline must have time constant 0 in every segment');
+        }
+      }
     }
   }
-  return knotsV2(ch, ca, S, C);
-}
-
-/**
- * The `tangents` (C, 3) of a version 4 or 5 coefficients part (docs/format.md §3.10, §3.11): uint8, 1 where
- * the item's linear segments use the cubic (Catmull-Rom in version 4, the natural spline in version 5), 0
- * where they use the straight line.
- */
-function tangentsV4(ca, C) {
-  const tangents = need(ca, 'tangents', [C, 3], 'coefficients', ['<u1']).data;
-  for (let i = 0; i < tangents.length; i++) {
-    if (tangents[i] > 1) {
-      throw new ClipFormatError(`coefficients tangents must be 0 or 1, got ${tangents[i]}`);
+  if (spline) {
+    // the spline's tangents divide by every segment's length (docs/format.md §3.5)
+    for (let j = 1; j <= S; j++) {
+      if (!(segT[j] > segT[j - 1])) {
+        throw new ClipFormatError(
+          `natural-spline items need strictly increasing segment times (segment ${j - 1} has length 0)`,
+        );
+      }
     }
   }
-  return tangents;
+  return spline ? model : null;
 }
 
-/**
- * Validate and decode the topology and coefficients containers of a dynamic-PDE clip (topology versions 1
- * and 2, coefficients versions 1 to 5).
- */
+/** A header count: a JSON integer >= 0 (not a string, a boolean or a float), else ClipFormatError. */
+function count(header, key, part) {
+  const value = header[key];
+  if (!Number.isInteger(value) || value < 0) {
+    throw new ClipFormatError(
+      `${part} header field '${key}' must be a non-negative integer, got ${JSON.stringify(value ?? null)}`,
+    );
+  }
+  return value;
+}
+
+/** Validate and decode the topology and coefficients containers of a dynamic-PDE clip (format 1.x). */
 export function decodeDynamic(topo, coef) {
   const th = topo.header;
   const ch = coef.header;
-  checkVersion(th, 'topology', DYNAMIC_TOPOLOGY_VERSIONS);
-  checkVersion(ch, 'coefficients', DYNAMIC_FORMAT_VERSIONS);
-  const V = Number(th.n_vertices);
-  if (!Number.isInteger(V) || V < 0) throw new ClipFormatError('topology header has no valid n_vertices');
+  checkFormatVersion(th, 'topology');
+  checkFormatVersion(ch, 'coefficients');
+  const V = count(th, 'n_vertices', 'topology');
   const ta = topo.arrays;
   const ca = coef.arrays;
-  const t = th.format_version === 1 ? topologyV1(ta, V) : topologyV2(th, ta, V);
+  const t = topologyArrays(th, ta, V);
   const { order, offsets, faces, uColumns } = t;
   const C = offsets.length - 1;
   if (C < 0 || offsets[0] !== 0 || offsets[C] !== V || !nondecreasing(offsets)) {
@@ -333,62 +298,24 @@ export function decodeDynamic(topo, coef) {
       curveOf[v] = c;
     }
   }
-  for (let i = 0; i < faces.length; i++) {
-    if (faces[i] < 0 || faces[i] >= V) throw new ClipFormatError('topology faces index outside the vertices');
-  }
-  if (uColumns !== 1 && uColumns !== 3) {
-    throw new ClipFormatError(`topology array 'u' must have 1 or 3 columns, got ${uColumns}`);
-  }
-  const u = t.u ?? toVertexOrder(t.uCurve, uColumns, order);
+  const u = toVertexOrder(t.uCurve, uColumns, order);
   for (let i = 0; i < u.length; i++) {
     if (!(u[i] >= 0 && u[i] <= 1)) throw new ClipFormatError('topology curve parameters u must lie in [0, 1]');
   }
-  const rest = t.rest ?? toVertexOrder(t.restCurve, 3, order);
+  const rest = toVertexOrder(t.restCurve, 3, order);
 
-  const S = Number(ch.n_segments);
+  const S = count(ch, 'n_segments', 'coefficients');
   const segT = need(ca, 'segment_t', [S + 1], 'coefficients').data;
   if (!(S >= 1) || !nondecreasing(segT)) {
     throw new ClipFormatError('segment boundaries must be non-decreasing with at least one segment');
   }
-  const { family, m } =
-    ch.format_version === 1
-      ? { family: need(ca, 'family', [S, C, 3], 'coefficients').data, m: need(ca, 'm', [S, C, 3], 'coefficients').data }
-      : familyV2(ca, S, C);
-  for (let i = 0; i < family.length; i++) {
-    if (family[i] > 3) throw new ClipFormatError('family codes must be 0..3');
-    if (family[i] % 2 !== family[i % (C * 3)] % 2) {
-      throw new ClipFormatError('the space kind of a curve+coordinate must be the same in every segment');
-    }
-    if (m[i] < 0 || (family[i] >= 2 && m[i] >= Math.PI)) {
-      throw new ClipFormatError('time constants must be >= 0 (and < pi for trig families)');
-    }
-  }
+  const { family, m } = familyOf(ca, S, C);
+  const timeModel = timeModelOf(ca, C, m, S, segT);
   const motion = String(ch.motion);
   if (!MOTIONS.includes(motion))
     throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
   const D = need(ca, 'D', [C, 3], 'coefficients').data;
-  const knots =
-    ch.format_version === 1
-      ? need(ca, 'knots', [S + 1, C, 3, 4], 'coefficients').data
-      : ch.format_version === 2
-        ? knotsV2(ch, ca, S, C)
-        : ch.format_version === 3
-          ? knotsV3(ch, ca, S, C)
-          : knotsV4(ch, ca, S, C); // versions 4 and 5
-  // versions 4 and 5 only (in older versions an array of that name is an unknown addition, ignored)
-  const tangents = ch.format_version >= 4 ? tangentsV4(ca, C) : null;
-  const tangentSpline = ch.format_version === 5 ? 'natural' : ch.format_version === 4 ? 'catmull-rom' : null;
-  if (tangentSpline === 'natural' && tangents.includes(1)) {
-    // natural-spline tangents divide by every segment's length (docs/format.md §3.11)
-    for (let j = 1; j <= S; j++) {
-      if (!(segT[j] > segT[j - 1])) {
-        throw new ClipFormatError(
-          'segment boundaries must be strictly increasing in a version 5 clip with tangents' +
-            ` (segment ${j - 1} has length 0)`,
-        );
-      }
-    }
-  }
+  const knots = decodeKnots(ch, ca, S, C);
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
   let rigid = null;
   if (motion === 'rigid') {
@@ -425,8 +352,7 @@ export function decodeDynamic(topo, coef) {
     m,
     D,
     knots,
-    tangents,
-    tangentSpline,
+    timeModel,
     motion,
     looping: Boolean(ch.looping),
     rigid,
@@ -493,7 +419,7 @@ export function rodrigues(rx, ry, rz, out, o = 0) {
 const SPLINE_BLOCK = 1 << 20;
 
 /**
- * The knot tangents of the natural cubic spline (format version 5, docs/format.md §3.11) through per-knot
+ * The knot tangents of the natural cubic spline (docs/format.md §3.5) through per-knot
  * data values ((S+1) x cols, row-major: row j holds every column's value at knot j, e.g. the per-vertex knot
  * fields P_j or the knot coefficients) over the boundaries segmentT (S+1, strictly increasing), into out (the
  * same layout; a Float32Array rounds the tangents to float32). Solves, per column and in float64, the
@@ -565,7 +491,7 @@ export function naturalSplineTangents(segmentT, values, cols, out = new Float64A
 }
 
 /**
- * The float64 weights of the version 5 cubic (docs/format.md §3.11) in segment s of boundaries segmentT at
+ * The float64 weights of the natural-spline cubic (docs/format.md §3.5) in segment s of boundaries segmentT at
  * local time tau, on T_s, P_s, P_s+1 and T_s+1 in that order (Δ h10, h00, h01, Δ h11 with
  * Δ = t_s+1 - t_s), into out[o..o+3].
  */
@@ -634,34 +560,19 @@ export class DynamicEvaluator {
     this.base = vertexBase(clip);
     this.phi0 = new Float64Array(C * 3);
     this.phi1 = new Float64Array(C * 3);
-    // Time tangents (format versions 4 and 5, docs/format.md §3.10, §3.11): null unless some item has them
-    // (every other clip takes the plain path below). cubic (S, C, 3) is 1 where the item has tangents and a
-    // linear constant in the segment; cubicWeights are the segment's four weights (float32-rounded), the
-    // same for all its cubic items; cubicSegment (S) whether it has any. Version 4 (Catmull-Rom): weights of
-    // the knot fields lo(s), s, s+1, hi(s+1). Version 5 (natural spline, `natural` true): weights of T_s,
-    // P_s, P_s+1, T_s+1, with tangentFields ((S+1) x V x 3 float32, the layout of fields) the tangents T_j
-    // of every knot, solved once here
-    this.cubic = null;
-    this.natural = false;
+    // The natural-spline time model (docs/format.md §3.5): null unless some item is on it (every other
+    // clip takes the plain path below). spline (C * 3) is 1 for the items on it, in every segment;
+    // cubicWeights are the segment's four weights on T_s, P_s, P_s+1, T_s+1 (float32-rounded), the same for
+    // all its spline items, with tangentFields ((S+1) x V x 3 float32, the layout of fields) the tangents
+    // T_j of every knot, solved once here
+    this.spline = clip.timeModel ?? null;
     this.tangentFields = null;
-    const tangents = clip.tangents;
-    if (tangents && tangents.some((x) => x === 1)) {
-      this.cubic = new Uint8Array(S * C * 3);
-      this.cubicSegment = new Uint8Array(S);
-      for (let i = 0; i < this.cubic.length; i++) {
-        if (tangents[i % (C * 3)] === 1 && Math.abs(this.mu[i]) <= 1e-12) {
-          this.cubic[i] = 1;
-          this.cubicSegment[Math.floor(i / (C * 3))] = 1;
-        }
-      }
+    if (this.spline !== null) {
       this.cubicWeights = new Float64Array(4);
       this.weights = new Float64Array(C * 12); // per item, by prepare(): the four weights it applies
-      if (clip.tangentSpline === 'natural') {
-        this.natural = true;
-        // from the float32 fields, in float64, rounded to float32 (as the reference evaluator)
-        const out = new Float32Array(this.fields.length);
-        this.tangentFields = naturalSplineTangents(clip.segmentT, this.fields, V * 3, out);
-      }
+      // from the float32 fields, in float64, rounded to float32 (as the reference evaluator)
+      const out = new Float32Array(this.fields.length);
+      this.tangentFields = naturalSplineTangents(clip.segmentT, this.fields, V * 3, out);
     }
     this.pair = new Float64Array(2);
     this.pair2 = new Float64Array(2);
@@ -674,9 +585,8 @@ export class DynamicEvaluator {
   /**
    * The per-curve state at t (everything t changes before the per-vertex sums): fills this.phi0, this.phi1
    * (C * 3 time pairs of the segment), for rigid clips this.rot (C * 9) and this.trans (C * 3), and for
-   * clips with tangents this.weights (C * 3 * 4: per item the four weights, on the knots lo(s), s, s+1,
-   * hi(s+1) in version 4 and on T_s, P_s, P_s+1, T_s+1 in version 5: the cubic's float32-rounded ones, or
-   * 0, phi0, phi1, 0); returns the segment index.
+   * clips with spline items this.weights (C * 3 * 4: per item the four weights on T_s, P_s, P_s+1, T_s+1:
+   * the spline's float32-rounded ones, or 0, phi0, phi1, 0); returns the segment index.
    */
   prepare(t) {
     if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -689,10 +599,10 @@ export class DynamicEvaluator {
       phi0[i] = uPhi0[k];
       phi1[i] = uPhi1[k];
     }
-    if (this.cubic !== null) {
-      const { cubic, cubicWeights: cw, weights } = this;
-      for (let i = 0, j = s * n; i < n; i++, j++) {
-        const cub = cubic[j] === 1;
+    if (this.spline !== null) {
+      const { spline, cubicWeights: cw, weights } = this;
+      for (let i = 0; i < n; i++) {
+        const cub = spline[i] === 1;
         weights[i * 4] = cub ? cw[0] : 0;
         weights[i * 4 + 1] = cub ? cw[1] : phi0[i];
         weights[i * 4 + 2] = cub ? cw[2] : phi1[i];
@@ -710,9 +620,9 @@ export class DynamicEvaluator {
 
   /**
    * The state of this.loc that does not depend on the item: the distinct time pairs of the segment
-   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]), for clips with tangents the cubic's four weights
-   * (cubicWeights: hermiteWeights in version 4, splineWeights in version 5, computed in float64 and rounded
-   * to float32 as the reference evaluator does) and, for rigid clips, rot and trans.
+   * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]), for clips with spline items the spline's four
+   * weights (cubicWeights: splineWeights, computed in float64 and rounded to float32 as the reference
+   * evaluator does) and, for rigid clips, rot and trans.
    */
   segmentState() {
     const s = this.loc[0];
@@ -723,9 +633,8 @@ export class DynamicEvaluator {
       uPhi0[k] = pair[0];
       uPhi1[k] = pair[1];
     }
-    if (this.cubic !== null) {
-      const weights = this.natural ? splineWeights : hermiteWeights;
-      const cw = weights(this.clip.segmentT, s, tau, this.cubicWeights);
+    if (this.spline !== null) {
+      const cw = splineWeights(this.clip.segmentT, s, tau, this.cubicWeights);
       for (let i = 0; i < 4; i++) cw[i] = Math.fround(cw[i]);
     }
     if (this.clip.rigid) this._rigidAt(this.loc[2]);
@@ -737,7 +646,7 @@ export class DynamicEvaluator {
     if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
     const clip = this.clip;
     const s = this.prepare(t);
-    if (this.cubic !== null && this.cubicSegment[s] === 1) return this._evaluateCubic(s, out);
+    if (this.spline !== null) return this._evaluateSpline(s, out);
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
     const P0 = this.fields.subarray(s * N, (s + 1) * N);
@@ -766,35 +675,32 @@ export class DynamicEvaluator {
   }
 
   /**
-   * evaluate() in a segment where some item uses the cubic: its values are ((w_lo P_lo + w_s P_s) +
-   * w_s+1 P_s+1) + w_hi P_hi + base in float32 for the Catmull-Rom cubic of version 4 (docs/format.md §3.10),
-   * ((w_0 T_s + w_1 P_s) + w_2 P_s+1) + w_3 T_s+1 + base for the natural spline of version 5 (§3.11), every
-   * product and sum rounded, as the reference evaluator; the other items' as in evaluate().
+   * evaluate() of a clip with spline items: their values are ((w_0 T_s + w_1 P_s) + w_2 P_s+1) + w_3 T_s+1
+   * + base (docs/format.md §3.5), every product and sum rounded to float32, as the reference evaluator; the
+   * other items' as in evaluate().
    */
-  _evaluateCubic(s, out) {
+  _evaluateSpline(s, out) {
     const clip = this.clip;
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
-    const S = clip.nSegments;
     const f = Math.fround;
     const field = (j) => this.fields.subarray(j * N, (j + 1) * N);
     const tangent = (j) => this.tangentFields.subarray(j * N, (j + 1) * N);
-    // the outer two terms: knot fields lo(s), hi(s+1) (version 4) or tangent fields s, s+1 (version 5)
-    const PL = this.natural ? tangent(s) : field(Math.max(s - 1, 0));
+    const PL = tangent(s);
     const P0 = field(s);
     const P1 = field(s + 1);
-    const PH = this.natural ? tangent(s + 1) : field(Math.min(s + 2, S));
+    const PH = tangent(s + 1);
     const cw = this.cubicWeights;
     const wl = cw[0];
     const ws = cw[1];
     const w1 = cw[2];
     const wh = cw[3];
-    const cubic = this.cubic.subarray(s * clip.nCurves * 3, (s + 1) * clip.nCurves * 3);
+    const spline = this.spline;
     if (!clip.rigid) {
       for (let i = 0; i < N; i++) {
         const k = item[i];
         out[i] =
-          cubic[k] === 1
+          spline[k] === 1
             ? base[i] + f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
             : base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
       }
@@ -804,7 +710,7 @@ export class DynamicEvaluator {
     const value = (i, k) =>
       f(
         base[i] +
-          (cubic[k] === 1
+          (spline[k] === 1
             ? f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
             : f(phi0[k] * P0[i] + phi1[k] * P1[i])),
       );

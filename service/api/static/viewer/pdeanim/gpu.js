@@ -21,17 +21,15 @@ function texture(nTexels, width) {
 
 /**
  * Textures and constants of a decoded clip for the vertex shader (independent of the mesh):
- * {kind, mode, rigid, tangents, spline, nCurves, nVertices, nSegments, curveTexels, textures: {vertex,
+ * {kind, mode, rigid, spline, nCurves, nVertices, nSegments, curveTexels, textures: {vertex,
  * field | knot, tangent?, curve}, maxHeight, evaluator}. The `curve` texture is the per-frame table that
  * timeUniforms() rewrites: per curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for
  * rigid clips, the rows of R with the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's
- * own code (a few us per frame). Clips with time tangents (format version 4 or 5, some item with tangents 1:
- * `tangents` true) carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz, w_2 xyz, w_3
- * xyz; for an item without the cubic in the segment 0, phi0, phi1, 0), then the rigid rows. In version 4
- * (Catmull-Rom, docs/format.md §3.10) they weigh the knots lo(s), s, s+1, hi(s+1). In version 5 (natural
- * spline, §3.11: `spline` true) they weigh T_s, P_s, P_s+1, T_s+1, and the `tangent` texture holds the
- * tangents T_j of every knot in the layout of the `field` or `knot` texture (the spline's tridiagonal solve
- * applied to the per-vertex fields, or to the knot coefficients, once per clip).
+ * own code (a few us per frame). Clips with items on the natural spline (docs/format.md §3.5: `spline` true)
+ * carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz, w_2 xyz, w_3 xyz: the weights of
+ * T_s, P_s, P_s+1, T_s+1, or 0, phi0, phi1, 0 for an item off the spline), then the rigid rows; their
+ * `tangent` texture holds the tangents T_j of every knot in the layout of the `field` or `knot` texture (the
+ * spline's tridiagonal solve applied to the per-vertex fields, or to the knot coefficients, once per clip).
  *
  * mode "fields" (the default while (S+1) x V texels, twice that with natural-spline tangents, fit
  * fieldsBudget bytes) stores every knot's per-vertex contribution P_k = knots_k . S(u) (the CPU evaluator's
@@ -49,8 +47,7 @@ export function gpuLayout(
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
   if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
   const ev = evaluator ?? new DynamicEvaluator(clip);
-  const tangents = ev.cubic !== null;
-  const spline = tangents && ev.natural;
+  const spline = ev.spline !== null;
   // natural-spline clips keep a tangent texture of the same size beside the fields
   const fieldBytes = (S + 1) * V * 16 * (spline ? 2 : 1);
   const useFields = mode === 'fields' || (mode === 'auto' && fieldBytes <= fieldsBudget);
@@ -91,14 +88,13 @@ export function gpuLayout(
       textures.tangent = tangent;
     }
   }
-  const weightTexels = tangents ? 4 : 2;
+  const weightTexels = spline ? 4 : 2;
   const curveTexels = weightTexels + (rigid ? 3 : 0);
   textures.curve = texture(C * curveTexels, width);
   return {
     kind: clip.kind,
     mode: useFields ? 'fields' : 'coefficients',
     rigid: Boolean(rigid),
-    tangents,
     spline,
     nCurves: C,
     nVertices: V,
@@ -131,7 +127,6 @@ function cyclicLayout(clip, width) {
     kind: clip.kind,
     mode: 'cyclic',
     rigid: false,
-    tangents: false,
     spline: false,
     nCurves: 0,
     nVertices: V,
@@ -175,7 +170,7 @@ export function timeUniforms(layout, t) {
   const d = layout.textures.curve.data;
   const K = layout.curveTexels * 4;
   const C = layout.nCurves;
-  if (!layout.tangents) {
+  if (!layout.spline) {
     for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K, j += 3) {
       const kx = muIndex[j];
       const ky = muIndex[j + 1];
@@ -188,12 +183,11 @@ export function timeUniforms(layout, t) {
       d[o + 6] = uPhi1[kz];
     }
   } else {
-    // four weights per item: the segment's cubic weights (docs/format.md §3.10 in version 4, §3.11 in
-    // version 5) or (0, phi0, phi1, 0)
-    const { cubic, cubicWeights: cw } = ev;
+    // four weights per item: the segment's spline weights (docs/format.md §3.5) or (0, phi0, phi1, 0)
+    const { spline, cubicWeights: cw } = ev;
     for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K) {
       for (let w = 0; w < 3; w++, j++) {
-        if (cubic[j] === 1) {
+        if (spline[c * 3 + w] === 1) {
           d[o + w] = cw[0];
           d[o + 4 + w] = cw[1];
           d[o + 8 + w] = cw[2];
@@ -376,7 +370,6 @@ export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass =
   if (pass) defs.push('#define PDEANIM_PASS');
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
-  if (layout.tangents) defs.push('#define PDEANIM_TANGENTS');
   if (layout.spline) defs.push('#define PDEANIM_SPLINE');
   if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
@@ -400,22 +393,13 @@ uniform mat4 pdeClipToLocal;
 uniform mat3 pdeNormalToLocal;
 #ifdef PDEANIM_DYNAMIC
 uniform highp sampler2D pdeCurveTex;
-#ifdef PDEANIM_TANGENTS
-uniform int pdeSegments;
-#endif
 #ifdef PDEANIM_FIELDS
 uniform highp sampler2D pdeFieldTex;
 #else
 uniform highp sampler2D pdeKnotTex;
 #endif
-// the texture of the outer two of the four weighted terms: the tangents T (natural spline), else the knots
 #ifdef PDEANIM_SPLINE
 uniform highp sampler2D pdeTangentTex;
-#define PDEANIM_OUTER_TEX pdeTangentTex
-#elif defined(PDEANIM_FIELDS)
-#define PDEANIM_OUTER_TEX pdeFieldTex
-#else
-#define PDEANIM_OUTER_TEX pdeKnotTex
 #endif
 #endif
 #ifdef PDEANIM_CYCLIC
@@ -438,32 +422,26 @@ vec3 pdeEval(int v) {
   vec4 head = pdeFetch(pdeVertexTex, v * 4);
 #endif
   int c = int(head.x + 0.5);
-#ifdef PDEANIM_TANGENTS
 #ifdef PDEANIM_SPLINE
-  // natural-spline time tangents: weights of T_s, P_s, P_s+1, T_s+1 (0, phi0, phi1, 0 off the cubic)
+  // natural spline: weights of T_s, P_s, P_s+1, T_s+1 (0, phi0, phi1, 0 for items off the spline)
   int sl = pdeSeg;
   int sh = pdeSeg + 1;
-#else
-  // Catmull-Rom time tangents: weights of the knots lo(s), s, s+1, hi(s+1) (0, phi0, phi1, 0 off the cubic)
-  int sl = max(pdeSeg - 1, 0);
-  int sh = min(pdeSeg + 2, pdeSegments);
-#endif
   vec3 fl = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
   vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
   vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2).xyz;
   vec3 fh = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3).xyz;
 #ifdef PDEANIM_FIELDS
-  vec3 p = head.yzw + (((fl * pdeFetch(PDEANIM_OUTER_TEX, sl * pdeVertices + v).xyz
+  vec3 p = head.yzw + (((fl * pdeFetch(pdeTangentTex, sl * pdeVertices + v).xyz
     + f0 * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz)
     + f1 * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz)
-    + fh * pdeFetch(PDEANIM_OUTER_TEX, sh * pdeVertices + v).xyz);
+    + fh * pdeFetch(pdeTangentTex, sh * pdeVertices + v).xyz);
 #else
   vec3 p = head.yzw;
   for (int w = 0; w < 3; w++) {
-    vec4 kl = pdeFetch(PDEANIM_OUTER_TEX, (sl * pdeCurves + c) * 3 + w);
+    vec4 kl = pdeFetch(pdeTangentTex, (sl * pdeCurves + c) * 3 + w);
     vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
     vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-    vec4 kh = pdeFetch(PDEANIM_OUTER_TEX, (sh * pdeCurves + c) * 3 + w);
+    vec4 kh = pdeFetch(pdeTangentTex, (sh * pdeCurves + c) * 3 + w);
     p[w] += dot(fl[w] * kl + f0[w] * k0 + f1[w] * k1 + fh[w] * kh, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
   }
 #endif

@@ -3,9 +3,10 @@
 export {
   ClipFormatError,
   decodeContainer,
+  checkFormatVersion,
   CONTAINER_VERSION,
-  CONTAINER_VERSIONS,
   ENCODINGS,
+  FORMAT_VERSION,
 } from './container.js';
 export {
   decodeClip,
@@ -22,12 +23,11 @@ export {
 } from './clip.js';
 export {
   DynamicEvaluator,
-  DYNAMIC_FORMAT_VERSION,
-  DYNAMIC_FORMAT_VERSIONS,
-  DYNAMIC_TOPOLOGY_VERSIONS,
+  TIME_PDE,
+  TIME_SPLINE,
   vertexBasis,
   vertexBase,
 } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
-export { spaceBasis, timePair, rigidTimePair, hermiteWeights, locate } from './basis.js';
+export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
 export { computeNormals, boundingBoxDiagonal } from './geometry.js';

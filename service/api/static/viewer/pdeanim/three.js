@@ -313,11 +313,11 @@ export function attachClip(mesh, clip, options = {}) {
     pdeRotate: { value: Boolean(layout.rotate) },
   };
   const header = glslHeader(layout, { normals, pass });
-  // the header's defines vary with all of these (clips with time tangents: another curve table and shader;
-  // natural-spline ones, format version 5: also a tangent texture)
-  const tangents = layout.tangents ? (layout.spline ? ':tangents:spline' : ':tangents') : '';
+  // the header's defines vary with all of these (clips with spline items: another curve table, shader and a
+  // tangent texture)
+  const spline = layout.spline ? ':spline' : '';
   const key =
-    `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}:${pass}${tangents}`;
+    `pdeanim:${layout.kind}:${layout.mode}:${layout.rigid}:${normals}:${layout.width}:${pass}${spline}`;
   const patch = (material) => {
     const m = material.clone();
     const previous = material.onBeforeCompile;

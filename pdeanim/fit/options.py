@@ -1,0 +1,169 @@
+"""What a fit is asked for (:class:`FitOptions`, the user's options: the CLI flags and a fit job's JSON) and
+how its stages trade size against error (:class:`FitTolerances`, the library's constants in one place, echoed
+in every fit report)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..model.adaptive import Targets
+from ..model.parameterisation import PARAM_MODES
+from ..model.segments import DEFAULT_MAX_SEGMENTS
+
+MOTIONS = ("displacement", "absolute", "rigid")
+TIME_MODELS = ("auto", "pde", "spline")
+"""``time_model`` choices: "auto" (per item, the natural spline where it predicts and fits the motion as well
+as the paper's time pairs, else the paper's; the default), "pde" (the paper's time solution alone: families
+with a constant m per segment, Eq. 5-8) or "spline" (every moving item of an open clip on the spline)."""
+DEFAULT_TARGET_REL_RMS = 3e-3
+
+
+@dataclass
+class FitOptions:
+    """What to fit and how well. Give error targets or a fixed segment count (not both); none = rel RMS 3e-3.
+
+    target_rms / target_max : absolute per-vertex distance; target_rel_rms / target_rel_max : relative to
+    the first frame's bounding-box diagonal. param_mode "chord" | "paper"; motion "displacement" |
+    "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last
+    frame flows into the first); max_segments caps the adaptivity (reaching it is reported, never silent).
+    best_effort: a missed target is not an error (the CLI exits 0, a fit job succeeds with the best clip).
+    time_model: see TIME_MODELS.
+    """
+
+    target_rms: float | None = None
+    target_rel_rms: float | None = None
+    target_max: float | None = None
+    target_rel_max: float | None = None
+    segments: int | None = None
+    param_mode: str = "chord"
+    motion: str = "displacement"
+    loop: bool = False
+    max_segments: int = DEFAULT_MAX_SEGMENTS
+    curve_points: int = 10
+    best_effort: bool = False
+    time_model: str = "auto"
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> FitOptions:
+        """Raise ParameterError on a bad value; returns self."""
+        for name in ("target_rms", "target_rel_rms", "target_max", "target_rel_max"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, int | float) and not isinstance(v, bool)
+                                      and np.isfinite(v) and v > 0):
+                raise ParameterError(f"{name} must be a positive number, got {v!r}")
+        if self.segments is not None and not (
+            isinstance(self.segments, int) and not isinstance(self.segments, bool) and self.segments >= 1
+        ):
+            raise ParameterError(f"segments must be an integer >= 1, got {self.segments!r}")
+        if self.segments is not None and self.has_targets:
+            raise ParameterError("give either a fixed segment count or error targets, not both")
+        for name, allowed in (("param_mode", PARAM_MODES), ("motion", MOTIONS), ("time_model", TIME_MODELS)):
+            if getattr(self, name) not in allowed:
+                raise ParameterError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+        for name in ("loop", "best_effort"):
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        for name in ("max_segments", "curve_points"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 4096):
+                raise ParameterError(f"{name} must be an integer in 1..4096, got {v!r}")
+        return self
+
+    @property
+    def has_targets(self) -> bool:
+        """Whether any error target is set."""
+        return any(getattr(self, n) is not None for n in ("target_rms", "target_rel_rms", "target_max",
+                                                             "target_rel_max"))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FitOptions:
+        """Options from a JSON-like dict; unknown keys or bad values raise ParameterError."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ParameterError(f"unknown fit option(s): {', '.join(unknown)}")
+        return cls(**d)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict (round-trips through from_dict)."""
+        return asdict(self)
+
+    def targets(self, diagonal: float) -> Targets:
+        """Absolute targets (the tighter of absolute and relative where both are given)."""
+        def pick(a: float | None, rel: float | None) -> float | None:
+            """The tighter of an absolute and a relative target (None if neither)."""
+            vals = [v for v in (a, None if rel is None else rel * diagonal) if v is not None]
+            return min(vals) if vals else None
+        rel_rms = self.target_rel_rms
+        if not self.has_targets and self.segments is None:
+            rel_rms = DEFAULT_TARGET_REL_RMS
+        return Targets(pick(self.target_rms, rel_rms), pick(self.target_max, self.target_rel_max))
+
+
+@dataclass(frozen=True)
+class FitTolerances:
+    """The constants by which a fit trades bytes against error, in one place (echoed as ``tolerances`` in
+    every fit report). The figures in the comments were measured on the benchmark sequences; see
+    docs/compression.md."""
+
+    quant_share: float = 0.1
+    """The rest pose (and, for max targets, the knots) are rounded by at most this share of the fit's tightest
+    target per coordinate."""
+    quant_budget: float = 0.8
+    """With an RMS target only, the knots' rounding may take this share of what the fit leaves of the target
+    (target^2 - fit rms^2, less the rest pose's share)."""
+    knot_cap: float = 2.0
+    """With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
+    quant_retries: int = 6
+    """Encodings tried at most after the first while the rounding is searched."""
+    quant_fill: float = 0.9
+    """The knots' rounding grows while the stored clip's RMS stays below this share of an RMS target."""
+    quant_aim: float = 0.95
+    """Each growth aims the stored clip's RMS at this share of the target: the rounding's share of the mean
+    square error is taken as proportional to the knots' budget squared ..."""
+    growth_min: float = 1.2
+    growth_max: float = 4.0
+    """... and the budget grows by a factor between these per step."""
+    bisect_until: float = 1.15
+    """When a grown rounding misses the target, the budget is bisected (geometric mean) between it and the
+    last one that met it while they differ by more than this factor (and retries remain)."""
+    soft_max_ratio: float | None = 3.5
+    """An RMS target alone also asks, softly, that no vertex be off by more than this times it: the knots'
+    rounding grows only while the stored clip stays within that (when its first rounding did), and of two
+    candidate fits the one within it is kept. Never reported as a missed target. None: no soft bound."""
+    dense_from: float = 0.0
+    """When the error-driven fit needs segments for at least this share of the frame intervals (by default:
+    always), a dense fit (a knot at every frame, or max_segments evenly spaced) is tried too and the smaller
+    stored clip that meets the targets is kept (elephant-gallop at 3e-3: 35 segments 659 KB, 47 segments
+    429 KB; samba: 28 segments 688 KB, 174 segments 551 KB, both with a 4x lower max error)."""
+    close_sizes: float = 0.15
+    """Candidates whose trial sizes lie within this share of each other are close: the one with a clearly
+    lower max error is kept, else they are compared at the final zstd level."""
+    clearly_lower_max: float = 0.75
+    """A close candidate's max error is clearly lower below this share of the other's."""
+    split_rms_ratio: float | None = 2.0
+    """With an RMS target, an automatically extracted curve whose spatial floor leaves more than this times
+    the target at some vertex is split in two (repeatedly); None: no such split."""
+    split_rounds: int = 12
+    """Rounds of splitting at most (each halves the offending curves; 12 reach single points from 4096)."""
+    floor_max_share: float = 0.7
+    """With a max target, curves are split until their floor leaves at most this share of it at every vertex
+    (the rest is the time fit's and the rounding's)."""
+    floor_room: float = 0.5
+    """Automatic curves get shorter until the spatial floor's RMS is at most this share of an RMS target."""
+    cubic_gain: float = 1.5
+    """An item is a natural-spline candidate unless the spline's held-out error (between every other frame)
+    exceeds this multiple of straight lines' (pdeanim.model.spline.CUBIC_GAIN)."""
+    cubic_slack: float = 1.05
+    """A candidate keeps the spline unless the paper's time pairs fit its frames better by more than this
+    factor (pdeanim.model.timefit.CUBIC_SLACK)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict (the report's ``tolerances``)."""
+        return asdict(self)
