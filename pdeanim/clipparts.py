@@ -37,7 +37,7 @@ class Clip(Protocol):
 
     kind: str
     n_vertices: int
-    faces: np.ndarray  # (T, 3) int32, the mesh's triangles (version 2 parts: in a canonical order)
+    faces: np.ndarray  # (T, 3) int32, the mesh's triangles (dynamic-pde: in a canonical order)
     frame_times: np.ndarray  # (F,) float64 seconds of the source frames
     looping: bool
 

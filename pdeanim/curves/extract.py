@@ -1,7 +1,7 @@
 """Partition every vertex of a mesh into ordered curves that run smoothly along the surface.
 
 Method (chosen by measuring the spatial floor and turning angles against greedy edge paths and banded
-iso-lines, see the README section "Curve extraction"): weld seams by position (connectivity only), compute a
+iso-lines, see docs/model.md, "Curve extraction"): weld seams by position (connectivity only), compute a
 smooth scalar field per connected component (:mod:`pdeanim.curves.fields`), link mesh edges into chains that
 follow the field's gradient ("meridians") or its iso-lines ("rings") (:mod:`pdeanim.curves.chains`), and cut
 every chain into near-equal runs of about ``target_points`` welded points. Copies of a welded point follow

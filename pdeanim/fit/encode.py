@@ -14,6 +14,7 @@ from ..curveset import CurveSet
 from ..model.clipformat import TIME_PDE, TIME_SPLINE, CoefficientData, encode_coefficients, encode_topology
 from ..model.clipmodel import DynamicClip, clip_from_parts
 from ..model.fitcore import SpaceStage, TimeStage
+from ..model.knotbasis import track_spectrum
 from ..poses import Poses
 from .options import FitOptions
 from .problem import Problem
@@ -64,13 +65,16 @@ def encode(p: Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, o
            level: int = ZSTD_LEVEL) -> ClipParts:
     """Both parts of the clip of a fit, rounded as ``quant`` says, compressed at zstd ``level``."""
     quant = quant or Quantisation()
-    topology = encode_topology(curves, p.u_per_vertex(), poses.faces, p.rest, options.param_mode,
-                               quant.tolerance, level)
+    u = p.u_per_vertex()
+    topology = encode_topology(curves, u, poses.faces, p.rest, options.param_mode, quant.tolerance, level)
     coef = coefficient_data(space, fitted, options, np.asarray(poses.times, np.float64), errors or {})
     if p.rigid is not None:
         coef.extra = p.rigid.arrays()
+    if "spectrum" not in fitted.cache:  # the same for every rounding of these knots: computed once
+        fitted.cache["spectrum"] = track_spectrum(curves, u.astype(np.float32), coef.family,
+                                                  np.asarray(coef.m, np.float32), coef.D, coef.knots)
     return ClipParts(topology, encode_coefficients(topology, coef, quant.tolerance, quant.knot_rms,
-                                                   quant.knot_cap, level))
+                                                   quant.knot_cap, level, spectrum=fitted.cache["spectrum"]))
 
 
 def decode(parts: ClipParts) -> DynamicClip:

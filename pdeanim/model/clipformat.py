@@ -128,12 +128,14 @@ def _diagonal(rest: np.ndarray) -> float:
 
 def encode_coefficients(topology: bytes, data: CoefficientData, tolerance: float | None = None,
                         knot_rms: float | None = None, knot_cap: float | None = None,
-                        level: int = container.ZSTD_LEVEL, shared_basis: bool = True) -> bytes:
+                        level: int = container.ZSTD_LEVEL, shared_basis: bool = True,
+                        spectrum: knotbasis.TrackSpectrum | None = None) -> bytes:
     """Coefficients part bytes for the given topology part. The knots are rounded to steps that add at most
     ``knot_rms`` to the RMS vertex distance and move no coordinate by more than ``knot_cap`` (default
     4 x knot_rms) when given, else whose error moves no vertex coordinate by more than ``tolerance``
     (default: DEFAULT_TOLERANCE of the diagonal); they are stored on a shared time basis plus residual tracks
-    where that is smaller (and ``shared_basis`` allows it)."""
+    where that is smaller (and ``shared_basis`` allows it). ``spectrum``: the knots' track spectrum when the
+    caller has it (:func:`pdeanim.model.knotbasis.track_spectrum` of these knots), else it is computed."""
     S, C = data.family.shape[:2]
     spline = data.spline_items()
     if np.any(spline[None] & (np.asarray(data.m) != 0)):
@@ -157,7 +159,9 @@ def encode_coefficients(topology: bytes, data: CoefficientData, tolerance: float
     else:
         steps = quantise.knot_steps(topo.curves, topo.u, family, m, data.D, data.knots, tol, tangents,
                                     cubic_max)
-    knot_arrays, differences, rank = _smallest_knots(topo, family, m, data, steps, shared_basis)
+    if shared_basis and spectrum is None:
+        spectrum = knotbasis.track_spectrum(topo.curves, topo.u, family, m, data.D, data.knots)
+    knot_arrays, differences, rank = _smallest_knots(data, steps, spectrum if shared_basis else None)
     header.update(knot_differences=differences, knot_rank=rank)
     arrays = {
         "segment_t": np.asarray(data.segment_t, np.float64),
@@ -172,17 +176,15 @@ def encode_coefficients(topology: bytes, data: CoefficientData, tolerance: float
     return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
 
 
-def _smallest_knots(topo: TopologyData, family: np.ndarray, m: np.ndarray, data: CoefficientData,
-                    steps: np.ndarray, shared_basis: bool) -> tuple[dict[str, np.ndarray], int, int]:
+def _smallest_knots(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None
+                    ) -> tuple[dict[str, np.ndarray], int, int]:
     """(arrays, knot_differences, knot_rank) of the smallest knot encoding: plain tracks, or one of the
-    shared-basis candidates (plain on a tie), held one at a time (each is as large as the knots)."""
+    shared-basis candidates of ``spectrum`` (plain on a tie), held one at a time (each is as large as the
+    knots)."""
     tracks, differences = quantise.encode_knot_tracks(quantise.quantise_knots(data.knots, steps))
     best: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
     size, rank = _trial_bytes(best), 0
-    if not shared_basis:
-        return best, differences, rank
-    for b in knotbasis.basis_candidates(topo.curves, topo.u, family, m, data.D, data.knots, steps,
-                                        data.looping):
+    for b in knotbasis.basis_candidates(spectrum, steps, data.looping):
         residual, order = quantise.encode_knot_tracks(b.residual)
         option = {"knot_step": steps, "knot_weights": quantise.zigzag(b.weights), "knot_basis": b.basis,
                   "knots": residual}

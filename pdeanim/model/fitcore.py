@@ -6,7 +6,8 @@ time stage (segments, knots, constants) reruns for every segmentation the adapti
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -39,6 +40,7 @@ class TimeStage:
     err_frames: np.ndarray  # (K, F) squared error per item and frame (floor included)
     pred: np.ndarray  # (K, F, 4) model tracks in orthonormal coordinates
     spline: np.ndarray | None = None  # (K,) bool natural-spline tracks, None: none
+    cache: dict[str, Any] = field(default_factory=dict)  # work on these knots that no rounding changes
 
 
 def items_from_curves(values: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:

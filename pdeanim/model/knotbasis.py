@@ -65,32 +65,54 @@ def knots_from_basis(codes: np.ndarray, residual: np.ndarray, steps: np.ndarray,
         return acc.astype(np.float32)
 
 
-def basis_candidates(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-                     knots: np.ndarray, steps: np.ndarray, loop: bool) -> Iterator[KnotBasis]:
-    """Encodings of the knots on a basis, one per distinct rank of TRUNCATION_SHARES, below MAX_RANK_SHARE of
-    the knot count, made one at a time (each holds integer tracks as large as the knots). Every knot decodes
-    within half a step of ``steps`` (C, 3), as plain tracks do. ``loop`` keeps the basis's first and last
-    columns equal, so equal first and last knots stay equal."""
+@dataclass
+class TrackSpectrum:
+    """The knot tracks (C * 12, K) float64 of a fit, how much a unit error of each moves the vertices
+    (weight (C, 3, 4)), and the right singular vectors vt (K, K) and tail energies (K + 1,) of the weighted
+    tracks: what the basis candidates need besides the steps, computed once per fit (the rate control encodes
+    the same knots at several steps)."""
+
+    knots: np.ndarray
+    tracks: np.ndarray
+    weight: np.ndarray
+    vt: np.ndarray
+    tail: np.ndarray
+
+
+def track_spectrum(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
+                   knots: np.ndarray) -> TrackSpectrum | None:
+    """The weighted spectrum of the knot tracks (None when there are too few knots or no curves)."""
     knots = np.asarray(knots, np.float64)
     K, C = knots.shape[0], curves.n_curves
     if K < 3 or C == 0:
-        return
+        return None
     cid, B = vertex_basis(curves, u, family, D)
     V = max(len(u), 1)
     weight = np.zeros((C, 3, 4))
     np.add.at(weight, cid, B * B)
-    weight *= (pair_max(family, m) ** 2)[..., None]  # how much a unit track error moves the vertices
+    weight *= (pair_max(family, m) ** 2)[..., None] / V  # how much a unit track error moves the vertices
     tracks = np.moveaxis(knots, 0, -1).reshape(-1, K)  # (C * 12, K)
     root = np.sqrt(weight).reshape(-1, 1)
     _, sigma, vt = np.linalg.svd(np.linalg.qr(root * tracks, mode="r"))  # QR first: (K, K), same spectrum
-    tail = np.concatenate([np.cumsum((sigma**2)[::-1])[::-1], [0.0]]) / (V * K)  # tail[r]: drop r..
-    rounding = float(np.sum(weight * (np.asarray(steps, np.float64) ** 2)[..., None])) / (12.0 * V)
+    tail = np.concatenate([np.cumsum((sigma**2)[::-1])[::-1], [0.0]]) / K  # tail[r]: drop r..
+    return TrackSpectrum(knots, tracks, weight, vt, tail)
+
+
+def basis_candidates(spectrum: TrackSpectrum | None, steps: np.ndarray, loop: bool) -> Iterator[KnotBasis]:
+    """Encodings of the knots on a basis, one per distinct rank of TRUNCATION_SHARES, below MAX_RANK_SHARE of
+    the knot count, made one at a time (each holds integer tracks as large as the knots). Every knot decodes
+    within half a step of ``steps`` (C, 3), as plain tracks do. ``loop`` keeps the basis's first and last
+    columns equal, so equal first and last knots stay equal."""
+    if spectrum is None:
+        return
+    K = spectrum.knots.shape[0]
+    rounding = float(np.sum(spectrum.weight * (np.asarray(steps, np.float64) ** 2)[..., None])) / 12.0
     ranks = set()
     for share in TRUNCATION_SHARES:
-        r = int(np.argmax(tail <= share**2 * rounding))
+        r = int(np.argmax(spectrum.tail <= share**2 * rounding))
         if 1 <= r <= min(MAX_RANK_SHARE * K, MAX_RANK) and r not in ranks:
             ranks.add(r)
-            found = _on_basis(knots, tracks, vt[:r], steps, loop)
+            found = _on_basis(spectrum.knots, spectrum.tracks, spectrum.vt[:r], steps, loop)
             if found is not None:
                 yield found
 

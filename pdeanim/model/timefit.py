@@ -378,6 +378,8 @@ def fit_tracks(b: np.ndarray, segm: Segmentation, loop: bool = False, refine_ite
 
     Grid choice on free per-segment fits, then ``rounds`` of (golden refinement with knots fixed, knot solve).
     """
+    if not loop and segm.n_segments == len(segm.t) - 1:  # every frame a knot: the knots are the frames,
+        return np.array(b, dtype=np.float64), np.zeros((len(b), segm.n_segments))  # exactly, whatever mu
     order = np.argsort(grid[1:]) + 1
     sorted_grid = np.concatenate([[grid[0]], grid[order]])
     seg_grid = _segment_grids(segm, sorted_grid, loop)  # (S, G)

@@ -1,4 +1,4 @@
-"""The domain library never imports the service or the worker (the map in DESIGN.md)."""
+"""The domain library never imports the service or the worker (the map in docs/architecture.md)."""
 
 from __future__ import annotations
 
