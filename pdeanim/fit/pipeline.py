@@ -39,7 +39,8 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     report = fit_report(sf.p, best, sf.floor_d, sf.targets, options, sf.curves, sf.diag, poses)
     report.update(
         curve_points=sf.curve_points, curve_splits=sf.splits, dense_fit=best.dense is not None,
-        segment_cap_reached=bool(best.cap) and not best.meets, every_frame_a_knot=bool(best.unsplittable),
+        segment_cap_reached=bool(best.cap) and not best.meets,
+        every_frame_a_knot=bool(best.unsplittable) and not best.meets,
         quantisation_tolerance=best.quant.tolerance, quantisation_knot_rms=best.quant.knot_rms,
         quantisation_knot_cap=best.quant.knot_cap, tolerances=tol.to_dict())
     t_end = time.perf_counter()

@@ -38,44 +38,73 @@ class Candidate:
 
 
 def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progress | None,
-              tol: FitTolerances, dense: int | None = None) -> Candidate:
-    """A time fit (error-driven, fixed segments, or ``dense`` evenly spaced segments) rounded and measured on
-    the targets."""
+              tol: FitTolerances, dense: int | None = None, search_cap: int | None = None) -> Candidate:
+    """A time fit (error-driven up to ``search_cap`` segments, fixed segments, or ``dense`` evenly spaced
+    segments: a knot at every frame when there are enough) rounded and measured on the targets."""
     p = sf.p
+    frames = len(p.t) - 1
     if options.segments or dense:
-        every = dense is not None and dense >= len(p.t) - 1
+        every = dense is not None and dense >= frames
         segm = Segmentation(np.arange(len(p.t)), normalised_times(p.t)) if every else uniform_segmentation(
             p.t, options.segments or dense)
         fitted, met, floor_high, history = time_stage(sf.space, segm, options.loop), None, False, []
-        cap = unsplittable = False
+        cap, unsplittable = dense is not None and not every, every
     else:
-        res = fit_adaptive(sf.space, Segmentation(np.array([0, len(p.t) - 1]), p.t), sf.targets,
+        res = fit_adaptive(sf.space, Segmentation(np.array([0, frames]), p.t), sf.targets,
                            lambda ts: model_distances(sf.space, ts, p.slots), sf.floor_d,
-                           min(options.max_segments, len(p.t) - 1), options.loop, progress)
+                           min(options.max_segments, frames, search_cap or frames), options.loop, progress)
         fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
         cap, unsplittable = res.cap_reached, res.unsplittable
     exact = model_distances(sf.space, fitted, p.slots)
     quant, approx, size = quantised(sf, fitted, options, poses, exact, tol)
     ok = meets(sf.targets, stored_distances(p, approx, poses.n_frames))
-    return Candidate(dense, fitted, ok if dense else met, floor_high, history, cap, unsplittable, exact,
-                     quant, approx, size, ok)
+    if dense:  # a missed target is the dense fit's only when the spatial floor is not above it
+        met = ok
+        floor_high = not ok and _floor_above(sf)
+    return Candidate(dense, fitted, met, floor_high, history, cap, unsplittable, exact, quant, approx, size,
+                     ok)
+
+
+def _floor_above(sf: SpaceFit) -> bool:
+    """Whether the curves' spatial floor alone exceeds a target (no time fit can then meet it)."""
+    d = sf.floor_d
+    return bool((sf.targets.rms is not None and np.sqrt(np.mean(d * d)) >= sf.targets.rms)
+                or (sf.targets.max is not None and d.max(initial=0.0) >= sf.targets.max))
 
 
 def best_candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progress | None,
                    tol: FitTolerances) -> Candidate:
-    """The error-driven (or fixed-segment) candidate, or the dense one where it is tried and preferred (see
-    tol.dense_from); ``progress`` is the whole fit's (this stage reports from 0.1 to 0.86)."""
-    best = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol)
+    """The fixed-segment candidate; or of the error-driven one (searched up to tol.search_share of the frame
+    intervals when the dense fit is tried) and the dense one (tol.dense_fit), the one that meets the targets,
+    the preferred one where both do, else the one closer to them. ``progress`` is the whole fit's (this stage
+    reports from 0.1 to 0.86)."""
+    if options.segments:
+        return candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol)
     frames = len(sf.p.t) - 1
     dense = min(frames, options.max_segments)
-    if (not options.segments and best.meets
-            and tol.dense_from * frames <= best.fitted.segm.n_segments < dense):
-        if progress is not None:
-            progress(0.86, f"dense fit ({dense} segments)")
-        cand = candidate(sf, options, poses, None, tol, dense)
-        if cand.meets and preferred(sf, options, poses, cand, best, tol):
-            best = cand
-    return best
+    cap = min(dense, max(1, int(np.ceil(tol.search_share * frames)))) if tol.dense_fit else dense
+    search = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol, search_cap=cap)
+    if not tol.dense_fit or search.fitted.segm.n_segments >= dense:
+        return search
+    if progress is not None:
+        progress(0.86, f"dense fit ({dense} segments)")
+    full = candidate(sf, options, poses, None, tol, dense)
+    if search.meets and full.meets:
+        return full if preferred(sf, options, poses, full, search, tol) else search
+    if search.meets or full.meets:
+        return search if search.meets else full
+    return min((search, full), key=lambda c: _excess(sf, poses, c))
+
+
+def _excess(sf: SpaceFit, poses: Poses, c: Candidate) -> float:
+    """How far a candidate's stored clip is from its targets: the larger of its RMS and max over them."""
+    d = stored_distances(sf.p, c.approx, poses.n_frames)
+    ratios = [0.0]
+    if sf.targets.rms is not None:
+        ratios.append(float(np.sqrt(np.mean(d * d))) / sf.targets.rms)
+    if sf.targets.max is not None:
+        ratios.append(float(d.max(initial=0.0)) / sf.targets.max)
+    return max(ratios)
 
 
 def preferred(sf: SpaceFit, options: FitOptions, poses: Poses, a: Candidate, b: Candidate,

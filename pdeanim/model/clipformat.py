@@ -285,7 +285,7 @@ def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n
                         ) -> CoefficientData:
     """Validated coefficient data from a decoded container; raises ClipFormatError."""
     S, C = _count(header, "n_segments", "coefficients"), int(n_curves)
-    seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients")
+    seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients", "<f8")
     if S < 1 or np.any(np.diff(seg_t) < 0):
         raise ClipFormatError("segment boundaries must be non-decreasing with at least one segment")
     family, signed = _family(arrays, S, C)
@@ -302,8 +302,8 @@ def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n
     if motion not in MOTIONS:
         raise ClipFormatError(f"unknown motion mode {motion!r}")
     extra = _rigid_arrays(arrays, C) if motion == "rigid" else {}
-    return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients"), family,
-                           np.abs(signed), _need(arrays, "D", (C, 3), "coefficients"), knots, motion,
+    return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients", "<f8"), family,
+                           np.abs(signed), _need(arrays, "D", (C, 3), "coefficients", "<f4"), knots, motion,
                            bool(header.get("looping", False)), header, extra, time_model)
 
 
@@ -357,14 +357,16 @@ def _finite_knots(knots: np.ndarray) -> np.ndarray:
 
 def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray]:
     """The validated rigid-track arrays of motion "rigid"."""
-    seg = _need(arrays, "rigid_segment_t", (None,), "coefficients")
+    seg = _need(arrays, "rigid_segment_t", (None,), "coefficients", "<f8")
     Sr = len(seg) - 1
     if Sr < 1 or np.any(np.diff(seg) < 0):
         raise ClipFormatError("rigid segment boundaries must be non-decreasing with at least one segment")
-    out = {"rigid_segment_t": seg, "rigid_centre": _need(arrays, "rigid_centre", (C, 3), "coefficients")}
+    out = {"rigid_segment_t": seg,
+           "rigid_centre": _need(arrays, "rigid_centre", (C, 3), "coefficients", "<f4")}
     for name in ("rot", "trans"):
-        out[f"rigid_{name}_knots"] = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients")
-        mu = _need(arrays, f"rigid_{name}_mu", (Sr, C), "coefficients")
+        out[f"rigid_{name}_knots"] = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients",
+                                           "<f4")
+        mu = _need(arrays, f"rigid_{name}_mu", (Sr, C), "coefficients", "<f4")
         if np.any(mu <= -np.pi):
             raise ClipFormatError("rigid trig time constants must be above -pi")
         out[f"rigid_{name}_mu"] = mu

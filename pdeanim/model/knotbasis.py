@@ -17,6 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve_triangular
 
+try:
+    from numba import njit
+
+    COMPILED = True
+except ImportError:  # pragma: no cover - numba is a pinned dependency; this keeps the numpy path usable
+    COMPILED = False
+
 from ..curveset import CurveSet
 from .quantise import MAX_CODE, pair_max, vertex_basis
 
@@ -51,9 +58,28 @@ def basis_part(codes: np.ndarray, steps: np.ndarray, basis: np.ndarray) -> np.nd
     q = np.asarray(codes, np.float64) * np.asarray(steps, np.float64)[None, :, :, None]  # (r, C, 3, 4)
     b = np.asarray(basis, np.float64)  # (r, S+1)
     acc = np.zeros((b.shape[1], *q.shape[1:]))
+    if COMPILED:
+        _ordered_sum(np.ascontiguousarray(q.reshape(len(q), -1)), np.ascontiguousarray(b),
+                     acc.reshape(b.shape[1], -1))
+        return acc
     for j in range(len(b)):
         acc += b[j][:, None, None, None] * q[j][None]
     return acc
+
+
+def _ordered_sum(q: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """out[s, t] = sum over j ascending of q[j, t] * b[j, s], each product and sum a rounded double (compiled
+    without fast-math: no contraction into fused multiply-adds, so the numpy path's bits)."""
+    for s in range(out.shape[0]):
+        for t in range(out.shape[1]):
+            acc = 0.0
+            for j in range(q.shape[0]):
+                acc += q[j, t] * b[j, s]
+            out[s, t] = acc
+
+
+if COMPILED:
+    _ordered_sum = njit(cache=True, nogil=True, boundscheck=False)(_ordered_sum)
 
 
 def knots_from_basis(codes: np.ndarray, residual: np.ndarray, steps: np.ndarray, basis: np.ndarray
@@ -134,7 +160,10 @@ def _on_basis(knots: np.ndarray, tracks: np.ndarray, rows: np.ndarray, steps: np
     if not np.all(np.abs(weights) <= MAX_CODE):
         return None
     weights = weights.astype(np.int64)
-    residual = np.rint((knots - basis_part(weights, steps, basis)) / h[None, :, :, None])
+    # the writer's basis part by one matrix product: it may differ from the decoder's ordered sum (§3.4) in
+    # the last bit, which moves a decoded knot by that bit on top of its half step
+    approx = (basis.astype(np.float64).T @ (weights * h[..., None]).reshape(r, -1)).reshape(knots.shape)
+    residual = np.rint((knots - approx) / h[None, :, :, None])
     if not np.all(np.abs(residual) <= MAX_CODE):
         return None
     return KnotBasis(weights, residual.astype(np.int64), basis)

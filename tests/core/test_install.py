@@ -46,7 +46,7 @@ def test_setup_and_image_install_from_the_lock():
     assert "pip install -r requirements-service.lock" in (ROOT / "Dockerfile").read_text()
 
 
-# A fresh interpreter in which the service extra's modules cannot be imported (as after `pip install pdeanim`).
+# A fresh interpreter in which the service extra's modules cannot be imported (as after pip install pdeanim).
 WITHOUT_SERVICE_EXTRA = """
 import importlib.abc, sys
 

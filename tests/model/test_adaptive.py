@@ -43,7 +43,7 @@ def test_search_doubles_far_from_the_target_and_skips_merging_many_segments(monk
     real = adaptive._merge
     monkeypatch.setattr(adaptive, "_merge", lambda *a, **k: merges.append(1) or real(*a, **k))
     r = fit_poses(_travelling_wave(), FitOptions(target_rel_rms=1e-3, time_model="pde"),
-                  tolerances=FitTolerances(dense_from=np.inf)).report  # the search alone
+                  tolerances=FitTolerances(dense_fit=False)).report  # the search alone
     counts = [h["segments"] for h in r["adaptive_history"] if not h.get("merged")]
     assert r["target_met"] is True and counts[-1] > adaptive.MERGE_MAX_SEGMENTS
     steps = np.diff(counts)

@@ -61,7 +61,7 @@ def test_relative_rms_target_is_met(morph_small, short_curves, target):
 
 def test_max_target_is_met_and_tighter_needs_more_segments(morph_small, short_curves):
     for search_only in (True, False):  # True: the error-driven search alone (no dense fit is tried)
-        tol = FitTolerances(dense_from=np.inf) if search_only else None
+        tol = FitTolerances(dense_fit=False) if search_only else None
         loose = fit_poses(morph_small, FitOptions(target_rel_max=0.05), curves=short_curves,
                           tolerances=tol).report
         tight = fit_poses(morph_small, FitOptions(target_rel_max=0.01), curves=short_curves,

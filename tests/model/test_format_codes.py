@@ -176,6 +176,9 @@ def test_broken_parts_raise_clear_errors(max_fit):
             decode_topology(*container.unpack(blob))
     ch, ca = container.unpack(coef)
     C = len(ca["knot_step"])
+    for name, dtype in (("segment_t", np.float32), ("frame_times", np.float32), ("D", np.float64)):
+        with pytest.raises(ClipFormatError, match=f"'{name}' has dtype"):
+            decode_coefficients(*container.unpack(_edit(coef, **{name: ca[name].astype(dtype)})), C)
     with pytest.raises(ClipFormatError, match="knot steps must be positive"):
         decode_coefficients(*container.unpack(_edit(coef, knot_step=np.zeros_like(ca["knot_step"]))), C)
     with pytest.raises(ClipFormatError, match="no 'knot_step'"):

@@ -12,10 +12,13 @@ import { dirname, extname, join, normalize } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..');
+// the paper's time pairs (rigid), spline items in the vertex shader, the paper's time pairs and spline items
+// (rigid) in the evaluation pass, a cyclic clip
 const CASES = [
   'fit-rigid-paper-loop',
   'fit-displacement-chord',
   'synthetic-rigid-paper',
+  'synthetic-rigid-paper-spline',
   'cyclic-trout-travelling-rotate-vertical',
 ];
 const TYPES = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.html': 'text/html' };
@@ -102,8 +105,13 @@ test(
         }),
       ]);
       assert.deepEqual(r.errors, []);
-      assert.deepEqual(r.passes, [false, false, true, true]); // both GPU variants ran
+      assert.deepEqual(r.passes, [false, false, true, true, true]); // both GPU variants ran
       assert.equal(r.cases.length, CASES.length + 1); // + one transformed multi-mesh scene
+      // the spline shader ran: in the vertex shader (the second case) and in the evaluation pass (the fourth)
+      assert.deepEqual(
+        r.cases.slice(0, CASES.length).map((c) => c.spline),
+        [false, true, false, true, false],
+      );
       for (const c of r.cases) {
         // same mesh, same lighting: only rasterisation at silhouettes may differ (positions agree to ~1e-7
         // of the diagonal); the runs show 0 to 0.05 % of the pixels, 0.5 % leaves room for other drivers

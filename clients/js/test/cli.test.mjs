@@ -7,8 +7,16 @@ import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { splitClipFile } from '../src/index.js';
-import { FIXTURES, encodeContainer, expected, manifest, readBytes, storedArrays } from './helpers.mjs';
+import {
+  FIXTURES,
+  edited,
+  encodeContainer,
+  expected,
+  fixtureParts,
+  manifest,
+  readBytes,
+  storedArrays,
+} from './helpers.mjs';
 
 const BIN = join(dirname(fileURLToPath(import.meta.url)), '..', 'bin', 'pdeanim-eval.mjs');
 const tmp = mkdtempSync(join(tmpdir(), 'pdeanim-eval-'));
@@ -25,9 +33,12 @@ function readF32LE(path) {
   return Float32Array.from({ length: b.byteLength / 4 }, (_, i) => view.getFloat32(i * 4, true));
 }
 
+// a rigid looping clip on the paper's time pairs, a clip with spline items on a knot basis, a rigid clip with
+// spline items, a cyclic clip
 for (const c of [
-  man.cases.find((x) => x.motion === 'rigid' && x.looping && x.format_version === 2),
-  man.cases.find((x) => x.motion === 'rigid' && x.looping && x.format_version === 1),
+  man.cases.find((x) => x.motion === 'rigid' && x.looping && x.spline_items === 0),
+  man.cases.find((x) => x.knot_rank > 0 && x.spline_items > 0),
+  man.cases.find((x) => x.motion === 'rigid' && x.spline_items > 0),
   man.cases.find((x) => x.kind === 'cyclic-spine'),
 ]) {
   test(`pdeanim-eval writes the expected frames of ${c.name}`, () => {
@@ -44,7 +55,7 @@ for (const c of [
 
 test('pdeanim-eval reads the two parts from separate files', () => {
   const c = man.cases.find((x) => x.motion === 'absolute');
-  const p = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+  const p = fixtureParts(c);
   writeFileSync(join(tmp, 'topo.bin'), p.topology);
   writeFileSync(join(tmp, 'coef.bin'), p.coefficients);
   const out = join(tmp, 'parts.bin');
@@ -65,12 +76,24 @@ test('pdeanim-eval reads the two parts from separate files', () => {
 test('pdeanim-eval exits 2 with a reason on bad input', () => {
   const clip = join(FIXTURES, man.cases[0].clip);
   const out = join(tmp, 'bad.bin');
-  // a version 2 coefficients part whose knots' zstd frame is cut short
-  const v2 = splitClipFile(readBytes(join(FIXTURES, man.cases.find((x) => x.format_version === 2).clip)));
-  const arrays = storedArrays(v2.coefficients);
+  // a coefficients part whose knots' zstd frame is cut short
+  const p = fixtureParts(man.cases.find((x) => x.kind === 'dynamic-pde'));
+  const arrays = storedArrays(p.coefficients);
+  assert.ok(arrays.knots.encoding);
   arrays.knots = { ...arrays.knots, stored: arrays.knots.stored.subarray(0, arrays.knots.nbytes - 4) };
-  writeFileSync(join(tmp, 'topo2.bin'), v2.topology);
+  writeFileSync(join(tmp, 'topo2.bin'), p.topology);
   writeFileSync(join(tmp, 'cut.bin'), encodeContainer({ part: 'coefficients' }, arrays));
+  // a CLIP file of another major format version, and a coefficients part of one
+  const future = edited(readBytes(clip), ({ header }) => {
+    header.format_version = '2.0';
+  });
+  const futureCoef = edited(p.coefficients, ({ header }) => {
+    header.format_version = '2.0';
+  });
+  writeFileSync(join(tmp, 'future.clip'), future);
+  writeFileSync(join(tmp, 'future-coef.bin'), futureCoef);
+  const topology = join(tmp, 'topo2.bin');
+  const withTopology = (coef) => ['--topology', topology, '--coefficients', coef, '--t', '0', '--out', out];
   const cases = [
     [[join(tmp, 'missing.clip'), '--t', '0', '--out', out], /cannot read clip file/],
     [[join(FIXTURES, 'manifest.json'), '--t', '0', '--out', out], /bad magic/],
@@ -82,8 +105,11 @@ test('pdeanim-eval exits 2 with a reason on bad input', () => {
     [[clip, '--topology', clip, '--t', '0', '--out', out], /not both/],
     [['--topology', clip, '--coefficients', clip, '--t', '0', '--out', out], /expected a topology part/],
     [[clip, '--bogus'], /bogus/],
-    [['--topology', join(tmp, 'topo2.bin'), '--coefficients', join(tmp, 'cut.bin'), '--t', '0', '--out', out],
-      /array "knots": bad zstd data/],
+    [withTopology(join(tmp, 'cut.bin')), /array "knots": bad zstd data/],
+    [[join(tmp, 'future.clip'), '--t', '0', '--out', out],
+      /unsupported clip format version "2\.0" in the clip-file part \(this build reads 1\.x\)/],
+    [withTopology(join(tmp, 'future-coef.bin')),
+      /unsupported clip format version "2\.0" in the coefficients part \(this build reads 1\.x\)/],
     [[clip, '--t', '0', '--out', join(tmp, 'no', 'such', 'dir', 'x.bin')], /cannot write/],
   ];
   for (const [args, reason] of cases) {

@@ -1,13 +1,16 @@
-// Container version 2: arrays stored as one zstd frame ("zstd") or as byte planes in one ("shuffle-zstd"),
-// read exactly; bad frames, sizes and encodings rejected with a reason; version 1 still read.
+// The one container version (1): arrays stored raw, as one zstd frame ("zstd") or as byte planes in one
+// ("shuffle-zstd"), read exactly; bad frames, sizes, encodings and every other container version rejected
+// with a reason.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
+import * as api from '../src/index.js';
 import {
   CONTAINER_VERSION,
-  CONTAINER_VERSIONS,
   ClipFormatError,
+  ENCODINGS,
+  FORMAT_VERSION,
   decodeClip,
   decodeContainer,
   splitClipFile,
@@ -16,6 +19,7 @@ import {
   FIXTURES,
   concat,
   encodeContainer,
+  fixtureParts,
   manifest,
   readBytes,
   shuffleBytes,
@@ -24,7 +28,9 @@ import {
 } from './helpers.mjs';
 
 const man = manifest();
-const partsOf = (name) => splitClipFile(readBytes(join(FIXTURES, `${name}.clip`)));
+const partsOf = (name) => fixtureParts(man.cases.find((c) => c.name === name));
+/** The uint32 at byte 8 of container bytes. */
+const versionOf = (b) => new DataView(b.buffer, b.byteOffset, b.byteLength).getUint32(8, true);
 
 /** Arrays of every dtype width with values whose bytes differ (so a wrong byte order shows). */
 function sampleArrays() {
@@ -42,16 +48,27 @@ function withEncoding(arrays, encoding) {
   return Object.fromEntries(Object.entries(arrays).map(([k, a]) => [k, { ...a, encoding }]));
 }
 
-test('the build reads container versions 1 and 2', () => {
-  assert.deepEqual([...CONTAINER_VERSIONS], [1, 2]);
-  assert.equal(CONTAINER_VERSION, 2);
+test('the build reads container version 1 and clip format 1.x; the per-version exports are gone', () => {
+  assert.equal(CONTAINER_VERSION, 1);
+  assert.equal(FORMAT_VERSION, '1.0');
+  assert.deepEqual([...ENCODINGS], ['zstd', 'shuffle-zstd']);
+  assert.ok(Object.isFrozen(ENCODINGS));
+  for (const name of [
+    'CONTAINER_VERSIONS',
+    'DYNAMIC_FORMAT_VERSION',
+    'DYNAMIC_FORMAT_VERSIONS',
+    'DYNAMIC_TOPOLOGY_VERSIONS',
+    'hermiteWeights',
+  ]) {
+    assert.equal(name in api, false, name);
+  }
 });
 
 for (const encoding of ['zstd', 'shuffle-zstd']) {
   test(`arrays stored with encoding ${encoding} decode to the same values`, () => {
     const arrays = sampleArrays();
     const blob = encodeContainer({ part: 'test' }, withEncoding(arrays, encoding));
-    assert.equal(new DataView(blob.buffer).getUint32(8, true), 2);
+    assert.equal(versionOf(blob), 1);
     const got = decodeContainer(blob);
     assert.deepEqual(got.header, { part: 'test' });
     for (const [name, a] of Object.entries(arrays)) {
@@ -67,43 +84,57 @@ test('shuffle-zstd puts byte j of element i at j * n + i', () => {
   const data = Uint32Array.from([0x04030201, 0x08070605]);
   const planes = Uint8Array.from([1, 5, 2, 6, 3, 7, 4, 8]);
   assert.deepEqual(shuffleBytes(new Uint8Array(data.buffer), 4), planes);
-  const blob = encodeContainer({}, { a: { dtype: '<u4', shape: [2], encoding: 'shuffle-zstd', stored: zstdStoredFrame(planes) } });
+  const stored = zstdStoredFrame(planes);
+  const blob = encodeContainer({}, { a: { dtype: '<u4', shape: [2], encoding: 'shuffle-zstd', stored } });
   assert.deepEqual(decodeContainer(blob).arrays.a.data, data);
 });
 
-test('a version 2 container may mix raw and encoded arrays, and a version 1 container reads as before', () => {
+test('a container may mix raw and encoded arrays, or hold raw ones only', () => {
   const arrays = sampleArrays();
-  const mixed = { ...arrays, u4: { ...arrays.u4, encoding: 'zstd' } };
+  const mixed = {
+    ...arrays,
+    u4: { ...arrays.u4, encoding: 'zstd' },
+    i2: { ...arrays.i2, encoding: 'shuffle-zstd' },
+  };
   const got = decodeContainer(encodeContainer({}, mixed));
   assert.deepEqual(got.arrays.f8.data, arrays.f8.data);
   assert.equal(got.arrays.f8.encoding, undefined);
   assert.deepEqual(got.arrays.u4.data, arrays.u4.data);
-  const raw2 = decodeContainer(encodeContainer({}, arrays, { version: 2 }));
-  assert.deepEqual(raw2.arrays.i2.data, arrays.i2.data);
-  const v1 = decodeContainer(encodeContainer({}, arrays));
-  for (const [name, a] of Object.entries(arrays)) assert.deepEqual(v1.arrays[name].data, a.data, name);
+  assert.equal(got.arrays.u4.encoding, 'zstd');
+  assert.deepEqual(got.arrays.i2.data, arrays.i2.data);
+  const raw = decodeContainer(encodeContainer({}, arrays));
+  for (const [name, a] of Object.entries(arrays)) {
+    assert.deepEqual(raw.arrays[name].data, a.data, name);
+    assert.equal(raw.arrays[name].encoding, undefined, name);
+  }
 });
 
-test('the Python-written fixtures use both encodings, real zstd compression and both container versions', () => {
+test('the Python-written fixtures use both encodings, real zstd compression and container version 1', () => {
   const seen = new Set();
   const versions = new Set();
+  let compressed = 0;
   for (const c of man.cases) {
-    const parts = partsOf(c.name);
+    const file = readBytes(join(FIXTURES, c.clip));
+    versions.add(versionOf(file));
+    const parts = splitClipFile(file);
     for (const part of [parts.topology, parts.coefficients]) {
-      versions.add(new DataView(part.buffer, part.byteOffset).getUint32(8, true));
+      versions.add(versionOf(part));
       for (const [name, a] of Object.entries(storedArrays(part))) {
         if (!a.encoding) continue;
         seen.add(a.encoding);
         const decoded = decodeContainer(part).arrays[name];
-        assert.equal(decoded.data.length, a.shape.reduce((x, y) => x * y, 1));
+        const count = a.shape.reduce((x, y) => x * y, 1);
+        assert.equal(decoded.data.length, count);
+        if (a.nbytes < count * decoded.data.BYTES_PER_ELEMENT) compressed++;
       }
     }
   }
   assert.deepEqual([...seen].sort(), ['shuffle-zstd', 'zstd']);
-  assert.deepEqual([...versions].sort(), [1, 2]);
+  assert.deepEqual([...versions], [1]);
+  assert.ok(compressed > 0, 'no array is smaller than its raw bytes');
 });
 
-/** A v2 container with one u4 array "a" of 64 values whose stored bytes are `stored`. */
+/** A container with one u4 array "a" of 64 values whose stored bytes are `stored`. */
 function oneArray(stored, { encoding = 'zstd', version } = {}) {
   return encodeContainer({}, { a: { dtype: '<u4', shape: [64], encoding, stored } }, { version });
 }
@@ -154,27 +185,47 @@ test('truncated, garbled and foreign zstd data is rejected', () => {
   assert.throws(() => decodeContainer(blob(garbled)), ClipFormatError);
 });
 
-test('unknown encodings, encodings in version 1 and other container versions are rejected', () => {
+test('unknown encodings and every container version but 1 are rejected (2 too: there is one version)', () => {
   const frame = zstdStoredFrame(RAW);
-  assert.throws(() => decodeContainer(oneArray(frame, { encoding: 'lz4' })), /unknown encoding "lz4"/);
-  assert.throws(() => decodeContainer(oneArray(frame, { encoding: null })), /unknown encoding null/);
-  assert.throws(
-    () => decodeContainer(oneArray(frame, { version: 1 })),
-    /array "a" has an encoding, which container version 1 does not allow/,
-  );
-  for (const version of [0, 3, 7]) {
+  assert.deepEqual(decodeContainer(oneArray(frame)).arrays.a.data, VALUES);
+  for (const encoding of ['lz4', 'ZSTD', 'shuffle', '', null, 1]) {
+    const want = `array "a" has an unknown encoding ${JSON.stringify(encoding)} (known: zstd, shuffle-zstd)`;
     assert.throws(
-      () => decodeContainer(oneArray(frame, { version })),
-      new RegExp(`unsupported container version ${version} \\(this build reads 1 and 2\\)`),
+      () => decodeContainer(oneArray(frame, { encoding })),
+      (e) => e instanceof ClipFormatError && e.message === want,
     );
   }
+  for (const version of [0, 2, 3, 7, 256, 2 ** 32 - 1]) {
+    for (const blob of [oneArray(frame, { version }), encodeContainer({}, sampleArrays(), { version })]) {
+      assert.throws(
+        () => decodeContainer(blob),
+        (e) =>
+          e instanceof ClipFormatError &&
+          e.message === `unsupported container version ${version} (this build reads 1)`,
+      );
+    }
+  }
+  // the Python-written parts too
+  const part = partsOf('fit-rigid-chord').coefficients.slice();
+  new DataView(part.buffer).setUint32(8, 2, true);
+  assert.throws(() => decodeContainer(part), /unsupported container version 2 \(this build reads 1\)/);
 });
 
-test('a CLIP file is a version 1 container of raw uint8 parts even when its parts are version 2', () => {
-  const c = man.cases.find((x) => x.format_version === 2);
+test('a CLIP file is a container of two raw uint8 parts whose own arrays are encoded', () => {
+  const c = man.cases.find((x) => x.kind === 'dynamic-pde');
   const bytes = readBytes(join(FIXTURES, c.clip));
-  assert.equal(new DataView(bytes.buffer).getUint32(8, true), 1);
-  const { topology, coefficients } = splitClipFile(bytes);
-  assert.equal(new DataView(topology.buffer, topology.byteOffset).getUint32(8, true), 2);
-  assert.equal(decodeClip(topology, coefficients).header.format_version, 2);
+  const file = storedArrays(bytes);
+  assert.deepEqual(Object.keys(file).sort(), ['coefficients', 'topology']);
+  for (const a of Object.values(file)) {
+    assert.equal(a.dtype, '<u1');
+    assert.equal(a.encoding, undefined);
+  }
+  const { topology, coefficients, header } = splitClipFile(bytes);
+  assert.equal(header.part, 'clip-file');
+  assert.equal(header.format_version, FORMAT_VERSION);
+  assert.ok(Object.values(storedArrays(topology)).every((a) => a.encoding));
+  assert.ok(Object.values(storedArrays(coefficients)).every((a) => a.encoding));
+  const clip = decodeClip(topology, coefficients);
+  assert.equal(clip.header.format_version, FORMAT_VERSION);
+  assert.equal(clip.topologyHeader.format_version, FORMAT_VERSION);
 });

@@ -1,114 +1,174 @@
-// Bad input gives a ClipFormatError (or RangeError for a bad t) with a reason, never a crash or NaN frames.
+// Bad input gives a ClipFormatError (or RangeError for a bad t) with a reason, never a crash or NaN frames:
+// the rules a reader of format 1.x must enforce (docs/format.md §1-§3, §4), on parts built from the
+// fixtures (the knot arrays' rules are in knots.test.mjs).
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import {
   ClipFormatError,
+  FORMAT_VERSION,
   createEvaluator,
   decodeClip,
   decodeClipFile,
   decodeContainer,
   loadClip,
-  splitClipFile,
+  loadClipFile,
 } from '../src/index.js';
 import {
   FIXTURES,
-  coefficientsV4,
+  edited,
   encodeContainer,
+  fixtureParts,
   manifest,
+  naiveEvaluate,
   readBytes,
-  strictlyIncreasing,
+  refused,
+  retimed,
+  worstDeviation,
 } from './helpers.mjs';
 
 const man = manifest();
-const dynamicCase = (version) =>
-  man.cases.find((c) => c.kind === 'dynamic-pde' && c.motion === 'displacement' && c.format_version === version);
-const parts = splitClipFile(readBytes(join(FIXTURES, dynamicCase(1).clip))); // format version 1
-const parts2 = splitClipFile(readBytes(join(FIXTURES, dynamicCase(2).clip))); // format version 2
-const parts3 = splitClipFile(readBytes(join(FIXTURES, dynamicCase(3).clip))); // coefficients version 3
+const dynamicCase = (pred) => man.cases.find((c) => c.kind === 'dynamic-pde' && pred(c));
+// a displacement clip on the paper's time pairs with plain knots (rank 0, no spline items), one on a knot
+// basis, one with spline items, a rigid one and a cyclic one (fixtures the conformance test requires)
+const parts = fixtureParts(
+  dynamicCase((c) => c.motion === 'displacement' && c.knot_rank === 0 && c.spline_items === 0),
+);
+const basisParts = fixtureParts(dynamicCase((c) => c.knot_rank > 0 && c.spline_items === 0));
+const splineParts = fixtureParts(
+  dynamicCase((c) => c.knot_rank === 0 && c.spline_items > 0 && c.motion !== 'rigid'),
+);
+const rigidParts = fixtureParts(dynamicCase((c) => c.motion === 'rigid'));
+const cyclicParts = fixtureParts(man.cases.find((c) => c.kind === 'cyclic-spine'));
 
-/** Re-encode a part with its header and arrays changed by edit({header, arrays}). */
-function edited(bytes, edit) {
-  const { header, arrays } = decodeContainer(bytes.slice());
-  edit({ header, arrays });
-  return encodeContainer(header, arrays);
+/** The C * 3 time models of a coefficients part, and its (S, C, 3) signed m. */
+function timeArrays(coefficients) {
+  const { arrays } = decodeContainer(coefficients.slice());
+  return { model: arrays.time_model.data, m: arrays.m.data, C: arrays.time_model.shape[0] };
 }
 
 test('truncated, foreign and future containers are rejected with a reason', () => {
-  assert.throws(() => decodeContainer(new Uint8Array(5)), /too short/);
-  assert.throws(() => decodeContainer(new TextEncoder().encode('{"not": "a container"}')), /magic/);
+  refused(() => decodeContainer(new Uint8Array(5)), /too short/);
+  refused(() => decodeContainer(new TextEncoder().encode('{"not": "a container"}')), /magic/);
   const future = parts.coefficients.slice();
   new DataView(future.buffer).setUint32(8, 3, true);
-  assert.throws(() => decodeContainer(future), /unsupported container version 3/);
-  assert.throws(
+  refused(() => decodeContainer(future), /unsupported container version 3/);
+  refused(
     () => decodeContainer(parts.coefficients.slice(0, parts.coefficients.length - 64)),
     /outside the container/,
   );
 });
 
-test('unknown format versions, kinds and motions are rejected', () => {
-  for (const p of [parts, parts2, parts3]) {
-    for (const future of [0, 6, '5', '4', '3', 4.5, null]) {
-      const v = edited(p.coefficients, ({ header }) => {
-        header.format_version = future;
-      });
-      const version = JSON.stringify(future).replace('.', '\\.');
-      const reads = '1, 2, 3, 4 and 5';
-      assert.throws(
-        () => decodeClip(p.topology, v),
-        new RegExp(`unsupported dynamic-pde coefficients version ${version} \\(this build reads ${reads}\\)`),
-      );
+// every format_version but "1.<digits>": numbers, other majors, malformed minors, other types, missing
+const BAD_VERSIONS = [
+  1,
+  1.5,
+  2,
+  0,
+  '2.0',
+  '0.9',
+  '10.0',
+  '1',
+  '1.',
+  '.0',
+  '1.x',
+  '1.0.1',
+  '1.0a',
+  '1.-1',
+  '1.+1',
+  '1.1e2',
+  '01.0',
+  ' 1.0',
+  '1.0 ',
+  '1.0\n',
+  'v1.0',
+  '1,0',
+  '\uff11.0',
+  '1.\u0660',
+  '',
+  null,
+  true,
+  ['1.0'],
+  { major: 1, minor: 0 },
+  undefined,
+];
+
+/** Every part kind's bytes with header.format_version set to version (deleted when undefined). */
+function withVersion(bytes, version) {
+  return edited(bytes, ({ header }) => {
+    if (version === undefined) delete header.format_version;
+    else header.format_version = version;
+  });
+}
+
+test('every part and CLIP file must have format_version "1.<digits>" (this build reads 1.x)', async () => {
+  const file = readBytes(join(FIXTURES, man.cases.find((c) => c.kind === 'dynamic-pde').clip));
+  for (const version of BAD_VERSIONS) {
+    const shown = JSON.stringify(version ?? null);
+    const want = (part) =>
+      `unsupported clip format version ${shown} in the ${part} part (this build reads 1.x)`;
+    for (const p of [parts, splineParts, basisParts, rigidParts, cyclicParts]) {
+      refused(() => decodeClip(withVersion(p.topology, version), p.coefficients), want('topology'));
+      refused(() => decodeClip(p.topology, withVersion(p.coefficients, version)), want('coefficients'));
     }
-    // versions 3 to 5 change the coefficients part only: a topology part claiming them is refused
-    for (const version of [3, 4, 5]) {
-      const t = edited(p.topology, ({ header }) => {
+    const bad = withVersion(file, version);
+    refused(() => decodeClipFile(bad), want('clip-file'));
+    await assert.rejects(
+      loadClipFile(bad),
+      (e) => e instanceof ClipFormatError && e.message === want('clip-file'),
+    );
+  }
+});
+
+test('minor versions 1.x decode as 1.0, ignoring the header keys and arrays they may add', () => {
+  for (const p of [parts, splineParts, basisParts, rigidParts, cyclicParts]) {
+    const want = createEvaluator(decodeClip(p.topology, p.coefficients));
+    for (const version of ['1.0', '1.1', '1.10', '1.999999']) {
+      const add = ({ header, arrays }) => {
         header.format_version = version;
+        header.future_key = { any: ['thing'] };
+        header.motion_hint = 'wobble';
+        // arrays a later 1.x may add (even with names of removed layouts): read by nobody
+        const future = Float32Array.from([1, NaN, -Infinity, 4]);
+        arrays.future_array = { dtype: '<f4', shape: [2, 2], data: future };
+        arrays.tangents = { dtype: '<u1', shape: [1, 3], data: Uint8Array.from([1, 7, 255]) };
+        arrays.family = { dtype: '<f8', shape: [3], data: Float64Array.from([0.5, 2, 9]) };
+      };
+      const topology = edited(p.topology, add);
+      const coefficients = edited(p.coefficients, ({ header, arrays }) => {
+        add({ header, arrays });
+        header.topology_id = null; // (the topology bytes changed)
       });
-      assert.throws(
-        () => decodeClip(t, p.coefficients),
-        new RegExp(`unsupported dynamic-pde topology version ${version} \\(this build reads 1 and 2\\)`),
-      );
+      const got = createEvaluator(decodeClip(topology, coefficients));
+      for (const t of [0, 0.37, 0.8, 1]) assert.deepEqual(got.evaluate(t), want.evaluate(t), `${version}`);
     }
   }
-  const noVersion = edited(parts3.coefficients, ({ header }) => {
-    delete header.format_version;
+  // a CLIP file of version 1.3 with extra keys
+  const c = man.cases.find((x) => x.spline_items > 0);
+  const file = edited(readBytes(join(FIXTURES, c.clip)), ({ header }) => {
+    header.format_version = '1.3';
+    header.extra = 1;
   });
-  assert.throws(() => decodeClip(parts3.topology, noVersion), /unsupported dynamic-pde coefficients version/);
+  assert.deepEqual(
+    createEvaluator(decodeClipFile(file)).evaluate(0.4),
+    createEvaluator(decodeClipFile(readBytes(join(FIXTURES, c.clip)))).evaluate(0.4),
+  );
+});
+
+test('unknown kinds, motions and parts are rejected', () => {
   const kind = edited(parts.coefficients, ({ header }) => {
     header.kind = 'spline';
   });
-  assert.throws(() => decodeClip(parts.topology, kind), /unknown clip kind "spline"/);
-  const motion = edited(parts.coefficients, ({ header }) => {
-    header.motion = 'wobble';
-  });
-  assert.throws(() => decodeClip(parts.topology, motion), /unknown motion mode/);
-  assert.throws(() => decodeClip(parts.coefficients, parts.topology), /expected a topology part/);
-});
-
-test('inconsistent arrays are rejected', () => {
-  const shape = edited(parts.coefficients, ({ arrays }) => {
-    arrays.D = { ...arrays.D, shape: [arrays.D.shape[0] * 3], data: arrays.D.data };
-  });
-  assert.throws(() => decodeClip(parts.topology, shape), /array 'D' has shape/);
-  const nan = edited(parts.coefficients, ({ arrays }) => {
-    const d = new Float32Array(arrays.knots.data);
-    d[3] = NaN;
-    arrays.knots = { ...arrays.knots, data: d };
-  });
-  assert.throws(() => decodeClip(parts.topology, nan), /non-finite/);
-  const fam = edited(parts.coefficients, ({ arrays }) => {
-    const d = new Uint8Array(arrays.family.data);
-    d[0] = 7;
-    arrays.family = { ...arrays.family, data: d };
-  });
-  assert.throws(() => decodeClip(parts.topology, fam), /family codes must be 0..3/);
-  const order = edited(parts.topology, ({ arrays }) => {
-    const d = new Int32Array(arrays.order.data);
-    d[0] = d[1];
-    arrays.order = { ...arrays.order, data: d };
-  });
-  assert.throws(() => decodeClip(order, parts.coefficients), /permutation/);
+  refused(() => decodeClip(parts.topology, kind), /unknown clip kind "spline"/);
+  for (const motion of ['wobble', null, undefined, 3]) {
+    const c = edited(parts.coefficients, ({ header }) => {
+      header.motion = motion;
+    });
+    refused(() => decodeClip(parts.topology, c), /unknown motion mode/);
+  }
+  refused(() => decodeClip(parts.coefficients, parts.topology), /expected a topology part/);
+  refused(() => decodeClip(parts.topology, parts.topology), /expected a coefficients part/);
 });
 
 test('coefficients made for another topology are refused by loadClip', async () => {
@@ -119,8 +179,23 @@ test('coefficients made for another topology are refused by loadClip', async () 
   await assert.rejects(loadClip(other, parts.coefficients), /topology_id mismatch/);
 });
 
-test('a CLIP file must be a clip-file container', () => {
-  assert.throws(() => decodeClipFile(parts.topology), /not a pdeanim CLIP file/);
+test('a CLIP file must be a clip-file container of two uint8 parts', () => {
+  refused(() => decodeClipFile(parts.topology), /not a pdeanim CLIP file/);
+  const file = readBytes(join(FIXTURES, man.cases[0].clip));
+  for (const edit of [
+    ({ header }) => {
+      header.part = 'clip';
+    },
+    ({ arrays }) => {
+      delete arrays.coefficients;
+    },
+    ({ arrays }) => {
+      const { shape, data } = arrays.topology;
+      arrays.topology = { dtype: '<i1', shape, data: Int8Array.from(data) };
+    },
+  ]) {
+    refused(() => decodeClipFile(edited(file, edit)), /not a pdeanim CLIP file/);
+  }
 });
 
 test('non-finite times and short buffers are refused', () => {
@@ -132,21 +207,16 @@ test('non-finite times and short buffers are refused', () => {
   }
 });
 
-test('cyclic clips with a bad swim header are rejected', () => {
-  const c = man.cases.find((x) => x.kind === 'cyclic-spine');
-  const p = splitClipFile(readBytes(join(FIXTURES, c.clip)));
+test('cyclic clips with a bad swim header or missing arrays are rejected', () => {
+  const p = cyclicParts;
   const bad = edited(p.coefficients, ({ header }) => {
     header.swim.frequency = 0;
   });
-  assert.throws(() => decodeClip(p.topology, bad), /invalid swim parameters/);
-  const future = edited(p.coefficients, ({ header }) => {
-    header.format_version = 2;
-  });
-  assert.throws(() => decodeClip(p.topology, future), /unsupported cyclic-spine coefficients version 2/);
+  refused(() => decodeClip(p.topology, bad), /invalid swim parameters/);
   const noSpine = edited(p.coefficients, ({ arrays }) => {
     delete arrays.spine;
   });
-  assert.throws(() => decodeClip(p.topology, noSpine), /lacks arrays: spine/);
+  refused(() => decodeClip(p.topology, noSpine), /lacks arrays: spine/);
 });
 
 /** Zigzag codes of the differences along the rows (per column) of integers vals (rows x cols). */
@@ -168,7 +238,7 @@ function unzigzag(codes, cols = 1) {
   return out;
 }
 
-/** A version 2 part with the integers of a zigzag-coded array changed by edit(values). */
+/** A part with the integers of a zigzag-coded array changed by edit(values). */
 function editedCodes(bytes, name, edit, cols = 1) {
   return edited(bytes, ({ arrays }) => {
     const vals = unzigzag(arrays[name].data, cols);
@@ -177,10 +247,10 @@ function editedCodes(bytes, name, edit, cols = 1) {
   });
 }
 
-test('version 2 parts decode to what the helpers encode (zigzag differences, curve order)', () => {
-  const { header, arrays } = decodeContainer(parts2.topology.slice());
-  const clip = decodeClip(parts2.topology, parts2.coefficients);
-  assert.equal(header.format_version, 2);
+test('topology parts decode to what the helpers encode (zigzag differences, curve order)', () => {
+  const { header, arrays } = decodeContainer(parts.topology.slice());
+  const clip = decodeClip(parts.topology, parts.coefficients);
+  assert.equal(header.format_version, FORMAT_VERSION);
   const order = unzigzag(arrays.order.data);
   assert.deepEqual(Array.from(clip.order), order);
   // faces: ranks in curve order (column 0 running, columns 1-2 offsets from column 0), vertex = order[rank]
@@ -200,6 +270,13 @@ test('version 2 parts decode to what the helpers encode (zigzag differences, cur
       assert.equal(clip.rest[order[i] * 3 + w], want);
     }
   }
+  const cols = arrays.u.shape[1];
+  const qu = unzigzag(arrays.u.data, cols);
+  for (let i = 0; i < order.length; i++) {
+    for (let k = 0; k < cols; k++) {
+      assert.equal(clip.u[order[i] * cols + k], Math.fround(qu[i * cols + k] * header.u_step));
+    }
+  }
   let sum = 0;
   arrays.curve_lengths.data.forEach((n, c) => {
     assert.equal(clip.offsets[c], sum);
@@ -208,14 +285,22 @@ test('version 2 parts decode to what the helpers encode (zigzag differences, cur
   assert.equal(sum, clip.nVertices);
 });
 
-test('version 2 topologies with bad curves, order, faces or steps are rejected', () => {
-  const bad = (topo, pattern) => assert.throws(() => decodeClip(topo, parts2.coefficients), pattern);
-  bad(editedCodes(parts2.topology, 'order', (v) => (v[1] = v[0])), /order must be a permutation/);
-  bad(editedCodes(parts2.topology, 'order', (v) => (v[0] = v.length)), /order holds an index outside/);
-  bad(editedCodes(parts2.topology, 'order', (v) => (v[2] = -1)), /order holds an index outside/);
-  const V = decodeClip(parts2.topology, parts2.coefficients).nVertices;
+test('topologies with bad counts, curves, order, faces, u or steps are rejected', () => {
+  const bad = (topo, pattern) => refused(() => decodeClip(topo, parts.coefficients), pattern);
+  for (const V of [-1, 1.5, '42', true, null, undefined, [42]]) {
+    const t = edited(parts.topology, ({ header }) => {
+      if (V === undefined) delete header.n_vertices;
+      else header.n_vertices = V;
+    });
+    const got = JSON.stringify(V ?? null);
+    bad(t, `topology header field 'n_vertices' must be a non-negative integer, got ${got}`);
+  }
+  bad(editedCodes(parts.topology, 'order', (v) => (v[1] = v[0])), /order must be a permutation/);
+  bad(editedCodes(parts.topology, 'order', (v) => (v[0] = v.length)), /order holds an index outside/);
+  bad(editedCodes(parts.topology, 'order', (v) => (v[2] = -1)), /order holds an index outside/);
+  const V = decodeClip(parts.topology, parts.coefficients).nVertices;
   const faceCodes = (edit) =>
-    edited(parts2.topology, ({ arrays }) => {
+    edited(parts.topology, ({ arrays }) => {
       const d = Uint32Array.from(arrays.faces.data);
       edit(d);
       arrays.faces = { ...arrays.faces, data: d };
@@ -223,16 +308,27 @@ test('version 2 topologies with bad curves, order, faces or steps are rejected',
   bad(faceCodes((d) => (d[4] = 2 * V)), /faces index outside the vertices/); // row 1: offset V past its first
   bad(faceCodes((d) => (d[0] = 5)), /faces index outside the vertices/); // first rank -3
   bad(faceCodes((d) => (d[2] = 2 * V + 1)), /faces index outside the vertices/); // offset -(V + 1)
-  const lengths = edited(parts2.topology, ({ arrays }) => {
+  const lengths = edited(parts.topology, ({ arrays }) => {
     const d = Uint32Array.from(arrays.curve_lengths.data);
     d[0] += 1;
     arrays.curve_lengths = { ...arrays.curve_lengths, data: d };
   });
   bad(lengths, /curve_lengths must add up to n_vertices/);
-  const signed = edited(parts2.topology, ({ arrays }) => {
-    arrays.order = { ...arrays.order, dtype: '<i4', data: Int32Array.from(arrays.order.data) };
+  for (const name of ['curve_lengths', 'order', 'u', 'faces', 'rest']) {
+    const missing = edited(parts.topology, ({ arrays }) => {
+      delete arrays[name];
+    });
+    bad(missing, `topology part has no '${name}' array`);
+    const signed = edited(parts.topology, ({ arrays }) => {
+      arrays[name] = { ...arrays[name], dtype: '<i4', data: Int32Array.from(arrays[name].data) };
+    });
+    bad(signed, `topology array '${name}' has dtype <i4, expected <u4`);
+  }
+  const uCols = edited(parts.topology, ({ arrays }) => {
+    const n = arrays.u.shape[0];
+    arrays.u = { ...arrays.u, shape: [n, 2], data: new Uint32Array(n * 2) };
   });
-  bad(signed, /array 'order' has dtype <i4, expected <u4/);
+  bad(uCols, /topology array 'u' must have 1 or 3 columns, got 2/);
   for (const [key, value] of [
     ['rest_step', 0],
     ['rest_step', -0.5],
@@ -240,520 +336,362 @@ test('version 2 topologies with bad curves, order, faces or steps are rejected',
     ['u_step', null],
     ['u_step', undefined],
   ]) {
-    const t = edited(parts2.topology, ({ header }) => {
+    const t = edited(parts.topology, ({ header }) => {
       header[key] = value;
     });
     bad(t, new RegExp(`topology ${key} must be a positive finite number`));
   }
   for (const origin of [[0, 0], [0, 0, 'x'], null]) {
-    const t = edited(parts2.topology, ({ header }) => {
+    const t = edited(parts.topology, ({ header }) => {
       header.rest_origin = origin;
     });
     bad(t, /rest_origin must be 3 finite numbers/);
   }
-  const huge = edited(parts2.topology, ({ header }) => {
+  const huge = edited(parts.topology, ({ header }) => {
     header.rest_step = 1e38; // finite, but codes of a few steps leave float32
   });
   bad(huge, /topology rest decode to non-finite values/);
-  const hugeU = edited(parts2.topology, ({ header }) => {
+  const hugeU = edited(parts.topology, ({ header }) => {
     header.u_step = 1e38;
   });
   bad(hugeU, /topology u decode to non-finite values/);
 });
 
-test('version 2 coefficients with bad knot steps or codes are rejected', () => {
-  const bad = (coef, pattern) => assert.throws(() => decodeClip(parts2.topology, coef), pattern);
-  for (const [value, pattern] of [
-    [0, /knot steps must be positive/],
-    [-1, /knot steps must be positive/],
-    [NaN, /array 'knot_step' has non-finite values/],
-    [3e38, /coefficients knots decode to non-finite values/],
-  ]) {
-    const c = edited(parts2.coefficients, ({ arrays }) => {
-      const d = Float32Array.from(arrays.knot_step.data);
-      d[1] = value;
-      arrays.knot_step = { ...arrays.knot_step, data: d };
-    });
-    bad(c, pattern);
-  }
-  const missing = edited(parts2.coefficients, ({ arrays }) => {
-    delete arrays.knot_step;
-  });
-  bad(missing, /coefficients part has no 'knot_step' array/);
-  const floatKnots = edited(parts2.coefficients, ({ arrays }) => {
-    arrays.knots = { ...arrays.knots, dtype: '<f4', data: Float32Array.from(arrays.knots.data) };
-  });
-  bad(floatKnots, /array 'knots' has dtype <f4, expected <u4/);
-  const badKind = edited(parts2.coefficients, ({ arrays }) => {
-    const d = Uint8Array.from(arrays.space_kind.data);
-    d[0] = 2;
-    arrays.space_kind = { ...arrays.space_kind, data: d };
-  });
-  bad(badKind, /space kinds must be 0 or 1/);
-  const trigOverPi = edited(parts2.coefficients, ({ arrays }) => {
-    const d = Float32Array.from(arrays.m.data);
-    d[0] = -4; // trig time with a constant above pi
-    arrays.m = { ...arrays.m, data: d };
-  });
-  bad(trigOverPi, /time constants must be >= 0 \(and < pi for trig families\)/);
-});
-
 test('curve parameters outside [0, 1] are rejected (they would overflow the space basis)', () => {
-  const t = edited(parts2.topology, ({ header }) => {
+  const t = edited(parts.topology, ({ header }) => {
     header.u_step = 2 ** 40;
   });
-  const c = edited(parts2.coefficients, ({ header }) => {
+  const c = edited(parts.coefficients, ({ header }) => {
     header.topology_id = null;
   });
-  assert.throws(() => decodeClip(t, c), /topology curve parameters u must lie in \[0, 1\]/);
+  refused(() => decodeClip(t, c), /topology curve parameters u must lie in \[0, 1\]/);
 });
 
-test('version 2 signed m gives the family: < 0 trig, > 0 exp, 0 linear', () => {
-  const c = edited(parts2.coefficients, ({ arrays }) => {
+test('the float layouts of earlier drafts are refused: only the integer-coded arrays are read', () => {
+  // a topology with float u and rest, int32 order and faces and curve offsets instead of lengths
+  const clip = decodeClip(parts.topology, parts.coefficients);
+  const { header } = decodeContainer(parts.topology.slice());
+  const floatTopology = encodeContainer(header, {
+    offsets: { dtype: '<i4', shape: [clip.nCurves + 1], data: Int32Array.from(clip.offsets) },
+    order: { dtype: '<i4', shape: [clip.nVertices], data: Int32Array.from(clip.order) },
+    u: { dtype: '<f4', shape: [clip.nVertices, clip.uColumns], data: Float32Array.from(clip.u) },
+    faces: { dtype: '<i4', shape: [clip.faces.length / 3, 3], data: Int32Array.from(clip.faces) },
+    rest: { dtype: '<f4', shape: [clip.nVertices, 3], data: Float32Array.from(clip.rest) },
+  });
+  refused(() => decodeClip(floatTopology, parts.coefficients), "topology part has no 'curve_lengths' array");
+  // coefficients with float family codes and float knots (no space_kind, knot_step, time_model)
+  const { header: ch, arrays } = decodeContainer(parts.coefficients.slice());
+  const S = clip.nSegments;
+  const C = clip.nCurves;
+  const floatCoefficients = encodeContainer(ch, {
+    segment_t: arrays.segment_t,
+    frame_times: arrays.frame_times,
+    family: { dtype: '<u1', shape: [S, C, 3], data: Uint8Array.from(clip.family) },
+    m: { dtype: '<f4', shape: [S, C, 3], data: Float32Array.from(clip.m) },
+    D: arrays.D,
+    knots: { dtype: '<f4', shape: [S + 1, C, 3, 4], data: Float32Array.from(clip.knots) },
+  });
+  refused(() => decodeClip(parts.topology, floatCoefficients), "coefficients part has no 'space_kind' array");
+  const floatKnots = edited(parts.coefficients, ({ arrays: a }) => {
+    a.knots = { dtype: '<f4', shape: [S + 1, C, 3, 4], data: Float32Array.from(clip.knots) };
+  });
+  refused(() => decodeClip(parts.topology, floatKnots), /coefficients array 'knots' has shape/);
+});
+
+test('coefficients with bad counts, arrays, space kinds, time constants or boundaries are rejected', () => {
+  const bad = (coef, pattern) => refused(() => decodeClip(parts.topology, coef), pattern);
+  const { header } = decodeContainer(parts.coefficients.slice());
+  for (const S of [-1, 1.5, '3', true, null, undefined, [3]]) {
+    const c = edited(parts.coefficients, ({ header: h }) => {
+      if (S === undefined) delete h.n_segments;
+      else h.n_segments = S;
+    });
+    const got = JSON.stringify(S ?? null);
+    bad(c, `coefficients header field 'n_segments' must be a non-negative integer, got ${got}`);
+  }
+  // another valid count than the arrays': their shapes disagree
+  const more = edited(parts.coefficients, ({ header: h }) => {
+    h.n_segments = header.n_segments + 1;
+  });
+  bad(more, /coefficients array 'segment_t' has shape/);
+  const shape = edited(parts.coefficients, ({ arrays }) => {
+    arrays.D = { ...arrays.D, shape: [arrays.D.shape[0] * 3], data: arrays.D.data };
+  });
+  bad(shape, /array 'D' has shape/);
+  // every float array has its stated dtype (float64 times, float32 constants)
+  for (const [name, dtype, Typed] of [
+    ['segment_t', '<f4', Float32Array],
+    ['frame_times', '<f4', Float32Array],
+    ['D', '<f8', Float64Array],
+  ]) {
+    const retyped = edited(parts.coefficients, ({ arrays }) => {
+      arrays[name] = { ...arrays[name], dtype, data: Typed.from(arrays[name].data) };
+    });
+    bad(retyped, new RegExp(`array '${name}' has dtype ${dtype}`));
+  }
+  for (const [name, index] of [
+    ['D', 0],
+    ['m', 5],
+    ['segment_t', 1],
+    ['frame_times', 0],
+  ]) {
+    for (const value of [NaN, Infinity, -Infinity]) {
+      const c = edited(parts.coefficients, ({ arrays }) => {
+        const d = arrays[name].data.slice();
+        d[index] = value;
+        arrays[name] = { ...arrays[name], data: d };
+      });
+      bad(c, `coefficients array '${name}' has non-finite values`);
+    }
+  }
+  for (const name of ['segment_t', 'frame_times', 'space_kind', 'time_model', 'm', 'D']) {
+    const missing = edited(parts.coefficients, ({ arrays }) => {
+      delete arrays[name];
+    });
+    bad(missing, `coefficients part has no '${name}' array`);
+  }
+  for (const [name, dtype, Type, want] of [
+    ['space_kind', '<i1', Int8Array, '<u1'],
+    ['space_kind', '<u4', Uint32Array, '<u1'],
+    ['m', '<f8', Float64Array, '<f4'],
+  ]) {
+    const c = edited(parts.coefficients, ({ arrays }) => {
+      arrays[name] = { ...arrays[name], dtype, data: Type.from(arrays[name].data) };
+    });
+    bad(c, `coefficients array '${name}' has dtype ${dtype}, expected ${want}`);
+  }
+  for (const kind of [2, 255]) {
+    const c = edited(parts.coefficients, ({ arrays }) => {
+      const d = Uint8Array.from(arrays.space_kind.data);
+      d[d.length - 1] = kind;
+      arrays.space_kind = { ...arrays.space_kind, data: d };
+    });
+    bad(c, /space kinds must be 0 or 1/);
+  }
+  // trig time constants at or beyond -pi (float32(-pi) is below -pi)
+  for (const mu of [-4, -Math.PI, Math.fround(-Math.PI)]) {
+    const c = edited(parts.coefficients, ({ arrays }) => {
+      const d = Float32Array.from(arrays.m.data);
+      d[d.length - 1] = mu;
+      arrays.m = { ...arrays.m, data: d };
+    });
+    bad(c, 'trig time constants must be above -pi');
+  }
+  const justAbove = edited(parts.coefficients, ({ arrays }) => {
+    const d = Float32Array.from(arrays.m.data);
+    d[0] = -3.1415925; // the float32 just above -pi
+    arrays.m = { ...arrays.m, data: d };
+  });
+  assert.ok(decodeClip(parts.topology, justAbove).m[0] > 3.14);
+  // segment boundaries: decreasing, or a single boundary (S = 0)
+  const { arrays } = decodeContainer(parts.coefficients.slice());
+  const segT = Array.from(arrays.segment_t.data);
+  const down = retimed(parts.coefficients, { segmentT: segT.map((x, j) => (j === 1 ? -0.5 : x)) });
+  bad(down, 'segment boundaries must be non-decreasing with at least one segment');
+  const none = edited(parts.coefficients, ({ header: h, arrays: a }) => {
+    h.n_segments = 0;
+    a.segment_t = { ...a.segment_t, shape: [1], data: Float64Array.from([0]) };
+    a.m = { ...a.m, shape: [0, a.m.shape[1], 3], data: new Float32Array(0) };
+    const [C] = a.knots.shape;
+    a.knots = { ...a.knots, shape: [C, 3, 4, 1], data: new Uint32Array(C * 12) };
+  });
+  bad(none, 'segment boundaries must be non-decreasing with at least one segment');
+});
+
+test('the signed m gives the family: < 0 trig, > 0 exp, 0 linear', () => {
+  const c = edited(parts.coefficients, ({ arrays }) => {
     const d = Float32Array.from(arrays.m.data);
     d[0] = -0.5;
     d[1] = 0.5;
     d[2] = 0;
     arrays.m = { ...arrays.m, data: d };
   });
-  const clip = decodeClip(parts2.topology, c);
+  const clip = decodeClip(parts.topology, c);
   assert.ok(clip.family[0] >= 2 && clip.family[1] < 2 && clip.family[2] < 2); // trig, exp, (linear) exp
-  const plain = decodeClip(parts2.topology, parts2.coefficients);
+  const plain = decodeClip(parts.topology, parts.coefficients);
   for (const i of [0, 1, 2]) assert.equal(clip.family[i] % 2, plain.family[i] % 2); // the item's space kind
   assert.deepEqual(Array.from(clip.m.slice(0, 3)), [0.5, 0.5, 0]);
 });
 
-/** The integers of plain (not differenced) zigzag codes. */
-const plain = (codes) => Array.from(codes, (z) => (z >>> 1) ^ -(z & 1));
-/** Plain zigzag codes of integers. */
-const codesOf = (vals) => Uint32Array.from(vals, (q) => ((q << 1) ^ (q >> 31)) >>> 0);
-
-/**
- * The integers q[s * T + t] (S+1 = n knots of T tracks) of knot tracks (T, n) of zigzag differences of order
- * `order`, decoded here independently of the client.
- */
-function trackIntegers(codes, T, n, order) {
-  const z = plain(codes);
-  const q = new Array(n * T);
-  for (let t = 0; t < T; t++) {
-    let first = 0;
-    let v = 0;
-    for (let s = 0; s < n; s++) {
-      if (order === 1) v += z[t * n + s];
-      else v += first += z[t * n + s];
-      q[s * T + t] = v;
-    }
-  }
-  return q;
-}
-
-/** Knot tracks (T, n) of zigzag differences of order `order` of the integers p[s * T + t]. */
-function tracksOf(p, T, n, order) {
-  const d = new Array(T * n);
-  for (let t = 0; t < T; t++) {
-    for (let s = 0; s < n; s++) {
-      const at = (k) => (k < 0 ? 0 : p[k * T + t]);
-      d[t * n + s] = order === 1 ? at(s) - at(s - 1) : at(s) - 2 * at(s - 1) + at(s - 2);
-    }
-  }
-  return codesOf(d);
-}
-
-test('version 3 knots are the weights on the basis, summed in order, plus the residual, bit for bit', () => {
-  for (const c of man.cases.filter((x) => x.format_version === 3)) {
-    const p3 = splitClipFile(readBytes(join(FIXTURES, c.clip)));
-    const { header, arrays } = decodeContainer(p3.coefficients.slice());
-    const clip = decodeClip(p3.topology, p3.coefficients);
-    assert.equal(header.format_version, 3);
-    const r = header.knot_rank;
-    const S = clip.nSegments;
-    const n = S + 1;
-    const T = clip.nCurves * 12;
-    assert.ok(r >= 1 && r < n);
-    assert.deepEqual(arrays.knots.shape, [clip.nCurves, 3, 4, n]);
-    const q = plain(arrays.knot_weights.data);
-    const p = trackIntegers(arrays.knots.data, T, n, header.knot_differences);
-    const step = arrays.knot_step.data;
-    const basis = arrays.knot_basis.data;
-    for (let s = 0; s <= S; s++) {
-      for (let i = 0; i < T; i++) {
-        let acc = 0;
-        for (let j = 0; j < r; j++) acc += q[j * T + i] * step[i >> 2] * basis[j * n + s];
-        acc += p[s * T + i] * step[i >> 2];
-        assert.equal(clip.knots[s * T + i], Math.fround(acc), c.name);
-      }
-    }
-  }
-});
-
-/**
- * A version 3 part with weights (r, C, 3, 4) of the integers q, basis (r, S+1), residual integers p
- * (S+1, C, 3, 4; zeros unless given) coded with `order` (default 1) differences, and steps as given.
- */
-function withBasis(bytes, { rank, q, basis, step, residual, order = 1 }) {
-  return edited(bytes, ({ header, arrays }) => {
-    const C = arrays.knot_step.shape[0];
-    const n = basis.length / rank;
-    const T = C * 12;
-    header.format_version = 3;
-    header.knot_rank = rank;
-    header.knot_differences = order;
-    arrays.knots = {
-      dtype: '<u4',
-      shape: [C, 3, 4, n],
-      data: tracksOf(residual ?? new Array(n * T).fill(0), T, n, order),
-    };
-    arrays.knot_weights = { dtype: '<u4', shape: [rank, C, 3, 4], data: codesOf(q) };
-    arrays.knot_basis = { dtype: '<f4', shape: [rank, n], data: Float32Array.from(basis) };
-    if (step) arrays.knot_step = { ...arrays.knot_step, data: Float32Array.from(arrays.knot_step.data, step) };
-  });
-}
-
-test('a full-rank identity basis decodes to the knots of version 2 (knot_rank may be S + 1)', () => {
-  const { header, arrays } = decodeContainer(parts2.coefficients.slice());
-  const S = header.n_segments;
-  const n = S + 1;
-  const T = arrays.knot_step.shape[0] * 12;
-  // the version 2 integers q[track, s] (running sums of order knot_differences along s) as weights q[s, track]
-  const q = trackIntegers(arrays.knots.data, T, n, header.knot_differences);
-  const eye = Array.from({ length: n * n }, (_, i) => (Math.floor(i / n) === i % n ? 1 : 0));
-  const want = decodeClip(parts2.topology, parts2.coefficients);
-  const a = createEvaluator(want).evaluate(0.42);
-  const zeros = new Array(n * T).fill(0);
-  for (const order of [1, 2]) {
-    // all in the weights (zero residual), all in the residual (zero weights), or split between them
-    const half = q.map((v) => Math.trunc(v / 2));
-    for (const [weights, residual] of [
-      [q, zeros],
-      [zeros, q],
-      [half, q.map((v, i) => v - half[i])],
-    ]) {
-      const v3 = withBasis(parts2.coefficients, { rank: n, q: weights, basis: eye, residual, order });
-      const got = decodeClip(parts2.topology, v3);
-      assert.equal(got.header.format_version, 3);
-      assert.deepEqual(got.knots, want.knots);
-      assert.deepEqual(createEvaluator(got).evaluate(0.42), a);
-    }
-  }
-});
-
-test('a version 2 part with zero weights on any basis decodes to its own knots: the residual is its tracks', () => {
-  const want = decodeClip(parts2.topology, parts2.coefficients);
-  const c = edited(parts2.coefficients, ({ header, arrays }) => {
-    const C = arrays.knot_step.shape[0];
-    header.format_version = 3;
-    header.knot_rank = 2; // knot_differences and knots stay those of version 2
-    arrays.knot_weights = { dtype: '<u4', shape: [2, C, 3, 4], data: new Uint32Array(2 * C * 12) };
-    arrays.knot_basis = {
-      dtype: '<f4',
-      shape: [2, header.n_segments + 1],
-      data: Float32Array.from({ length: 2 * (header.n_segments + 1) }, (_, i) => 0.25 * i - 1),
-    };
-  });
-  assert.deepEqual(decodeClip(parts2.topology, c).knots, want.knots);
-});
-
-test('version 3 sums the basis tracks from j = 0 upwards in doubles, then rounds to float32', () => {
-  // per track the products 1, 2^53 and -2^53: (0 + 1 + 2^53) rounds to 2^53 (ties to even), so the
-  // ascending sum is 0; summed from j = r - 1 downwards it is 1
-  const { header, arrays } = decodeContainer(parts3.coefficients.slice());
-  const S = header.n_segments;
-  const T = arrays.knot_step.shape[0] * 12;
-  const q = [...new Array(T).fill(1), ...new Array(T).fill(2 ** 22), ...new Array(T).fill(-(2 ** 22))];
-  const basis = [...new Array(S + 1).fill(1), ...new Array(2 * (S + 1)).fill(2 ** 31)];
-  const c = withBasis(parts3.coefficients, { rank: 3, q, basis, step: () => 1 });
-  const clip = decodeClip(parts3.topology, c);
-  assert.ok(clip.knots.every((k) => Object.is(k, 0)));
-  // the total is rounded once, to float32: 1 + 3 * 2^-25 is more than half a float32 ulp above 1, so it
-  // rounds up to 1 + 2^-23 (a float32 accumulator would stay at 1)
-  const once = withBasis(parts3.coefficients, {
-    rank: 4,
-    q: new Array(4 * T).fill(1),
-    basis: [...new Array(S + 1).fill(1), ...new Array(3 * (S + 1)).fill(2 ** -25)],
-    step: () => 1,
-  });
-  assert.ok(decodeClip(parts3.topology, once).knots.every((k) => k === 1 + 2 ** -23));
-});
-
-test('version 3 adds the residual p * h after the basis sum, in doubles', () => {
-  const { header, arrays } = decodeContainer(parts3.coefficients.slice());
-  const S = header.n_segments;
-  const n = S + 1;
-  const T = arrays.knot_step.shape[0] * 12;
-  // basis products 2^53 then -2^53, residual 1: after the basis sum, (0 + 2^53 - 2^53) + 1 = 1; added first,
-  // (0 + 1 + 2^53) would round to 2^53 (ties to even) and the total would be 0
-  const q = [...new Array(T).fill(2 ** 22), ...new Array(T).fill(-(2 ** 22))];
-  const basis = new Array(2 * n).fill(2 ** 31);
-  for (const order of [1, 2]) {
-    const residual = new Array(n * T).fill(1);
-    const c = withBasis(parts3.coefficients, { rank: 2, q, basis, step: () => 1, residual, order });
-    assert.ok(decodeClip(parts3.topology, c).knots.every((k) => k === 1));
-  }
-  // a residual that varies along the tracks (differences of order 1 and 2), on steps of 2^-3 and a basis
-  // part of weights 3 on a ramp: knots = float32((3 h) * ramp[s] + p[s, t] h)
-  const h = 2 ** -3;
-  const ramp = Array.from({ length: n }, (_, s) => 0.1 * s - 0.35);
-  const residual = Array.from({ length: n * T }, (_, i) => ((i * 7919) % 23) - 11);
-  for (const order of [1, 2]) {
-    const q3 = new Array(T).fill(3);
-    const c = withBasis(parts3.coefficients, { rank: 1, q: q3, basis: ramp, step: () => h, residual, order });
-    const { knots } = decodeClip(parts3.topology, c);
-    for (let s = 0; s < n; s++) {
-      for (let t = 0; t < T; t++) {
-        const want = Math.fround(3 * h * Math.fround(ramp[s]) + residual[s * T + t] * h);
-        assert.equal(knots[s * T + t], want);
-      }
-    }
-  }
-});
-
-test('version 3 coefficients with a bad knot_rank, weights, basis, steps or residual tracks are rejected', () => {
-  const bad = (coef, pattern) => assert.throws(() => decodeClip(parts3.topology, coef), pattern);
-  const { header } = decodeContainer(parts3.coefficients.slice());
-  const S = header.n_segments;
-  const r = header.knot_rank;
-  const rankError = new RegExp(`coefficients knot_rank must be an integer in 1\\.\\.${S + 1}, got`);
-  for (const rank of [0, -1, S + 2, 1.5, '2', null, true, [2], undefined]) {
-    const c = edited(parts3.coefficients, ({ header: h }) => {
-      h.knot_rank = rank;
-    });
-    bad(c, rankError);
-  }
-  // another valid rank than the arrays': their shapes disagree
-  const lower = edited(parts3.coefficients, ({ header: h }) => {
-    h.knot_rank = r - 1 || r + 1;
-  });
-  bad(lower, /array 'knot_weights' has shape/);
-  // a version 2 part that claims version 3: no knot_rank (and no weights nor basis)
-  const claimed = edited(parts2.coefficients, ({ header: h }) => {
-    h.format_version = 3;
-  });
-  assert.throws(
-    () => decodeClip(parts2.topology, claimed),
-    /coefficients knot_rank must be an integer in 1\.\.\d+, got undefined/,
-  );
-  const edit = (name, change) =>
-    edited(parts3.coefficients, ({ arrays }) => {
-      arrays[name] = change(arrays[name]);
-    });
-  for (const name of ['knot_weights', 'knot_basis', 'knot_step', 'knots']) {
-    const missing = edited(parts3.coefficients, ({ arrays }) => {
-      delete arrays[name];
-    });
-    bad(missing, new RegExp(`coefficients part has no '${name}' array`));
-  }
-  // the residual tracks are read as version 2 knots: knot_differences 1 or 2, required
-  for (const order of [0, 3, -1, 1.5, '1', null, true, [1], undefined]) {
-    const c = edited(parts3.coefficients, ({ header: h }) => {
-      if (order === undefined) delete h.knot_differences;
-      else h.knot_differences = order;
-    });
-    const want = `coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`;
-    assert.throws(
-      () => decodeClip(parts3.topology, c),
-      (e) => e instanceof ClipFormatError && e.message.includes(want),
-    );
-  }
-  // shapes: the axes in another order, a flat array, a rank too many
-  bad(edit('knots', (a) => ({ ...a, shape: [a.shape[3], a.shape[0], 3, 4] })), /array 'knots' has shape/);
-  bad(edit('knots', (a) => ({ ...a, shape: [a.data.length] })), /array 'knots' has shape/);
-  const moved = edit('knot_weights', (a) => ({ ...a, shape: [a.shape[1], 3, 4, a.shape[0]] }));
-  bad(moved, /array 'knot_weights' has shape/);
-  bad(edit('knot_weights', (a) => ({ ...a, shape: [a.data.length] })), /array 'knot_weights' has shape/);
-  bad(edit('knot_basis', (a) => ({ ...a, shape: [a.shape[1], a.shape[0]] })), /array 'knot_basis' has shape/);
-  const extraRow = edit('knot_basis', (a) => ({
-    ...a,
-    shape: [a.shape[0] + 1, a.shape[1]],
-    data: new Float32Array(a.data.length + a.shape[1]),
-  }));
-  bad(extraRow, /array 'knot_basis' has shape/);
-  // dtypes: signed or float weights, a float64 basis, float64 steps
-  for (const [name, dtype, Type, want] of [
-    ['knot_weights', '<i4', Int32Array, '<u4'],
-    ['knot_weights', '<f4', Float32Array, '<u4'],
-    ['knot_basis', '<f8', Float64Array, '<f4'],
-    ['knot_step', '<f8', Float64Array, '<f4'],
-    ['knots', '<i4', Int32Array, '<u4'],
-    ['knots', '<f4', Float32Array, '<u4'],
-  ]) {
-    const c = edit(name, (a) => ({ ...a, dtype, data: Type.from(a.data) }));
-    bad(c, new RegExp(`array '${name}' has dtype ${dtype}, expected ${want}`));
-  }
-  // values: a non-finite basis, bad steps, knots that leave float32
-  for (const value of [NaN, Infinity, -Infinity]) {
-    bad(
-      edit('knot_basis', (a) => {
-        const d = Float32Array.from(a.data);
-        d[a.shape[1] - 1] = value;
-        return { ...a, data: d };
-      }),
-      /array 'knot_basis' has non-finite values/,
-    );
-  }
-  for (const [value, pattern] of [
-    [0, /knot steps must be positive/],
-    [-1, /knot steps must be positive/],
-    [NaN, /array 'knot_step' has non-finite values/],
-  ]) {
-    bad(
-      edit('knot_step', (a) => {
-        const d = Float32Array.from(a.data);
-        d[1] = value;
-        return { ...a, data: d };
-      }),
-      pattern,
-    );
-  }
-  const T = decodeClip(parts3.topology, parts3.coefficients).nCurves * 12;
-  const huge = withBasis(parts3.coefficients, {
-    rank: 1,
-    q: new Array(T).fill(2 ** 20),
-    basis: new Array(S + 1).fill(3e38),
-    step: () => 1,
-  });
-  bad(huge, /coefficients knots decode to non-finite values/);
-  // a residual alone that leaves float32 (zero weights): 2 * 3e38
-  const hugeResidual = withBasis(parts3.coefficients, {
-    rank: 1,
-    q: new Array(T).fill(0),
-    basis: new Array(S + 1).fill(1),
-    step: () => 3e38,
-    residual: new Array((S + 1) * T).fill(2),
-  });
-  bad(hugeResidual, /coefficients knots decode to non-finite values/);
-  // the version 2 checks still apply: space kinds and signed m
-  const badKind = edit('space_kind', (a) => {
-    const d = Uint8Array.from(a.data);
-    d[0] = 2;
-    return { ...a, data: d };
-  });
-  bad(badKind, /space kinds must be 0 or 1/);
-});
-
-for (const version of [4, 5]) {
-  const what = 'a bad knot_rank, basis arrays at rank 0, or bad tangents';
-  test(`version ${version} coefficients with ${what} are rejected`, () => {
-    // docs/format.md §3.10: besides what §3.9 rejects, a knot_rank that is not an integer in 0..S+1, arrays of
-    // the basis present with rank 0, and a tangents array that is missing, of another shape or dtype, or holds
-    // a value other than 0 and 1; version 5 (§3.11) rejects the same (its segment boundaries here strictly
-    // increasing: the rejection of repeated ones has a test of its own)
-    const tangents = (c, w) => Number((c + w) % 2 === 0);
-    for (const p of [parts2, parts3]) {
-      const segT = decodeContainer(p.coefficients.slice()).arrays.segment_t.data;
-      const segmentT = version === 5 ? strictlyIncreasing(segT) : null;
-      const v4 = (edit) => coefficientsV4(p.coefficients, { version, tangents, segmentT, edit });
-      const bad = (coef, pattern) => {
-        assert.throws(
-          () => decodeClip(p.topology, coef),
-          (e) => e instanceof ClipFormatError && pattern.test(e.message),
-          `${pattern}`,
-        );
-      };
-      const ok = decodeClip(p.topology, v4());
-      assert.equal(ok.header.format_version, version);
-      const S = ok.nSegments;
-      const C = ok.nCurves;
-      const rank = ok.header.knot_rank; // 0 from version 2, >= 1 from version 3
-      // knot_rank: not an integer in 0..S+1 (missing too)
-      const rankError = new RegExp(`coefficients knot_rank must be an integer in 0\\.\\.${S + 1}, got`);
-      for (const r of [-1, S + 2, 0.5, 1.5, '0', '1', null, true, false, [0], undefined]) {
-        bad(v4(({ header }) => {
-          if (r === undefined) delete header.knot_rank;
-          else header.knot_rank = r;
-        }), rankError);
-      }
-      if (rank === 0) {
-        // rank 0 with either basis array present (even of a consistent shape) is refused
-        for (const name of ['knot_weights', 'knot_basis']) {
-          const c = v4(({ arrays }) => {
-            arrays[name] = name === 'knot_weights'
-              ? { dtype: '<u4', shape: [0, C, 3, 4], data: new Uint32Array(0) }
-              : { dtype: '<f4', shape: [0, S + 1], data: new Float32Array(0) };
-          });
-          bad(c, new RegExp(`knot_rank is 0 \\(no shared basis\\), but the part has '${name}'`));
-        }
-        // a rank >= 1 on a part without the basis: its arrays are missing
-        bad(v4(({ header }) => { header.knot_rank = 1; }), /coefficients part has no 'knot_weights' array/);
-      } else {
-        // rank 0 on a part with a basis: the arrays of the basis are present
-        bad(v4(({ header }) => { header.knot_rank = 0; }), /knot_rank is 0 \(no shared basis\), but the part has/);
-        // the version 3 rules still apply: a basis of the wrong rank, a missing or non-finite basis
-        bad(v4(({ header }) => { header.knot_rank = rank === 1 ? 2 : rank - 1; }), /array 'knot_weights' has shape/);
-        bad(v4(({ arrays }) => { delete arrays.knot_basis; }), /coefficients part has no 'knot_basis' array/);
-        bad(v4(({ arrays }) => {
-          const d = Float32Array.from(arrays.knot_basis.data);
-          d[0] = NaN;
-          arrays.knot_basis = { ...arrays.knot_basis, data: d };
-        }), /array 'knot_basis' has non-finite values/);
-      }
-      // the version 2 rules too: knot_differences, knot steps, space kinds
-      bad(v4(({ header }) => { header.knot_differences = 3; }), /knot_differences must be 1 or 2, got 3/);
-      bad(v4(({ arrays }) => {
-        const d = Float32Array.from(arrays.knot_step.data);
-        d[0] = 0;
-        arrays.knot_step = { ...arrays.knot_step, data: d };
-      }), /knot steps must be positive/);
-      // tangents: missing, another shape, another dtype, values other than 0 and 1
-      bad(v4(({ arrays }) => { delete arrays.tangents; }), /coefficients part has no 'tangents' array/);
-      for (const shape of [[C * 3], [3, C], [C, 3, 1], [C + 1, 3], [C, 4]]) {
-        const n = shape.reduce((a, b) => a * b, 1);
-        bad(v4(({ arrays }) => {
-          arrays.tangents = { dtype: '<u1', shape, data: new Uint8Array(n) };
-        }), /array 'tangents' has shape/);
-      }
-      for (const [dtype, Type] of [
-        ['<i1', Int8Array],
-        ['<u2', Uint16Array],
-        ['<u4', Uint32Array],
-        ['<f4', Float32Array],
-      ]) {
-        bad(v4(({ arrays }) => {
-          arrays.tangents = { dtype, shape: [C, 3], data: Type.from(arrays.tangents.data) };
-        }), new RegExp(`array 'tangents' has dtype ${dtype}, expected <u1`));
-      }
-      for (const value of [2, 255]) {
-        bad(v4(({ arrays }) => {
-          const d = Uint8Array.from(arrays.tangents.data);
-          d[d.length - 1] = value;
-          arrays.tangents = { ...arrays.tangents, data: d };
-        }), new RegExp(`coefficients tangents must be 0 or 1, got ${value}`));
-      }
-      // a version 2 or 3 part that claims version 4 or 5 keeps its basis and needs its tangents
-      const claimed = edited(p.coefficients, ({ header }) => {
-        header.format_version = version;
-        header.knot_rank ??= 0;
+test('time_model: required, (C, 3) uint8 of 0 and 1; null on the clip when no item is on the spline', () => {
+  for (const p of [parts, splineParts, basisParts]) {
+    const bad = (coef, pattern) => refused(() => decodeClip(p.topology, coef), pattern);
+    const { model, C } = timeArrays(p.coefficients);
+    const clip = decodeClip(p.topology, p.coefficients);
+    if (model.includes(1)) assert.deepEqual(clip.timeModel, model);
+    else assert.equal(clip.timeModel, null);
+    const edit = (change) =>
+      edited(p.coefficients, ({ arrays }) => {
+        arrays.time_model = change(arrays.time_model);
       });
-      bad(claimed, /coefficients part has no 'tangents' array/);
+    // missing, or the removed `tangents` array in its place
+    const missing = edited(p.coefficients, ({ arrays }) => {
+      delete arrays.time_model;
+    });
+    bad(missing, "coefficients part has no 'time_model' array");
+    const renamed = edited(p.coefficients, ({ arrays }) => {
+      arrays.tangents = arrays.time_model;
+      delete arrays.time_model;
+    });
+    bad(renamed, "coefficients part has no 'time_model' array");
+    for (const shape of [[C * 3], [3, C], [C, 3, 1], [C + 1, 3], [C, 4], [1, C, 3]]) {
+      const n = shape.reduce((a, b) => a * b, 1);
+      const c = edit((a) => ({ ...a, shape, data: new Uint8Array(n) }));
+      bad(c, /coefficients array 'time_model' has shape/);
     }
-  });
-}
+    for (const [dtype, Type] of [
+      ['<i1', Int8Array],
+      ['<u2', Uint16Array],
+      ['<u4', Uint32Array],
+      ['<f4', Float32Array],
+    ]) {
+      const c = edit((a) => ({ ...a, dtype, data: Type.from(a.data) }));
+      bad(c, `coefficients array 'time_model' has dtype ${dtype}, expected <u1`);
+    }
+    for (const value of [2, 3, 255]) {
+      for (const i of [0, C * 3 - 1]) {
+        const c = edit((a) => {
+          const d = Uint8Array.from(a.data);
+          d[i] = value;
+          return { ...a, data: d };
+        });
+        bad(c, `coefficients time_model must be 0 (paper) or 1 (natural spline), got ${value}`);
+      }
+    }
+  }
+});
 
-test('version 5 rejects segment boundaries that are not strictly increasing where some item has tangents', () => {
-  // docs/format.md §3.11: a segment of zero length cannot occur in a version 5 clip with tangents (its
-  // natural-spline tangents divide by every segment's length); without tangents, and in version 4, it can
-  for (const p of [parts2, parts3]) {
-    const S = decodeContainer(p.coefficients.slice()).header.n_segments;
+test('items on the spline must have m = 0 in every segment; the other items keep their constants', () => {
+  const { model, m, C } = timeArrays(splineParts.coefficients);
+  const S = m.length / (C * 3);
+  assert.ok(S >= 3);
+  const item = model.indexOf(1);
+  const off = model.indexOf(0);
+  assert.ok(item >= 0 && off >= 0);
+  assert.ok(Array.from({ length: S }, (_, s) => m[s * C * 3 + off]).some((x) => x !== 0)); // not all linear
+  for (const s of [0, 1, S - 1]) {
+    for (const mu of [0.5, -0.5, 1e-30, -1e-30, 2]) {
+      const c = edited(splineParts.coefficients, ({ arrays }) => {
+        const d = Float32Array.from(arrays.m.data);
+        d[s * C * 3 + item] = mu;
+        arrays.m = { ...arrays.m, data: d };
+      });
+      refused(
+        () => decodeClip(splineParts.topology, c),
+        'items on the natural spline must have time constant 0 in every segment',
+      );
+    }
+  }
+  // an item put on the spline without zeroing its constants; -0 is 0
+  const moved = edited(splineParts.coefficients, ({ arrays }) => {
+    const d = Uint8Array.from(arrays.time_model.data);
+    d[off] = 1;
+    arrays.time_model = { ...arrays.time_model, data: d };
+  });
+  refused(() => decodeClip(splineParts.topology, moved), /must have time constant 0 in every segment/);
+  const negativeZero = edited(splineParts.coefficients, ({ arrays }) => {
+    const d = Float32Array.from(arrays.m.data);
+    for (let s = 0; s < S; s++) d[s * C * 3 + item] = -0;
+    arrays.m = { ...arrays.m, data: d };
+  });
+  const clip = decodeClip(splineParts.topology, negativeZero);
+  assert.equal(clip.m[item], 0);
+  // the same clip with every item on the paper's time pairs keeps every constant
+  const paper = decodeClip(splineParts.topology, retimed(splineParts.coefficients, { timeModel: () => 0 }));
+  assert.equal(paper.timeModel, null);
+  assert.deepEqual(paper.m, decodeClip(splineParts.topology, splineParts.coefficients).m);
+});
+
+test('a zero-length segment is refused when some item is on the spline, read otherwise', () => {
+  for (const p of [splineParts, parts, basisParts]) {
+    const { header, arrays } = decodeContainer(p.coefficients.slice());
+    const S = header.n_segments;
+    const C = arrays.time_model.shape[0];
     const even = Array.from({ length: S + 1 }, (_, j) => j / S);
     for (const j of [0, 1, S - 1]) {
       // segment j of length 0 (the first, an inner one, the last)
       const segmentT = even.map((x, i) => (i === j + 1 ? even[j] : x));
-      const tangents = (c, w) => Number(c === 1 && w === 2);
-      const coef = (version, tg = tangents) =>
-        coefficientsV4(p.coefficients, { version, tangents: tg, segmentT });
-      assert.throws(
-        () => decodeClip(p.topology, coef(5)),
-        (e) =>
-          e instanceof ClipFormatError &&
-          e.message ===
-            'segment boundaries must be strictly increasing in a version 5 clip with tangents' +
-              ` (segment ${j} has length 0)`,
-      );
-      assert.equal(decodeClip(p.topology, coef(5, () => 0)).header.format_version, 5);
-      assert.equal(decodeClip(p.topology, coef(4)).header.format_version, 4);
-      // decreasing boundaries stay refused in every version, with the message of every version
+      for (const spline of [(c, w) => Number(c === 1 && w === 2), () => 1]) {
+        refused(
+          () => decodeClip(p.topology, retimed(p.coefficients, { timeModel: spline, segmentT })),
+          `natural-spline items need strictly increasing segment times (segment ${j} has length 0)`,
+        );
+      }
+      const paper = decodeClip(p.topology, retimed(p.coefficients, { timeModel: () => 0, segmentT }));
+      assert.equal(paper.timeModel, null);
+      assert.ok(createEvaluator(paper).evaluate(even[j]).every(Number.isFinite));
+      // strictly increasing boundaries are fine with the spline
+      const ok = decodeClip(p.topology, retimed(p.coefficients, { timeModel: () => 1, segmentT: even }));
+      assert.equal(ok.timeModel.length, C * 3);
+      // decreasing boundaries stay refused with and without spline items
       const back = even.map((x, i) => (i === j + 1 ? -1 : x));
-      const down = coefficientsV4(p.coefficients, { version: 5, tangents, segmentT: back });
-      assert.throws(() => decodeClip(p.topology, down), /segment boundaries must be non-decreasing/);
+      for (const timeModel of [() => 0, () => 1]) {
+        refused(
+          () => decodeClip(p.topology, retimed(p.coefficients, { timeModel, segmentT: back })),
+          'segment boundaries must be non-decreasing with at least one segment',
+        );
+      }
     }
   }
+});
+
+test('zero-length segments without spline items: the last of equal boundaries wins, t = 1 too', () => {
+  // boundaries 0, 0.3, 0.3, 1, 1 (S = 4): t = 0.3 is in segment 2 at tau = 0 (the motion jumps from P_1 to
+  // P_2 there), and t = 1 in the empty segment 3 at tau = 0 (its first knot, P_3); every t evaluates as the
+  // naive form of docs/format.md
+  let tested = 0;
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde' && x.spline_items === 0)) {
+    const p = fixtureParts(c);
+    if (decodeContainer(p.coefficients.slice()).header.n_segments !== 4) continue;
+    tested++;
+    const segmentT = [0, 0.3, 0.3, 1, 1];
+    const clip = decodeClip(p.topology, retimed(p.coefficients, { segmentT }));
+    const ev = createEvaluator(clip);
+    assert.deepEqual(ev.locate(0.3).slice(0, 2), [2, 0]);
+    assert.deepEqual(ev.locate(0.3 - 1e-12).slice(0, 1), [0]);
+    assert.deepEqual(ev.locate(1).slice(0, 2), c.looping ? [0, 0] : [3, 0]);
+    for (const t of [0, 0.1, 0.3 - 1e-12, 0.3, 0.31, 0.6, 0.999999, 1, 1.5]) {
+      const worst = worstDeviation(ev.evaluate(t), naiveEvaluate(clip, t));
+      assert.ok(worst <= 1e-6 * c.diagonal, `${c.name} t = ${t}: ${worst}`);
+    }
+  }
+  assert.ok(tested >= 2, `${tested} clips of 4 segments`);
+});
+
+test('rigid tracks with bad boundaries, shapes, constants or values are rejected', () => {
+  const bad = (coef, pattern) => refused(() => decodeClip(rigidParts.topology, coef), pattern);
+  const edit = (name, change) =>
+    edited(rigidParts.coefficients, ({ arrays }) => {
+      arrays[name] = change(arrays[name]);
+    });
+  const names = ['rigid_segment_t', 'rigid_centre', 'rigid_rot_knots', 'rigid_rot_mu', 'rigid_trans_knots'];
+  for (const name of names) {
+    const missing = edited(rigidParts.coefficients, ({ arrays }) => {
+      delete arrays[name];
+    });
+    bad(missing, `coefficients part has no '${name}' array`);
+  }
+  bad(
+    edit('rigid_segment_t', (a) => ({ ...a, data: Float64Array.from(a.data, (x, i) => (i === 1 ? -1 : x)) })),
+    'rigid segment boundaries must be non-decreasing with at least one segment',
+  );
+  bad(
+    edit('rigid_segment_t', (a) => ({ ...a, shape: [1], data: a.data.slice(0, 1) })),
+    'rigid segment boundaries must be non-decreasing with at least one segment',
+  );
+  const fewer = edit('rigid_trans_knots', (a) => {
+    const shape = [a.shape[0] - 1, ...a.shape.slice(1)];
+    return { ...a, shape, data: a.data.slice(0, shape.reduce((x, y) => x * y, 1)) };
+  });
+  bad(fewer, /coefficients array 'rigid_trans_knots' has shape/);
+  for (const name of ['rigid_rot_mu', 'rigid_trans_mu']) {
+    bad(
+      edit(name, (a) => ({ ...a, data: Float32Array.from(a.data, (x, i) => (i === 0 ? -4 : x)) })),
+      'rigid trig time constants must be above -pi',
+    );
+  }
+  bad(
+    edit('rigid_rot_knots', (a) => ({ ...a, data: Float32Array.from(a.data, (x, i) => (i ? x : NaN)) })),
+    "coefficients array 'rigid_rot_knots' has non-finite values",
+  );
 });

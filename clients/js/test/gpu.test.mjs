@@ -1,52 +1,41 @@
 // The GPU path without a browser: a line-by-line JS emulation of the vertex shader (src/gpu.js), fed the
-// same textures, attributes and uniforms, agrees with the CPU evaluator on every fixture; normals follow
-// the surface; the three.js integration patches every built-in material and its CPU fallback works.
+// same textures, attributes and uniforms, agrees with the CPU evaluator on every fixture (those with items on
+// the natural spline: four weights per item and a tangent texture); normals follow the surface; the three.js
+// integration patches every built-in material and its CPU fallback works.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import * as THREE from 'three';
-import { computeNormals, createEvaluator, decodeClip, decodeClipFile, hermiteWeights } from '../src/index.js';
+import {
+  TIME_PDE,
+  TIME_SPLINE,
+  computeNormals,
+  createEvaluator,
+  decodeClip,
+  decodeClipFile,
+} from '../src/index.js';
 import { naturalSplineTangents, splineWeights } from '../src/dynamic.js';
 import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from '../src/gpu.js';
 import { attachClip, attachClipToScene } from '../src/three.js';
-import {
-  FIXTURES,
-  coefficientsV4,
-  manifest,
-  readBytes,
-  versionFiveCases,
-  versionFourCases,
-} from './helpers.mjs';
+import { FIXTURES, fixtureParts, manifest, readBytes, retimed } from './helpers.mjs';
 
 const man = manifest();
-// version 4 clips (Catmull-Rom time tangents) and version 5 ones (natural-spline tangents) re-encoded from
-// the version 2 and 3 fixtures (helpers.mjs)
-const v4 = versionFourCases();
-const v5 = versionFiveCases();
+// the fixtures with items on the natural spline (rigid, looping and knot-basis ones among them)
+const splineCases = man.cases.filter((x) => x.spline_items > 0);
 
 /**
- * The four weighted terms' (knot, texture) with time tangents: version 4 the knots lo(s), s, s+1, hi(s+1) of
- * the field or knot texture; version 5 (spline) T_s and T_s+1 from the tangent texture around P_s, P_s+1.
+ * The four weighted terms' (knot, texture) of a clip with spline items: T_s and T_s+1 from the tangent
+ * texture around P_s, P_s+1 from the field or knot texture.
  */
-function tangentTerms(layout, seg) {
+function splineTerms(layout, seg) {
   const T = layout.textures;
   const main = layout.mode === 'fields' ? T.field : T.knot;
-  if (layout.spline) {
-    return [
-      [seg, T.tangent],
-      [seg, main],
-      [seg + 1, main],
-      [seg + 1, T.tangent],
-    ];
-  }
-  const sl = Math.max(seg - 1, 0);
-  const sh = Math.min(seg + 2, layout.nSegments); // the pdeSegments uniform
   return [
-    [sl, main],
+    [seg, T.tangent],
     [seg, main],
     [seg + 1, main],
-    [sh, main],
+    [seg + 1, T.tangent],
   ];
 }
 
@@ -82,10 +71,9 @@ function emulate(layout, u, v) {
   const head = fetch(T.vertex, fields ? v : v * 4);
   const c = Math.round(head[0]);
   const V = layout.nVertices;
-  if (layout.tangents) {
-    // four weights per item on the knots lo(s), s, s+1, hi(s+1) (version 5: on T_s, P_s, P_s+1, T_s+1),
-    // summed ((l + 0) + 1) + h, then + base
-    const terms = tangentTerms(layout, u.seg);
+  if (layout.spline) {
+    // four weights per item on T_s, P_s, P_s+1, T_s+1, summed ((l + 0) + 1) + h, then + base
+    const terms = splineTerms(layout, u.seg);
     const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * K + j));
     let p = [0, 1, 2].map((w) => {
       if (fields) {
@@ -142,8 +130,8 @@ function termMagnitude(layout, u, v) {
   const T = layout.textures;
   const C = layout.nCurves;
   const c = Math.round(fetch(T.vertex, v * 4)[0]);
-  if (layout.tangents) {
-    const terms = tangentTerms(layout, u.seg);
+  if (layout.spline) {
+    const terms = splineTerms(layout, u.seg);
     const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * layout.curveTexels + j));
     return [0, 1, 2].map((w) => {
       const b = fetch(T.vertex, v * 4 + 1 + w);
@@ -168,14 +156,19 @@ function termMagnitude(layout, u, v) {
   });
 }
 
-/** A fixture's clip, or a version 4 or 5 case's (decoded from its two parts). */
+/** A fixture's clip. */
 function loadCase(c) {
-  if (c.coefficients) return decodeClip(c.topology, c.coefficients);
   return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
 }
 
-for (const [c, mode] of [...man.cases, ...v4, ...v5].flatMap((x) =>
-  x.kind === 'dynamic-pde' || x.coefficients
+/** A fixture's clip with every item on the paper's time pairs (its spline items' constants 0: linear). */
+function withoutSpline(c) {
+  const { topology, coefficients } = fixtureParts(c);
+  return decodeClip(topology, retimed(coefficients, { timeModel: () => TIME_PDE }));
+}
+
+for (const [c, mode] of man.cases.flatMap((x) =>
+  x.kind === 'dynamic-pde'
     ? [
         [x, 'fields'],
         [x, 'coefficients'],
@@ -184,11 +177,9 @@ for (const [c, mode] of [...man.cases, ...v4, ...v5].flatMap((x) =>
 )) {
   test(`emulated shader (${mode}) matches the CPU evaluator: ${c.name}`, () => {
     const clip = loadCase(c);
-    // version 4 clips: the table carries four weights per item, on knots lo(s), s, s+1, hi(s+1); version 5
-    // ones on T_s, P_s, P_s+1, T_s+1, with a tangent texture
-    if (c.coefficients) assert.ok(gpuLayout(clip).tangents, c.name);
-    const spline = clip.tangentSpline === 'natural' && clip.tangents.includes(1);
-    assert.equal(gpuLayout(clip).spline, spline, c.name);
+    // clips with spline items: the table carries four weights per item, on T_s, P_s, P_s+1, T_s+1, with a
+    // tangent texture
+    assert.equal(gpuLayout(clip).spline, c.spline_items > 0, c.name);
     const layout = gpuLayout(clip, { width: 64, mode }); // a narrow texture exercises the 2D texel addressing
     const ev = createEvaluator(clip);
     // Mode "fields" holds the CPU path's float32 P_k: 1e-6 of the diagonal. Mode "coefficients" holds the
@@ -308,7 +299,8 @@ test('attachClip patches every built-in material (and the shadow materials) and 
 
 test('setTime drives the uniforms; the CPU fallback writes the evaluated positions and normals', () => {
   for (const c of [
-    man.cases.find((x) => x.motion === 'rigid' && x.looping),
+    man.cases.find((x) => x.motion === 'rigid' && x.looping && x.spline_items === 0),
+    man.cases.find((x) => x.motion === 'rigid' && x.spline_items > 0),
     man.cases.find((x) => x.kind === 'cyclic-spine'),
   ]) {
     const clip = loadCase(c);
@@ -565,8 +557,10 @@ test('with a renderer the clip is evaluated in a pass before drawing, once per t
 });
 
 test('the per-curve table equals every item time pair and is rewritten only when the state moves', () => {
-  // version 4 fixtures with tangents carry four knot weights per item (tested in its own test below)
-  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde' && x.format_version < 4)) {
+  // clips with spline items carry four weights per item (tested in its own test below)
+  const plainCases = man.cases.filter((x) => x.kind === 'dynamic-pde' && x.spline_items === 0);
+  assert.ok(plainCases.length >= 5);
+  for (const c of plainCases) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
     const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
@@ -615,17 +609,18 @@ test('a t with the same segment and local time uploads nothing', () => {
 });
 
 /**
- * The per-curve table of clips with time tangents holds each item the CPU evaluator's four weights: the
- * segment's cubic weights (weightsOf: Catmull-Rom's on four knots in version 4, the spline's on T_s, P_s,
- * P_s+1, T_s+1 in version 5) or 0, phi0, phi1, 0 off the cubic, then the rigid rows.
+ * The per-curve table of clips with spline items holds each item the CPU evaluator's four weights: the
+ * segment's spline weights on T_s, P_s, P_s+1, T_s+1 for items on the spline, 0, phi0, phi1, 0 for the
+ * others, then the rigid rows; it is rewritten only when the state moves.
  */
-function checkWeightTable(cases, weightsOf, spline) {
-  for (const c of cases) {
+test('spline clips: the table holds each item its four weights (the CPU ones), then the rigid rows', () => {
+  assert.ok(splineCases.some((c) => c.motion === 'rigid') && splineCases.some((c) => c.motion !== 'rigid'));
+  for (const c of splineCases) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
     const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
-    assert.equal(layout.tangents, true);
-    assert.equal(layout.spline, spline);
+    assert.equal(layout.spline, true);
+    assert.equal('tangents' in layout, false);
     assert.equal(layout.weightTexels, 4);
     assert.equal(layout.curveTexels, layout.rigid ? 7 : 4);
     assert.equal(layout.nSegments, clip.nSegments);
@@ -633,19 +628,20 @@ function checkWeightTable(cases, weightsOf, spline) {
     const C = clip.nCurves;
     const K = layout.curveTexels * 4;
     const d = layout.textures.curve.data;
-    let cubicItems = 0;
-    for (const t of c.t) {
+    let splineItems = 0;
+    let prev = null;
+    for (const t of [...c.t, ...c.t.map((x) => x + 1)]) {
       const u = timeUniforms(layout, t);
       ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
       const s = ref.prepare(t);
       assert.equal(u.seg, s);
-      const cubic = weightsOf(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
+      const cubic = splineWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
       for (let cw = 0; cw < C * 3; cw++) {
         const o = Math.floor(cw / 3) * K + (cw % 3);
         const table = [0, 1, 2, 3].map((j) => d[o + j * 4]);
         assert.deepEqual(table, Array.from(ref.weights.subarray(cw * 4, cw * 4 + 4), Math.fround));
-        if (ref.cubic[s * C * 3 + cw] === 1) {
-          cubicItems++;
+        if (clip.timeModel[cw] === TIME_SPLINE) {
+          splineItems++;
           assert.deepEqual(table, Array.from(cubic), `${c.name} t = ${t}`);
         } else {
           assert.deepEqual(table, [0, Math.fround(ref.phi0[cw]), Math.fround(ref.phi1[cw]), 0]);
@@ -659,60 +655,17 @@ function checkWeightTable(cases, weightsOf, spline) {
           }
         }
       }
+      const loc = ref.locate(t);
+      const key = `${loc[0]} ${loc[1]} ${layout.rigid ? loc[2] : ''}`;
+      assert.equal(u.changed, key !== prev, `${c.name} t = ${t}`);
+      prev = key;
     }
-    assert.ok(cubicItems > 0, c.name);
-  }
-}
-
-test('version 4: the per-curve table holds each item four knot weights (the CPU ones), then rigid rows', () => {
-  checkWeightTable(v4, hermiteWeights, false);
-});
-
-test('version 4: GLSL and three.js materials get the tangents layout; other clips keep theirs', () => {
-  for (const motion of ['rigid', 'displacement']) {
-    const c = v4.find((x) => x.motion === motion);
-    const clip = loadCase(c);
-    const plainClip = loadCase(c.fixture);
-    const rigid = motion === 'rigid';
-    const layout = gpuLayout(clip);
-    const header = glslHeader(layout);
-    assert.match(header, /#define PDEANIM_TANGENTS/);
-    assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
-    assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
-    assert.match(header, /uniform int pdeSegments;/);
-    // without tangents (versions 1-3, or version 4 with tangents all 0): 2 texels (5 rigid), no tangents
-    const plain = gpuLayout(plainClip);
-    assert.equal(plain.tangents, false);
-    assert.equal(plain.curveTexels, rigid ? 5 : 2);
-    assert.doesNotMatch(glslHeader(plain), /#define PDEANIM_TANGENTS/);
-    assert.match(glslHeader(plain), new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 5 : 2}\\n`));
-    const zero = gpuLayout(decodeClip(c.topology, coefficientsV4(c.original)));
-    assert.equal(zero.tangents, false);
-    assert.equal(zero.curveTexels, rigid ? 5 : 2);
-    // three.js: the segment count as a uniform, a program cache key of its own
-    const mesh = meshOf(clip, THREE.MeshStandardMaterial);
-    const player = attachClip(mesh, clip);
-    assert.equal(player.uniforms.pdeSegments.value, clip.nSegments);
-    const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
-    mesh.material.onBeforeCompile(shader, null);
-    assert.match(shader.vertexShader, /#define PDEANIM_TANGENTS/);
-    assert.equal(shader.uniforms.pdeSegments.value, clip.nSegments);
-    assert.match(mesh.material.customProgramCacheKey(), /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+:tangents$/);
-    const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
-    assert.doesNotMatch(other.mesh.material.customProgramCacheKey(), /tangents/);
-    // the GPU path and the CPU fallback agree on the positions it shows
-    agreesWithCpu(player, clip, 0.43, c.diagonal);
-    player.detach();
-    other.detach();
+    assert.ok(splineItems > 0, c.name);
   }
 });
 
-test('version 5: the table holds each item the spline weights on T_s, P_s, P_s+1, T_s+1 (the CPU ones)', () => {
-  checkWeightTable(v5, splineWeights, true);
-});
-
-test('version 5: a tangent texture in the layout of the field or knot texture, the spline of its data', () => {
-  for (const c of v5) {
+test('spline clips: a tangent texture in the layout of the field or knot texture, of the same data', () => {
+  for (const c of splineCases) {
     const clip = loadCase(c);
     const { nVertices: V, nCurves: C, nSegments: S } = clip;
     // mode "fields": per (knot, vertex) the evaluator's float32 tangent fields T xyz
@@ -725,46 +678,49 @@ test('version 5: a tangent texture in the layout of the field or knot texture, t
     }
     // mode "coefficients": per (knot, curve, coordinate) the spline's tangents of the 4 knot coefficients
     const coef = gpuLayout(clip, { width: 64, mode: 'coefficients' });
-    const want = naturalSplineTangents(clip.segmentT, clip.knots, C * 12, new Float32Array(clip.knots.length));
+    const want = new Float32Array(clip.knots.length);
+    naturalSplineTangents(clip.segmentT, clip.knots, C * 12, want);
     assert.equal(coef.textures.tangent.height, coef.textures.knot.height);
     assert.deepEqual(coef.textures.tangent.data.subarray(0, want.length), want, c.name);
     assert.ok(coef.maxHeight >= coef.textures.tangent.height);
-    // version 4 and plain clips have none
-    assert.equal(gpuLayout(loadCase(c.fixture)).textures.tangent, undefined);
+    // the same clip without spline items has none
+    const plain = withoutSpline(c);
+    assert.equal(gpuLayout(plain).textures.tangent, undefined);
     // mode auto counts the tangent texture: fields while both fit the budget
     const bytes = (S + 1) * V * 16;
     assert.equal(gpuLayout(clip, { fieldsBudget: 2 * bytes }).mode, 'fields');
     assert.equal(gpuLayout(clip, { fieldsBudget: 2 * bytes - 1 }).mode, 'coefficients');
-    const c4 = v4.find((x) => x.fixture.name === c.fixture.name);
-    assert.equal(gpuLayout(loadCase(c4), { fieldsBudget: bytes }).mode, 'fields');
+    assert.equal(gpuLayout(plain, { fieldsBudget: bytes }).mode, 'fields');
+    assert.equal(gpuLayout(plain, { fieldsBudget: bytes - 1 }).mode, 'coefficients');
   }
-  for (const c of v4) assert.equal(gpuLayout(loadCase(c)).textures.tangent, undefined);
+  for (const c of man.cases.filter((x) => !(x.spline_items > 0))) {
+    assert.equal(gpuLayout(loadCase(c)).textures.tangent, undefined, c.name);
+  }
 });
 
-test('version 5: GLSL and three.js materials get the spline layout, another program than version 4', () => {
+test('spline clips: GLSL and three.js materials get the spline layout; other clips keep theirs', () => {
   for (const motion of ['rigid', 'displacement']) {
-    const c = v5.find((x) => x.motion === motion);
-    const c4 = v4.find((x) => x.fixture.name === c.fixture.name);
+    const c = splineCases.find((x) => x.motion === motion);
     const clip = loadCase(c);
-    const clip4 = loadCase(c4);
+    const plainClip = withoutSpline(c);
     const rigid = motion === 'rigid';
     for (const mode of ['fields', 'coefficients']) {
       const header = glslHeader(gpuLayout(clip, { mode }));
-      assert.match(header, /#define PDEANIM_TANGENTS\n#define PDEANIM_SPLINE\n/);
+      assert.match(header, /#define PDEANIM_SPLINE\n/);
       assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
       assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
-      assert.match(header, /uniform highp sampler2D pdeTangentTex;\n#define PDEANIM_OUTER_TEX pdeTangentTex/);
-      // version 4: the same weights layout, the knot or field texture for all four terms
-      const header4 = glslHeader(gpuLayout(clip4, { mode }));
-      assert.match(header4, /#define PDEANIM_TANGENTS\n/);
-      assert.doesNotMatch(header4, /#define PDEANIM_SPLINE/);
+      assert.match(header, /#ifdef PDEANIM_SPLINE\nuniform highp sampler2D pdeTangentTex;\n#endif/);
+      // the Catmull-Rom branch of earlier drafts is gone: no segment count, no define of its own
+      assert.doesNotMatch(header, /PDEANIM_TANGENTS|pdeSegments|PDEANIM_OUTER_TEX/);
+      // without spline items: 2 texels (5 rigid), no spline define
+      const plain = glslHeader(gpuLayout(plainClip, { mode }));
+      assert.doesNotMatch(plain, /#define PDEANIM_SPLINE/);
+      assert.match(plain, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 5 : 2}\\n`));
+      assert.match(plain, /#define PDEANIM_WEIGHT_TEXELS 2\n/);
     }
-    // version 5 with tangents all 0: the plain layout
-    const zeroCoef = coefficientsV4(c.original, { version: 5, segmentT: c.segmentT });
-    const zero = gpuLayout(decodeClip(c.topology, zeroCoef));
-    assert.equal(zero.tangents, false);
-    assert.equal(zero.spline, false);
-    assert.equal(zero.textures.tangent, undefined);
+    const plainLayout = gpuLayout(plainClip);
+    assert.equal(plainLayout.spline, false);
+    assert.equal(plainLayout.curveTexels, rigid ? 5 : 2);
     // three.js: the tangent texture as a uniform, a program cache key of its own
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
     const player = attachClip(mesh, clip);
@@ -775,11 +731,11 @@ test('version 5: GLSL and three.js materials get the spline layout, another prog
     assert.match(shader.vertexShader, /#define PDEANIM_SPLINE/);
     assert.equal(shader.uniforms.pdeTangentTex.value, player.textures.tangent);
     const key = mesh.material.customProgramCacheKey();
-    assert.match(key, /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+:tangents:spline$/);
-    const other = attachClip(meshOf(clip4, THREE.MeshStandardMaterial), clip4);
-    const key4 = other.mesh.material.customProgramCacheKey();
-    assert.match(key4, /:tangents$/);
-    assert.notEqual(key, key4);
+    assert.match(key, /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+:spline$/);
+    const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
+    const plainKey = other.mesh.material.customProgramCacheKey();
+    assert.match(plainKey, /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+$/);
+    assert.equal(key, `${plainKey}:spline`);
     assert.equal(other.uniforms.pdeTangentTex.value, null);
     // the evaluation pass gets the tangent texture too
     let scene = null;
@@ -801,8 +757,9 @@ test('version 5: GLSL and three.js materials get the spline layout, another prog
     assert.equal(quad.uniforms.pdeTangentTex.value, passed.textures.tangent);
     assert.ok(quad.uniforms.pdeTangentTex.value.isDataTexture);
     assert.match(quad.fragmentShader, /#define PDEANIM_SPLINE/);
-    // the GPU path and the CPU fallback agree on the positions it shows
+    // the GPU path and the CPU fallback agree on the positions it shows, with and without spline items
     agreesWithCpu(player, clip, 0.43, c.diagonal);
+    agreesWithCpu(other, plainClip, 0.43, c.diagonal);
     player.detach();
     other.detach();
     passed.detach();

@@ -1,9 +1,18 @@
-// Test helpers: read the fixtures, and re-encode containers (to build broken inputs).
+// Test helpers: read the fixtures, re-encode containers (to build broken or varied inputs), and evaluate
+// clips naively (float64, straight from docs/format.md) as a reference.
 
+import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
-import { createEvaluator, decodeContainer, splitClipFile, timePair, vertexBasis } from '../src/index.js';
+import {
+  ClipFormatError,
+  createEvaluator,
+  decodeContainer,
+  splitClipFile,
+  timePair,
+  vertexBasis,
+} from '../src/index.js';
 
 export const FIXTURES = join(dirname(fileURLToPath(import.meta.url)), 'fixtures');
 
@@ -18,6 +27,11 @@ export function manifest() {
 
 export function expected(c) {
   return new Float32Array(readBytes(join(FIXTURES, c.expected)).buffer);
+}
+
+/** The two parts {topology, coefficients, header} of a manifest case's CLIP file. */
+export function fixtureParts(c) {
+  return splitClipFile(readBytes(join(FIXTURES, c.clip)));
 }
 
 const ITEMSIZE = { '<f4': 4, '<f8': 8, '<i4': 4, '<u4': 4, '<i2': 2, '<u2': 2, '<u1': 1, '<i1': 1 };
@@ -61,14 +75,13 @@ export function concat(parts) {
 /**
  * Container bytes from a header and arrays {name: {dtype, shape, data, encoding?, stored?}} (inverse of
  * decodeContainer). An array with an encoding ("zstd", "shuffle-zstd") is stored as a raw-block zstd frame,
- * or as its `stored` bytes verbatim when given; the version is 2 when any array has an encoding, 1 otherwise
- * (as the Python writer), unless given.
+ * or as its `stored` bytes verbatim when given. The version at byte 8 is 1 (the one container version)
+ * unless given.
  */
-export function encodeContainer(header, arrays, { version } = {}) {
+export function encodeContainer(header, arrays, { version = 1 } = {}) {
   const table = {};
   const chunks = [];
   let offset = 0;
-  const encoded = Object.values(arrays).some((a) => a.encoding !== undefined);
   for (const [name, a] of Object.entries(arrays)) {
     let raw = a.data ? new Uint8Array(a.data.buffer, a.data.byteOffset, a.data.byteLength) : null;
     table[name] = { dtype: a.dtype, shape: a.shape, offset };
@@ -95,7 +108,7 @@ export function encodeContainer(header, arrays, { version } = {}) {
   const out = new Uint8Array(16 + hl + offset);
   out.set(new TextEncoder().encode('PDEANIM\0'), 0);
   const view = new DataView(out.buffer);
-  view.setUint32(8, version ?? (encoded ? 2 : 1), true);
+  view.setUint32(8, version, true);
   view.setUint32(12, hl, true);
   out.set(meta, 16);
   let o = 16 + hl;
@@ -119,106 +132,61 @@ export function storedArrays(bytes) {
   return out;
 }
 
+/** Assert that fn throws a ClipFormatError whose message matches want (a RegExp) or equals it (a string). */
+export function refused(fn, want) {
+  assert.throws(fn, (e) => {
+    assert.ok(e instanceof ClipFormatError, `not a ClipFormatError: ${e}`);
+    if (typeof want === 'string') assert.equal(e.message, want);
+    else assert.match(e.message, want);
+    return true;
+  });
+}
+
 /**
- * A version 4 coefficients part (docs/format.md §3.10) re-encoded from a version 2 or 3 one (bytes): header
- * format_version 4, its knot_rank kept (0 for a version 2 part, whose knots then decode as before), and a
- * `tangents` (C, 3) uint8 array from tangents(c, w) (0 or 1). Options: version 5 writes a version 5 part
- * instead (§3.11: the same arrays, natural-spline tangents); linear(s, c, w) true zeroes the signed m of that
- * segment and item (a linear segment, where the cubic applies); segmentT replaces segment_t (float64);
- * edit({header, arrays}) changes anything else before encoding (to build broken parts). Encoded arrays stay
- * encoded (container 2).
+ * A part (bytes) re-encoded with its header and arrays changed by edit({header, arrays}); encoded arrays stay
+ * encoded (as raw-block zstd frames).
  */
-export function coefficientsV4(
-  bytes,
-  { version = 4, tangents = () => 0, linear = null, segmentT = null, edit = null } = {},
-) {
+export function edited(bytes, edit) {
   const { header, arrays } = decodeContainer(bytes.slice());
-  if (header.format_version !== 2 && header.format_version !== 3) {
-    throw new Error(`expected a version 2 or 3 coefficients part, got ${header.format_version}`);
-  }
-  const C = header.n_curves;
-  const S = header.n_segments;
-  header.format_version = version;
-  header.knot_rank ??= 0;
-  if (segmentT) arrays.segment_t = { dtype: '<f8', shape: [S + 1], data: Float64Array.from(segmentT) };
-  const t = new Uint8Array(C * 3);
-  for (let i = 0; i < t.length; i++) t[i] = tangents(Math.floor(i / 3), i % 3);
-  arrays.tangents = { dtype: '<u1', shape: [C, 3], data: t };
-  if (linear) {
-    const m = Float32Array.from(arrays.m.data);
-    for (let i = 0; i < m.length; i++) {
-      const item = i % (C * 3);
-      if (linear(Math.floor(i / (C * 3)), Math.floor(item / 3), item % 3)) m[i] = 0;
-    }
-    arrays.m = { ...arrays.m, data: m };
-  }
-  if (edit) edit({ header, arrays });
+  edit({ header, arrays });
   return encodeContainer(header, arrays);
 }
 
 /**
- * Version 4 clips built from the version 2 and 3 dynamic-pde fixtures until the Python side writes some:
- * [{name, fixture, motion, looping, diagonal, t, topology, coefficients, original}] where original is the
- * fixture's coefficients part. Items get tangents in a mix (every item of some curves, one coordinate of
- * others, none of the rest) and linear constants in every segment but one, so that the cubic, its
- * neighbours' time pairs and cubic items in non-linear segments all occur; t lists every segment boundary,
- * points just inside each segment, a grid, and times outside [0, 1].
+ * A dynamic-pde coefficients part (bytes) with other time models: timeModel(c, w) gives each item's
+ * time_model (0: the paper's time pair, 1: the natural spline; default: the part's own), and an item on the
+ * spline gets m = 0 in every segment (the format requires it); linear(s, c, w) true zeroes m of more segments
+ * and items; segmentT replaces segment_t.
  */
-export function versionFourCases({ version = 4 } = {}) {
-  const out = [];
-  for (const c of manifest().cases) {
-    if (c.kind !== 'dynamic-pde' || (c.format_version !== 2 && c.format_version !== 3)) continue;
-    const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
-    const { header, arrays } = decodeContainer(coefficients.slice());
-    const S = header.n_segments;
-    const tangents = (cc, w) => (cc % 3 === 0 ? 1 : cc % 3 === 1 ? Number(w === 1) : 0);
-    const linear = (s, cc) => s !== (cc % S); // one non-linear segment per curve, the others linear
-    // version 5 with tangents needs strictly increasing boundaries: a repeated one moves to the middle
-    const segT = version === 5 ? strictlyIncreasing(arrays.segment_t.data) : Array.from(arrays.segment_t.data);
-    const written = version === 5 ? segT : null; // (version 4 keeps the fixture's segment_t)
-    const t = [...segT];
-    for (let s = 0; s < S; s++) {
-      for (const f of [1e-9, 0.013, 0.25, 0.5, 0.77, 1 - 1e-9]) t.push(segT[s] + f * (segT[s + 1] - segT[s]));
+export function retimed(bytes, { timeModel = null, linear = null, segmentT = null } = {}) {
+  return edited(bytes, ({ arrays }) => {
+    const C = arrays.time_model.shape[0];
+    const model = Uint8Array.from(arrays.time_model.data);
+    if (timeModel) for (let i = 0; i < model.length; i++) model[i] = timeModel(Math.floor(i / 3), i % 3);
+    arrays.time_model = { ...arrays.time_model, data: model };
+    const m = Float32Array.from(arrays.m.data);
+    for (let i = 0; i < m.length; i++) {
+      const item = i % (C * 3);
+      const s = Math.floor(i / (C * 3));
+      if (model[item] === 1 || linear?.(s, Math.floor(item / 3), item % 3)) m[i] = 0;
     }
-    for (let k = 0; k <= 20; k++) t.push(k / 20);
-    t.push(-0.3, 1.2, 2.61);
-    out.push({
-      name: `${c.name}-v${version}`,
-      fixture: c,
-      motion: c.motion,
-      looping: c.looping,
-      diagonal: c.diagonal,
-      t,
-      topology,
-      coefficients: coefficientsV4(coefficients, { version, tangents, linear, segmentT: written }),
-      original: coefficients,
-      segmentT: written,
-    });
-  }
-  return out;
+    arrays.m = { ...arrays.m, data: m };
+    if (segmentT) arrays.segment_t = { ...arrays.segment_t, data: Float64Array.from(segmentT) };
+  });
 }
 
 /**
- * Version 5 clips (natural-spline time tangents, docs/format.md §3.11) built as versionFourCases() builds
- * version 4 ones, with strictly increasing segment boundaries (the synthetic fixtures' repeated boundary
- * moved halfway to the next): [{..., name: '<fixture>-v5', segmentT}] (segmentT: the boundaries written; pass
- * it to coefficientsV4 to build the same clip with other options).
+ * Times that reach every part of a clip with boundaries segT: every boundary, points just inside and across
+ * each segment, a grid, and times outside [0, 1].
  */
-export function versionFiveCases() {
-  return versionFourCases({ version: 5 });
-}
-
-/** Boundaries (array of numbers) with each repeated one moved halfway to the next (or last) distinct one. */
-export function strictlyIncreasing(segT) {
-  const out = Array.from(segT);
-  for (let j = 1; j < out.length; j++) {
-    if (out[j] > out[j - 1]) continue;
-    let k = j;
-    while (k < out.length && !(out[k] > out[j - 1])) k++;
-    if (k === out.length) throw new Error('the last boundaries are equal');
-    out[j] = (out[j - 1] + out[k]) / 2;
+export function sampleTimes(segT) {
+  const t = Array.from(segT);
+  for (let s = 0; s + 1 < segT.length; s++) {
+    for (const f of [1e-9, 0.013, 0.25, 0.5, 0.77, 1 - 1e-9]) t.push(segT[s] + f * (segT[s + 1] - segT[s]));
   }
-  return out;
+  for (let k = 0; k <= 20; k++) t.push(k / 20);
+  t.push(-0.3, 1.2, 2.61);
+  return t;
 }
 
 /** The largest absolute difference between two equal-length arrays. */
@@ -228,7 +196,7 @@ export function worstDeviation(a, b) {
   return worst;
 }
 
-/** Segment, local time and wrapped time of t (docs/format.md §2, §3.6 step 1), written out naively. */
+/** Segment, local time and wrapped time of t (docs/format.md §2, §3.8 step 1), written out naively. */
 export function naiveLocate(segT, t, looping) {
   const tw = looping ? t - Math.floor(t) : Math.min(Math.max(t, 0), 1);
   const S = segT.length - 1;
@@ -240,33 +208,85 @@ export function naiveLocate(segT, t, looping) {
   return [s, tau, tw];
 }
 
-/** Catmull-Rom knot tangents of §3.10 (one-sided at the ends, 0 where the times are equal) of values P. */
-export function centralTangents(segT, P) {
-  const S = segT.length - 1;
-  return P.map((_, j) => {
-    const lo = Math.max(j - 1, 0);
-    const hi = Math.min(j + 1, S);
-    const dt = segT[hi] - segT[lo];
-    return dt === 0 ? 0 : (P[hi] - P[lo]) / dt;
-  });
+
+/**
+ * The natural spline's tangents T_0..T_S of knot values P (S+1) at times t (docs/format.md §3.5.2) from the
+ * full (S+1) x (S+1) system, by Gaussian elimination with partial pivoting on the dense matrix (float64).
+ */
+export function denseSplineTangents(t, P) {
+  const S = t.length - 1;
+  const n = S + 1;
+  const A = Array.from({ length: n }, () => new Float64Array(n + 1)); // augmented rows
+  const d = (j) => (P[j + 1] - P[j]) / (t[j + 1] - t[j]);
+  A[0][0] = 2;
+  A[0][1] = 1;
+  A[0][n] = 3 * d(0);
+  for (let j = 1; j < S; j++) {
+    const dl = t[j] - t[j - 1];
+    const dr = t[j + 1] - t[j];
+    A[j][j - 1] = dr;
+    A[j][j] = 2 * (dl + dr);
+    A[j][j + 1] = dl;
+    A[j][n] = 3 * (dr * d(j - 1) + dl * d(j));
+  }
+  A[S][S - 1] += 1; // (with S = 1 row 0 and row S share no entry: += keeps both rows' terms)
+  A[S][S] += 2;
+  A[S][n] = 3 * d(S - 1);
+  for (let k = 0; k < n; k++) {
+    let best = k;
+    for (let i = k + 1; i < n; i++) if (Math.abs(A[i][k]) > Math.abs(A[best][k])) best = i;
+    [A[k], A[best]] = [A[best], A[k]];
+    for (let i = k + 1; i < n; i++) {
+      const f = A[i][k] / A[k][k];
+      for (let j = k; j <= n; j++) A[i][j] -= f * A[k][j];
+    }
+  }
+  const T = new Float64Array(n);
+  for (let k = n - 1; k >= 0; k--) {
+    let acc = A[k][n];
+    for (let j = k + 1; j < n; j++) acc -= A[k][j] * T[j];
+    T[k] = acc / A[k][k];
+  }
+  return T;
+}
+
+/** Per decoded clip, its knot values P[v * 3 + w] (S+1 each, float64) and their dense spline tangents. */
+const naiveKnots = new WeakMap();
+
+function knotValuesOf(clip) {
+  let out = naiveKnots.get(clip);
+  if (out) return out;
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, segmentT } = clip;
+  const B = vertexBasis(clip);
+  const P = [];
+  const T = [];
+  for (let v = 0; v < V; v++) {
+    for (let w = 0; w < 3; w++) {
+      const values = Array.from({ length: S + 1 }, (_, j) => {
+        const o = ((j * C + curveOf[v]) * 3 + w) * 4;
+        let acc = 0;
+        for (let k = 0; k < 4; k++) acc += knots[o + k] * B[v * 12 + w * 4 + k];
+        return acc;
+      });
+      P.push(values);
+      T.push(clip.timeModel?.[curveOf[v] * 3 + w] === 1 ? denseSplineTangents(segmentT, values) : null);
+    }
+  }
+  out = { P, T };
+  naiveKnots.set(clip, out);
+  return out;
 }
 
 /**
- * Positions (V * 3, float64) of a decoded clip at t from the Hermite form of §3.10, in float64 throughout:
- * the knot values P_j per vertex coordinate, their tangents T = tangentsOf(segmentT, P) (central differences
- * for version 4, the natural spline's for version 5), value = h00 P_s + h01 P_s+1 + Δ (h10 T_s + h11 T_s+1)
- * for items with tangents 1 in segments with a linear constant, the time pair of §3.4 otherwise. The space
- * basis and the rigid motion are the library's (checked by the conformance fixtures).
+ * Positions (V * 3, float64) of a decoded dynamic clip at t, in float64 throughout, from docs/format.md
+ * §3.5: per vertex coordinate the knot values P_j; items with time_model 1 take the Hermite form
+ * h00 P_s + h01 P_s+1 + Δ (h10 T_s + h11 T_s+1) with the tangents of the dense spline system, the others the
+ * time pair of their constant. The space basis and the rigid motion are the library's (checked by the
+ * conformance fixtures).
  */
-export function naiveEvaluate(clip, t, tangentsOf) {
-  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, segmentT: segT, family, m } = clip;
-  const B = vertexBasis(clip);
-  const knotValues = (v, w) =>
-    Array.from({ length: S + 1 }, (_, j) => {
-      let acc = 0;
-      for (let k = 0; k < 4; k++) acc += knots[((j * C + curveOf[v]) * 3 + w) * 4 + k] * B[v * 12 + w * 4 + k];
-      return acc;
-    });
+export function naiveEvaluate(clip, t) {
+  const { nVertices: V, nCurves: C, curveOf, segmentT: segT, family, m } = clip;
+  const knotValues = knotValuesOf(clip);
   const [s, tau, tw] = naiveLocate(segT, t, clip.looping);
   const delta = segT[s + 1] - segT[s];
   const h00 = (1 + 2 * tau) * (1 - tau) ** 2;
@@ -286,14 +306,12 @@ export function naiveEvaluate(clip, t, tangentsOf) {
     const c = curveOf[v];
     const x = [0, 1, 2].map((w) => {
       const i = (s * C + c) * 3 + w;
-      const mu = (family[i] >= 2 ? -1 : 1) * m[i];
-      const P = knotValues(v, w);
+      const P = knotValues.P[v * 3 + w];
+      const T = knotValues.T[v * 3 + w];
       let value;
-      if (clip.tangents?.[c * 3 + w] === 1 && Math.abs(mu) <= 1e-12) {
-        const T = tangentsOf(segT, P);
-        value = h00 * P[s] + h01 * P[s + 1] + delta * (h10 * T[s] + h11 * T[s + 1]);
-      } else {
-        const pair = timePair(tau, mu, [0, 0]);
+      if (T) value = h00 * P[s] + h01 * P[s + 1] + delta * (h10 * T[s] + h11 * T[s + 1]);
+      else {
+        const pair = timePair(tau, (family[i] >= 2 ? -1 : 1) * m[i], [0, 0]);
         value = pair[0] * P[s] + pair[1] * P[s + 1];
       }
       const rest = clip.rest[v * 3 + w];

@@ -1,6 +1,6 @@
 // The package itself: browser-safe sources (no node-only imports outside bin/), exports that resolve,
 // declarations for every entry point, an MIT licence and one runtime dependency (fzstd, the zstd decoder of
-// container version 2).
+// the containers' encoded arrays).
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';

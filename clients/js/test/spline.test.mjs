@@ -1,34 +1,55 @@
-// Format version 5 (docs/format.md §3.11): natural-spline time tangents. Besides the version 5 conformance
-// fixtures (conformance.test.mjs), the clips here are the version 2 and 3 fixtures re-encoded as version 5
-// (test/helpers.mjs, with the synthetic fixtures' repeated segment boundary moved: version 5 with tangents
-// needs strictly increasing ones). The tangent solve must equal a dense Gaussian elimination of the spline's system and give a C2
-// spline with zero second derivative at the ends; the CPU evaluator must equal a naive float64 evaluation of
-// the Hermite form with those tangents; version 4 clips keep their Catmull-Rom cubic.
+// The natural-spline time model (docs/format.md §3.5.2, `time_model` 1). The tangent solve must equal a dense
+// Gaussian elimination of the spline's system and give a C2 spline with zero second derivative at the ends.
+// On the fixtures with spline items, and on variants of the fixtures with other items on the spline, the CPU
+// evaluator must equal a naive float64 evaluation of the Hermite form, pass through the knots, and leave the
+// items off the spline bit for bit as they are in the same clip without spline items.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { join } from 'node:path';
-import {
-  createEvaluator,
-  decodeClip,
-  decodeClipFile,
-  hermiteWeights,
-} from '../src/index.js';
+import { TIME_PDE, TIME_SPLINE, createEvaluator, decodeClip, decodeContainer } from '../src/index.js';
 import { naturalSplineTangents, splineWeights } from '../src/dynamic.js';
 import {
-  FIXTURES,
-  coefficientsV4,
+  denseSplineTangents,
+  fixtureParts,
   manifest,
   naiveEvaluate,
-  readBytes,
-  versionFiveCases,
-  versionFourCases,
+  retimed,
+  sampleTimes,
   worstDeviation,
 } from './helpers.mjs';
 
 const man = manifest();
-const cases = versionFiveCases();
-const v4cases = versionFourCases();
+const dynamic = man.cases.filter((c) => c.kind === 'dynamic-pde');
+
+/**
+ * Clips with spline items: the fixtures written with some (as written, name = the fixture's), and every
+ * fixture whose boundaries increase strictly with a mix of time models of its own (name '<fixture>-mixed':
+ * every item of some curves on the spline, one coordinate of others, none of the rest; spline items next to
+ * time pairs in rigid, looping and knot-basis clips): [{name, fixture, topology, coefficients, diagonal,
+ * looping, t}], t being the fixture's own times and sampleTimes() of its boundaries.
+ */
+function splineCases() {
+  const out = [];
+  for (const c of dynamic) {
+    const { topology, coefficients } = fixtureParts(c);
+    const segT = decodeContainer(coefficients.slice()).arrays.segment_t.data;
+    const base = { fixture: c, topology, diagonal: c.diagonal, looping: c.looping };
+    const t = [...c.t, ...sampleTimes(segT)];
+    if (c.spline_items > 0) out.push({ ...base, name: c.name, coefficients, t });
+    if (segT.every((x, j) => j === 0 || x > segT[j - 1]) && segT.length > 2) {
+      const timeModel = (cc, w) => (cc % 3 === 0 ? 1 : cc % 3 === 1 ? Number(w === 1) : 0);
+      out.push({ ...base, name: `${c.name}-mixed`, coefficients: retimed(coefficients, { timeModel }), t });
+    }
+  }
+  return out;
+}
+
+const cases = splineCases();
+
+/** A case's clip with every item on the paper's time pairs (the spline items' constants stay 0: linear). */
+function withoutSpline(c) {
+  return decodeClip(c.topology, retimed(c.coefficients, { timeModel: () => TIME_PDE }));
+}
 
 /** A deterministic pseudo-random generator (mulberry32) of floats in [0, 1). */
 function random(seed) {
@@ -53,47 +74,6 @@ function boundaries(S, rnd) {
 }
 
 /**
- * The natural spline's tangents T_0..T_S of knot values P (S+1) at times t from the full (S+1) x (S+1)
- * system of §3.11, by Gaussian elimination with partial pivoting on the dense matrix (float64).
- */
-function denseTangents(t, P) {
-  const S = t.length - 1;
-  const n = S + 1;
-  const A = Array.from({ length: n }, () => new Float64Array(n + 1)); // augmented rows
-  const d = (j) => (P[j + 1] - P[j]) / (t[j + 1] - t[j]);
-  A[0][0] = 2;
-  A[0][1] = 1;
-  A[0][n] = 3 * d(0);
-  for (let j = 1; j < S; j++) {
-    const dl = t[j] - t[j - 1];
-    const dr = t[j + 1] - t[j];
-    A[j][j - 1] = dr;
-    A[j][j] = 2 * (dl + dr);
-    A[j][j + 1] = dl;
-    A[j][n] = 3 * (dr * d(j - 1) + dl * d(j));
-  }
-  A[S][S - 1] += 1; // (with S = 1 row 0 and row S share no entry: += keeps both rows' terms)
-  A[S][S] += 2;
-  A[S][n] = 3 * d(S - 1);
-  for (let k = 0; k < n; k++) {
-    let best = k;
-    for (let i = k + 1; i < n; i++) if (Math.abs(A[i][k]) > Math.abs(A[best][k])) best = i;
-    [A[k], A[best]] = [A[best], A[k]];
-    for (let i = k + 1; i < n; i++) {
-      const f = A[i][k] / A[k][k];
-      for (let j = k; j <= n; j++) A[i][j] -= f * A[k][j];
-    }
-  }
-  const T = new Float64Array(n);
-  for (let k = n - 1; k >= 0; k--) {
-    let acc = A[k][n];
-    for (let j = k + 1; j < n; j++) acc -= A[k][j] * T[j];
-    T[k] = acc / A[k][k];
-  }
-  return T;
-}
-
-/**
  * Second derivatives in t of the Hermite cubic of segment j at its start and end (values P, tangents T).
  */
 function secondDerivatives(t, P, T, j) {
@@ -102,7 +82,7 @@ function secondDerivatives(t, P, T, j) {
   return [(6 * slope - 4 * T[j] - 2 * T[j + 1]) / h, (-6 * slope + 2 * T[j] + 4 * T[j + 1]) / h];
 }
 
-test('the tangent solve equals a dense elimination of the system of §3.11, for every column at once', () => {
+test('the tangent solve equals a dense elimination of the system of §3.5.2, for every column at once', () => {
   const rnd = random(5);
   for (const S of [1, 2, 3, 4, 7, 12, 40]) {
     for (const t of [Array.from({ length: S + 1 }, (_, j) => j / S), boundaries(S, rnd)]) {
@@ -112,7 +92,7 @@ test('the tangent solve equals a dense elimination of the system of §3.11, for 
       const T = naturalSplineTangents(t, values, cols);
       for (let k = 0; k < cols; k++) {
         const P = Array.from({ length: S + 1 }, (_, j) => values[j * cols + k]);
-        const want = denseTangents(t, P);
+        const want = denseSplineTangents(t, P);
         const scale = Math.max(1, ...want.map(Math.abs));
         for (let j = 0; j <= S; j++) {
           assert.ok(Math.abs(T[j * cols + k] - want[j]) <= 1e-12 * scale, `S = ${S} column ${k} knot ${j}`);
@@ -131,7 +111,9 @@ test('the spline is C2 at every interior knot, with zero second derivative at bo
     const P = Float64Array.from({ length: S + 1 }, () => rnd() - 0.5);
     const T = naturalSplineTangents(t, P, 1);
     let curvature = 0;
-    for (let j = 0; j < S; j++) curvature = Math.max(curvature, ...secondDerivatives(t, P, T, j).map(Math.abs));
+    for (let j = 0; j < S; j++) {
+      curvature = Math.max(curvature, ...secondDerivatives(t, P, T, j).map(Math.abs));
+    }
     const tol = 1e-10 * Math.max(1, curvature);
     assert.ok(Math.abs(secondDerivatives(t, P, T, 0)[0]) <= tol, `S = ${S}: start`);
     assert.ok(Math.abs(secondDerivatives(t, P, T, S - 1)[1]) <= tol, `S = ${S}: end`);
@@ -174,7 +156,7 @@ test('the solve in blocks of columns equals the column-by-column solve, bit for 
   }
 });
 
-test('the four weights of version 5: Δ h10, h00, h01, Δ h11 in float64, rounded to float32', () => {
+test('the four weights: Δ h10, h00, h01, Δ h11 in float64, rounded to float32 by the evaluator', () => {
   const segT = [0, 0.25, 0.5, 0.6, 1];
   const tau = 0.3;
   const w = splineWeights(segT, 1, tau, new Float64Array(4));
@@ -191,35 +173,49 @@ test('the four weights of version 5: Δ h10, h00, h01, Δ h11 in float64, rounde
   const plus = (x) => x + 0; // -0 as 0
   assert.deepEqual(splineWeights(segT, 2, 0, [0, 0, 0, 0]).map(plus), [0, 1, 0, 0]);
   assert.deepEqual(splineWeights(segT, 2, 1, [0, 0, 0, 0]).map(plus), [0, 0, 1, 0]);
-  const c = cases[0];
-  const ev = createEvaluator(decodeClip(c.topology, c.coefficients));
-  assert.equal(ev.natural, true);
-  for (const t of [0.05, 0.4, 0.93]) {
-    ev.prepare(t);
-    const [s, tt] = ev.loc;
-    const ref = splineWeights(ev.clip.segmentT, s, tt, new Float64Array(4));
-    assert.deepEqual(Array.from(ev.cubicWeights), Array.from(ref, Math.fround));
+  for (const c of cases.slice(0, 3)) {
+    const ev = createEvaluator(decodeClip(c.topology, c.coefficients));
+    for (const t of [0.05, 0.4, 0.93]) {
+      ev.prepare(t);
+      const [s, tt] = ev.loc;
+      const ref = splineWeights(ev.clip.segmentT, s, tt, new Float64Array(4));
+      assert.deepEqual(Array.from(ev.cubicWeights), Array.from(ref, Math.fround));
+    }
   }
 });
 
-test('version 5 clips are read: knots as version 4 (rank 0 or a basis), tangents 0/1, natural splines', () => {
-  assert.ok(cases.length >= 10);
+test('spline items: time_model 1 in every segment with m = 0; the knots do not depend on it', () => {
+  const written = cases.filter((c) => c.name === c.fixture.name);
+  assert.ok(written.length >= 5);
+  // the written ones cover rigid and looping clips, and both knot encodings
+  assert.ok(written.some((c) => c.fixture.motion === 'rigid') && written.some((c) => c.looping));
+  assert.ok(written.some((c) => c.fixture.knot_rank === 0) && written.some((c) => c.fixture.knot_rank > 0));
+  assert.ok(cases.length >= 2 * written.length);
   for (const c of cases) {
     const clip = decodeClip(c.topology, c.coefficients);
-    const v4 = decodeClip(c.topology, coefficientsV4(c.original, { tangents: () => 1, segmentT: c.segmentT }));
-    assert.equal(clip.header.format_version, 5, c.name);
-    assert.equal(clip.tangentSpline, 'natural', c.name);
-    assert.equal(v4.tangentSpline, 'catmull-rom', c.name);
-    assert.deepEqual(clip.knots, v4.knots, c.name); // bit for bit the knots of version 4 (so of 2 or 3)
-    assert.equal(clip.header.knot_rank, decodeClip(c.topology, c.original).header.knot_rank ?? 0, c.name);
-    assert.ok(clip.tangents.some((x) => x === 1) && clip.tangents.some((x) => x === 0), c.name);
+    const C = clip.nCurves;
+    assert.equal(clip.timeModel.length, C * 3, c.name);
+    assert.ok(clip.timeModel.every((x) => x === TIME_PDE || x === TIME_SPLINE), c.name);
+    assert.ok(clip.timeModel.includes(TIME_SPLINE) && clip.timeModel.includes(TIME_PDE), c.name);
+    for (let i = 0; i < clip.m.length; i++) {
+      if (clip.timeModel[i % (C * 3)] === TIME_SPLINE) assert.equal(clip.m[i], 0, c.name);
+    }
     assert.ok(clip.segmentT.every((x, j) => j === 0 || x > clip.segmentT[j - 1]), c.name);
+    const ev = createEvaluator(clip);
+    assert.equal(ev.spline, clip.timeModel, c.name);
+    // the same part with every item on the paper's time pairs: bit for bit the same knots
+    const paper = withoutSpline(c);
+    assert.deepEqual(paper.knots, clip.knots, c.name);
+    assert.equal(paper.timeModel, null, c.name);
   }
-  assert.ok(cases.some((c) => decodeClip(c.topology, c.coefficients).header.knot_rank === 0));
-  assert.ok(cases.some((c) => decodeClip(c.topology, c.coefficients).header.knot_rank >= 1));
-  // older versions: no tangents, no spline
-  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde' && x.format_version < 4)) {
-    assert.equal(decodeClipFile(readBytes(join(FIXTURES, c.clip))).tangentSpline, null, c.name);
+  // fixtures without spline items: no time model on the clip, the plain path
+  for (const c of dynamic.filter((x) => x.spline_items === 0)) {
+    const { topology, coefficients } = fixtureParts(c);
+    const clip = decodeClip(topology, coefficients);
+    assert.equal(clip.timeModel, null, c.name);
+    const ev = createEvaluator(clip);
+    assert.equal(ev.spline, null, c.name);
+    assert.equal(ev.tangentFields, null, c.name);
   }
 });
 
@@ -234,7 +230,7 @@ test('the evaluator solves the tangent fields once: the float32 knot fields, in 
     // and the tangents of the dense system, per value (a few values: the dense solve is slow)
     for (const i of [0, 7, N - 1]) {
       const P = Array.from({ length: clip.nSegments + 1 }, (_, j) => ev.fields[j * N + i]);
-      const T = denseTangents(clip.segmentT, P);
+      const T = denseSplineTangents(clip.segmentT, P);
       const scale = Math.max(1e-30, ...T.map(Math.abs));
       T.forEach((x, j) => assert.ok(Math.abs(ev.tangentFields[j * N + i] - x) <= 1e-6 * scale, `${c.name}`));
     }
@@ -242,111 +238,88 @@ test('the evaluator solves the tangent fields once: the float32 knot fields, in 
 });
 
 for (const c of cases) {
-  test(`version 5 CPU evaluation equals the naive float64 Hermite form: ${c.name}`, () => {
+  test(`CPU evaluation equals the naive float64 Hermite form: ${c.name}`, () => {
     const clip = decodeClip(c.topology, c.coefficients);
     const ev = createEvaluator(clip);
-    assert.ok(ev.cubic !== null && ev.natural);
+    assert.notEqual(ev.spline, null);
     const tol = 1e-6 * c.diagonal;
-    let cubicFrames = 0;
     for (const t of c.t) {
-      const got = ev.evaluate(t);
-      const want = naiveEvaluate(clip, t, denseTangents);
-      const worst = worstDeviation(got, want);
+      const worst = worstDeviation(ev.evaluate(t), naiveEvaluate(clip, t));
       assert.ok(worst <= tol, `t = ${t}: max deviation ${worst} > ${tol}`);
-      if (ev.cubicSegment[ev.loc[0]]) cubicFrames++;
     }
-    assert.ok(cubicFrames > c.t.length / 2, `${cubicFrames} of ${c.t.length} frames use the cubic`);
   });
 }
 
-test('the natural spline passes through the knots: at every boundary it equals the straight line', () => {
+test('the natural spline passes through the knots: at every boundary it equals the time pairs', () => {
   for (const c of cases) {
     const clip = decodeClip(c.topology, c.coefficients);
-    const S = clip.nSegments;
-    const linear = (s, cc) => S < 2 || s !== cc % S;
-    const lines = createEvaluator(
-      decodeClip(c.topology, coefficientsV4(c.original, { linear, segmentT: c.segmentT })),
-    );
+    const pairs = createEvaluator(withoutSpline(c));
     const ev = createEvaluator(clip);
     for (const t of clip.segmentT) {
-      const worst = worstDeviation(ev.evaluate(t), lines.evaluate(t));
+      const worst = worstDeviation(ev.evaluate(t), pairs.evaluate(t));
       assert.ok(worst <= 1e-6 * c.diagonal, `${c.name} t = ${t}: ${worst}`);
     }
   }
 });
 
-test('with one segment the natural spline is the straight line', () => {
-  const c = cases.find((x) => decodeClip(x.topology, x.original).nSegments === 1);
-  const all = decodeClip(c.topology, coefficientsV4(c.original, { version: 5, tangents: () => 1 }));
-  const ev = createEvaluator(all);
-  assert.ok(ev.natural && ev.cubic.every((x) => x === 1)); // every item is linear in this clip
-  const before = createEvaluator(decodeClip(c.topology, c.original));
-  for (const t of c.t) {
-    assert.ok(worstDeviation(ev.evaluate(t), before.evaluate(t)) <= 1e-6 * c.diagonal, `t = ${t}`);
+test('the spline differs from the straight line where the motion curves (the tests above see it)', () => {
+  // the same clips with the spline items on linear time pairs move along the chords instead
+  let curved = 0;
+  for (const c of cases) {
+    const lines = createEvaluator(withoutSpline(c));
+    const ev = createEvaluator(decodeClip(c.topology, c.coefficients));
+    let worst = 0;
+    for (const t of c.t) worst = Math.max(worst, worstDeviation(ev.evaluate(t), lines.evaluate(t)));
+    if (worst > 1e-3 * c.diagonal) curved++;
   }
-  // both tangents are the chord
+  assert.ok(curved >= cases.length - 2, `${curved} of ${cases.length}`);
+});
+
+test('items off the spline evaluate bit for bit as in the same clip without spline items', () => {
+  let rigidCompared = 0;
+  for (const c of cases) {
+    const clip = decodeClip(c.topology, c.coefficients);
+    const ev = createEvaluator(clip);
+    const plain = createEvaluator(withoutSpline(c));
+    const off = (cc, w) => clip.timeModel[cc * 3 + w] === TIME_PDE;
+    let compared = 0;
+    for (const t of c.t) {
+      const got = ev.evaluate(t);
+      const want = plain.evaluate(t);
+      for (let v = 0; v < clip.nVertices; v++) {
+        const cc = clip.curveOf[v];
+        // (rigid: the rotation mixes the coordinates, so all three of the curve's items must be off)
+        const curveOff = off(cc, 0) && off(cc, 1) && off(cc, 2);
+        for (let w = 0; w < 3; w++) {
+          if (clip.rigid ? !curveOff : !off(cc, w)) continue;
+          assert.equal(got[v * 3 + w], want[v * 3 + w], `${c.name} t = ${t} v = ${v}`);
+          compared++;
+        }
+      }
+    }
+    if (!clip.rigid) assert.ok(compared > 0, c.name);
+    if (clip.rigid) rigidCompared += compared;
+  }
+  assert.ok(rigidCompared > 0, 'no rigid clip has a curve off the spline');
+});
+
+test('with one segment the natural spline is the straight line: both tangents are the chord', () => {
+  const segments = (x) => decodeContainer(fixtureParts(x).coefficients.slice()).header.n_segments;
+  const c = dynamic.find((x) => segments(x) === 1);
+  const { topology, coefficients } = fixtureParts(c);
+  const all = decodeClip(topology, retimed(coefficients, { timeModel: () => TIME_SPLINE }));
+  const ev = createEvaluator(all);
+  assert.ok(all.timeModel.every((x) => x === TIME_SPLINE));
+  const lines = createEvaluator(decodeClip(topology, retimed(coefficients, { linear: () => true })));
+  assert.equal(lines.spline, null);
+  for (const t of [...c.t, ...sampleTimes(all.segmentT)]) {
+    assert.ok(worstDeviation(ev.evaluate(t), lines.evaluate(t)) <= 1e-6 * c.diagonal, `t = ${t}`);
+  }
   const N = all.nVertices * 3;
   const delta = all.segmentT[1] - all.segmentT[0];
   for (let i = 0; i < N; i++) {
     const chord = Math.fround((ev.fields[N + i] - ev.fields[i]) / delta);
     assert.equal(ev.tangentFields[i], chord);
     assert.equal(ev.tangentFields[N + i], chord);
-  }
-});
-
-test('tangents all 0 in version 5 give the positions of the original clip, bit for bit', () => {
-  for (const c of cases) {
-    const zero = coefficientsV4(c.original, { version: 5, tangents: () => 0, segmentT: c.segmentT });
-    const strict = coefficientsV4(c.original, { tangents: () => 0, segmentT: c.segmentT });
-    const a = createEvaluator(decodeClip(c.topology, zero));
-    const b = createEvaluator(decodeClip(c.topology, strict));
-    assert.equal(a.cubic, null, c.name); // the plain path
-    assert.equal(a.tangentFields, null, c.name);
-    for (const t of c.t) assert.deepEqual(a.evaluate(t), b.evaluate(t), `${c.name} t = ${t}`);
-  }
-});
-
-test('version 5 and version 4 differ where the motion curves; version 4 keeps its Catmull-Rom cubic', () => {
-  let differ = 0;
-  for (const c of cases) {
-    const S = decodeClip(c.topology, c.original).nSegments;
-    const tangents = (cc, w) => (cc % 3 === 0 ? 1 : cc % 3 === 1 ? Number(w === 1) : 0);
-    const linear = (s, cc) => s !== cc % S;
-    const v4coef = coefficientsV4(c.original, { tangents, linear, segmentT: c.segmentT });
-    const v4clip = decodeClip(c.topology, v4coef);
-    const v4 = createEvaluator(v4clip);
-    const v5 = createEvaluator(decodeClip(c.topology, c.coefficients));
-    assert.equal(v4.natural, false, c.name);
-    assert.equal(v4.tangentFields, null, c.name);
-    let worst = 0;
-    for (const t of c.t) {
-      const a = v4.evaluate(t);
-      worst = Math.max(worst, worstDeviation(a, v5.evaluate(t)));
-      // version 4: the Catmull-Rom weights on knots lo(s), s, s+1, hi(s+1), as before
-      const ref = hermiteWeights(v4clip.segmentT, v4.loc[0], v4.loc[1], new Float64Array(4));
-      assert.deepEqual(Array.from(v4.cubicWeights), Array.from(ref, Math.fround));
-    }
-    // S >= 3: the spline's tangents reach beyond the neighbouring knots (S = 2: they can agree)
-    if (S >= 3 && worst > 1e-4 * c.diagonal) differ++;
-  }
-  const longer = cases.filter((c) => decodeClip(c.topology, c.original).nSegments >= 3).length;
-  assert.ok(differ >= longer - 1, `${differ} of ${longer}`);
-  // the version 4 clips of tangents.test.mjs keep their layout: no tangent fields, Catmull-Rom weights
-  for (const c of v4cases) {
-    const ev = createEvaluator(decodeClip(c.topology, c.coefficients));
-    assert.equal(ev.natural, false);
-    assert.equal(ev.tangentFields, null);
-  }
-});
-
-test('version 5: looping clips repeat with period 1 and open clips clamp', () => {
-  for (const c of cases) {
-    const ev = createEvaluator(decodeClip(c.topology, c.coefficients));
-    const diff = (x, y) => worstDeviation(ev.evaluate(x), ev.evaluate(y));
-    if (c.looping) assert.ok(diff(0.2, 3.2) <= 1e-6 * c.diagonal, c.name);
-    else {
-      assert.equal(diff(-2, 0), 0, c.name);
-      assert.equal(diff(7, 1), 0, c.name);
-    }
   }
 });

@@ -34,6 +34,8 @@ function nondecreasing(a) {
 }
 
 const U4 = ['<u4'];
+const F4 = ['<f4'];
+const F8 = ['<f8'];
 
 /**
  * Undo zigzag-coded differences in place order: z (uint32, rows x cols row-major) becomes the running sums
@@ -305,7 +307,7 @@ export function decodeDynamic(topo, coef) {
   const rest = toVertexOrder(t.restCurve, 3, order);
 
   const S = count(ch, 'n_segments', 'coefficients');
-  const segT = need(ca, 'segment_t', [S + 1], 'coefficients').data;
+  const segT = need(ca, 'segment_t', [S + 1], 'coefficients', F8).data;
   if (!(S >= 1) || !nondecreasing(segT)) {
     throw new ClipFormatError('segment boundaries must be non-decreasing with at least one segment');
   }
@@ -314,20 +316,20 @@ export function decodeDynamic(topo, coef) {
   const motion = String(ch.motion);
   if (!MOTIONS.includes(motion))
     throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
-  const D = need(ca, 'D', [C, 3], 'coefficients').data;
+  const D = need(ca, 'D', [C, 3], 'coefficients', F4).data;
   const knots = decodeKnots(ch, ca, S, C);
-  const frameTimes = need(ca, 'frame_times', [null], 'coefficients').data;
+  const frameTimes = need(ca, 'frame_times', [null], 'coefficients', F8).data;
   let rigid = null;
   if (motion === 'rigid') {
-    const rs = need(ca, 'rigid_segment_t', [null], 'coefficients').data;
+    const rs = need(ca, 'rigid_segment_t', [null], 'coefficients', F8).data;
     const Sr = rs.length - 1;
     if (Sr < 1 || !nondecreasing(rs)) {
       throw new ClipFormatError('rigid segment boundaries must be non-decreasing with at least one segment');
     }
-    rigid = { segmentT: rs, centre: need(ca, 'rigid_centre', [C, 3], 'coefficients').data };
+    rigid = { segmentT: rs, centre: need(ca, 'rigid_centre', [C, 3], 'coefficients', F4).data };
     for (const name of ['rot', 'trans']) {
-      rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients').data;
-      const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients').data;
+      rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients', F4).data;
+      const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients', F4).data;
       if (mu.some((x) => x <= -Math.PI))
         throw new ClipFormatError('rigid trig time constants must be above -pi');
       rigid[`${name}Mu`] = mu;
