@@ -120,23 +120,24 @@ class FitTolerances:
     (target^2 - fit rms^2, less the rest pose's share)."""
     knot_cap: float = 2.0
     """With an RMS budget for the knots' rounding, no vertex coordinate moves by more than this times it."""
-    quant_retries: int = 6
-    """Encodings tried at most after the first while the rounding is searched."""
-    quant_fill: float = 0.9
+    quant_retries: int = 10
+    """Roundings tried at most after the first while the rounding is searched."""
+    quant_fill: float = 0.85
     """The knots' rounding grows while the stored clip's RMS stays below this share of an RMS target."""
-    quant_aim: float = 0.95
+    quant_aim: float = 0.93
     """Each growth aims the stored clip's RMS at this share of the target: the rounding's share of the mean
     square error is taken as proportional to the knots' budget squared ..."""
     growth_min: float = 1.2
     growth_max: float = 4.0
     """... and the budget grows by a factor between these per step."""
-    bisect_until: float = 1.15
+    bisect_until: float = 1.05
     """When a grown rounding misses the target, the budget is bisected (geometric mean) between it and the
     last one that met it while they differ by more than this factor (and retries remain)."""
-    soft_max_ratio: float | None = 3.5
-    """An RMS target alone also asks, softly, that no vertex be off by more than this times it: the knots'
-    rounding grows only while the stored clip stays within that (when its first rounding did), and of two
-    candidate fits the one within it is kept. Never reported as a missed target. None: no soft bound."""
+    soft_max_ratio: float | None = 3.0
+    """An RMS target alone also asks, softly, that no vertex be off by more than this times it: a curve on
+    which the knots' rounding takes a vertex past it gets finer steps (where the unrounded fit was within it),
+    and of two candidate fits the one within it is kept. Never reported as a missed target. None: no soft
+    bound."""
     dense_fit: bool = True
     """Besides the error-driven search, fit a knot at every frame (or max_segments evenly spaced ones) and
     keep the smaller stored clip that meets the targets: a dense fit is far more accurate, which leaves most

@@ -42,7 +42,7 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
         segment_cap_reached=bool(best.cap) and not best.meets,
         every_frame_a_knot=bool(best.unsplittable) and not best.meets,
         quantisation_tolerance=best.quant.tolerance, quantisation_knot_rms=best.quant.knot_rms,
-        quantisation_knot_cap=best.quant.knot_cap, tolerances=tol.to_dict())
+        quantisation_knot_cap=best.quant.knot_cap, rate_control=best.trials, tolerances=tol.to_dict())
     t_end = time.perf_counter()
     report["timings_s"] = {"curves_and_space": t_space - t_start, "time_and_encode": t_time - t_space,
                            "report": t_end - t_time, "total": t_end - t_start}

@@ -29,6 +29,7 @@ class Problem:
     t: np.ndarray  # (F,) normalised times
     rigid: RigidTracks | None = None
     slots: np.ndarray | None = None  # (V,) slot c * N + n of every vertex in the padded curves
+    curve_of: np.ndarray | None = None  # (V,) curve of every vertex
 
     def u_per_vertex(self) -> np.ndarray:
         """(V, 3) curve parameter of every vertex and coordinate."""
@@ -61,7 +62,8 @@ def prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> Problem:
         values = X - rest if options.motion == "displacement" else X
     Y = items_from_curves(values, idx, mask)
     del values
-    return Problem(X, rest, idx, mask, u, Y, t, rigid, vertex_slots(idx, mask, X.shape[1]))
+    return Problem(X, rest, idx, mask, u, Y, t, rigid, vertex_slots(idx, mask, X.shape[1]),
+                   curves.curve_of_vertex(X.shape[1])[0])
 
 
 def u_grid(points_per_curve: int) -> float:

@@ -15,7 +15,7 @@ from ..progress import Progress, sub_progress
 from .encode import Quantisation, encode
 from .options import FitOptions, FitTolerances
 from .problem import meets, stored_distances
-from .ratecontrol import quantised, soft_max
+from .ratecontrol import max_bound, quantised
 from .spacestage import SpaceFit
 
 
@@ -30,6 +30,7 @@ class Candidate:
     history: list
     cap: bool
     unsplittable: bool
+    trials: list[dict]  # the rate control's trials (ratecontrol._trial)
     exact: np.ndarray  # (F, V) distances of the unrounded fit
     quant: Quantisation
     approx: np.ndarray  # (F, V, 3) float32 positions of the stored clip
@@ -56,13 +57,14 @@ def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progres
         fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
         cap, unsplittable = res.cap_reached, res.unsplittable
     exact = model_distances(sf.space, fitted, p.slots)
-    quant, approx, size = quantised(sf, fitted, options, poses, exact, tol)
+    trials: list[dict] = []
+    quant, approx, size = quantised(sf, fitted, options, poses, exact, tol, trials)
     ok = meets(sf.targets, stored_distances(p, approx, poses.n_frames))
     if dense:  # a missed target is the dense fit's only when the spatial floor is not above it
         met = ok
         floor_high = not ok and _floor_above(sf)
-    return Candidate(dense, fitted, met, floor_high, history, cap, unsplittable, exact, quant, approx, size,
-                     ok)
+    return Candidate(dense, fitted, met, floor_high, history, cap, unsplittable, trials, exact, quant, approx,
+                     size, ok)
 
 
 def _floor_above(sf: SpaceFit) -> bool:
@@ -113,7 +115,7 @@ def preferred(sf: SpaceFit, options: FitOptions, poses: Poses, a: Candidate, b: 
     one is, else the smaller, or of two close in size the one with a clearly lower max error, else the
     smaller at the final zstd level."""
     worst = [float(stored_distances(sf.p, c.approx, poses.n_frames).max()) for c in (a, b)]
-    soft = soft_max(sf.targets, tol)
+    soft = max_bound(sf.targets, tol)
     if soft is not None and (worst[0] <= soft) != (worst[1] <= soft):
         return worst[0] <= soft
     if abs(a.size - b.size) > tol.close_sizes * min(a.size, b.size):

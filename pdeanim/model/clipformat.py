@@ -44,6 +44,10 @@ from ..errors import ClipFormatError
 from . import knotbasis, quantise
 from .spline import spline_weight_bound
 
+BASIS_MARGIN = 0.9
+"""The knots go on a shared basis only where that encoding is below this share of the plain tracks' bytes at
+the trial level: level 19 compresses plain tracks relatively better (horse-collapse, dense fit at 3e-3:
+rank 18 looked smaller at level 3, 161,200 B against 143,992 B at level 19)."""
 TRIAL_LEVEL = 3
 """zstd level of trial encodings (the fit's rounding search, its choice between fits, and the choice between
 knot encodings): fast, and about proportional to the final level 19 sizes; only the clip that is kept is
@@ -99,6 +103,14 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
     """Topology part bytes from curves, u (V, 3), faces (T, 3), rest (V, 3): rest rounded to a step whose
     error is at most ``tolerance`` (default: DEFAULT_TOLERANCE of the diagonal), compressed at zstd ``level``
     (a trial encoding may use a fast one)."""
+    header, arrays = topology_arrays(curves, u, faces, rest, param_mode, tolerance)
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
+
+
+def topology_arrays(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np.ndarray, param_mode: str,
+                    tolerance: float | None = None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """(header, arrays) of the topology part before packing (:func:`decode_topology` reads them as they
+    are: what a reader of the packed part decodes, without compressing anything)."""
     header = {"part": "topology", "model": "dynamic-pde", "format_version": FORMAT_VERSION,
               "n_vertices": int(len(rest)), "n_curves": curves.n_curves, "param_mode": param_mode}
     u = np.asarray(u, np.float32)
@@ -112,14 +124,13 @@ def encode_topology(curves: CurveSet, u: np.ndarray, faces: np.ndarray, rest: np
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     step_u = quantise.u_step(u)
     header.update({"rest_origin": [float(x) for x in origin], "rest_step": step, "u_step": step_u})
-    arrays = {
+    return header, {
         "curve_lengths": np.diff(np.asarray(curves.offsets, np.int64)).astype(np.uint32),
         "order": quantise.zigzag_deltas(order),
         "u": quantise.zigzag_deltas(np.rint(u[order].astype(np.float64) / step_u), axis=0),
         "faces": quantise.encode_faces(faces, order),
         "rest": quantise.zigzag_deltas(np.rint((rest[order] - origin) / step), axis=0),
     }
-    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
 
 
 def _diagonal(rest: np.ndarray) -> float:
@@ -127,43 +138,55 @@ def _diagonal(rest: np.ndarray) -> float:
 
 
 def encode_coefficients(topology: bytes, data: CoefficientData, tolerance: float | None = None,
-                        knot_rms: float | None = None, knot_cap: float | None = None,
+                        knot_rms: float | None = None, knot_cap: float | np.ndarray | None = None,
                         level: int = container.ZSTD_LEVEL, shared_basis: bool = True,
-                        spectrum: knotbasis.TrackSpectrum | None = None) -> bytes:
+                        spectrum: knotbasis.TrackSpectrum | None = None,
+                        knot_refine: np.ndarray | None = None, knot_rank: int | None = None) -> bytes:
     """Coefficients part bytes for the given topology part. The knots are rounded to steps that add at most
-    ``knot_rms`` to the RMS vertex distance and move no coordinate by more than ``knot_cap`` (default
-    4 x knot_rms) when given, else whose error moves no vertex coordinate by more than ``tolerance``
+    ``knot_rms`` to the RMS vertex distance and move no coordinate by more than ``knot_cap`` (a number, or
+    (C, 3) per curve and coordinate; default 4 x knot_rms) when given, else whose error moves no vertex
+    coordinate by more than ``tolerance``
     (default: DEFAULT_TOLERANCE of the diagonal); they are stored on a shared time basis plus residual tracks
     where that is smaller (and ``shared_basis`` allows it). ``spectrum``: the knots' track spectrum when the
-    caller has it (:func:`pdeanim.model.knotbasis.track_spectrum` of these knots), else it is computed."""
+    caller has it (:func:`pdeanim.model.knotbasis.track_spectrum` of these knots), else it is computed.
+    ``knot_refine`` (C, 3): halve those items' steps that many times more (a rate control's per-curve
+    refinement); ``knot_rank``: store the knots on exactly that many shared tracks (0: plain tracks) instead
+    of choosing."""
+    topo = decode_topology(*container.unpack(topology))
+    header, arrays = coefficient_arrays(topology_id(topology), topo, data, tolerance, knot_rms, knot_cap,
+                                        shared_basis, spectrum, knot_refine=knot_refine, knot_rank=knot_rank)
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
+
+
+def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
+                       tolerance: float | None = None, knot_rms: float | None = None,
+                       knot_cap: float | np.ndarray | None = None,
+                       shared_basis: bool = True, spectrum: knotbasis.TrackSpectrum | None = None,
+                       choose: bool = True, knot_refine: np.ndarray | None = None,
+                       knot_rank: int | None = None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """(header, arrays) of the coefficients part before packing, on the decoded topology ``topo``
+    (:func:`decode_coefficients` reads them as they are). ``choose`` False skips every choice made by trial
+    compression (the order of the knot differences, and the rank unless ``knot_rank`` fixes it: then plain
+    tracks): the same decoded knots, for a rate control that measures errors, not bytes."""
     S, C = data.family.shape[:2]
     spline = data.spline_items()
     if np.any(spline[None] & (np.asarray(data.m) != 0)):
         raise ValueError("items on the natural spline must have time constant 0 in every segment")
     header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": FORMAT_VERSION,
-              "topology_id": topology_id(topology), "motion": data.motion, "looping": bool(data.looping),
+              "topology_id": topo_id, "motion": data.motion, "looping": bool(data.looping),
               "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
-    topo = decode_topology(*container.unpack(topology))
-    tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(topo.rest)
     m = np.asarray(data.m, np.float32)
     family = np.asarray(data.family, np.uint8)
-    tangents = spline.astype(np.uint8) if spline.any() else None
-    cubic_max = quantise.CUBIC_PAIR_MAX
-    if tangents is not None:  # the spline's weights at the clip's frames
-        ft = np.asarray(data.frame_times, np.float64)
-        span = ft[-1] - ft[0] if len(ft) > 1 and ft[-1] > ft[0] else 1.0
-        cubic_max = max(cubic_max, spline_weight_bound(data.segment_t, (ft - ft[0]) / span))
-    if knot_rms is not None:
-        steps = quantise.knot_steps_rms(topo.curves, topo.u, family, m, data.D, data.knots, knot_rms,
-                                        4.0 * knot_rms if knot_cap is None else knot_cap, tangents, cubic_max)
-    else:
-        steps = quantise.knot_steps(topo.curves, topo.u, family, m, data.D, data.knots, tol, tangents,
-                                    cubic_max)
-    if shared_basis and spectrum is None:
+    steps = _knot_steps(topo, data, family, m, tolerance, knot_rms, knot_cap)
+    if knot_refine is not None:
+        steps = quantise.refined_steps(steps, knot_refine, data.knots)
+    if knot_rank is None and not choose or not shared_basis:
+        knot_rank = 0
+    if spectrum is None and knot_rank != 0:
         spectrum = knotbasis.track_spectrum(topo.curves, topo.u, family, m, data.D, data.knots)
-    knot_arrays, differences, rank = _smallest_knots(data, steps, spectrum if shared_basis else None)
+    knot_arrays, differences, rank = _knot_encoding(data, steps, spectrum, choose, knot_rank)
     header.update(knot_differences=differences, knot_rank=rank)
-    arrays = {
+    return header, {
         "segment_t": np.asarray(data.segment_t, np.float64),
         "frame_times": np.asarray(data.frame_times, np.float64),
         "space_kind": (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8),
@@ -173,7 +196,46 @@ def encode_coefficients(topology: bytes, data: CoefficientData, tolerance: float
         **knot_arrays,
         **{k: np.asarray(v) for k, v in data.extra.items()},
     }
-    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
+
+
+def _knot_steps(topo: TopologyData, data: CoefficientData, family: np.ndarray, m: np.ndarray,
+                tolerance: float | None, knot_rms: float | None, knot_cap: float | np.ndarray | None
+                ) -> np.ndarray:
+    """(C, 3) float32 power-of-two knot steps for an RMS budget (and cap), or for a per-coordinate
+    tolerance (docs/compression.md)."""
+    tol = tolerance if tolerance is not None else DEFAULT_TOLERANCE * _diagonal(topo.rest)
+    spline = data.spline_items()
+    tangents = spline.astype(np.uint8) if spline.any() else None
+    cubic_max = quantise.CUBIC_PAIR_MAX
+    if tangents is not None:  # the spline's weights at the clip's frames
+        ft = np.asarray(data.frame_times, np.float64)
+        span = ft[-1] - ft[0] if len(ft) > 1 and ft[-1] > ft[0] else 1.0
+        cubic_max = max(cubic_max, spline_weight_bound(data.segment_t, (ft - ft[0]) / span))
+    if knot_rms is not None:
+        return quantise.knot_steps_rms(topo.curves, topo.u, family, m, data.D, data.knots, knot_rms,
+                                       4.0 * knot_rms if knot_cap is None else knot_cap, tangents, cubic_max)
+    return quantise.knot_steps(topo.curves, topo.u, family, m, data.D, data.knots, tol, tangents, cubic_max)
+
+
+def _knot_encoding(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None,
+                   choose: bool, rank: int | None) -> tuple[dict[str, np.ndarray], int, int]:
+    """(arrays, knot_differences, knot_rank) of the knots: on ``rank`` shared tracks (0: plain tracks; a rank
+    whose codes would overflow falls back to plain ones), or with ``rank`` None the smallest encoding; the
+    order of the differences chosen by size only when ``choose``."""
+    if rank is None:
+        return _smallest_knots(data, steps, spectrum)
+    found = None
+    if rank and spectrum is not None:
+        found = knotbasis.basis_of_rank(spectrum, steps, data.looping, rank)
+    residual = quantise.quantise_knots(data.knots, steps) if found is None else found.residual
+    if choose:
+        tracks, order = quantise.encode_knot_tracks(residual)
+    else:
+        tracks, order = quantise.knot_tracks(residual, 1), 1
+    if found is None:
+        return {"knot_step": steps, "knots": tracks}, order, 0
+    return ({"knot_step": steps, "knot_weights": quantise.zigzag(found.weights), "knot_basis": found.basis,
+             "knots": tracks}, order, found.rank)
 
 
 def _smallest_knots(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None
@@ -181,9 +243,10 @@ def _smallest_knots(data: CoefficientData, steps: np.ndarray, spectrum: knotbasi
     """(arrays, knot_differences, knot_rank) of the smallest knot encoding: plain tracks, or one of the
     shared-basis candidates of ``spectrum`` (plain on a tie), held one at a time (each is as large as the
     knots)."""
-    tracks, differences = quantise.encode_knot_tracks(quantise.quantise_knots(data.knots, steps))
+    codes = quantise.quantise_knots(data.knots, steps)
+    tracks, differences = quantise.encode_knot_tracks(codes)
     best: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
-    size, rank = _trial_bytes(best), 0
+    size, rank = BASIS_MARGIN * _trial_bytes(best), 0
     for b in knotbasis.basis_candidates(spectrum, steps, data.looping):
         residual, order = quantise.encode_knot_tracks(b.residual)
         option = {"knot_step": steps, "knot_weights": quantise.zigzag(b.weights), "knot_basis": b.basis,

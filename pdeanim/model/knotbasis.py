@@ -143,6 +143,11 @@ def basis_candidates(spectrum: TrackSpectrum | None, steps: np.ndarray, loop: bo
                 yield found
 
 
+def basis_of_rank(spectrum: TrackSpectrum, steps: np.ndarray, loop: bool, rank: int) -> KnotBasis | None:
+    """The knots on the leading ``rank`` tracks of the spectrum (None where a code would overflow)."""
+    return _on_basis(spectrum.knots, spectrum.tracks, spectrum.vt[:rank], steps, loop)
+
+
 def _on_basis(knots: np.ndarray, tracks: np.ndarray, rows: np.ndarray, steps: np.ndarray, loop: bool
               ) -> KnotBasis | None:
     """The knots on the basis ``rows`` (r, K): least-squares weights rounded to the steps, and the rounded

@@ -153,10 +153,10 @@ def knot_steps(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarra
 
 
 def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.ndarray, D: np.ndarray,
-                   knots: np.ndarray, rms: float, cap: float, tangents: np.ndarray | None = None,
+                   knots: np.ndarray, rms: float, cap: float | np.ndarray, tangents: np.ndarray | None = None,
                    cubic_max: float = CUBIC_PAIR_MAX) -> np.ndarray:
     """(C, 3) float32 power-of-two steps whose rounding adds at most ``rms`` to the RMS vertex distance, and
-    moves no vertex coordinate by more than ``cap`` (so the max error stays near the unrounded one).
+    moves no vertex coordinate by more than ``cap`` (a number, or (C, 3) per curve and coordinate).
 
     Rounding to a step h is noise of variance h^2 / 12 per knot value; at a vertex it adds
     h^2 / 12 * sum_k S_k(u)^2 * (phi0^2 + phi1^2) to a coordinate's variance. Fewest bits for a given total:
@@ -176,6 +176,12 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
     bound = pair_max(family, m, tangents, cubic_max)
     return _power_of_two(np.minimum(steps, 2.0 * cap / np.maximum(sens * bound, 1e-30)), knots)
+
+
+def refined_steps(steps: np.ndarray, refine: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """(C, 3) float32 power-of-two steps halved ``refine`` (C, 3) times per curve and coordinate (still coarse
+    enough that every code stays within MAX_CODE)."""
+    return _power_of_two(np.asarray(steps, np.float64) * 2.0 ** -np.asarray(refine, np.float64), knots)
 
 
 def _power_of_two(steps: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -201,6 +207,13 @@ def encode_knot_tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
     second = zigzag_deltas(np.diff(tracks, axis=-1, prepend=0), axis=-1)
     del tracks
     return (first, 1) if first_size <= len(size(second)) else (second, 2)
+
+
+def knot_tracks(codes: np.ndarray, order: int) -> np.ndarray:
+    """(C, 3, 4, S+1) uint32 tracks of the integer knot codes (S+1, C, 3, 4): zigzag differences of order 1
+    or 2 along time."""
+    tracks = np.moveaxis(np.asarray(codes, np.int64), 0, -1)
+    return zigzag_deltas(tracks if order == 1 else np.diff(tracks, axis=-1, prepend=0), axis=-1)
 
 
 def decode_knot_tracks(tracks: np.ndarray, order: int) -> np.ndarray:

@@ -253,7 +253,8 @@ def test_topology_whose_curves_miss_a_vertex_is_an_error(fixed_fit):
 
 def test_rounding_growth_aims_at_the_target():
     """The knots' budget grows by the factor that would bring the stored MSE to quant_aim of the target
-    (the rounding's share of the MSE taken as proportional to the budget squared), within [1.2, 4]."""
+    (the rounding's share of the MSE taken as proportional to the budget squared), by a factor in [1.2, 4]
+    or, past the aim, in [1/4, 1/1.2]."""
     from pdeanim.fit.ratecontrol import growth
 
     tol = FitTolerances()
@@ -261,7 +262,9 @@ def test_rounding_growth_aims_at_the_target():
     assert g == pytest.approx(np.sqrt(((tol.quant_aim**2) - 0.09) / (0.25 - 0.09)))
     assert 0.09 + (0.25 - 0.09) * g**2 == pytest.approx(tol.quant_aim**2)
     assert growth(stored=0.09, exact=0.09, target=1.0, tol=tol) == 4.0  # rounding added nothing measurable
-    assert growth(stored=0.9, exact=0.1, target=1.0, tol=tol) == 1.2  # already close: the smallest step
+    assert growth(stored=0.8, exact=0.1, target=1.0, tol=tol) == 1.2  # already close: the smallest step
+    assert growth(stored=1.0, exact=0.1, target=1.0, tol=tol) == pytest.approx(1 / 1.2)  # past the aim: shrink
+    assert growth(stored=9.0, exact=0.1, target=1.0, tol=tol) == 0.25  # far past: at most 4x smaller
 
 
 @pytest.fixture(scope="module")
