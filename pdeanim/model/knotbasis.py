@@ -118,9 +118,14 @@ def track_spectrum(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     np.add.at(weight, cid, B * B)
     weight *= (pair_max(family, m) ** 2)[..., None] / V  # how much a unit track error moves the vertices
     tracks = np.moveaxis(knots, 0, -1).reshape(-1, K)  # (C * 12, K)
-    root = np.sqrt(weight).reshape(-1, 1)
-    _, sigma, vt = np.linalg.svd(np.linalg.qr(root * tracks, mode="r"))  # QR first: (K, K), same spectrum
-    tail = np.concatenate([np.cumsum((sigma**2)[::-1])[::-1], [0.0]]) / K  # tail[r]: drop r..
+    weighted = np.sqrt(weight).reshape(-1, 1) * tracks
+    # the spectrum from the (K, K) Gram matrix: one matrix product (~3x faster than a QR of the C * 12 rows);
+    # it squares the condition number, which loses only energies below ~1e-16 of the largest, far under any
+    # rounding the basis is weighed against (the weights themselves are solved by QR, in _on_basis)
+    energy, vectors = np.linalg.eigh(weighted.T @ weighted)
+    order = np.argsort(energy)[::-1]
+    sigma2, vt = np.maximum(energy[order], 0.0), vectors[:, order].T
+    tail = np.concatenate([np.cumsum(sigma2[::-1])[::-1], [0.0]]) / K  # tail[r]: drop r..
     return TrackSpectrum(knots, tracks, weight, vt, tail)
 
 
