@@ -169,13 +169,25 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     np.add.at(weight, cid, (B * B).sum(-1))  # sum over the curve's vertices of sum_k S_k^2
     weight *= pair**2 / (12.0 * max(V, 1))
     share = rms * rms / max(3 * C, 1)
-    # nearest power of two (in log2): the budget is a total, so rounding up here is balanced by rounding down
-    # elsewhere; the caller measures the stored clip anyway
-    steps = np.sqrt(2.0 * share / np.maximum(weight, 1e-300))
+    ideal = np.sqrt(share / np.maximum(weight, 1e-300))
     sens = np.zeros((C, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
     bound = pair_max(family, m, tangents, cubic_max)
-    return _power_of_two(np.minimum(steps, 2.0 * cap / np.maximum(sens * bound, 1e-30)), knots)
+    capped = np.minimum(ideal, 2.0 * cap / np.maximum(sens * bound, 1e-30))
+    # a power of two by dithered rounding in log2 (floor(log2 x + d), d spread over [0, 1) item by item:
+    # unbiased in log2), so that the total moves smoothly with rms instead of every item whose step is alike
+    # doubling at the same rms (the cap is a share of the budget, so it is rounded alike: the caller measures
+    # the stored clip, and refines the curves that stray past its bound)
+    return _power_of_two(2.0 ** np.floor(np.log2(np.maximum(capped, 1e-300)) + dither((C, 3))), knots)
+
+
+GOLDEN = 0.6180339887498949
+
+
+def dither(shape: tuple[int, ...]) -> np.ndarray:
+    """Offsets in [0, 1) spread evenly over the elements of ``shape`` (the golden-ratio sequence:
+    deterministic, and any run of consecutive items covers [0, 1) evenly)."""
+    return np.mod(np.arange(int(np.prod(shape))) * GOLDEN, 1.0).reshape(shape)
 
 
 def refined_steps(steps: np.ndarray, refine: np.ndarray, knots: np.ndarray) -> np.ndarray:
