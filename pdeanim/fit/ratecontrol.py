@@ -82,7 +82,8 @@ def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
         if trials is not None:
             trials.append(_trial(targets, quant, d))
         rms = float(np.sqrt(np.mean(d * d)))
-        over = None if bound is None or rms > targets.rms else _over(sf, d, exact, bound)
+        rms_missed = targets.rms is not None and rms > targets.rms
+        over = None if bound is None or rms_missed else _over(sf, d, exact, bound)
         if over is not None:  # finer steps on the curves past the bound, the budget kept
             quant = quant.refined(over, sf.curves.n_curves)
             continue

@@ -264,7 +264,7 @@ def test_rounding_growth_aims_at_the_target():
     assert growth(stored=0.09, exact=0.09, target=1.0, tol=tol) == 4.0  # rounding added nothing measurable
     assert growth(stored=0.8, exact=0.1, target=1.0, tol=tol) == 1.2  # already close: the smallest step
     assert growth(stored=1.0, exact=0.1, target=1.0, tol=tol) == pytest.approx(1 / 1.2)  # past the aim: shrink
-    assert growth(stored=9.0, exact=0.1, target=1.0, tol=tol) == 0.25  # far past: at most 4x smaller
+    assert growth(stored=20.0, exact=0.1, target=1.0, tol=tol) == 0.25  # far past: at most 4x smaller
 
 
 @pytest.fixture(scope="module")
@@ -299,12 +299,11 @@ def test_curves_whose_floor_exceeds_the_per_vertex_bound_are_split(moving_bump):
 
 
 def test_rms_target_keeps_the_rounding_within_the_soft_max_bound(moving_bump):
-    """With an RMS target alone, the knots' rounding grows only while no vertex is off by more than
-    soft_max_ratio x the target (the first rounding being within it); without the bound it grows further."""
+    """With an RMS target alone, no vertex is off by more than soft_max_ratio x the target where the unrounded
+    fit was within it (the curves that stray past get finer steps); without the bound some do."""
     target, ratio = 3e-3, FitTolerances().soft_max_ratio
     soft = fit_poses(moving_bump, FitOptions(target_rel_rms=target)).report
     assert soft["target_met"] and soft["rel_max"] <= ratio * target
     free = fit_poses(moving_bump, FitOptions(target_rel_rms=target),
                      tolerances=FitTolerances(soft_max_ratio=None)).report
-    assert free["target_met"] and free["rel_max"] > ratio * target
-    assert free["sizes"]["coefficients_bytes"] < soft["sizes"]["coefficients_bytes"]
+    assert free["target_met"] and free["rel_max"] > ratio * target  # measured 5.4x the target, 3.0x with it
