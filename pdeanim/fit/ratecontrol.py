@@ -5,7 +5,8 @@ is measured on the stored clip (docs/compression.md, "Rate control")."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -17,7 +18,7 @@ from ..model.quantise import power_of_two_step
 from ..poses import Poses
 from .encode import Quantisation, decode, encode, stored_clip
 from .options import FitOptions, FitTolerances
-from .problem import meets, stored_distances
+from .problem import stored_distances
 from .spacestage import SpaceFit
 
 
@@ -54,54 +55,91 @@ def quantised(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
         clip = decode(parts)
         approx = clip.evaluate(clip.frame_t())
         chosen = int(container.unpack(parts.coefficients)[0]["knot_rank"])
-        d = stored_distances(sf.p, approx, F)
-        reachable = quant.tolerance is not None and meets(sf.targets, exact[:F])
+        found = Errors.of(stored_distances(sf.p, approx, F), sf.p.curve_of, sf.curves.n_curves)
+        unrounded = Errors.of(exact[:F], sf.p.curve_of, sf.curves.n_curves)
+        reachable = quant.tolerance is not None and unrounded.meets(sf.targets)
         if chosen == quant.rank or not reachable or (
-                meets(sf.targets, d) and (bound is None or _over(sf, d, exact, bound) is None)):
+                found.meets(sf.targets) and (bound is None or _over(found, unrounded, bound) is None)):
             break
     return replace(quant, rank=chosen), approx, len(parts.topology) + len(parts.coefficients)
 
 
 def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses, exact: np.ndarray,
               tol: FitTolerances, trials: list[dict] | None) -> Quantisation:
-    """The coarsest rounding found whose stored clip meets the targets, with its RMS error in
-    [tol.quant_fill, 1] of an RMS target where the trials reach it, and no curve past the max bound that the
-    unrounded fit kept within it; the knots on the number of shared tracks that the first rounding's
-    smallest encoding has."""
-    p, F, targets = sf.p, poses.n_frames, sf.targets
-    quant = first_quantisation(targets, exact[:F], tol)
-    if quant.tolerance is None or not meets(targets, exact[:F]):
+    """:func:`search_rounding` of a fit held in memory: each rounding measured on its stored clip (evaluated
+    at every frame), the knots on the number of shared tracks that the first rounding's smallest encoding
+    has."""
+    p, F = sf.p, poses.n_frames
+    unrounded = Errors.of(exact[:F], p.curve_of, sf.curves.n_curves)
+    quant = first_quantisation(sf.targets, exact[:F], tol)
+    if quant.tolerance is not None and unrounded.meets(sf.targets):
+        first = encode(p, sf.curves, sf.space, fitted, options, poses, None, quant, TRIAL_LEVEL)
+        quant = replace(quant, rank=int(container.unpack(first.coefficients)[0]["knot_rank"]))
+
+    def measure(q: Quantisation) -> Errors:
+        clip = stored_clip(p, sf.curves, sf.space, fitted, options, poses, q)
+        d = stored_distances(p, clip.evaluate(clip.frame_t()), F)
+        return Errors.of(d, p.curve_of, sf.curves.n_curves)
+
+    return search_rounding(sf.targets, unrounded, quant, tol, measure, trials)
+
+
+@dataclass
+class Errors:
+    """What the rate control reads of a clip's distances to the data: their RMS and mean square, the largest,
+    and the largest on each curve (C,)."""
+
+    rms: float
+    largest: float
+    curve_max: np.ndarray
+
+    @classmethod
+    def of(cls, d: np.ndarray, curve_of: np.ndarray, n_curves: int) -> Errors:
+        """The errors of distances d (F, V) of vertices on curves ``curve_of`` (V,)."""
+        curve_max = np.zeros(n_curves)
+        np.maximum.at(curve_max, curve_of, d.max(axis=0, initial=0.0))
+        return cls(float(np.sqrt(np.mean(d * d))) if d.size else 0.0, float(d.max(initial=0.0)), curve_max)
+
+    def meets(self, targets: Targets) -> bool:
+        """Whether they meet the targets."""
+        return ((targets.rms is None or self.rms <= targets.rms)
+                and (targets.max is None or self.largest <= targets.max))
+
+
+def search_rounding(targets: Targets, unrounded: Errors, quant: Quantisation, tol: FitTolerances,
+                    measure: Callable[[Quantisation], Errors], trials: list[dict] | None = None
+                    ) -> Quantisation:
+    """The coarsest rounding found, starting from ``quant``, whose stored clip (``measure(rounding)``) meets
+    the targets, with its RMS error in [tol.quant_fill, 1] of an RMS target where the trials reach it, and no
+    curve past the max bound that the unrounded fit kept within it (such curves get finer steps, the budget
+    kept). Each trial is appended to ``trials``."""
+    if quant.tolerance is None or not unrounded.meets(targets):
         return quant  # nothing to round for, or a target the fit itself misses
     bound = max_bound(targets, tol)
-    first = encode(p, sf.curves, sf.space, fitted, options, poses, None, quant, TRIAL_LEVEL)
-    quant = replace(quant, rank=int(container.unpack(first.coefficients)[0]["knot_rank"]))
     good, bad = None, None  # the coarsest budget that met the targets; the finest one that missed the RMS
     for _ in range(tol.quant_retries + 1):
-        clip = stored_clip(p, sf.curves, sf.space, fitted, options, poses, quant)
-        d = stored_distances(p, clip.evaluate(clip.frame_t()), F)
+        found = measure(quant)
         if trials is not None:
-            trials.append(_trial(targets, quant, d))
-        rms = float(np.sqrt(np.mean(d * d)))
-        rms_missed = targets.rms is not None and rms > targets.rms
-        over = None if bound is None or rms_missed else _over(sf, d, exact, bound)
+            trials.append(_trial(targets, quant, found))
+        rms_missed = targets.rms is not None and found.rms > targets.rms
+        over = None if bound is None or rms_missed else _over(found, unrounded, bound)
         if over is not None:  # finer steps on the curves past the bound, the budget kept
-            quant = quant.refined(over, sf.curves.n_curves)
+            quant = quant.refined(over, len(found.curve_max))
             continue
-        if meets(targets, d):
+        if found.meets(targets):
             good = quant
-            if quant.knot_rms is None or rms >= tol.quant_fill * targets.rms:
+            if quant.knot_rms is None or found.rms >= tol.quant_fill * targets.rms:
                 return good
         else:
             bad = quant
         if quant.knot_rms is None:
             quant = quant.finer()
             continue
+        factor = growth(found.rms**2, unrounded.rms**2, targets.rms, tol)
         if good is None:  # the first budget missed: shrink towards the aim
-            quant = quant.coarser(growth(rms**2, float(np.mean(exact[:F] ** 2)), targets.rms, tol))
+            quant = quant.coarser(factor)
             continue
-        if bad is None:
-            factor = growth(rms**2, float(np.mean(exact[:F] ** 2)), targets.rms, tol)
-        else:
+        if bad is not None:
             gap = bad.knot_rms / good.knot_rms  # bisect (in log) between the last met and the first missed
             if gap < tol.bisect_until:
                 return good
@@ -110,26 +148,20 @@ def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
     return good or quant
 
 
-def _over(sf: SpaceFit, d: np.ndarray, exact: np.ndarray, bound: float) -> np.ndarray | None:
+def _over(found: Errors, unrounded: Errors, bound: float) -> np.ndarray | None:
     """Indices of the curves on which a vertex of the stored clip is past the max bound while the unrounded
     fit kept it within (the rounding's doing), or None."""
-    cid = sf.p.curve_of
-    C = sf.curves.n_curves
-    stored, unrounded = np.zeros(C), np.zeros(C)
-    np.maximum.at(stored, cid, d.max(axis=0, initial=0.0))
-    np.maximum.at(unrounded, cid, exact[: len(d)].max(axis=0, initial=0.0))
-    over = np.flatnonzero((stored > bound) & (unrounded <= bound))
+    over = np.flatnonzero((found.curve_max > bound) & (unrounded.curve_max <= bound))
     return over if len(over) else None
 
 
-def _trial(targets: Targets, quant: Quantisation, d: np.ndarray) -> dict:
+def _trial(targets: Targets, quant: Quantisation, found: Errors) -> dict:
     """One rate-control trial for the report: the knots' RMS budget, how many curves have refined steps, and
     the stored clip's RMS and max error over the targets (an RMS target's when there is no max target)."""
-    rms, worst = float(np.sqrt(np.mean(d * d))), float(d.max(initial=0.0))
     return {"knot_rms": quant.knot_rms, "knot_rank": quant.rank,
             "refined_curves": 0 if quant.refine is None else int(np.any(quant.refine > 0, axis=1).sum()),
-            "rms_over_target": rms / targets.rms if targets.rms else None,
-            "max_over_target": worst / (targets.max or targets.rms or 1.0)}
+            "rms_over_target": found.rms / targets.rms if targets.rms else None,
+            "max_over_target": found.largest / (targets.max or targets.rms or 1.0)}
 
 
 def max_bound(targets: Targets, tol: FitTolerances) -> float | None:
