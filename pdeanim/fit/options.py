@@ -144,6 +144,9 @@ class FitTolerances:
     of the target to the knots' rounding, and its smooth knot tracks code small (elephant-gallop at 3e-3:
     35 segments 659 KB, 47 segments 429 KB; samba: 28 segments 688 KB, 174 segments 551 KB, both with a 4x
     lower max error; horse-collapse keeps its 5 segments for 52 frames)."""
+    window_fit_values: int = 4_000_000
+    """Inputs of more frame-vertex values than this are fitted in windows of frames with a knot at every frame
+    (:mod:`pdeanim.fit.windowed`: memory bounded by a window, not by the frames), where the options allow."""
     search_share: float = 0.125
     """With the dense fit, the error-driven search stops at this share of the frame intervals: a clip that
     needs more segments than that has been smaller with a knot at every frame on every benchmark sequence,

@@ -22,6 +22,7 @@ from .problem import prepare
 from .report import fit_report, header_errors, time_model_counts
 from .search import best_candidate
 from .spacestage import space_fit
+from .windowed import fit_windowed, windowed_applies
 
 
 def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progress | None = None,
@@ -31,6 +32,8 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     tol = tolerances or FitTolerances()
     t_start = time.perf_counter()
     report_progress = sub_progress(progress, 0.0, 1.0)
+    if windowed_applies(poses, options, tol):
+        return fit_windowed(poses, options, report_progress, tol, curves)
     sf = space_fit(poses, options, curves, report_progress, tol)
     t_space = time.perf_counter()
     best = best_candidate(sf, options, poses, report_progress, tol)

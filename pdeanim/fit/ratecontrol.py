@@ -22,10 +22,10 @@ from .problem import stored_distances
 from .spacestage import SpaceFit
 
 
-def first_quantisation(targets: Targets, exact: np.ndarray, tol: FitTolerances) -> Quantisation:
+def first_quantisation(targets: Targets, unrounded_ms: float, tol: FitTolerances) -> Quantisation:
     """The first rounding tried: a share of the tightest target per coordinate; with an RMS target, the knots
-    get most of what the unrounded fit (distances ``exact`` (F, V)) leaves of it, moving no vertex coordinate
-    by more than tol.knot_cap times that budget."""
+    get most of what the unrounded fit (its mean square distance ``unrounded_ms``) leaves of it, moving no
+    vertex coordinate by more than tol.knot_cap times that budget."""
     goals = [g for g in (targets.rms, targets.max) if g is not None]
     if not goals:
         return Quantisation()
@@ -33,7 +33,7 @@ def first_quantisation(targets: Targets, exact: np.ndarray, tol: FitTolerances) 
     if targets.rms is None:
         return Quantisation(tolerance)
     rest_step = power_of_two_step(tolerance)
-    spare = tol.quant_budget * (targets.rms**2 - float(np.mean(exact * exact))) - rest_step**2 / 4
+    spare = tol.quant_budget * (targets.rms**2 - unrounded_ms) - rest_step**2 / 4
     if spare <= tolerance**2:
         return Quantisation(tolerance)
     knot_rms = float(np.sqrt(spare))
@@ -71,7 +71,7 @@ def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
     has."""
     p, F = sf.p, poses.n_frames
     unrounded = Errors.of(exact[:F], p.curve_of, sf.curves.n_curves)
-    quant = first_quantisation(sf.targets, exact[:F], tol)
+    quant = first_quantisation(sf.targets, unrounded.rms**2, tol)
     if quant.tolerance is not None and unrounded.meets(sf.targets):
         first = encode(p, sf.curves, sf.space, fitted, options, poses, None, quant, TRIAL_LEVEL)
         quant = replace(quant, rank=int(container.unpack(first.coefficients)[0]["knot_rank"]))

@@ -163,17 +163,32 @@ def knot_steps_rms(curves: CurveSet, u: np.ndarray, family: np.ndarray, m: np.nd
     every curve and coordinate contributes the same share of rms^2 (each has the same number of knots).
     """
     cid, B = vertex_basis(curves, u, family, D)
-    V, C = len(u), curves.n_curves
-    pair = pair_max(family, m)  # the cubics' squared weights: 1 at the knots, about 1 or less between them
-    weight = np.zeros((C, 3))
+    weight, reach = item_sensitivity(cid, B, curves.n_curves, pair_max(family, m),
+                                     pair_max(family, m, tangents, cubic_max))
+    return budget_steps(weight, reach, rms, cap, knots)
+
+
+def item_sensitivity(cid: np.ndarray, B: np.ndarray, n_curves: int, pair: np.ndarray | float,
+                     bound: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """(weight, reach), each (C, 3), of every item: the mean square a unit rounding noise of its knots adds
+    over the vertices (sum_k S_k^2 x pair^2 / 12 / V), and the most a unit rounding of them moves a vertex
+    coordinate (max over the curve of sum_k |S_k| x bound). ``pair``/``bound``: the time weights' bounds."""
+    weight = np.zeros((n_curves, 3))
     np.add.at(weight, cid, (B * B).sum(-1))  # sum over the curve's vertices of sum_k S_k^2
-    weight *= pair**2 / (12.0 * max(V, 1))
-    share = rms * rms / max(3 * C, 1)
-    ideal = np.sqrt(share / np.maximum(weight, 1e-300))
-    sens = np.zeros((C, 3))
+    weight *= np.asarray(pair) ** 2 / (12.0 * max(len(cid), 1))
+    sens = np.zeros((n_curves, 3))
     np.maximum.at(sens, cid, np.abs(B).sum(-1))
-    bound = pair_max(family, m, tangents, cubic_max)
-    capped = np.minimum(ideal, 2.0 * cap / np.maximum(sens * bound, 1e-30))
+    return weight, sens * bound
+
+
+def budget_steps(weight: np.ndarray, reach: np.ndarray, rms: float, cap: float | np.ndarray,
+                 knots: np.ndarray) -> np.ndarray:
+    """(C, 3) float32 power-of-two steps for an RMS budget shared evenly by the items (weight, reach of
+    :func:`item_sensitivity`), none moving a vertex coordinate by more than ``cap``; ``knots`` bound the
+    codes."""
+    C = weight.shape[0]
+    ideal = np.sqrt(rms * rms / max(3 * C, 1) / np.maximum(weight, 1e-300))
+    capped = np.minimum(ideal, 2.0 * cap / np.maximum(reach, 1e-30))
     # a power of two by dithered rounding in log2 (floor(log2 x + d), d spread over [0, 1) item by item:
     # unbiased in log2), so that the total moves smoothly with rms instead of every item whose step is alike
     # doubling at the same rms (the cap is a share of the budget, so it is rounded alike: the caller measures
