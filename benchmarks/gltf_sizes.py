@@ -169,13 +169,13 @@ def written(glb: bytes) -> tuple[int, str]:
     return count, "targets" if any("NORMAL" in t for p in prims for t in p.get("targets", [])) else "base"
 
 
-def measure(case: Case, look: bool, normals: bool, bits: int, repeats: int) -> tuple[bytes, float]:
+def measure(case: Case, look: bool, options: PackOptions, repeats: int) -> tuple[bytes, float]:
     """Our GLB and the median seconds to write it."""
     builds, glb = [], b""
     for _ in range(repeats):
         layout = gltf_layout(case.source) if look else None
         start = time.perf_counter()
-        glb = case.write(PackOptions(normals=normals, position_bits=bits), layout)
+        glb = case.write(options, layout)
         builds.append(time.perf_counter() - start)
     return glb, statistics.median(builds)
 
@@ -197,7 +197,8 @@ def rows(case: Case, args: argparse.Namespace) -> None:
                 gp_pos = gltfpack_cc(positions_only(plain), Path(tmp))
             matched = int(np.clip(np.ceil(np.log2(extent / grid_step(gp) + 1)), 8, 15))  # step <= gltfpack's
             for bits in sorted({args.bits, matched}, reverse=True):
-                glb, build = measure(case, look, normals, bits, args.repeats)
+                options = PackOptions(normals=normals, position_bits=bits)
+                glb, build = measure(case, look, options, args.repeats)
                 (ours_v, kind), (gp_v, _) = written(glb), written(gp)
                 shape = f"{case.frames.shape[0]} x {case.frames.shape[1]}"
                 print(f"{case.label:<21} {'look' if look else 'plain':<5} {kind:<7} {shape:>11} "

@@ -24,7 +24,7 @@ from .glb import ARRAY_BUFFER, pack_glb
 from .layout import Layout, Part, Slot, add_accessor, add_view, drop_unused, minmax_of
 from .meshopt import compress_glb
 from .normals import unit_normals_frames
-from .weld import flat_shaded, weld_primitive
+from .weld import flat_shaded, smooth_groups, weld_primitive
 
 QUANT = "KHR_mesh_quantization"
 TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one meshopt stream) at most
@@ -37,15 +37,14 @@ class PackOptions:
     to bytes, ``compress`` with EXT_meshopt_compression, ``normals`` as per-frame morph deltas (else every
     frame is lit with the first frame's normals), ``weld`` vertices whose written data are all equal (see
     :mod:`.weld`; off keeps one vertex per clip vertex, in clip order). A welded primitive's vertices come in
-    the triangles' fetch order with a ``_PDEANIM_VERTEX`` map to the clip's; ``fetch_order`` reorders (and
-    maps) primitives that nothing welded too (about 10% smaller; for players that read the map)."""
+    the triangles' fetch order with a ``_PDEANIM_VERTEX`` map to the clip's; one that nothing welded stays as
+    it was (reordering it too would save only 2-3%, see docs/gltf.md)."""
 
     quantize: bool = True
     compress: bool = True
     position_bits: int = 14
     normals: bool = True
     weld: bool = True
-    fetch_order: bool = False
 
     def __post_init__(self) -> None:
         if not 8 <= int(self.position_bits) <= 15:
@@ -74,12 +73,12 @@ def _local(part: Part, world: np.ndarray) -> np.ndarray:
 
 def _normals(layout: Layout, frames: np.ndarray) -> np.ndarray:
     """Unit normals (K, V, 3) in world space, area-weighted over the welded surface (compiled, one pass per
-    frame)."""
+    frame): a glTF source's weld, else :func:`~.weld.smooth_groups` of the frames."""
     if not len(layout.faces):
         return np.zeros(frames.shape, np.float32)
-    if layout.weld is None:
+    weld = layout.weld if layout.weld is not None else smooth_groups(frames, layout.faces)
+    if weld is None:
         return unit_normals_frames(frames, layout.faces)
-    weld = layout.weld
     first = np.zeros(int(weld.max()) + 1, np.int64)
     first[weld[::-1]] = np.arange(len(weld))[::-1]
     welded = unit_normals_frames(frames[:, first], weld[layout.faces])
@@ -286,8 +285,7 @@ def _welded(doc: dict, views: list[bytes], prim: dict, layout: Layout, slot: Slo
     if nrm is not None:
         shown = nrm if opts.normals else nrm[:1]
         written = np.rint(shown * 127).astype(np.int8) if opts.quantize else shown.astype(np.float32)
-    keep = weld_primitive(doc, views, prim, pos, written, _slot_faces(layout, slot), slot.start,
-                          opts.fetch_order)
+    keep = weld_primitive(doc, views, prim, pos, written, _slot_faces(layout, slot), slot.start)
     if keep is None:
         return pos, nrm
     return pos[:, keep], None if nrm is None else nrm[:, keep]

@@ -17,6 +17,7 @@ from .layout import accessor_rows, add_accessor, add_view, cache_order
 
 VERTEX_MAP = "_PDEANIM_VERTEX"  # per written vertex: the clip vertex it shows (welded ones share motion)
 FLAT_ANGLE = 1e-3  # radians: a vertex is flat when its incident faces' normals agree this closely
+SMOOTH_ANGLE = np.radians(60.0)  # split vertices whose one-sided normals are this close: a seam, not an edge
 
 
 @dataclass
@@ -58,6 +59,32 @@ def weld_labels(rest: np.ndarray, motion: Callable[[np.ndarray], np.ndarray]) ->
         sub = _labels(row_bytes(labels[repeated], motion(repeated)))
         out[repeated] = len(labels) + sub
     return out
+
+
+def smooth_groups(frames: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """(V,) normal groups of a mesh without source normals (frames (K, V, 3)): vertices at the same position
+    in every frame share one smooth normal when their one-sided normals at rest (each from its own faces)
+    are within :data:`SMOOTH_ANGLE` of each other, as at a UV seam or wherever an export split a smooth
+    surface; across a hard edge (one-sided normals far apart) each side keeps its own. None when no vertex
+    repeats."""
+    from .normals import vertex_normals
+
+    labels = weld_labels(row_bytes(frames[0]), lambda idx: row_bytes(frames[1:, idx].transpose(1, 0, 2)))
+    group = np.unique(labels, return_inverse=True)[1].reshape(-1)
+    if group.max() + 1 == len(group):
+        return None
+    one_sided = vertex_normals(frames[0], faces).astype(np.float64)
+    sub = np.zeros(len(group), np.int64)
+    left = np.flatnonzero(np.bincount(group)[group] > 1)
+    rounds = 0
+    while len(left):  # each round, every group's first unassigned member takes those close to it
+        g = group[left]
+        pivot = np.zeros(group.max() + 1, np.int64)
+        pivot[g[::-1]] = left[::-1]
+        close = np.einsum("ij,ij->i", one_sided[left], one_sided[pivot[g]]) >= np.cos(SMOOTH_ANGLE)
+        sub[left[close]] = rounds
+        left, rounds = left[~close], rounds + 1
+    return np.unique(np.stack([group, sub], 1), axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
 def weld(labels: np.ndarray, faces: np.ndarray) -> Welded:
@@ -115,13 +142,13 @@ def flat_shaded(positions: np.ndarray, faces: np.ndarray) -> bool:
 
 
 def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, normals: np.ndarray | None,
-                   faces: np.ndarray, first_vertex: int, reorder: bool = False) -> np.ndarray | None:
+                   faces: np.ndarray, first_vertex: int) -> np.ndarray | None:
     """Weld one triangle primitive of a template whose vertices are clip vertices ``first_vertex`` on. Keys:
     its positions (K, n, 3) as written, ``normals`` (K', n, 3) as written (K' = 1 without normal targets)
     and its kept attributes (UVs...). Rewrites the primitive's indices (cache then fetch order) and
     attributes over the welded vertices and adds the :data:`VERTEX_MAP` attribute; returns ``keep`` (m,), the
     primitive's own vertex each written vertex takes its positions and normals from, or None when the
-    primitive stays as it was (nothing welded and no ``reorder``, or attributes the weld cannot follow)."""
+    primitive stays as it was (nothing welded, or attributes the weld cannot follow)."""
     n = pos.shape[1]
     attrs = {name: accessor_rows(doc, views, acc) for name, acc in prim["attributes"].items()}
     if not len(faces) or any(len(v) != n for v in attrs.values()):
@@ -135,7 +162,7 @@ def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, n
 
     rest = [pos[0], *([] if normals is None else [normals[0]]), *attrs.values()]
     welded = weld(weld_labels(row_bytes(*rest), motion), faces)
-    if welded.identity(n) and not reorder:
+    if welded.identity(n):
         return None
     welded.faces = cache_order(welded.faces, len(welded.keep))
     welded = fetch_order(welded)

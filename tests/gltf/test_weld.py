@@ -185,3 +185,44 @@ def test_cli_export_welds_by_default(fox, tmp_path, capsys):
     assert VERTEX_MAP not in prim["attributes"]
     assert load_document(unwelded).accessor(prim["attributes"]["POSITION"]).shape[0] == 1728
     assert out.stat().st_size < 0.3 * (tmp_path / "all.glb").stat().st_size
+
+
+def capped_tube(segments: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A smooth tube whose seam column is duplicated (as at a UV seam), with flat caps of their own
+    vertices (split from the tube's rims, as at a hard edge): vertices (V, 3) and faces (T, 3)."""
+    a = np.linspace(0.0, 2 * np.pi, segments + 1)
+    ring = np.stack([np.cos(a), np.sin(a)], 1)
+    ring[-1] = ring[0]  # the last column repeats the first's positions exactly
+    side = np.concatenate([np.c_[ring, np.zeros(segments + 1)], np.c_[ring, np.ones(segments + 1)]])
+    i = np.arange(segments)
+    top = i + segments + 1
+    faces = [np.c_[i, i + 1, top + 1], np.c_[i, top + 1, top]]
+    verts = [side]
+    for z, flip in ((0.0, True), (1.0, False)):
+        base = sum(len(v) for v in verts)
+        cap = np.concatenate([np.c_[ring[:-1], np.full(segments, z)], [[0.0, 0.0, z]]])
+        tri = np.c_[np.full(segments, base + segments), base + i, base + (i + 1) % segments]
+        faces.append(tri[:, ::-1] if flip else tri)
+        verts.append(cap)
+    return np.concatenate(verts).astype(np.float32), np.concatenate(faces).astype(np.int64)
+
+
+def test_split_smooth_surface_gets_one_normal_and_hard_edges_stay(tmp_path):
+    """Without source normals (a plain export), vertices split on a smooth surface share one smooth normal
+    and weld; at a hard edge (the caps' rims, one-sided normals 90 degrees apart) they keep their own."""
+    rest, faces = capped_tube()
+    k = 4
+    frames = rest[None] * (1 + 0.1 * np.arange(k)[:, None, None] * rest[None, :, 2:])  # flare the top
+    assert not flat_shaded(rest, faces)
+    glb = animation(plain_layout(faces, len(rest)), frames.astype(np.float32))
+    (prim,) = primitives(glb)
+    gd = load_document(glb)
+    normal = gd.accessor(prim["attributes"]["NORMAL"])
+    clip_vertex = gd.accessor(prim["attributes"][VERTEX_MAP])[:, 0].astype(np.int64)
+    assert len(clip_vertex) == 24 + 2 * 13  # the seam column welded; rims and caps of their own
+    where = rest[clip_vertex]
+    on_side = np.isin(clip_vertex, np.arange(26))
+    radial = np.c_[where[:, :2], np.zeros(len(where))]  # the tube's own normals at rest: radial
+    assert np.einsum("ij,ij->i", normal[on_side], radial[on_side]).min() > 0.95
+    assert np.abs(normal[~on_side, 2]).min() > 0.99  # caps face along the axis
+    assert_clean(validate_many([glb])[0], "tube with a seam and hard rims")
