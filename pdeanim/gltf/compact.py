@@ -24,7 +24,7 @@ from .glb import ARRAY_BUFFER, pack_glb
 from .layout import Layout, Part, Slot, add_accessor, add_view, drop_unused, minmax_of
 from .meshopt import compress_glb
 from .normals import unit_normals_frames
-from .weld import flat_shaded, smooth_groups, weld_primitive
+from .weld import flat_shaded, map_all_or_none, smooth_groups, weld_primitive
 
 QUANT = "KHR_mesh_quantization"
 TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one meshopt stream) at most
@@ -276,6 +276,28 @@ def _slot_faces(layout: Layout, slot: Slot) -> np.ndarray:
     return f[inside] - slot.start
 
 
+def _write_slot(doc: dict, views: list[bytes], layout: Layout, part: Part, slot: Slot, pos: np.ndarray,
+                normals: np.ndarray | None, opts: PackOptions) -> None:
+    """One primitive's POSITION, NORMAL and morph targets from its positions (K, n, 3) (grid or local) and
+    the world ``normals`` (K, V, 3) of every clip vertex (None: none written), welded unless ``opts`` say
+    not."""
+    prim = doc["meshes"][slot.mesh]["primitives"][slot.prim]
+    nrm = None
+    if slot.normals and normals is not None:
+        nrm = normals[:, slot.start: slot.stop].astype(np.float64)  # unit already
+        if not np.array_equal(part.to_local, np.eye(4)):  # an identity node keeps them as they are
+            nrm = _local_normals(part, nrm)
+        if opts.quantize:
+            nrm = _quantised_normals(nrm)
+    if opts.weld and prim.get("mode", 4) == 4:
+        pos, nrm = _welded(doc, views, prim, layout, slot, pos, nrm, opts)
+    p_acc, n_acc, targets = _add_targets(doc, views, pos, nrm, opts)
+    prim["attributes"]["POSITION"] = p_acc
+    if n_acc is not None:
+        prim["attributes"]["NORMAL"] = n_acc
+    prim["targets"] = targets
+
+
 def _welded(doc: dict, views: list[bytes], prim: dict, layout: Layout, slot: Slot, pos: np.ndarray,
             nrm: np.ndarray | None, opts: PackOptions) -> tuple[np.ndarray, np.ndarray | None]:
     """One slot's positions (K, n, 3) and normals after :func:`~.weld.weld_primitive` (which rewrites
@@ -329,28 +351,16 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
         grid = _Grid(local, opts.position_bits) if opts.quantize and local is not None else None
         first = part.slots[0].start if part.slots else 0
         for slot in part.slots:
-            prim = doc["meshes"][slot.mesh]["primitives"][slot.prim]
             a, b = slot.start - first, slot.stop - first
             pos = grid.q[:, a:b] if grid is not None else local[:, a:b]
-            nrm = None
-            if slot.normals and normals is not None:
-                nrm = normals[:, slot.start: slot.stop].astype(np.float64)  # unit already
-                if not np.array_equal(part.to_local, np.eye(4)):  # an identity node keeps them as they are
-                    nrm = _local_normals(part, nrm)
-                if opts.quantize:
-                    nrm = _quantised_normals(nrm)
-            if opts.weld and prim.get("mode", 4) == 4:
-                pos, nrm = _welded(doc, views, prim, layout, slot, pos, nrm, opts)
-            p_acc, n_acc, targets = _add_targets(doc, views, pos, nrm, opts)
-            prim["attributes"]["POSITION"] = p_acc
-            if n_acc is not None:
-                prim["attributes"]["NORMAL"] = n_acc
-            prim["targets"] = targets
+            _write_slot(doc, views, layout, part, slot, pos, normals, opts)
         mesh = doc["meshes"][part.mesh]
         mesh["weights"] = [0.0] * n_targets
         if names is not None:
             mesh.setdefault("extras", {})["targetNames"] = [str(x) for x in names][:n_targets]
         holders.append(_mesh_node(doc, part, grid, mesh.get("name"), own=layout.source != "gltf"))
+    prims = [(doc["meshes"][s.mesh]["primitives"][s.prim], s.start) for s in layout.slots]
+    map_all_or_none(doc, views, prims)
     if opts.quantize:
         for key in ("extensionsUsed", "extensionsRequired"):
             doc[key] = [*[e for e in doc.get(key, []) if e != QUANT], QUANT]

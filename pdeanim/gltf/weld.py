@@ -179,6 +179,17 @@ def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, n
     return keep
 
 
+def map_all_or_none(doc: dict, views: list[bytes], prims: list[tuple[dict, int]]) -> None:
+    """When some primitive has a :data:`VERTEX_MAP`, give one to every other (``(primitive, its first clip
+    vertex)``, in clip order), so a player maps every mesh through it or, in a GLB without welds, none."""
+    if not any(VERTEX_MAP in prim["attributes"] for prim, _ in prims):
+        return
+    for prim, first in prims:
+        if VERTEX_MAP not in prim["attributes"]:
+            count = int(doc["accessors"][prim["attributes"]["POSITION"]]["count"])
+            prim["attributes"][VERTEX_MAP] = _vertex_map(doc, views, first + np.arange(count))
+
+
 def _vertex_map(doc: dict, views: list[bytes], clip_vertex: np.ndarray) -> int:
     """The :data:`VERTEX_MAP` accessor: UNSIGNED_SHORT (padded to the 4-byte vertex stride glTF asks for)
     while the clip vertex indices fit, else FLOAT (exact below 2**24; UNSIGNED_INT is for indices only)."""
