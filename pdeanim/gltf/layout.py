@@ -21,7 +21,8 @@ from .read import mesh_instances, read_static_mesh
 from .scene import scene_order, world_matrices
 
 log = logging.getLogger("pdeanim.gltf")
-DROPPED_ATTRIBUTES = ("POSITION", "NORMAL", "TANGENT")  # recomputed (or, for tangents, left to the viewer)
+DROPPED_ATTRIBUTES = ("POSITION", "NORMAL", "TANGENT",  # recomputed (or, for tangents, left to the viewer)
+                      "_PDEANIM_VERTEX")  # the map of a GLB pdeanim wrote, rewritten for each export
 DROPPED_PREFIXES = ("JOINTS_", "WEIGHTS_")  # skinning is baked into the evaluated positions
 
 

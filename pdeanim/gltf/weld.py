@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .glb import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER
-from .layout import accessor_rows, add_accessor, add_view, cache_order
+from .layout import accessor_rows, add_accessor, add_view, cache_order, minmax_of
 
 VERTEX_MAP = "_PDEANIM_VERTEX"  # per written vertex: the clip vertex it shows (welded ones share motion)
 FLAT_ANGLE = 1e-3  # radians: a vertex is flat when its incident faces' normals agree this closely
@@ -173,10 +173,26 @@ def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, n
     prim["mode"] = 4
     for name, values in attrs.items():
         src = doc["accessors"][prim["attributes"][name]]
-        prim["attributes"][name] = add_accessor(doc, views, values[keep], src["type"], ARRAY_BUFFER,
-                                                normalized=bool(src.get("normalized")), minmax="min" in src)
+        prim["attributes"][name] = _vertex_attribute(doc, views, values[keep], src["type"],
+                                                     bool(src.get("normalized")), "min" in src)
     prim["attributes"][VERTEX_MAP] = _vertex_map(doc, views, first_vertex + keep)
     return keep
+
+
+def _vertex_attribute(doc: dict, views: list[bytes], values: np.ndarray, acc_type: str, normalized: bool,
+                      minmax: bool) -> int:
+    """An attribute accessor over (n, k) values in its own view, each element padded to the 4-byte stride
+    glTF asks of vertex attributes (a VEC3 of bytes takes 4)."""
+    elem = values.dtype.itemsize * values.shape[1]
+    stride = -(-elem // 4) * 4
+    rows = np.zeros((len(values), stride), np.uint8)
+    little = np.ascontiguousarray(values, values.dtype.newbyteorder("<"))
+    rows[:, :elem] = little.view(np.uint8).reshape(-1, elem)
+    view = add_view(doc, views, rows.tobytes(), ARRAY_BUFFER, stride if stride != elem else None)
+    acc = add_accessor(doc, views, values, acc_type, normalized=normalized, view=view)
+    if minmax:
+        doc["accessors"][acc].update(minmax_of(values.reshape(len(values), -1)))
+    return acc
 
 
 def map_all_or_none(doc: dict, views: list[bytes], prims: list[tuple[dict, int]]) -> None:
@@ -193,9 +209,5 @@ def map_all_or_none(doc: dict, views: list[bytes], prims: list[tuple[dict, int]]
 def _vertex_map(doc: dict, views: list[bytes], clip_vertex: np.ndarray) -> int:
     """The :data:`VERTEX_MAP` accessor: UNSIGNED_SHORT (padded to the 4-byte vertex stride glTF asks for)
     while the clip vertex indices fit, else FLOAT (exact below 2**24; UNSIGNED_INT is for indices only)."""
-    if clip_vertex.max() <= 65535:
-        padded = np.zeros((len(clip_vertex), 2), np.uint16)
-        padded[:, 0] = clip_vertex
-        view = add_view(doc, views, padded.tobytes(), ARRAY_BUFFER, 4)
-        return add_accessor(doc, views, clip_vertex.astype(np.uint16)[:, None], "SCALAR", view=view)
-    return add_accessor(doc, views, clip_vertex.astype(np.float32)[:, None], "SCALAR", ARRAY_BUFFER)
+    dtype = np.uint16 if not len(clip_vertex) or clip_vertex.max() <= 65535 else np.float32
+    return _vertex_attribute(doc, views, clip_vertex.astype(dtype)[:, None], "SCALAR", False, False)

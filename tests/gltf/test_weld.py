@@ -226,3 +226,22 @@ def test_split_smooth_surface_gets_one_normal_and_hard_edges_stay(tmp_path):
     assert np.einsum("ij,ij->i", normal[on_side], radial[on_side]).min() > 0.95
     assert np.abs(normal[~on_side, 2]).min() > 0.99  # caps face along the axis
     assert_clean(validate_many([glb])[0], "tube with a seam and hard rims")
+
+
+def test_rewritten_attributes_keep_their_type_and_the_vertex_stride():
+    """A welded primitive's attributes are written back with their own component type and normalisation,
+    each element padded to a 4-byte stride (a VEC3 of bytes), and read back as they were."""
+    from pdeanim.gltf.layout import accessor_rows
+    from pdeanim.gltf.weld import _vertex_attribute
+
+    doc: dict = {"bufferViews": [], "accessors": []}
+    views: list[bytes] = []
+    colours = np.arange(15, dtype=np.uint8).reshape(5, 3)
+    acc = _vertex_attribute(doc, views, colours, "VEC3", True, True)
+    assert doc["bufferViews"][doc["accessors"][acc]["bufferView"]]["byteStride"] == 4
+    assert doc["accessors"][acc]["normalized"] and doc["accessors"][acc]["max"] == [12, 13, 14]
+    np.testing.assert_array_equal(accessor_rows(doc, views, acc), colours)
+    uv = np.linspace(0, 1, 10, dtype=np.float32).reshape(5, 2)
+    acc = _vertex_attribute(doc, views, uv, "VEC2", False, False)
+    assert "byteStride" not in doc["bufferViews"][doc["accessors"][acc]["bufferView"]]
+    np.testing.assert_array_equal(accessor_rows(doc, views, acc), uv)
