@@ -150,7 +150,10 @@ def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, n
     primitive's own vertex each written vertex takes its positions and normals from, or None when the
     primitive stays as it was (nothing welded, or attributes the weld cannot follow)."""
     n = pos.shape[1]
-    attrs = {name: accessor_rows(doc, views, acc) for name, acc in prim["attributes"].items()}
+    try:
+        attrs = {name: accessor_rows(doc, views, acc) for name, acc in prim["attributes"].items()}
+    except (ValueError, KeyError, IndexError, TypeError):  # an attribute past its view: written as it was
+        return None
     if not len(faces) or any(len(v) != n for v in attrs.values()):
         return None
 
