@@ -40,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-normal-targets", dest="normals", action="store_false",
                    help="leave out per-frame normal deltas (smaller; every frame is lit with the first "
                         "frame's normals)")
+    p.add_argument("--no-weld", dest="weld", action="store_false",
+                   help="keep one vertex per clip vertex, in clip order (by default vertices whose positions "
+                        "in every frame, normals and UVs are equal are written once, as gltfpack does: a "
+                        "flat-shaded, unwelded mesh shrinks several times)")
     # --quantize was an opt-in flag before quantising became the default: still accepted, hidden
     p.add_argument("--quantize", dest="quantize", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
@@ -61,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         layout = source_layout(data, path.name, clip.faces, clip.n_vertices)
         for note in layout.notes:
             print(f"note: {note}")
-    options = PackOptions(args.quantize, args.compress, args.position_bits, args.normals)
+    options = PackOptions(args.quantize, args.compress, args.position_bits, args.normals, args.weld)
     progress = cli_progress("export", args.quiet)
     try:
         glb = clip_animation_glb(clip, args.fps, options=options, layout=layout, progress=progress)
@@ -71,6 +75,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.write_bytes(glb)
     packing = [w for w, on in (("quantised", args.quantize), ("meshopt", args.compress)) if on]
+    written = _written_vertices(glb)
+    if written != clip.n_vertices:
+        packing.append(f"welded to {written} vertices")
     look = f", look of {layout.source} source" if layout is not None and layout.source != "plain" else ""
     loop = ", looping" if clip.looping else ""
     packed = ", " + " + ".join(packing) if packing else ""
@@ -79,3 +86,12 @@ def run(args: argparse.Namespace) -> int:
         f"{args.fps:g} fps{loop}{packed}{look})"
     )
     return 0
+
+
+def _written_vertices(glb: bytes) -> int:
+    """Vertices the GLB's primitives hold in all."""
+    from ..gltf.glb import unpack_glb
+
+    doc, _ = unpack_glb(glb)
+    return sum(doc["accessors"][p["attributes"]["POSITION"]]["count"]
+               for m in doc.get("meshes", []) for p in m["primitives"] if "POSITION" in p["attributes"])

@@ -117,9 +117,9 @@ def clip_animation_glb(clip: Clip, fps: float = 30.0, *, options: PackOptions | 
                        progress: Progress | None = None) -> bytes:
     """The clip as an animated GLB: frames evaluated at ``fps`` over its duration, last frame included; for a
     looping clip the last key is the first frame exactly, so playback wraps without a seam. ``options``
-    default to quantised + meshopt-compressed with per-frame normal deltas; ``layout`` (default plain)
-    keeps a source mesh's look. ``PackOptions(quantize=False, compress=False)`` writes plain float32. Frames
-    are evaluated in chunks so
+    default to quantised + meshopt-compressed with per-frame normal deltas and welded vertices; ``layout``
+    (default plain) keeps a source mesh's look. ``PackOptions(quantize=False, compress=False, weld=False)``
+    writes the plain float32 layout of :func:`~.write.animation_glb`. Frames are evaluated in chunks so
     ``progress`` hears about long exports."""
     opts = options or PackOptions()
     duration = clip_duration(clip)
@@ -135,7 +135,7 @@ def clip_animation_glb(clip: Clip, fps: float = 30.0, *, options: PackOptions | 
     if loop:
         frames[-1] = frames[0]  # period 1 in t: the end of the cycle is its start
     names = [f"t{x:.4f}" for x in t]
-    if layout is None and not opts.quantize and not opts.compress:
+    if layout is None and not (opts.quantize or opts.compress or opts.weld):
         glb = animation_glb(frames, seconds, clip.faces, loop=loop, names=names, normals=opts.normals)
     else:
         lay = layout or plain_layout(clip.faces, clip.n_vertices)

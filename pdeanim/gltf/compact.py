@@ -21,9 +21,10 @@ import numpy as np
 
 from ..errors import ParameterError
 from .glb import ARRAY_BUFFER, pack_glb
-from .layout import Layout, Part, add_accessor, add_view, minmax_of
+from .layout import Layout, Part, Slot, add_accessor, add_view, drop_unused, minmax_of
 from .meshopt import compress_glb
 from .normals import unit_normals_frames
+from .weld import flat_shaded, map_all_or_none, smooth_groups, weld_primitive
 
 QUANT = "KHR_mesh_quantization"
 TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one meshopt stream) at most
@@ -34,12 +35,16 @@ class PackOptions:
     """How an animation GLB is stored: ``quantize`` positions to ``position_bits`` (8..15, default 14) per
     axis over the frames' extent (max error half a step) and normals
     to bytes, ``compress`` with EXT_meshopt_compression, ``normals`` as per-frame morph deltas (else every
-    frame is lit with the first frame's normals)."""
+    frame is lit with the first frame's normals), ``weld`` vertices whose written data are all equal (see
+    :mod:`.weld`; off keeps one vertex per clip vertex, in clip order). A welded primitive's vertices come in
+    the triangles' fetch order with a ``_PDEANIM_VERTEX`` map to the clip's; one that nothing welded stays as
+    it was (reordering it too would save only 2-3%, see docs/gltf.md)."""
 
     quantize: bool = True
     compress: bool = True
     position_bits: int = 14
     normals: bool = True
+    weld: bool = True
 
     def __post_init__(self) -> None:
         if not 8 <= int(self.position_bits) <= 15:
@@ -68,12 +73,12 @@ def _local(part: Part, world: np.ndarray) -> np.ndarray:
 
 def _normals(layout: Layout, frames: np.ndarray) -> np.ndarray:
     """Unit normals (K, V, 3) in world space, area-weighted over the welded surface (compiled, one pass per
-    frame)."""
+    frame): a glTF source's weld, else :func:`~.weld.smooth_groups` of the frames."""
     if not len(layout.faces):
         return np.zeros(frames.shape, np.float32)
-    if layout.weld is None:
+    weld = layout.weld if layout.weld is not None else smooth_groups(frames, layout.faces)
+    if weld is None:
         return unit_normals_frames(frames, layout.faces)
-    weld = layout.weld
     first = np.zeros(int(weld.max()) + 1, np.int64)
     first[weld[::-1]] = np.arange(len(weld))[::-1]
     welded = unit_normals_frames(frames[:, first], weld[layout.faces])
@@ -264,6 +269,50 @@ def _quantised_normals(normals: np.ndarray) -> np.ndarray:
     return np.rint(normals * 127) / 127
 
 
+def _slot_faces(layout: Layout, slot: Slot) -> np.ndarray:
+    """The slot's triangles (T, 3) over its own vertices (0 = the slot's first)."""
+    f = layout.faces
+    inside = (f[:, 0] >= slot.start) & (f[:, 0] < slot.stop)
+    return f[inside] - slot.start
+
+
+def _write_slot(doc: dict, views: list[bytes], layout: Layout, part: Part, slot: Slot, pos: np.ndarray,
+                normals: np.ndarray | None, opts: PackOptions) -> None:
+    """One primitive's POSITION, NORMAL and morph targets from its positions (K, n, 3) (grid or local) and
+    the world ``normals`` (K, V, 3) of every clip vertex (None: none written), welded unless ``opts`` say
+    not."""
+    prim = doc["meshes"][slot.mesh]["primitives"][slot.prim]
+    nrm = None
+    if slot.normals and normals is not None:
+        nrm = normals[:, slot.start: slot.stop].astype(np.float64)  # unit already
+        if not np.array_equal(part.to_local, np.eye(4)):  # an identity node keeps them as they are
+            nrm = _local_normals(part, nrm)
+        if opts.quantize:
+            nrm = _quantised_normals(nrm)
+    if opts.weld and prim.get("mode", 4) == 4:
+        pos, nrm = _welded(doc, views, prim, layout, slot, pos, nrm, opts)
+    p_acc, n_acc, targets = _add_targets(doc, views, pos, nrm, opts)
+    prim["attributes"]["POSITION"] = p_acc
+    if n_acc is not None:
+        prim["attributes"]["NORMAL"] = n_acc
+    prim["targets"] = targets
+
+
+def _welded(doc: dict, views: list[bytes], prim: dict, layout: Layout, slot: Slot, pos: np.ndarray,
+            nrm: np.ndarray | None, opts: PackOptions) -> tuple[np.ndarray, np.ndarray | None]:
+    """One slot's positions (K, n, 3) and normals after :func:`~.weld.weld_primitive` (which rewrites
+    ``prim``); the weld compares normals as written: bytes when quantised, float32 otherwise, and only the
+    first frame's without normal targets."""
+    written = None
+    if nrm is not None:
+        shown = nrm if opts.normals else nrm[:1]
+        written = np.rint(shown * 127).astype(np.int8) if opts.quantize else shown.astype(np.float32)
+    keep = weld_primitive(doc, views, prim, pos, written, _slot_faces(layout, slot), slot.start)
+    if keep is None:
+        return pos, nrm
+    return pos[:, keep], None if nrm is None else nrm[:, keep]
+
+
 def _mesh_node(doc: dict, part: Part, grid: _Grid | None, name: str | None, own: bool) -> int:
     """The node that holds the part's mesh: the part's own node when pdeanim made it (``own``, a plain layout)
     and it is a leaf without a transform, else a new child, so a source's node transforms stay as they
@@ -291,7 +340,10 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
     target ``key_target[i]`` (one-hot). ``names`` go to each mesh's ``extras.targetNames``."""
     opts = options or PackOptions()
     world = _check_frames(frames, layout)[:n_targets]
-    normals = _normals(layout, world) if any(s.normals for s in layout.slots) else None
+    # a plain (or OBJ) mesh whose vertex normals are its face normals is flat-shaded: no NORMAL, as a glTF
+    # source without normals (viewers then compute the same flat normals), and its corners can weld
+    flat = layout.source != "gltf" and flat_shaded(world[0], layout.faces)
+    normals = _normals(layout, world) if any(s.normals for s in layout.slots) and not flat else None
     doc, views = copy.deepcopy(layout.doc), list(layout.views)
     holders = []
     for part in layout.parts:
@@ -299,29 +351,20 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
         grid = _Grid(local, opts.position_bits) if opts.quantize and local is not None else None
         first = part.slots[0].start if part.slots else 0
         for slot in part.slots:
-            prim = doc["meshes"][slot.mesh]["primitives"][slot.prim]
             a, b = slot.start - first, slot.stop - first
             pos = grid.q[:, a:b] if grid is not None else local[:, a:b]
-            nrm = None
-            if slot.normals and normals is not None:
-                nrm = normals[:, slot.start: slot.stop].astype(np.float64)  # unit already
-                if not np.array_equal(part.to_local, np.eye(4)):  # an identity node keeps them as they are
-                    nrm = _local_normals(part, nrm)
-                if opts.quantize:
-                    nrm = _quantised_normals(nrm)
-            p_acc, n_acc, targets = _add_targets(doc, views, pos, nrm, opts)
-            prim["attributes"]["POSITION"] = p_acc
-            if n_acc is not None:
-                prim["attributes"]["NORMAL"] = n_acc
-            prim["targets"] = targets
+            _write_slot(doc, views, layout, part, slot, pos, normals, opts)
         mesh = doc["meshes"][part.mesh]
         mesh["weights"] = [0.0] * n_targets
         if names is not None:
             mesh.setdefault("extras", {})["targetNames"] = [str(x) for x in names][:n_targets]
         holders.append(_mesh_node(doc, part, grid, mesh.get("name"), own=layout.source != "gltf"))
+    prims = [(doc["meshes"][s.mesh]["primitives"][s.prim], s.start) for s in layout.slots]
+    map_all_or_none(doc, views, prims)
     if opts.quantize:
         for key in ("extensionsUsed", "extensionsRequired"):
             doc[key] = [*[e for e in doc.get(key, []) if e != QUANT], QUANT]
+    views = drop_unused(doc, views)  # the source indices and attributes that welding replaced
     weights = np.zeros((len(key_times), n_targets), np.float32)
     weights[np.arange(len(key_times)), key_target] = 1.0
     t_acc = add_accessor(doc, views, np.asarray(key_times, np.float32).reshape(-1, 1), "SCALAR", minmax=True)

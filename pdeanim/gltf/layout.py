@@ -16,12 +16,13 @@ import numpy as np
 
 from ..errors import InputError, MeshInputError, ParameterError
 from .document import MESHOPT, GltfDocument, load_document, malformed_as
-from .glb import ARRAY_BUFFER, COMPONENT_TYPES, ELEMENT_ARRAY_BUFFER
+from .glb import ARRAY_BUFFER, COMPONENT_DTYPES, COMPONENT_TYPES, ELEMENT_ARRAY_BUFFER, TYPE_SIZES
 from .read import mesh_instances, read_static_mesh
 from .scene import scene_order, world_matrices
 
 log = logging.getLogger("pdeanim.gltf")
-DROPPED_ATTRIBUTES = ("POSITION", "NORMAL", "TANGENT")  # recomputed (or, for tangents, left to the viewer)
+DROPPED_ATTRIBUTES = ("POSITION", "NORMAL", "TANGENT",  # recomputed (or, for tangents, left to the viewer)
+                      "_PDEANIM_VERTEX")  # the map of a GLB pdeanim wrote, rewritten for each export
 DROPPED_PREFIXES = ("JOINTS_", "WEIGHTS_")  # skinning is baked into the evaluated positions
 
 
@@ -33,7 +34,7 @@ class Slot:
     prim: int
     start: int
     stop: int
-    normals: bool  # it has triangles, so it gets a NORMAL
+    normals: bool  # it has triangles and (a glTF source's primitive) had a NORMAL, so it gets one
 
 
 @dataclass
@@ -146,6 +147,80 @@ def minmax_of(flat: np.ndarray) -> dict[str, list]:
     if np.issubdtype(flat.dtype, np.floating):
         return {"min": [float(np.float32(x)) for x in lo], "max": [float(np.float32(x)) for x in hi]}
     return {"min": [int(x) for x in lo], "max": [int(x) for x in hi]}
+
+
+def accessor_rows(doc: dict, views: list[bytes], index: int) -> np.ndarray:
+    """The values of accessor ``index`` of a template (views' bytes in ``views``) as (count, components)
+    of its own component type, strides and sparse substitutions applied: the bytes a writer copies."""
+    acc = doc["accessors"][index]
+    dtype = COMPONENT_DTYPES[acc["componentType"]]
+    count, width = int(acc["count"]), TYPE_SIZES[acc["type"]]
+    out = np.zeros((count, width), dtype)
+    if "bufferView" in acc and count:
+        raw = views[acc["bufferView"]]
+        elem = width * dtype.itemsize
+        stride = int(doc["bufferViews"][acc["bufferView"]].get("byteStride", elem))
+        start = int(acc.get("byteOffset", 0))
+        span = np.frombuffer(raw, np.uint8, (count - 1) * stride + elem, start)
+        rows = np.lib.stride_tricks.as_strided(span, (count, elem), (stride, 1))
+        out = np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+    sparse = acc.get("sparse")
+    if sparse:
+        n = int(sparse["count"])
+        ind, val = sparse["indices"], sparse["values"]
+        idx = np.frombuffer(views[ind["bufferView"]], COMPONENT_DTYPES[ind["componentType"]], n,
+                            int(ind.get("byteOffset", 0)))
+        out = out.copy()
+        out[idx.astype(np.int64)] = np.frombuffer(views[val["bufferView"]], dtype, n * width,
+                                                  int(val.get("byteOffset", 0))).reshape(n, width)
+    return out
+
+
+def drop_unused(doc: dict, views: list[bytes]) -> list[bytes]:
+    """Remove the accessors and buffer views nothing refers to any more (meshes, animations, skins, images),
+    renumbering the rest in place; returns the kept views' bytes."""
+    refs: set[int] = set()
+    for mesh in doc.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            refs.update(prim.get("attributes", {}).values())
+            refs.update(v for t in prim.get("targets", []) for v in t.values())
+            if "indices" in prim:
+                refs.add(prim["indices"])
+    for anim in doc.get("animations", []):
+        refs.update(i for s in anim.get("samplers", []) for i in (s["input"], s["output"]))
+    refs.update(s["inverseBindMatrices"] for s in doc.get("skins", []) if "inverseBindMatrices" in s)
+    acc_keep = sorted(refs)
+    acc_map = {old: new for new, old in enumerate(acc_keep)}
+    accessors = [doc["accessors"][i] for i in acc_keep]
+    used = {a["bufferView"] for a in accessors if "bufferView" in a}
+    used |= {a["sparse"][p]["bufferView"] for a in accessors if "sparse" in a for p in ("indices", "values")}
+    used |= {im["bufferView"] for im in doc.get("images", []) if "bufferView" in im}
+    view_keep = sorted(used)
+    view_map = {old: new for new, old in enumerate(view_keep)}
+    for acc in accessors:
+        if "bufferView" in acc:
+            acc["bufferView"] = view_map[acc["bufferView"]]
+        for part in ("indices", "values") if "sparse" in acc else ():
+            acc["sparse"][part]["bufferView"] = view_map[acc["sparse"][part]["bufferView"]]
+    for image in doc.get("images", []):
+        if "bufferView" in image:
+            image["bufferView"] = view_map[image["bufferView"]]
+    for mesh in doc.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            prim["attributes"] = {k: acc_map[v] for k, v in prim.get("attributes", {}).items()}
+            if "targets" in prim:
+                prim["targets"] = [{k: acc_map[v] for k, v in t.items()} for t in prim["targets"]]
+            if "indices" in prim:
+                prim["indices"] = acc_map[prim["indices"]]
+    for anim in doc.get("animations", []):
+        for s in anim.get("samplers", []):
+            s["input"], s["output"] = acc_map[s["input"]], acc_map[s["output"]]
+    for skin in doc.get("skins", []):
+        if "inverseBindMatrices" in skin:
+            skin["inverseBindMatrices"] = acc_map[skin["inverseBindMatrices"]]
+    doc["accessors"] = accessors
+    doc["bufferViews"] = [doc["bufferViews"][i] for i in view_keep]
+    return [views[i] for i in view_keep]
 
 
 def _strip_primitive(prim: dict) -> dict:
@@ -269,7 +344,9 @@ def gltf_layout(source: str | Path | bytes) -> Layout:
                     nrm = gd.accessor(prim["attributes"]["NORMAL"])
                     if nrm.shape == (count, 3):
                         src_normals[start: start + count] = nrm
-                slots.append(Slot(len(meshes) - 1, j, start, start + count, bool(len(inst.primitive.faces))))
+                smooth = "NORMAL" in prim.get("attributes", {})  # without NORMAL, viewers shade it flat
+                slots.append(Slot(len(meshes) - 1, j, start, start + count,
+                                  smooth and bool(len(inst.primitive.faces))))
                 start += count
             parts.append(Part(n, len(meshes) - 1, np.linalg.inv(m), slots))
         views = _compact(doc, gd)

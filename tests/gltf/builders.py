@@ -192,3 +192,21 @@ def textured_scene_glb() -> bytes:
         "images": [{"name": "checker", "bufferView": image_view, "mimeType": "image/png"}],
     })
     return b.to_glb()
+
+
+def clip_vertices(glb: bytes) -> np.ndarray:
+    """The clip vertex each vertex of a written GLB shows, in the reader's order (scene nodes depth-first,
+    primitives in order): its ``_PDEANIM_VERTEX`` maps when it was welded, else 0, 1, 2, ..."""
+    from pdeanim.gltf.document import load_document
+    from pdeanim.gltf.scene import scene_order
+    from pdeanim.gltf.weld import VERTEX_MAP
+
+    gd = load_document(glb)
+    maps, total = [], 0
+    for n in scene_order(gd):
+        node = gd.doc["nodes"][n]
+        for prim in gd.doc["meshes"][node["mesh"]]["primitives"] if "mesh" in node else []:
+            total += int(gd.doc["accessors"][prim["attributes"]["POSITION"]]["count"])
+            if VERTEX_MAP in prim["attributes"]:
+                maps.append(gd.accessor(prim["attributes"][VERTEX_MAP])[:, 0].astype(np.int64))
+    return np.concatenate(maps) if maps else np.arange(total)

@@ -35,6 +35,7 @@ function describe(gltf) {
       positionType: g.attributes.position.array.constructor.name, targets: targets.length,
       normalTargets: (g.morphAttributes.normal || []).length, relative: g.morphTargetsRelative,
       uv: Boolean(g.attributes.uv), normal: Boolean(g.attributes.normal), material: o.material.name,
+      flatShading: Boolean(o.material.flatShading),
       map: o.material.map ? o.material.map.name : null, influences: (o.morphTargetInfluences || []).length,
       worldScale: o.matrixWorld.getMaxScaleOnAxis(),
     });
