@@ -263,7 +263,7 @@ def test_rounding_growth_aims_at_the_target():
     assert 0.09 + (0.25 - 0.09) * g**2 == pytest.approx(tol.quant_aim**2)
     assert growth(stored=0.09, exact=0.09, target=1.0, tol=tol) == 4.0  # rounding added nothing measurable
     assert growth(stored=0.8, exact=0.1, target=1.0, tol=tol) == 1.2  # already close: the smallest step
-    assert growth(stored=1.0, exact=0.1, target=1.0, tol=tol) == pytest.approx(1 / 1.2)  # past the aim: shrink
+    assert growth(stored=1.0, exact=0.1, target=1.0, tol=tol) == pytest.approx(1 / 1.2)  # past the aim
     assert growth(stored=20.0, exact=0.1, target=1.0, tol=tol) == 0.25  # far past: at most 4x smaller
 
 
