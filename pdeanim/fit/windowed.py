@@ -40,8 +40,6 @@ from .ratecontrol import Errors, first_quantisation, search_rounding
 from .report import header_errors
 from .spacestage import space_fit
 
-WINDOW_VALUES = 1 << 22
-"""Frame-vertex values per window of frames (a window's float64 items take about 8 bytes per value each)."""
 CURVE_FRAMES = 128
 """Frames, evenly spaced, on which the curves of a windowed fit are chosen."""
 
@@ -87,7 +85,7 @@ def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: Fit
     start = time.perf_counter()
     X = poses.vertices
     F, V = X.shape[:2]
-    window = max(2, WINDOW_VALUES // max(V * 3, 1))
+    window = max(1, tol.window_values // max(V, 1))
     layout, sub_report = _layout(poses, options, curves, sub_progress(progress, 0.0, 0.1), tol)
     diag = bbox_diagonal(layout.rest)
     targets = options.targets(diag)
@@ -224,7 +222,7 @@ class _ClipModel:
         bound = np.where(self.spline, quantise.CUBIC_PAIR_MAX, 1.0)
         self.weight, self.reach = quantise.item_sensitivity(cid, basis, C, 1.0, bound)
         self.largest_knot = np.zeros((C, 3))
-        for f0, f1 in _windows(b.shape[1], max(1, WINDOW_VALUES // max(b.shape[0] * 4, 1))):
+        for f0, f1 in _windows(b.shape[1], max(1, (1 << 22) // max(b.shape[0] * 4, 1))):
             np.maximum(self.largest_knot, np.abs(self._knots(f0, f1)).max(axis=(0, 3)), out=self.largest_knot)
         self._topologies: dict[float | None, tuple[bytes, np.ndarray]] = {}
 
