@@ -148,8 +148,8 @@ class FitTolerances:
     """Inputs of more frame-vertex values than this are fitted in windows of frames with a knot at every frame
     (:mod:`pdeanim.fit.windowed`: memory bounded by a window, not by the frames), where the options allow."""
     window_values: int = 4_194_304
-    """Frame-vertex values per window of frames in a windowed fit (a window's float64 arrays take about 8 bytes
-    per value each)."""
+    """Frame-vertex values per window of frames in a windowed fit (a window's float64 arrays take about 8
+    bytes per value each)."""
     search_share: float = 0.125
     """With the dense fit, the error-driven search stops at this share of the frame intervals: a clip that
     needs more segments than that has been smaller with a knot at every frame on every benchmark sequence,
