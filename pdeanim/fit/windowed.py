@@ -218,6 +218,10 @@ class _ClipModel:
             if np.any(sel):
                 basis[sel] = space_basis(u[sel][:, None], Dv[sel], name)[:, 0, :]
         self.basis = basis  # (V, 3, 4): the evaluator's space basis
+        N = layout.mask.shape[1]
+        padded = np.zeros((C * N, 3, 4))
+        padded[layout.slots] = basis
+        self.padded_basis = np.ascontiguousarray(padded.reshape(C, N, 3, 4))  # the same on the padded curves
         # every frame is a knot: the linear pair's bound is 1, the spline items' that of the in-memory writer
         bound = np.where(self.spline, quantise.CUBIC_PAIR_MAX, 1.0)
         self.weight, self.reach = quantise.item_sensitivity(cid, basis, C, 1.0, bound)
@@ -244,6 +248,13 @@ class _ClipModel:
         if quant.refine is not None:
             steps = quantise.refined_steps(steps, quant.refine, big)
         return steps
+
+    def _fields(self, knots: np.ndarray) -> np.ndarray:
+        """(w, V, 3) float32 knot fields at the vertices of knots (w, C, 3, 4), computed on the padded curves
+        (no (w, V, 3, 4) temporary) in float64 and rounded as the evaluator rounds its fields."""
+        on_curves = np.einsum("cnwk,fcwk->fcnw", self.padded_basis, knots)  # (w, C, N, 3)
+        w = len(knots)
+        return np.take(on_curves.reshape(w, -1, 3), self.layout.slots, axis=1).astype(np.float32)
 
     def topology(self, quant: Quantisation) -> tuple[bytes, np.ndarray]:
         """(topology part bytes, base (V, 3) float32 the stored clip adds its fields to)."""
@@ -272,7 +283,7 @@ class _ClipModel:
         for f0, f1 in _windows(F, window):
             codes = np.rint(self._knots(f0, f1) / steps[None, :, :, None])
             stored_knots = (codes * steps[None, :, :, None]).astype(np.float32).astype(np.float64)
-            fields = np.einsum("vwk,fvwk->fvw", self.basis, stored_knots[:, cid]).astype(np.float32)
+            fields = self._fields(stored_knots)
             d = np.linalg.norm((fields + base).astype(np.float64) - X[f0:f1], axis=-1)  # (w, V)
             dd = d * d
             sq += float(dd.sum())
