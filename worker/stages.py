@@ -39,7 +39,7 @@ def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int
     """Fit and store the clip; a missed target fails the job (TargetNotMetError, not retried) unless the
     options ask for ``best_effort``."""
     from pdeanim.errors import TargetNotMetError
-    from pdeanim.model.budget import check_fit_memory
+    from pdeanim.fit.budget import check_fit_memory
     from pdeanim.fit import FitOptions, fit_poses, target_shortfall
 
     check_fit_memory(poses.n_frames, poses.n_vertices, memory)  # refused now, not after minutes of work
@@ -72,7 +72,7 @@ def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Prog
     mesh = _mesh(job, blobs, settings)
     scene = SceneParams.from_dict(spec["params"])
     if spec.get("then_fit"):
-        from pdeanim.model.budget import check_fit_memory
+        from pdeanim.fit.budget import check_fit_memory
 
         check_fit_memory(scene.frames, len(mesh.vertices), settings.job_memory_limit())  # before simulating
     progress(0.0, "tetrahedralize")

@@ -77,7 +77,7 @@ def _inputs(req: SimulateJob | FitJob | CyclicJob | ExportJob, tenant: str,
 def _check_fit_memory(session, spec: dict, mesh_id: str, poses_id: str | None,  # noqa: ANN001
                       limit: int) -> None:
     """413 now when the fit this job will run cannot fit the job memory limit (the worker checks it again)."""
-    from pdeanim.model.budget import check_fit_memory
+    from pdeanim.fit.budget import check_fit_memory
 
     if poses_id is not None:
         poses = session.get(PosesRecord, poses_id)

@@ -1,0 +1,41 @@
+"""Memory a fit needs, estimated before fitting so work that cannot fit is refused at once with a clear
+message instead of running for minutes into the memory limit."""
+
+from __future__ import annotations
+
+from ..errors import LimitError
+from .options import FitTolerances
+
+FIT_BYTES_PER_FRAME_VERTEX = 480
+"""Peak memory of an in-memory fit grows with frames x vertices: measured 205-229 bytes each (icospheres of
+10k and 41k vertices, 100-400 frames, peak RSS over the start) with loose targets, and up to 390 above
+FIT_BASE_BYTES with tight ones (benchmarks/compression_peers.py, 2026-11-26: samba at rel-RMS 1e-3, 1,161 MiB
+peak for 175 frames x 9,971 vertices; pdance 341, elephant-gallop 238), rounded up for headroom."""
+WINDOWED_BYTES_PER_FRAME_VERTEX = 64
+"""A fit in windows of frames (pdeanim.fit.windowed) keeps, per frame-vertex, the poses (12 bytes), every
+frame's projected tracks (float32: 16 bytes per item, up to one item per vertex coordinate of three-point
+curves) and the clip's integer codes and tracks (4 + 4 bytes per knot coefficient): at most about 60."""
+WINDOWED_WINDOW_BYTES = 48
+"""... plus, per frame-vertex value of one window, its float64 arrays (items, projection, fields, distances)."""
+FIT_BASE_BYTES = 512 * 1024**2  # the interpreter, numpy/scipy/numba and the poses themselves at small sizes
+
+
+def fit_memory_bytes(n_frames: int, n_vertices: int, tol: FitTolerances | None = None) -> int:
+    """Estimated peak memory of fitting (F, V, 3) poses (in windows of frames where the fit would be)."""
+    tol = tol or FitTolerances()
+    values = int(n_frames) * int(n_vertices)
+    if tol.dense_fit and values > tol.window_fit_values:
+        return (FIT_BASE_BYTES + WINDOWED_BYTES_PER_FRAME_VERTEX * values
+                + WINDOWED_WINDOW_BYTES * min(values, tol.window_values) * 3)
+    return FIT_BASE_BYTES + FIT_BYTES_PER_FRAME_VERTEX * values
+
+
+def check_fit_memory(n_frames: int, n_vertices: int, limit_bytes: int) -> None:
+    """LimitError naming the sizes when the fit's estimate is over ``limit_bytes`` (0: no limit)."""
+    need = fit_memory_bytes(n_frames, n_vertices)
+    if limit_bytes and need > limit_bytes:
+        exc = LimitError(f"estimated memory to fit {n_frames} frames x {n_vertices} vertices in GiB",
+                         round(need / 1024**3, 2), round(limit_bytes / 1024**3, 2),
+                         "PDEANIM_JOB_MEMORY_BYTES or PDEANIM_JOB_MEMORY_FRACTION")
+        exc.args = (f"{exc}: fit fewer frames or a coarser mesh, or raise the limit",)
+        raise exc
