@@ -39,8 +39,8 @@ def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int
     """Fit and store the clip; a missed target fails the job (TargetNotMetError, not retried) unless the
     options ask for ``best_effort``."""
     from pdeanim.errors import TargetNotMetError
-    from pdeanim.fit.budget import check_fit_memory
     from pdeanim.fit import FitOptions, fit_poses, target_shortfall
+    from pdeanim.fit.budget import check_fit_memory
 
     check_fit_memory(poses.n_frames, poses.n_vertices, memory)  # refused now, not after minutes of work
 
