@@ -16,7 +16,7 @@ WINDOWED_BYTES_PER_FRAME_VERTEX = 64
 frame's projected tracks (float32: 16 bytes per item, up to one item per vertex coordinate of three-point
 curves) and the clip's integer codes and tracks (4 + 4 bytes per knot coefficient): at most about 60."""
 WINDOWED_WINDOW_BYTES = 48
-"""... plus, per frame-vertex value of one window, its float64 arrays (items, projection, fields, distances)."""
+"""... plus, per frame-vertex value of one window, its float64 arrays (items, projection, fields, ...)."""
 FIT_BASE_BYTES = 512 * 1024**2  # the interpreter, numpy/scipy/numba and the poses themselves at small sizes
 
 
