@@ -67,7 +67,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--legs", help="gaits: the foot joints, comma-separated (FOOT or TOP:FOOT), instead of "
                    "the legs found from the skeleton")
     p.add_argument("--forward", type=_vec, help="gaits: x,y,z facing direction instead of the one found")
-    p.add_argument("--target-rel-rms", type=float, default=1e-3,
+    p.add_argument("--target-rel-rms", type=float, default=5e-4,
                    help="gaits, --out CLIP: the fit's RMS error target relative to the bounding-box diagonal")
     p.add_argument("--hip", help="gaits: the joint the body's bob moves (default: the one carrying the legs)")
     for side in ("right", "left"):

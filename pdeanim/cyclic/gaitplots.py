@@ -18,6 +18,7 @@ from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 DEFAULT_COLOUR = np.array([0.62, 0.7, 0.8])
+FIGURE_WIDTH = 11.0  # inches
 _LIGHT = np.array([0.45, 0.75, 0.5])  # in (forward, up, left) coordinates
 
 
@@ -37,7 +38,13 @@ def _texture_colours(gd: Any, prim: dict, faces: np.ndarray, colour: np.ndarray)
     img_spec = gd.item("images", source)
     if "bufferView" not in img_spec:
         return out
-    img = image.imread(io.BytesIO(gd.view_bytes(img_spec["bufferView"])), format="png")
+    kind = "jpg" if img_spec.get("mimeType") == "image/jpeg" else "png"
+    try:
+        img = image.imread(io.BytesIO(gd.view_bytes(img_spec["bufferView"])), format=kind)
+    except (OSError, SyntaxError, ValueError):  # an image the picture cannot decode: material colour only
+        return out
+    if img.dtype == np.uint8:
+        img = img / 255.0
     uv = gd.accessor(prim["attributes"][uv_key])[faces].mean(axis=1)
     h, w = img.shape[:2]
     px = np.clip((np.mod(uv[:, 0], 1.0) * w).astype(int), 0, w - 1)
@@ -90,10 +97,14 @@ def gait_strip_png(path: str | Path, frames: np.ndarray, faces: np.ndarray, colo
     ground = plan.skeleton.ground
     lo, hi = local[..., :2].min(axis=(0, 1)), local[..., :2].max(axis=(0, 1))
     pad = 0.06 * (hi - lo).max()
-    width = (hi[0] - lo[0] + 2 * pad) / (hi[1] - ground + 2 * pad)
-    fig = Figure(figsize=(min(2.2 * panels * width, 16), 2.2 + 0.3 * len(plan.legs)), dpi=110)
+    aspect = (hi[0] - lo[0] + 2 * pad) / (hi[1] - ground + 2 * pad)
+    strip = FIGURE_WIDTH / panels / aspect + 0.3
+    diagram = 0.16 * len(plan.legs) + 0.5
+    height = strip + diagram + 0.9
+    fig = Figure(figsize=(FIGURE_WIDTH, height), dpi=100)
     FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, panels, height_ratios=[2.2, 0.3 * len(plan.legs) + 0.4], hspace=0.35)
+    grid = fig.add_gridspec(2, panels, height_ratios=[strip, diagram], hspace=1.2 / (strip + diagram),
+                            left=0.1, right=0.98, top=1 - 0.35 / height, bottom=0.5 / height, wspace=0.05)
     feet = [leg.foot for leg in plan.legs]
     spacing = 0.25 * plan.leg_length
     for col, f in enumerate(picks):

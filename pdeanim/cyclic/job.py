@@ -61,7 +61,7 @@ class CyclicOptions:
     legs: list[str] | None = None
     forward: tuple[float, float, float] | None = None
     body_joint: str | None = None
-    target_rel_rms: float = 1e-3
+    target_rel_rms: float = 5e-4
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> CyclicOptions:
@@ -141,8 +141,11 @@ class CyclicOptions:
         self.gait()
         if self.frames > GAIT_FRAMES:
             raise ParameterError(f"a gait cycle has at most {GAIT_FRAMES} frames, got {self.frames}")
-        if self.legs is not None and not 1 <= len(self.legs) <= 64:
-            raise ParameterError("legs must name 1 to 64 foot joints")
+        names_ok = self.legs is None or all(0 < len(x) <= 500 for x in self.legs)
+        if self.legs is not None and not (1 <= len(self.legs) <= 64 and names_ok):
+            raise ParameterError("legs must name 1 to 64 foot joints (names of 1 to 500 characters)")
+        if self.body_joint is not None and not 0 < len(self.body_joint) <= 500:
+            raise ParameterError("body_joint must be a joint name of 1 to 500 characters")
 
 
 def _mesh_arrays(mesh: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -180,7 +183,17 @@ def make_gait_clip(source: Any, options: CyclicOptions, progress: Progress | Non
 def make_cyclic_clip(mesh: Any, options: CyclicOptions, progress: Progress | None = None,
                      source: Any = None) -> ClipParts:
     """A looping swim-cycle clip of an elongated mesh (.vertices (V, 3), .faces (T, 3)), or for a gait mode
-    the gait clip of ``source`` (the skinned glTF file's bytes or path the mesh was read from).
+    the gait clip of ``source`` (the skinned glTF file's bytes or path the mesh was read from)."""
+    options.validate()
+    if not options.is_gait:
+        return make_swim_clip(mesh, options, progress)
+    if source is None:
+        raise ParameterError(f"the {options.mode} gait animates a skinned glTF: give its file")
+    return make_gait_clip(source, options, progress)
+
+
+def make_swim_clip(mesh: Any, options: CyclicOptions, progress: Progress | None = None) -> ClipParts:
+    """A looping swim-cycle clip of an elongated mesh (.vertices (V, 3), .faces (T, 3)).
 
     Raises MeshInputError/InputError when the mesh cannot be cut into cross-sections, ParameterError on
     bad options. The report holds curves, patches, the rest-pose distance of the mesh to the PDE surface
@@ -188,10 +201,6 @@ def make_cyclic_clip(mesh: Any, options: CyclicOptions, progress: Progress | Non
     """
     progress = progress or no_progress
     options.validate()
-    if options.is_gait:
-        if source is None:
-            raise ParameterError(f"the {options.mode} gait animates a skinned glTF: give its file")
-        return make_gait_clip(source, options, progress)
     params = options.swim()
     verts, faces = _mesh_arrays(mesh)
     t0 = time.perf_counter()

@@ -9,6 +9,7 @@ last two bones above the foot, or the last three when they descend in a zigzag (
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,13 +85,12 @@ def _lateral(pos: np.ndarray) -> tuple[np.ndarray, float]:
     return cands[best], scores[best][1]
 
 
-def _facing_sign(sk: Skeleton, forward: np.ndarray, leaves: list[int]) -> float:
-    """+1 when forward points to the head: a joint named head/neck/skull (or away from a tail), else the
-    highest leaf that is no foot when it sits clearly off-centre, else glTF's +z front."""
-    import re
-
+def _facing_sign(sk: Skeleton, forward: np.ndarray, leaves: list[int], toes: list[tuple[int, int]]) -> float:
+    """+1 when forward points to the head: a joint named head/neck/skull (or away from a tail); else the
+    highest leaf that is no foot when it sits clearly off-centre; else the way the toes point (the last bone
+    of each leg); else glTF's +z front."""
     pos, centre = sk.positions, sk.positions.mean(axis=0)
-    extent = float(np.ptp(pos @ forward)) or 1.0
+    extent = float(np.ptp(pos, axis=0).max()) or 1.0  # the size of the skeleton
     for pattern, sign in ((r"head|neck|skull", 1.0), (r"tail", -1.0)):
         hits = [j for j, n in enumerate(sk.names) if re.search(pattern, n, re.IGNORECASE)]
         if hits:
@@ -102,11 +102,18 @@ def _facing_sign(sk: Skeleton, forward: np.ndarray, leaves: list[int]) -> float:
         off = float((pos[top] - centre) @ forward)
         if abs(off) > 0.1 * extent:
             return float(np.sign(off))
+    if toes:
+        bones = np.array([pos[b] - pos[a] for a, b in toes])
+        lean = float(np.mean(bones @ forward / np.maximum(np.linalg.norm(bones, axis=1), 1e-300)))
+        if abs(lean) > 0.2:
+            return float(np.sign(lean))
     return 1.0 if forward[2] >= 0 else -1.0
 
 
-def body_axes(sk: Skeleton, other_leaves: list[int], forward: object = None) -> Axes:
-    """The body axes from the mirror symmetry of the joints (or a given forward direction)."""
+def body_axes(sk: Skeleton, other_leaves: list[int], toes: list[tuple[int, int]], forward: object = None
+              ) -> Axes:
+    """The body axes from the mirror symmetry of the joints (or a given forward direction); other_leaves
+    (leaves that are no feet) and toes (each leg's last bone) tell which way is forward."""
     if forward is not None:
         f = np.asarray(forward, np.float64).reshape(-1)
         if f.shape != (3,) or not np.isfinite(f).all():
@@ -119,7 +126,7 @@ def body_axes(sk: Skeleton, other_leaves: list[int], forward: object = None) -> 
         return Axes(UP, f, left, float((sk.positions @ left).mean()))
     lat, mid = _lateral(sk.positions)
     f = np.cross(lat, UP)
-    f = f * _facing_sign(sk, f, other_leaves)
+    f = f * _facing_sign(sk, f, other_leaves, toes)
     left = np.cross(UP, f)
     return Axes(UP, f, left, mid if left @ lat > 0 else -mid)
 
@@ -233,8 +240,10 @@ def find_legs(sk: Skeleton, legs: list[str] | None = None, forward: object = Non
         others = [j for j in sk.leaves() if j not in {c[-1] for c in chains}]
     else:
         chains, others = _leg_candidates(sk)
+    toes = [(c[-2], c[-1]) for c in chains]
+    if not legs:
         chains = [[c[0], *_foot_of(sk, c[1:])] for c in chains]
-    axes = body_axes(sk, others, forward)
+    axes = body_axes(sk, others, toes, forward)
     made = [_make_leg(sk, c[0], c[1:], axes) for c in chains]
     if not legs:
         made = [m for m in made if m[0].side != 0]
