@@ -1,6 +1,7 @@
 """The body's motion under the feet: each row of legs sets a height (a bob that follows its feet through
 stance) and a turn (its girdle turns with the stride of its feet); the body rises, pitches and turns about
-the hind girdle to follow the rows, the spine bends between the girdles, the neck undoes the turn and pitch
+the hind girdle to follow the rows, the spine bends sideways between the girdles (and arches as the feet
+gather under the body in a canter or gallop), the neck undoes the turn and pitch
 so the head keeps looking ahead (on two legs the chest turns against the hips), and the tail sways against
 the hips. A row sinks further where its legs could not reach their feet (a long stride needs bent knees)."""
 
@@ -42,6 +43,17 @@ def row_turns(plan: BodyPlan, params: GaitParams, paths: FootPaths) -> np.ndarra
                      for idx in _rows(plan)], axis=1)
 
 
+def spine_flex(plan: BodyPlan, params: GaitParams, paths: FootPaths) -> np.ndarray:
+    """Arch (K,) in radians of the back: it flexes as the hind feet reach forward and the fore feet back
+    (gathered), and extends the other way (stretched); zero on one row of legs."""
+    rows = _rows(plan)
+    if len(rows) < 2 or not params.spine_flex:
+        return np.zeros(len(paths.forward))
+    stride = max(2.0 * params.step_length * plan.leg_length, 1e-300)
+    gather = paths.forward[:, rows[-1]].mean(axis=1) - paths.forward[:, rows[0]].mean(axis=1)
+    return params.spine_flex * gather / stride
+
+
 def sway(plan: BodyPlan, params: GaitParams, paths: FootPaths) -> np.ndarray:
     """Sideways shift (K,) toward the feet in stance."""
     sides = np.array([leg.side for leg in plan.legs], np.float64)
@@ -68,7 +80,7 @@ def _turn_chain(world: np.ndarray, plan: BodyPlan, chain: tuple[int, ...], axis:
 
 
 def move_body(plan: BodyPlan, params: GaitParams, heights: np.ndarray, turns: np.ndarray,
-              side: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+              side: np.ndarray, flex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World matrices (K, J, 4, 4) with the body moved (legs not yet solved) and the body pitch (K,)."""
     sk, ax = plan.skeleton, plan.axes
     k = len(heights)
@@ -83,10 +95,12 @@ def move_body(plan: BodyPlan, params: GaitParams, heights: np.ndarray, turns: np
         chest = -CHEST_COUNTER * hips
     if plan.spine:
         _turn_chain(world, plan, plan.spine, ax.up, chest - hips)
+        bent = np.einsum("kij,j->ki", axis_angle(ax.up, chest), ax.left)
+        _turn_chain(world, plan, plan.spine, bent, flex)
     if plan.neck:
         _turn_chain(world, plan, plan.neck, ax.up, -params.head_level * chest)
         lateral = np.einsum("kij,j->ki", axis_angle(ax.up, chest * (1 - params.head_level)), ax.left)
-        _turn_chain(world, plan, plan.neck, lateral, params.head_level * pitch)
+        _turn_chain(world, plan, plan.neck, lateral, params.head_level * (pitch - flex * bool(plan.spine)))
     if plan.tail:
         _turn_chain(world, plan, plan.tail, ax.up, -params.tail_sway * hips)
     return world, pitch

@@ -103,7 +103,7 @@ def gait_strip_png(path: str | Path, frames: np.ndarray, faces: np.ndarray, colo
     height = strip + diagram + 0.9
     fig = Figure(figsize=(FIGURE_WIDTH, height), dpi=100)
     FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, panels, height_ratios=[strip, diagram], hspace=1.2 / (strip + diagram),
+    grid = fig.add_gridspec(2, panels, height_ratios=[strip, diagram], hspace=0.9 / (strip + diagram),
                             left=0.1, right=0.98, top=1 - 0.35 / height, bottom=0.5 / height, wspace=0.05)
     feet = [leg.foot for leg in plan.legs]
     spacing = 0.25 * plan.leg_length

@@ -25,8 +25,10 @@ PRESETS: dict[str, dict[str, float]] = {
     "run": {"step_height": 0.3, "step_length": 0.55, "frequency": 1.6, "hip_bob": 0.07},
     "trot": {"step_height": 0.18, "step_length": 0.3, "frequency": 1.8, "hip_bob": 0.04},
     "pace": {"step_height": 0.15, "step_length": 0.3, "frequency": 1.6, "hip_bob": 0.03},
-    "canter": {"step_height": 0.2, "step_length": 0.35, "frequency": 1.8, "hip_bob": 0.05},
-    "gallop": {"step_height": 0.25, "step_length": 0.4, "frequency": 2.4, "hip_bob": 0.06},
+    "canter": {"step_height": 0.2, "step_length": 0.35, "frequency": 1.8, "hip_bob": 0.05,
+               "spine_flex": 0.12},
+    "gallop": {"step_height": 0.25, "step_length": 0.4, "frequency": 2.4, "hip_bob": 0.06,
+               "spine_flex": 0.25},
     "tripod": {"step_height": 0.15, "step_length": 0.2, "frequency": 2.0, "hip_bob": 0.01},
     "wave": {"step_height": 0.12, "step_length": 0.2, "frequency": 1.2, "hip_bob": 0.005},
 }
@@ -52,6 +54,7 @@ class GaitParams:
     tuning of Eq. 10 (height_right H_R, lift_right H_RF, length_right L_R and their left twins; fractions of
     the leg length), hip_bob (fraction of the leg length), hip_sway (sideways, the same), body_pitch (1 =
     the body follows the height of each row of legs), spine_yaw (radians a girdle turns at full stride),
+    spine_flex (radians the back arches when the hind feet reach forward and the fore feet back),
     head_level (share of the body's turn and pitch the neck undoes), tail_sway (the tail turns against the
     hips by this multiple of their turn: 1 keeps it straight behind, 2 swings it the other way), literal
     (Eq. 10 as printed: sinusoidal paths, both feet lifted by sin(2 pi f t))."""
@@ -71,6 +74,7 @@ class GaitParams:
     hip_sway: float = 0.0
     body_pitch: float = 1.0
     spine_yaw: float = 0.08
+    spine_flex: float = 0.0
     head_level: float = 1.0
     tail_sway: float = 2.0
     literal: bool = False

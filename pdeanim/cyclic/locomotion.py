@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..poses import Poses, make_poses
-from .bodymotion import leg_drops, move_body, row_heights, row_turns, sway
+from .bodymotion import leg_drops, move_body, row_heights, row_turns, spine_flex, sway
 from .bodyplan import BodyPlan
 from .footpaths import FootPaths, foot_paths, travel_speed
 from .gaits import GaitParams, leg_phases
@@ -70,11 +70,11 @@ def _settle(plan: BodyPlan, params: GaitParams, paths: FootPaths, targets: np.nd
     """The body moved over the feet (world matrices (K, J, 4, 4) before IK, and its pitch (K,)): rows sink
     until every leg reaches its foot target, then every row sinks to the lowest row's mean height (no lasting
     pitch) and sinks again where that made a leg overreach."""
-    heights, turns, side = row_heights(plan, params, paths), row_turns(plan, params, paths), sway(
-        plan, params, paths)
+    heights, turns = row_heights(plan, params, paths), row_turns(plan, params, paths)
+    side, flex = sway(plan, params, paths), spine_flex(plan, params, paths)
     for round_ in range(2):
         for _ in range(CROUCH_STEPS):
-            world, pitch = move_body(plan, params, heights, turns, side)
+            world, pitch = move_body(plan, params, heights, turns, side, flex)
             drop = leg_drops(plan, world, targets)
             if drop.max() <= 1e-9 * plan.leg_length:
                 break
@@ -82,7 +82,7 @@ def _settle(plan: BodyPlan, params: GaitParams, paths: FootPaths, targets: np.nd
         if round_ == 0:
             level = heights.mean(axis=0)
             heights = heights - (level - level.min())
-    return move_body(plan, params, heights, turns, side)
+    return move_body(plan, params, heights, turns, side, flex)
 
 
 def solve_cycle(plan: BodyPlan, params: GaitParams, times: np.ndarray) -> GaitCycle:

@@ -135,6 +135,19 @@ def test_body_bobs_pitches_and_counter_turns(cycles):
     assert (height <= 1e-12).all() and np.ptp(height) > 0.01 * plan.leg_length
 
 
+def test_a_gallop_arches_the_back_and_keeps_the_head_level(cycles):
+    _, gallop, _ = cycles["quadruped", "gallop"]
+    sk, plan = gallop.plan.skeleton, gallop.plan
+
+    def pitch(j: int) -> np.ndarray:  # nose-up turn of joint j's frame about the lateral axis, from rest
+        f = np.einsum("kij,j->ki", gallop.world[:, j, :3, :3] @ sk.rest[j, :3, :3].T, plan.axes.forward)
+        return np.arctan2(f @ plan.axes.up, f @ plan.axes.forward)
+
+    arch = pitch(plan.root) - pitch(plan.spine[-1])  # the chest dips against the hips when gathered
+    assert np.ptp(arch) > 0.2 and np.corrcoef(arch, gallop.paths.forward[:, 2:].mean(axis=1))[0, 1] > 0.9
+    assert np.abs(pitch(plan.neck[-1])).max() < 0.2 * np.abs(pitch(plan.spine[-1])).max()
+
+
 def test_a_stride_longer_than_the_legs_is_refused(rigs):
     _, plan = rigs["quadruped"]
     params = GaitParams.preset("trot", step_length=1.5)
