@@ -105,11 +105,12 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
 
 def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
                partial: Partial | None = None) -> dict:
-    """Mesh -> loopable swim-cycle clip."""
+    """Mesh -> loopable swim-cycle clip, or a gait's looping clip of the skinned glTF the mesh came from."""
     from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
 
     mesh = _mesh(job, blobs, settings)
-    parts = make_cyclic_clip(mesh, CyclicOptions.from_dict(job["params"]["params"]), progress=progress)
+    parts = make_cyclic_clip(mesh, CyclicOptions.from_dict(job["params"]["params"]), progress=progress,
+                             source=blobs.get(job["mesh"]["blob_key"]))
     frames = int(parts.report.get("frames", 1)) if isinstance(parts.report.get("frames"), int) else 1
     return {"clip": _store_clip(parts, blobs, frames, len(mesh.vertices))}
 

@@ -1,8 +1,10 @@
 """``pdeanim cyclic MESH --mode eel --out CLIP``: a loopable swim cycle of an elongated mesh.
 
-``--mode walk`` or ``--mode run`` on a skinned glTF/GLB instead writes one skeletal walk/run cycle as poses
-(``--out POSES.npz``, to fit with ``pdeanim fit``) or as a looping morph-target animation (``--out
-FILE.glb``).
+A gait (``--mode walk``, run, trot, pace, canter, gallop, tripod or wave) on a skinned glTF/GLB instead makes
+one locomotion cycle from the skeleton (legs found from it, or named with ``--legs``) and writes it as a
+looping fitted clip (``--out CLIP``), a looping morph-target animation keeping the model's look (``--out
+FILE.glb``) or poses (``--out POSES.npz``); the travel speed that keeps planted feet still is printed and
+kept in the clip.
 """
 
 from __future__ import annotations
@@ -36,8 +38,9 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("mesh", help="mesh file (OBJ, PLY, STL, OFF, GLB)")
     p.add_argument("--mode", default="eel", help="eel, trout, tropical, shark, dolphin (or anguilliform, "
-                   "subcarangiform, carangiform, thunniform); walk or run for a skinned glTF")
-    p.add_argument("--out", required=True, help="output CLIP file (walk/run: POSES.npz or FILE.glb)")
+                   "subcarangiform, carangiform, thunniform); a gait for a skinned glTF: walk, run (two "
+                   "legs), walk, trot, pace, canter, gallop (four), tripod, wave (six or more)")
+    p.add_argument("--out", required=True, help="output CLIP file (gaits: also FILE.glb or POSES.npz)")
     p.add_argument("--curves", type=int, default=37, help="cross-section curves (rounded up to 3 B + 1)")
     p.add_argument("--points", type=int, default=32, help="samples per curve")
     p.add_argument("--modes", type=int, default=6, help="Fourier modes solved exactly (M)")
@@ -52,18 +55,23 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--direction", choices=["lateral", "vertical"], help="side to side (fish) or up and down (dolphin)"
     )
-    p.add_argument("--plot", help="also write a PNG of the body, its spine and a few frames to this path")
+    p.add_argument("--plot", help="also write a PNG of the body, its spine and a few frames (gaits: a strip "
+                   "of frames and the footfall diagram) to this path")
     p.add_argument(
         "--set",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="walk/run parameter (step_height, step_length, height_right, lift_left, hip_bob, ...)",
+        help="gait parameter (step_height, step_length, duty, height_right, lift_left, hip_bob, ...)",
     )
-    for joint in ("hip", "right-foot", "left-foot"):
-        p.add_argument(
-            f"--{joint}", help=f"walk/run: name of the {joint.replace('-', ' ')} joint (default: by name)"
-        )
+    p.add_argument("--legs", help="gaits: the foot joints, comma-separated (FOOT or TOP:FOOT), instead of "
+                   "the legs found from the skeleton")
+    p.add_argument("--forward", type=_vec, help="gaits: x,y,z facing direction instead of the one found")
+    p.add_argument("--target-rel-rms", type=float, default=5e-4,
+                   help="gaits, --out CLIP: the fit's RMS error target relative to the bounding-box diagonal")
+    p.add_argument("--hip", help="gaits: the joint the body's bob moves (default: the one carrying the legs)")
+    for side in ("right", "left"):
+        p.add_argument(f"--{side}-foot", help=f"two-legged gaits: the {side} foot joint (default: found)")
     p.set_defaults(func=run)
 
 
@@ -77,8 +85,8 @@ def _load(path: str) -> Any:
 def run(args: argparse.Namespace) -> int:
     """Build the clip, write it and print curves, sizes and the rest-pose distance."""
     from ..clip import load_clip, write_clip_file
+    from ..cyclic.gaits import GAITS
     from ..cyclic.job import CyclicOptions, make_cyclic_clip
-    from ..cyclic.skeletal import GAITS
 
     if args.mode in GAITS:
         return run_gait(args)
@@ -135,34 +143,94 @@ def _plot(path: str, clip: Any) -> None:
     print(f"plot: {path}")
 
 
-def run_gait(args: argparse.Namespace) -> int:
-    """Write one walk/run cycle of a skinned glTF as POSES.npz or a looping GLB animation."""
-    from ..cyclic.skeletal import StepParams, step_cycle
-    from ..gltf.skin import load_skinned
-    from ..poses import save_poses
+def _gait_options(args: argparse.Namespace) -> Any:
+    """The CyclicOptions of a gait run from the command line."""
+    from ..cyclic.job import CyclicOptions
 
-    out = args.out.lower()
-    if not out.endswith((".npz", ".glb")):
-        raise ParameterError("for walk/run cycles --out must be a .npz (poses) or .glb (animation) file")
     over: dict[str, Any] = {k: getattr(args, k) for k in ("frequency",) if getattr(args, k) is not None}
     for item in args.set:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParameterError(f"--set expects KEY=VALUE, got {item!r}")
-        over[key.strip()] = (
-            value.strip().lower() in ("1", "true", "yes") if key.strip() == "literal" else value
-        )
-    joints = {"hip": args.hip, "right_foot": args.right_foot, "left_foot": args.left_foot}
-    poses = step_cycle(
-        load_skinned(args.mesh), StepParams.preset(args.mode, **over), frames=args.frames, **joints
-    )
-    if out.endswith(".npz"):
-        save_poses(args.out, poses)
-    else:
-        from ..gltf.write import animation_glb
+        over[key.strip()] = value.strip()
+    return CyclicOptions.from_dict({
+        "mode": args.mode, "overrides": over, "frames": args.frames, "legs": _legs(args),
+        "forward": args.forward, "body_joint": args.hip, "target_rel_rms": args.target_rel_rms})
 
+
+def _legs(args: argparse.Namespace) -> list[str] | None:
+    """The feet named by --legs, or by --left-foot/--right-foot (the other foot found from the skeleton)."""
+    if args.legs:
+        if args.left_foot or args.right_foot:
+            raise ParameterError("name the feet with --legs or with --left-foot/--right-foot, not both")
+        return [x.strip() for x in args.legs.split(",") if x.strip()]
+    if not (args.left_foot or args.right_foot):
+        return None
+    if args.left_foot and args.right_foot:
+        return [args.left_foot, args.right_foot]
+    from ..cyclic.bodyplan import plan_of
+    from ..gltf.skin import load_skinned
+
+    plan = plan_of(load_skinned(args.mesh), forward=args.forward)
+    if plan.rows != 1:
+        raise ParameterError("--left-foot/--right-foot name the feet of a two-legged character; use --legs")
+    found = {leg.side: plan.skeleton.names[leg.foot] for leg in plan.legs}
+    return [args.left_foot or found[1], args.right_foot or found[-1]]
+
+
+def run_gait(args: argparse.Namespace) -> int:
+    """Write one gait cycle of a skinned glTF as a looping clip, a looping GLB or poses; print the legs
+    found, the travel speed and how still the planted feet are."""
+    from ..clip import write_clip_file
+    from ..cyclic.gaitclip import fit_gait_clip, gait_glb, solve_gait
+    from ..poses import save_poses
+
+    out = args.out.lower()
+    if not out.endswith((".npz", ".glb", ".clip")):
+        raise ParameterError("for gaits --out must be a .clip (fitted clip), .glb (animation) or .npz "
+                             "(poses)")
+    options = _gait_options(args)
+    result = solve_gait(args.mesh, options.gait(), options.frames, options.legs, options.forward,
+                        options.body_joint)
+    r = result.report
+    print("legs: " + ", ".join(f"{leg['name']} ({leg['foot']}, {leg['ik_bones']} bones)"
+                               for leg in r["plan"]["legs"]))
+    if out.endswith(".npz"):
+        save_poses(args.out, result.poses)
+    elif out.endswith(".glb"):
         with open(args.out, "wb") as fh:
-            fh.write(animation_glb(poses.vertices, poses.times, poses.faces, loop=True))
-    print(f"{args.mode} cycle: {poses.vertices.shape[0]} frames over {poses.times[-1]:.4g} s, "
-          f"{poses.vertices.shape[1]} vertices -> {args.out}")
+            fh.write(gait_glb(args.mesh, result))
+    else:
+        parts = fit_gait_clip(result, options.target_rel_rms)
+        write_clip_file(args.out, parts)
+        c = parts.report["contact_clip"]
+        print(f"clip: rel RMS {parts.report['rel_rms']:.3g}, planted feet slide at most {c['slide_max']:.4g} "
+              f"({c['slide_max_rel']:.2%} of the leg) in the clip")
+    c, travel = r["contact"], r["travel"]
+    print(f"{args.mode} cycle: {result.poses.n_frames} frames over {result.cycle.params.period:.4g} s, "
+          f"travel {travel['speed']:.4g} units/s along {_fmt(travel['direction'])}, "
+          f"planted feet slide at most {c['slide_max']:.4g} ({c['slide_max_rel']:.2%} of the leg) "
+          f"-> {args.out}")
+    if args.plot:
+        _gait_plot(args.plot, args.mesh, result)
     return 0
+
+
+def _fmt(v: list[float]) -> str:
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+def _gait_plot(path: str, mesh: str, result: Any) -> None:
+    """Write the strip of frames and the footfall diagram of a gait."""
+    from ..cyclic.gaitclip import skinned_offset
+    from ..cyclic.gaitplots import face_colours, gait_strip_png
+    from ..gltf.skin import load_skinned
+
+    if not path.lower().endswith(".png"):
+        raise ParameterError("--plot must name a .png file")
+    skinned = load_skinned(mesh)
+    start = skinned_offset(mesh)
+    frames = result.poses.vertices[:, start:start + len(skinned.rest_vertices)]
+    gait_strip_png(path, frames, skinned.faces, face_colours(mesh, len(skinned.faces)), result.cycle,
+                   title=f"{result.cycle.params.gait}")
+    print(f"plot: {path}")

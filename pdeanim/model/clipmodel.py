@@ -190,6 +190,7 @@ class DynamicClip:
             "param_mode": self.topo.param_mode,
             "duration_s": float(self.frame_times[-1] - self.frame_times[0]),
             "errors": h.get("errors", {}),
+            **{k: h[k] for k in ("gait", "travel") if isinstance(h.get(k), dict)},  # gait clips (cyclic)
         }
 
 

@@ -1,0 +1,259 @@
+"""Find the legs of a skeleton from its shape alone: chains that end in a low leaf near the ground plane,
+sorted into left and right by the skeleton's mirror symmetry and into rows from front to back along the
+facing direction. ``--legs`` names the feet instead; with no leg found the error names the joints seen.
+
+A leg is the chain from the first joint below its girdle (the joint it branches from) down to its foot (the
+effector the IK places: the leaf, or the ankle when the chain ends in a horizontal toe bone). The IK bends the
+last two bones above the foot, or the last three when they descend in a zigzag (a digitigrade hind leg).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError, ParameterError
+from .skeleton import UP, Skeleton
+
+LOW_LEAF = 0.3
+"""A foot's leaf lies at most this share of its leg's top height above the ground."""
+DESCENT = 0.5
+"""A leg drops at least this share of its top height from its top joint to its leaf."""
+FLAT_BONE = 0.5
+"""A toe bone at the end of a chain is horizontal when its rise is under this share of its run."""
+MID_PLANE = 0.05
+"""Feet closer to the mirror plane than this share of their leg length are on it (a tail, not a leg)."""
+ZIGZAG_DEGREES = 5.0
+"""Both bends of a three-bone leg must exceed this for three-bone IK (else the last two bones bend)."""
+
+
+@dataclass(frozen=True)
+class Axes:
+    """Body axes at rest: up (glTF +y), forward (the facing direction) and left = up x forward, and the
+    lateral coordinate of the mirror plane."""
+
+    up: np.ndarray
+    forward: np.ndarray
+    left: np.ndarray
+    mid: float
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One leg: chain (top .. foot joints), ik (the joints the IK moves, from its first bone's start to the
+    foot), girdle (the joint the leg hangs from), side (+1 left, -1 right, 0 on the mirror plane), row (0 =
+    front), length (summed IK bone lengths at rest) and a name such as "hind-left"."""
+
+    chain: tuple[int, ...]
+    ik: tuple[int, ...]
+    girdle: int
+    side: int
+    row: int
+    length: float
+    name: str
+
+    @property
+    def foot(self) -> int:
+        """The foot joint (the IK effector)."""
+        return self.chain[-1]
+
+
+def _mirror_score(pos: np.ndarray, axis: np.ndarray) -> tuple[float, float]:
+    """Mean distance from each joint mirrored about the plane normal to axis (through the joints' mean) to
+    its nearest joint, and the plane's coordinate along axis."""
+    x = pos @ axis
+    mid = float(x.mean())
+    mirrored = pos - 2.0 * (x - mid)[:, None] * axis
+    d = np.linalg.norm(mirrored[:, None] - pos[None], axis=2).min(axis=1)
+    return float(d.mean()), mid
+
+
+def _lateral(pos: np.ndarray) -> tuple[np.ndarray, float]:
+    """The horizontal axis the joints are most mirror-symmetric about (world x wins ties) and the plane."""
+    flat = pos - np.outer(pos @ UP, UP)
+    cands = [np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])]
+    cands += [np.array([np.cos(a), 0.0, np.sin(a)]) for a in np.radians(np.arange(5.0, 180.0, 5.0))]
+    _, _, vt = np.linalg.svd(flat - flat.mean(axis=0), full_matrices=False)
+    cands += [v / np.linalg.norm(v) for v in vt[:2] if np.linalg.norm(v) > 0.5]
+    scores = [_mirror_score(pos, a) for a in cands]
+    best = min(range(len(cands)), key=lambda i: scores[i][0])
+    tie = 1e-9 * max(float(np.ptp(pos, axis=0).max()), 1e-300)
+    if scores[0][0] <= scores[best][0] + tie:
+        best = 0
+    return cands[best], scores[best][1]
+
+
+def _facing_sign(sk: Skeleton, forward: np.ndarray, leaves: list[int], toes: list[tuple[int, int]]) -> float:
+    """+1 when forward points to the head: a joint named head/neck/skull (or away from a tail); else the
+    highest leaf that is no foot when it sits clearly off-centre; else the way the toes point (the last bone
+    of each leg); else glTF's +z front."""
+    pos, centre = sk.positions, sk.positions.mean(axis=0)
+    extent = float(np.ptp(pos, axis=0).max()) or 1.0  # the size of the skeleton
+    for pattern, sign in ((r"head|neck|skull", 1.0), (r"tail", -1.0)):
+        hits = [j for j, n in enumerate(sk.names) if re.search(pattern, n, re.IGNORECASE)]
+        if hits:
+            off = float((pos[hits].mean(axis=0) - centre) @ forward)
+            if abs(off) > 0.05 * extent:
+                return sign * np.sign(off)
+    if leaves:
+        top = max(leaves, key=lambda j: pos[j, 1])
+        off = float((pos[top] - centre) @ forward)
+        if abs(off) > 0.1 * extent:
+            return float(np.sign(off))
+    if toes:
+        bones = np.array([pos[b] - pos[a] for a, b in toes])
+        lean = float(np.mean(bones @ forward / np.maximum(np.linalg.norm(bones, axis=1), 1e-300)))
+        if abs(lean) > 0.2:
+            return float(np.sign(lean))
+    return 1.0 if forward[2] >= 0 else -1.0
+
+
+def body_axes(sk: Skeleton, other_leaves: list[int], toes: list[tuple[int, int]], forward: object = None
+              ) -> Axes:
+    """The body axes from the mirror symmetry of the joints (or a given forward direction); other_leaves
+    (leaves that are no feet) and toes (each leg's last bone) tell which way is forward."""
+    if forward is not None:
+        f = np.asarray(forward, np.float64).reshape(-1)
+        if f.shape != (3,) or not np.isfinite(f).all():
+            raise ParameterError("forward must be three finite numbers")
+        f = f - (f @ UP) * UP
+        if np.linalg.norm(f) < 1e-9:
+            raise ParameterError("forward must not point straight up or down")
+        f = f / np.linalg.norm(f)
+        left = np.cross(UP, f)
+        return Axes(UP, f, left, float((sk.positions @ left).mean()))
+    lat, mid = _lateral(sk.positions)
+    f = np.cross(lat, UP)
+    f = f * _facing_sign(sk, f, other_leaves, toes)
+    left = np.cross(UP, f)
+    return Axes(UP, f, left, mid if left @ lat > 0 else -mid)
+
+
+def _foot_of(sk: Skeleton, chain: list[int]) -> list[int]:
+    """The chain without its trailing horizontal toe bones near the ground (the foot is the ankle then)."""
+    top_h = sk.height(chain[0])
+    while len(chain) > 2:
+        a, b = sk.positions[chain[-2]], sk.positions[chain[-1]]
+        rise, run = abs((b - a) @ UP), np.linalg.norm((b - a) - ((b - a) @ UP) * UP)
+        if rise < FLAT_BONE * run and sk.height(chain[-2]) < LOW_LEAF * top_h:
+            chain = chain[:-1]
+        else:
+            break
+    return chain
+
+
+def _bend(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle in degrees between two bone vectors."""
+    c = a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300)
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def ik_joints(sk: Skeleton, chain: list[int]) -> tuple[int, ...]:
+    """The joints the IK moves: the last three bones when they all descend and bend in a zigzag, else the
+    last two (or the only one)."""
+    p = sk.positions
+    if len(chain) >= 4:
+        b = [p[chain[-3 + i]] - p[chain[-4 + i]] for i in range(3)]
+        zigzag = np.cross(b[0], b[1]) @ np.cross(b[1], b[2]) < 0
+        descend = all(v @ UP < 0 for v in b)
+        if zigzag and descend and min(_bend(b[0], b[1]), _bend(b[1], b[2])) > ZIGZAG_DEGREES:
+            return tuple(chain[-4:])
+    return tuple(chain[-3:]) if len(chain) >= 3 else tuple(chain[-2:])
+
+
+def _leg_candidates(sk: Skeleton) -> tuple[list[list[int]], list[int]]:
+    """Chains (girdle first) that end in a low leaf and drop most of their height; and the other leaves."""
+    legs, others = [], []
+    for leaf in sk.leaves():
+        chain = [leaf]
+        for p in sk.ancestors(leaf):
+            chain.append(p)
+            if len(sk.children[p]) > 1:
+                break
+        chain = chain[::-1]  # girdle (or root) first
+        top = chain[1] if len(chain) > 1 else leaf
+        top_h, leaf_h = sk.height(top), sk.height(leaf)
+        is_leg = (len(chain) >= 3 and top_h > 0 and leaf_h <= LOW_LEAF * top_h
+                  and top_h - leaf_h >= DESCENT * top_h)
+        (legs if is_leg else others).append(chain if is_leg else leaf)
+    return legs, others
+
+
+def _make_leg(sk: Skeleton, girdle: int, chain: list[int], axes: Axes) -> tuple[Leg, float]:
+    """A leg (row and name filled in later) and the forward coordinate of its top joint."""
+    ik = ik_joints(sk, chain)
+    p = sk.positions
+    length = float(sum(np.linalg.norm(p[b] - p[a]) for a, b in zip(ik[:-1], ik[1:], strict=True)))
+    lateral = float(p[chain[-1]] @ axes.left) - axes.mid
+    side = 0 if abs(lateral) < MID_PLANE * max(length, 1e-300) else int(np.sign(lateral))
+    return Leg(tuple(chain), ik, girdle, side, 0, length, ""), float(p[chain[0]] @ axes.forward)
+
+
+def _rows(legs: list[tuple[Leg, float]]) -> list[Leg]:
+    """Rows from front to back: the k-th left leg pairs with the k-th right leg (by their forward
+    coordinate) when the sides have as many legs, else every leg is a row of its own."""
+    lefts = sorted([x for x in legs if x[0].side > 0], key=lambda x: -x[1])
+    rights = sorted([x for x in legs if x[0].side < 0], key=lambda x: -x[1])
+    middle = [x for x in legs if x[0].side == 0]
+    if len(lefts) == len(rights) and not middle:
+        rows = [[a[0], b[0]] for a, b in zip(lefts, rights, strict=True)]
+    else:
+        rows = [[x[0]] for x in sorted(legs, key=lambda x: -x[1])]
+    labels = {1: [""], 2: ["front", "hind"], 3: ["front", "middle", "hind"]}.get(
+        len(rows), [f"row{k + 1}" for k in range(len(rows))])
+    out = []
+    for k, row in enumerate(rows):
+        for leg in row:
+            side = {1: "left", -1: "right", 0: "middle"}[leg.side]
+            name = f"{labels[k]}-{side}" if labels[k] else side
+            out.append(Leg(leg.chain, leg.ik, leg.girdle, leg.side, k, leg.length, name))
+    return out
+
+
+def _override_chain(sk: Skeleton, spec: str) -> list[int]:
+    """The chain (girdle first) of a leg named "foot" or "top:foot" by its joints."""
+    top_name, _, foot_name = spec.rpartition(":")
+    foot = sk.index(foot_name.strip())
+    if top_name.strip():
+        top = sk.index(top_name.strip())
+        if sk.parents[top] < 0:
+            raise InputError(f"leg top {top_name!r} is a root joint: name the joint below the body")
+        return [int(sk.parents[top]), *sk.path_down(top, foot)]
+    chain = [foot]
+    for p in sk.ancestors(foot):
+        chain.append(p)
+        if len(sk.children[p]) > 1:
+            break
+    if len(chain) < 2:
+        raise InputError(f"foot {foot_name!r} has no parent joint to bend")
+    return chain[::-1]
+
+
+def find_legs(sk: Skeleton, legs: list[str] | None = None, forward: object = None) -> tuple[list[Leg], Axes]:
+    """The legs (front row first, left before right) and the body axes. ``legs`` names the feet ("foot" or
+    "top:foot" joint names) instead of finding them. Raises InputError naming the joints when none is
+    found."""
+    if legs:
+        chains = [_override_chain(sk, s) for s in legs]
+        others = [j for j in sk.leaves() if j not in {c[-1] for c in chains}]
+    else:
+        chains, others = _leg_candidates(sk)
+    toes = [(c[-2], c[-1]) for c in chains]
+    if not legs:
+        chains = [[c[0], *_foot_of(sk, c[1:])] for c in chains]
+    axes = body_axes(sk, others, toes, forward)
+    made = [_make_leg(sk, c[0], c[1:], axes) for c in chains]
+    if not legs:
+        made = [m for m in made if m[0].side != 0]
+    if not made:
+        raise InputError(
+            "no legs found: no chain of joints ends in a leaf near the ground on either side of the body "
+            f"(ground at y = {sk.ground:.4g}; joints seen, with their height: "
+            + ", ".join(f"{n} {sk.height(j):.3g}" for j, n in enumerate(sk.names))
+            + "); name the feet with --legs")
+    dup = {m[0].foot for m in made}
+    if len(dup) != len(made):
+        raise InputError("a foot joint is named twice in legs")
+    return _rows(made), axes
