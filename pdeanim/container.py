@@ -171,6 +171,17 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     return header, arrays
 
 
+def with_header(blob: bytes, extra: dict[str, Any]) -> bytes:
+    """The container ``blob`` with keys added to its JSON header (the arrays' bytes untouched: their offsets
+    count from the start of the data, which follows the header)."""
+    magic, version, hlen = _PREFIX.unpack_from(blob, 0)
+    header = json.loads(bytes(blob[_PREFIX.size:_PREFIX.size + hlen]).decode())
+    header.update(extra)
+    meta = json.dumps(header, separators=(",", ":"), sort_keys=True, allow_nan=False).encode()
+    meta += b" " * (-len(meta) % 8)
+    return _PREFIX.pack(magic, version, len(meta)) + meta + bytes(blob[_PREFIX.size + hlen:])
+
+
 def to_json(blob: bytes) -> dict[str, Any]:
     """The JSON form of a container: its header with arrays inlined (dtype, shape, flat data)."""
     header, arrays = unpack(blob)

@@ -5,15 +5,14 @@ contact figures measured on what is shipped."""
 
 from __future__ import annotations
 
-import json
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..clip import ClipParts
+from .. import container
+from ..clipparts import ClipParts
 from ..errors import MeshInputError
 from ..poses import Poses, make_poses
 from ..progress import Progress, no_progress, sub_progress
@@ -77,30 +76,19 @@ def solve_gait(source: str | Path | bytes, params: GaitParams, frames: int = 24,
     return GaitResult(cycle, poses, feet, report)
 
 
-def with_header(blob: bytes, extra: dict[str, Any]) -> bytes:
-    """The container ``blob`` with keys added to its JSON header (the arrays' bytes untouched: their offsets
-    count from the start of the data, which follows the header)."""
-    magic, version, hlen = struct.unpack_from("<8sII", blob, 0)
-    header = json.loads(bytes(blob[16:16 + hlen]).decode())
-    header.update(extra)
-    meta = json.dumps(header, separators=(",", ":"), sort_keys=True, allow_nan=False).encode()
-    meta += b" " * (-len(meta) % 8)
-    return struct.pack("<8sII", magic, version, len(meta)) + meta + bytes(blob[16 + hlen:])
-
-
 def fit_gait_clip(result: GaitResult, target_rel_rms: float, progress: Progress | None = None) -> ClipParts:
     """Fit the scene's poses into a looping dynamic-PDE clip; its coefficients header gets "gait" and
     "travel" (speed in units per second along "direction"), its report the same and the contact figures of
     the clip itself."""
-    from ..clip import load_clip
-    from ..model.fitclip import FitOptions, fit_poses
+    from ..fit import FitOptions, fit_poses
+    from ..fit.encode import decode
 
     progress = progress or no_progress
     options = FitOptions(loop=True, target_rel_rms=target_rel_rms)
     parts = fit_poses(result.poses, options, progress=sub_progress(progress, 0.0, 0.95))
     meta = result.cycle.metadata()
-    coefficients = with_header(parts.coefficients, meta)
-    clip = load_clip(parts.topology, coefficients)
+    coefficients = container.with_header(parts.coefficients, meta)
+    clip = decode(ClipParts(parts.topology, coefficients))
     cycle = result.cycle
     frames = np.asarray(clip.evaluate(cycle.times / cycle.params.period), np.float32)
     report = {**parts.report, **result.report, "kind": "dynamic-pde", "producer": "cyclic-gait",
