@@ -100,7 +100,8 @@ def main() -> None:
                 r = row(name, poses, model, target)
                 print(f"| {name} | {target:g} | {model} | {r['bytes']:,} | {r['rms']:.2f} | {r['max']:.2f} | "
                       f"{r['segments']} | {r['spline']} | {r['pde']} | {r['linear']} | "
-                      f"{r['held_clip']:.2e} | {r['held_vs_linear']:.3f} | {r['held_vs_cr']:.3f} |", flush=True)
+                      f"{r['held_clip']:.2e} | {r['held_vs_linear']:.3f} | {r['held_vs_cr']:.3f} |",
+                      flush=True)
     print(f"# done, load {os.getloadavg()[0]:.1f}")
 
 
