@@ -32,7 +32,7 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     tol = tolerances or FitTolerances()
     t_start = time.perf_counter()
     report_progress = sub_progress(progress, 0.0, 1.0)
-    if windowed_applies(poses, options, tol):
+    if windowed_applies(poses.n_frames, poses.n_vertices, options, tol):
         return fit_windowed(poses, options, report_progress, tol, curves)
     sf = space_fit(poses, options, curves, report_progress, tol)
     t_space = time.perf_counter()

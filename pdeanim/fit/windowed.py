@@ -1,20 +1,26 @@
-"""A fit of a long or large input in windows of frames, with a knot at every frame.
+"""A fit of a long or large input in windows of frames, with a knot at every frame, as steps that any process
+may run: the windows are independent but for two joins.
 
-With a knot at every frame the knots of frame f depend on frame f alone (they are its projection on the
-curves' space bases), and the stored clip at frame f is the rest pose plus the knot fields of knot f. So
-everything but two small global choices runs one window of frames at a time: the space stage needs the Gram
-matrix of every item summed over all frames (pass 1), each rate-control trial needs the stored clip's errors
-summed over all frames (one pass per trial), and the clip's integer codes are written window by window. The
-curves themselves are chosen on a subsample of the frames. Memory: a window of frames in float64, the
-projected tracks of every frame in float32 and the clip's integer codes (4 bytes per knot coefficient),
-never all frames in float64.
+With a knot at every frame the knots of frame f depend on frame f alone (its projection on the curves' space
+bases), and the stored clip at frame f is the rest pose plus the knot fields of knot f. So the fit runs as
+
+1. :func:`plan_windows`: the curves (chosen on a subsample of the frames), the rest pose's rounding and the
+   window bounds;
+2. :func:`gram_window` per window, then :func:`join_space`: the space family and constant of every item from
+   its Gram matrix summed over all frames;
+3. :func:`encode_window` per window: the window's knots, their rate control (its own knot steps, so that
+   every window meets the targets alone) and integer codes;
+4. :func:`join_clip`: the time models, the knot tracks and both parts of the clip.
+
+Every step's result has ``to_bytes``/``from_bytes`` so that a job queue can hand windows to other workers
+(service: one task per window). Memory of a step: one window of frames in float64, never all frames.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -22,6 +28,7 @@ import numpy as np
 from .. import container
 from ..clipparts import FORMAT_VERSION, ClipParts, topology_id
 from ..curveset import CurveSet
+from ..errors import InputError
 from ..model import quantise
 from ..model.adaptive import Targets
 from ..model.clipformat import TIME_SPLINE, TRIAL_LEVEL, decode_topology, topology_arrays
@@ -30,7 +37,7 @@ from ..model.fitcore import items_from_curves, vertex_slots
 from ..model.metrics import bbox_diagonal
 from ..model.parameterisation import curve_parameters
 from ..model.spacefit import SpaceProjection, project_items, search_D
-from ..model.spline import prefer_spline
+from ..model.spline import spline_evidence
 from ..poses import Poses, make_poses
 from ..progress import Progress, sub_progress
 from .encode import Quantisation
@@ -42,15 +49,36 @@ from .spacestage import space_fit
 
 CURVE_FRAMES = 128
 """Frames, evenly spaced, on which the curves of a windowed fit are chosen."""
+MIN_WINDOW_FRAMES = 8
+"""Frames per window at least (the time-model evidence needs a few frames on either side)."""
 
 
-def windowed_applies(poses: Poses, options: FitOptions, tol: FitTolerances) -> bool:
-    """Whether a fit of ``poses`` runs in windows: inputs of more than tol.window_fit_values frame-vertex
-    values, fitted with targets, displacement or absolute motion, chord parameters and an open clip (the
-    other fits need every frame at once)."""
-    return (poses.n_frames * poses.n_vertices > tol.window_fit_values and tol.dense_fit
+def windowed_applies(n_frames: int, n_vertices: int, options: FitOptions, tol: FitTolerances) -> bool:
+    """Whether a fit of (n_frames, n_vertices) poses runs in windows: inputs of more than
+    tol.window_fit_values frame-vertex values, fitted with targets, displacement or absolute motion, chord
+    parameters and an open clip (the other fits need every frame at once)."""
+    return (n_frames * n_vertices > tol.window_fit_values and tol.dense_fit
             and not options.segments and not options.loop and options.motion != "rigid"
             and options.param_mode == "chord")
+
+
+def window_bounds(n_frames: int, n_vertices: int, tol: FitTolerances) -> np.ndarray:
+    """(W+1,) first frame of every window, then n_frames: as few windows of at most tol.window_values
+    frame-vertex values (and at least MIN_WINDOW_FRAMES frames) as cover the frames, of balanced sizes."""
+    most = max(MIN_WINDOW_FRAMES, tol.window_values // max(n_vertices, 1), 1)
+    W = max(1, min(-(-n_frames // most), n_frames // MIN_WINDOW_FRAMES))
+    return np.round(np.linspace(0, n_frames, W + 1)).astype(np.int64)
+
+
+def _pack(kind: str, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> bytes:
+    return container.pack({"windowed_step": kind, **header}, arrays)
+
+
+def _unpack(kind: str, blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    header, arrays = container.unpack(blob)
+    if header.get("windowed_step") != kind:
+        raise InputError(f"expected a windowed fit's {kind!r}, got {header.get('windowed_step')!r}")
+    return header, arrays
 
 
 @dataclass
@@ -66,10 +94,29 @@ class Layout:
     rest: np.ndarray  # (V, 3) float64 (float32 values): frame 0
     absolute: bool
 
+    @classmethod
+    def of(cls, curves: CurveSet, rest: np.ndarray, absolute: bool) -> Layout:
+        """The layout of ``curves`` on the rest pose (chord parameters rounded to the storage grid)."""
+        rest = np.asarray(np.asarray(rest, np.float32), np.float64)
+        idx, mask = curves.padded()
+        u = curve_parameters(rest[idx], mask, "chord")
+        grid = u_grid(mask.shape[1])
+        u = np.rint(u / grid) * grid
+        return cls(curves, idx, mask, u, vertex_slots(idx, mask, len(rest)),
+                   curves.curve_of_vertex(len(rest))[0], rest, absolute)
+
+    @property
+    def n_items(self) -> int:
+        return self.mask.shape[0] * 3
+
     def items(self, frames: np.ndarray) -> np.ndarray:
         """(w, K, N) float64 what the curves fit of frames (w, V, 3): displacement or positions."""
         values = frames if self.absolute else frames - self.rest.astype(np.float32)
         return items_from_curves(values, self.idx, self.mask)
+
+    def item_rows(self, frames: np.ndarray) -> np.ndarray:
+        """(K, w, N) the same, item first."""
+        return np.moveaxis(self.items(frames), 0, 1)
 
     def u_per_vertex(self) -> np.ndarray:
         """(V, 3) curve parameter of every vertex and coordinate."""
@@ -78,107 +125,287 @@ class Layout:
         return u_v
 
 
-def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: FitTolerances,
-                 curves: CurveSet | None = None) -> ClipParts:
-    """The clip of ``poses`` fitted in windows of frames (see the module docstring); its report has the keys
-    of an in-memory fit's."""
-    start = time.perf_counter()
-    X = poses.vertices
-    F, V = X.shape[:2]
-    window = max(1, tol.window_values // max(V, 1))
-    layout, sub_report = _layout(poses, options, curves, sub_progress(progress, 0.0, 0.1), tol)
-    diag = bbox_diagonal(layout.rest)
-    targets = options.targets(diag)
-    progress(0.1, f"space fit ({F} frames in windows of {window})")
-    proj, gram_floor = _space(layout, X, window)
-    K = layout.mask.shape[0] * 3
-    b = np.empty((K, F, 4), np.float32)  # every frame's projection on its item's basis
-    floor, spread = _project(layout, proj, X, window, b)
-    progress(0.3, "time models")
-    t = _normalised(poses.times, F)
-    spline = prefer_spline(b, t, tol.cubic_gain) if options.time_model == "auto" else (
-        np.ptp(b, axis=1).any(axis=-1) if options.time_model == "spline" else np.zeros(K, bool))
-    t_space = time.perf_counter()
-    clip = _ClipModel(layout, proj, b, spline, poses, options)
-    quant = first_quantisation(targets, floor.rms**2, tol)
-    trials: list[dict] = []
-    measure = sub_progress(progress, 0.35, 0.9)
-    quant = search_rounding(targets, floor, quant, tol,
-                            lambda q: clip.errors(q, X, window, measure, len(trials)), trials)
-    progress(0.92, "encode")
-    final = clip.errors(quant, X, window, None, 0, full=True)
-    report = _report(final, floor, spread, targets, diag, options, layout, poses, trials, quant, sub_report,
-                     tol)
-    parts = clip.encode(quant, X, window, header_errors(report))
-    t_time = time.perf_counter()
-    report["timings_s"] = {"curves_and_space": t_space - start, "time_and_encode": t_time - t_space,
-                           "report": time.perf_counter() - t_time, "total": time.perf_counter() - start}
-    report["gram_floor_rel_rms"] = float(np.sqrt(gram_floor / (F * V))) / diag if diag else None
-    header, arrays = container.unpack(parts.coefficients)
-    report.update(format_version=header["format_version"], knot_rank=0,
-                  time_models={"spline": int(spline.sum()), "pde": 0, "linear": int((~spline).sum())})
-    parts.report = {**report, "sizes": parts.sizes(F, V)}
-    progress(1.0, "done")
-    return parts
+@dataclass
+class WindowPlan:
+    """What every step of a windowed fit shares: options, curves, rest pose, rounding of the rest pose (the
+    topology part), window bounds and frame times."""
+
+    options: FitOptions
+    tol: FitTolerances
+    layout: Layout
+    bounds: np.ndarray  # (W+1,) int64
+    times: np.ndarray  # (F,) float64
+    topology: bytes
+    tolerance: float | None
+    diagonal: float
+    report: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_windows(self) -> int:
+        return len(self.bounds) - 1
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.bounds[-1])
+
+    def window(self, i: int) -> tuple[int, int]:
+        """(first frame, end frame) of window i."""
+        return int(self.bounds[i]), int(self.bounds[i + 1])
+
+    @property
+    def targets(self) -> Targets:
+        return self.options.targets(self.diagonal)
+
+    def base(self) -> np.ndarray:
+        """(V, 3) float32 what the stored clip adds its knot fields to: the stored rest pose (zero for
+        absolute motion)."""
+        topo = decode_topology(*container.unpack(self.topology))
+        return np.zeros_like(topo.rest) if self.layout.absolute else np.asarray(topo.rest, np.float32)
+
+    def to_bytes(self) -> bytes:
+        cs = self.layout.curves
+        return _pack("plan", {"options": self.options.to_dict(), "tolerances": self.tol.to_dict(),
+                              "tolerance": self.tolerance, "diagonal": self.diagonal, "report": self.report},
+                     {"order": cs.order.astype(np.int32), "offsets": cs.offsets.astype(np.int32),
+                      "rest": self.layout.rest.astype(np.float32), "bounds": self.bounds.astype(np.uint32),
+                      "times": self.times, "topology": np.frombuffer(self.topology, np.uint8)})
+
+    @classmethod
+    def from_bytes(cls, blob: bytes) -> WindowPlan:
+        h, a = _unpack("plan", blob)
+        options = FitOptions.from_dict(h["options"])
+        curves = CurveSet(a["order"].astype(np.int32), a["offsets"].astype(np.int32))
+        return cls(options, FitTolerances(**h["tolerances"]),
+                   Layout.of(curves, a["rest"], options.motion == "absolute"), a["bounds"].astype(np.int64),
+                   a["times"], a["topology"].tobytes(), h["tolerance"], h["diagonal"], h["report"])
 
 
-def _layout(poses: Poses, options: FitOptions, curves: CurveSet | None, progress: Progress,
-            tol: FitTolerances) -> tuple[Layout, dict]:
-    """The curves (chosen on CURVE_FRAMES evenly spaced frames as an in-memory fit chooses them, unless given)
-    and their per-vertex layout; and what the curve choice did (for the report)."""
-    F = poses.n_frames
+def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress: Progress | None = None,
+                 curves: CurveSet | None = None) -> WindowPlan:
+    """Step 1: the curves (chosen on CURVE_FRAMES evenly spaced frames as an in-memory fit chooses them,
+    unless given), the rest pose's rounding and the windows of ``poses``."""
+    F, V = poses.n_frames, poses.n_vertices
     picked = np.unique(np.round(np.linspace(0, F - 1, min(F, CURVE_FRAMES))).astype(np.int64))
-    sub = make_poses(poses.vertices[picked], poses.faces, poses.times[picked])
-    sf = space_fit(sub, options, curves, progress, tol)
-    cs = sf.curves
-    rest = np.asarray(poses.vertices[0], np.float64)
-    idx, mask = cs.padded()
-    u = curve_parameters(rest[idx], mask, "chord")
-    grid = u_grid(mask.shape[1])
-    u = np.rint(u / grid) * grid
-    layout = Layout(cs, idx, mask, u, vertex_slots(idx, mask, len(rest)), cs.curve_of_vertex(len(rest))[0],
-                    rest, options.motion == "absolute")
-    return layout, {"curve_points": sf.curve_points, "curve_splits": sf.splits,
-                    "curve_frames": int(len(picked))}
+    sub = make_poses(np.asarray(poses.vertices[picked]), poses.faces, poses.times[picked])
+    sf = space_fit(sub, options, curves, progress or (lambda *_: None), tol)
+    layout = Layout.of(sf.curves, poses.vertices[0], options.motion == "absolute")
+    diagonal = bbox_diagonal(layout.rest)
+    tolerance = first_quantisation(options.targets(diagonal), 0.0, tol).tolerance
+    header, arrays = topology_arrays(layout.curves, layout.u_per_vertex(), poses.faces, layout.rest,
+                                     options.param_mode, tolerance)
+    topology = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
+    report = {"curve_points": sf.curve_points, "curve_splits": sf.splits, "curve_frames": int(len(picked))}
+    return WindowPlan(options, tol, layout, window_bounds(F, V, tol), np.asarray(poses.times, np.float64),
+                      topology, tolerance, diagonal, report)
 
 
-def _windows(F: int, window: int) -> Iterator[tuple[int, int]]:
-    for f0 in range(0, F, window):
-        yield f0, min(F, f0 + window)
+@dataclass
+class GramPart:
+    """One window's share of the space stage: every item's Gram matrix (K, N, N) summed over the window's
+    frames, and the window's summed squared distance of the vertices to their frame's centroid."""
+
+    gram: np.ndarray
+    spread: float
+
+    def to_bytes(self) -> bytes:
+        return _pack("gram", {"spread": self.spread}, {"gram": self.gram})
+
+    @classmethod
+    def from_bytes(cls, blob: bytes) -> GramPart:
+        h, a = _unpack("gram", blob)
+        return cls(a["gram"], float(h["spread"]))
 
 
-def _space(layout: Layout, X: np.ndarray, window: int) -> tuple[SpaceProjection, float]:
-    """Pass 1: each item's Gram matrix summed over every frame, then its space family and constant (as the
-    in-memory space stage chooses them); and the floor's summed squared error the Gram matrices give."""
-    K, N = layout.mask.shape[0] * 3, layout.mask.shape[1]
-    gram = np.zeros((K, N, N))
-    for f0, f1 in _windows(len(X), window):
-        Yk = np.moveaxis(layout.items(X[f0:f1]), 0, 1)  # (K, w, N)
-        gram += np.swapaxes(Yk, 1, 2) @ Yk
-    u, mask = layout.u.reshape(K, N), np.repeat(layout.mask, 3, axis=0)
+def gram_window(plan: WindowPlan, frames: np.ndarray) -> GramPart:
+    """Step 2, per window: the Gram matrices and spread of ``frames`` (w, V, 3)."""
+    Yk = plan.layout.item_rows(frames)  # (K, w, N)
+    f = np.asarray(frames, np.float64)
+    spread = float(((f - f.mean(axis=1, keepdims=True)) ** 2).sum())
+    return GramPart(np.swapaxes(Yk, 1, 2) @ Yk, spread)
+
+
+@dataclass
+class SpaceModel:
+    """The space family (K,) and constant D (K,) of every item, and what the whole sequence's Gram matrices
+    and spread gave (the floor's summed squared error, the Karni-Gotsman denominator)."""
+
+    kind: np.ndarray
+    D: np.ndarray
+    gram_floor: float
+    spread: float
+
+    def projection(self, plan: WindowPlan) -> SpaceProjection:
+        """The items' orthonormal space bases (the same, bit for bit, in every process)."""
+        K, N = plan.layout.n_items, plan.layout.mask.shape[1]
+        return project_items(plan.layout.u.reshape(K, N), np.repeat(plan.layout.mask, 3, axis=0),
+                             self.kind, self.D, fallback=True)
+
+    def to_bytes(self) -> bytes:
+        return _pack("space", {"gram_floor": self.gram_floor, "spread": self.spread},
+                     {"kind": self.kind.astype(np.uint8), "D": self.D.astype(np.float64)})
+
+    @classmethod
+    def from_bytes(cls, blob: bytes) -> SpaceModel:
+        h, a = _unpack("space", blob)
+        return cls(a["kind"].astype(np.int64), a["D"], float(h["gram_floor"]), float(h["spread"]))
+
+
+def join_space(plan: WindowPlan, parts: Iterable[GramPart]) -> SpaceModel:
+    """Join 1: each item's space family and constant, as the in-memory space stage chooses them, from the Gram
+    matrices summed over every window."""
+    lay = plan.layout
+    K, N = lay.n_items, lay.mask.shape[1]
+    gram, spread = np.zeros((K, N, N)), 0.0
+    for part in parts:
+        gram += part.gram
+        spread += part.spread
+    u, mask = lay.u.reshape(K, N), np.repeat(lay.mask, 3, axis=0)
     kind, D, floor = search_D(u, mask, gram, check_cond=False)
-    return project_items(u, mask, kind, D, fallback=True), float(floor.sum())
+    proj = project_items(u, mask, kind, D, fallback=True)
+    return SpaceModel(np.asarray(proj.kind, np.int64), np.asarray(proj.D, np.float64), float(floor.sum()),
+                      spread)
 
 
-def _project(layout: Layout, proj: SpaceProjection, X: np.ndarray, window: int, b: np.ndarray
-             ) -> tuple[Errors, float]:
-    """Pass 2: every frame's projection into ``b`` (K, F, 4); the errors the space bases alone leave (the
-    spatial floor: a knot at every frame fits every frame's projection exactly); and the summed squared
-    distance of the vertices to their frame's centroid (the Karni-Gotsman error's denominator)."""
-    F, V = X.shape[:2]
-    C = layout.curves.n_curves
-    sq, largest, curve_max, spread = 0.0, 0.0, np.zeros(C), 0.0
-    for f0, f1 in _windows(F, window):
-        frames = X[f0:f1].astype(np.float64)
-        spread += float(((frames - frames.mean(axis=1, keepdims=True)) ** 2).sum())
-        Yk = np.moveaxis(layout.items(X[f0:f1]), 0, 1)
-        bw = Yk @ proj.U
-        b[:, f0:f1] = bw
-        d = _point_distances(Yk - bw @ np.swapaxes(proj.U, 1, 2), layout.slots)
-        sq += float((d * d).sum())
-        largest = max(largest, float(d.max(initial=0.0)))
-        np.maximum.at(curve_max, layout.curve_of, d.max(axis=0, initial=0.0))
-    return Errors(float(np.sqrt(sq / (F * V))), largest, curve_max), spread
+@dataclass
+class WindowCodes:
+    """One window's share of the clip: integer knot codes (C, 3, 4, w) on its own knot steps (C, 3), the
+    time-model evidence of its tracks, its errors (stored clip and unrounded floor), rate-control trials."""
+
+    index: int
+    codes: np.ndarray
+    steps: np.ndarray
+    e_lin: np.ndarray  # (K,)
+    e_cub: np.ndarray  # (K,)
+    b_min: np.ndarray  # (K, 4) float32
+    b_max: np.ndarray  # (K, 4) float32
+    frame_sq: np.ndarray  # (w,)
+    frame_max: np.ndarray  # (w,)
+    curve_sq: np.ndarray  # (C,)
+    curve_max: np.ndarray  # (C,)
+    floor_sq: float
+    floor_max: float
+    trials: list[dict]
+    quantisation: dict[str, Any]
+
+    _ARRAYS = ("codes", "steps", "e_lin", "e_cub", "b_min", "b_max", "frame_sq", "frame_max", "curve_sq",
+               "curve_max")
+
+    def to_bytes(self) -> bytes:
+        return _pack("window", {"index": self.index, "floor_sq": self.floor_sq, "floor_max": self.floor_max,
+                                "trials": self.trials, "quantisation": self.quantisation},
+                     {n: getattr(self, n) for n in self._ARRAYS})
+
+    @classmethod
+    def from_bytes(cls, blob: bytes) -> WindowCodes:
+        h, a = _unpack("window", blob)
+        return cls(int(h["index"]), **{n: a[n] for n in cls._ARRAYS}, floor_sq=float(h["floor_sq"]),
+                   floor_max=float(h["floor_max"]), trials=h["trials"], quantisation=h["quantisation"])
+
+
+class WindowModel:
+    """What the encoding of every window shares: the space bases and, per vertex, the evaluator's space basis
+    (built once per process from the plan and the space model)."""
+
+    def __init__(self, plan: WindowPlan, space: SpaceModel):
+        self.plan, self.space = plan, space
+        lay = plan.layout
+        self.proj = space.projection(plan)
+        C = lay.curves.n_curves
+        self.C = C
+        self.kind = self.proj.kind.reshape(C, 3).astype(np.uint8)
+        self.D = self.proj.D.reshape(C, 3).astype(np.float32)
+        cid = lay.curve_of
+        u = lay.u_per_vertex().astype(np.float32).astype(np.float64)
+        basis = np.zeros((len(cid), 3, 4))
+        Dv, kv = self.D.astype(np.float64)[cid], self.kind[cid]
+        for i, name in enumerate(SPACE_KINDS):
+            sel = kv == i
+            if np.any(sel):
+                basis[sel] = space_basis(u[sel][:, None], Dv[sel], name)[:, 0, :]
+        self.basis = basis  # (V, 3, 4): the evaluator's space basis
+        N = lay.mask.shape[1]
+        padded = np.zeros((C * N, 3, 4))
+        padded[lay.slots] = basis
+        self.padded_basis = np.ascontiguousarray(padded.reshape(C, N, 3, 4))
+        self.base = plan.base()
+
+    def knots(self, b: np.ndarray) -> np.ndarray:
+        """(w, C, 3, 4) float64 knots (balanced space coefficients) of projections b (K, w, 4)."""
+        k = np.einsum("kab,kwb->kwa", self.proj.to_coef, np.asarray(b, np.float64))
+        return np.moveaxis(k.reshape(self.C, 3, b.shape[1], 4), 2, 0)
+
+    def fields(self, knots: np.ndarray) -> np.ndarray:
+        """(w, V, 3) float32 knot fields at the vertices of knots (w, C, 3, 4), computed on the padded curves
+        (no (w, V, 3, 4) temporary) in float64 and rounded as the evaluator rounds its fields."""
+        on_curves = np.einsum("cnwk,fcwk->fcnw", self.padded_basis, knots)  # (w, C, N, 3)
+        slots = self.plan.layout.slots
+        return np.take(on_curves.reshape(len(knots), -1, 3), slots, axis=1).astype(np.float32)
+
+
+def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: Progress | None = None
+                  ) -> WindowCodes:
+    """Step 3, per window: the knots of ``frames`` (w, V, 3; window ``index``), the coarsest knot steps
+    (rate control as in an in-memory fit, on this window's frames) with which the window meets the targets,
+    and their codes."""
+    plan, lay = model.plan, model.plan.layout
+    f0, f1 = plan.window(index)
+    if len(frames) != f1 - f0:
+        raise InputError(f"window {index} has {f1 - f0} frames, got {len(frames)}")
+    X = np.asarray(frames, np.float64)
+    Yk = lay.item_rows(frames)
+    b = Yk @ model.proj.U  # (K, w, 4)
+    d = _point_distances(Yk - b @ np.swapaxes(model.proj.U, 1, 2), lay.slots)
+    del Yk
+    C = model.C
+    floor = Errors.of(d, lay.curve_of, C)
+    t = _normalised(plan.times)[f0:f1]
+    e_lin, e_cub = spline_evidence(b, t)
+    spline = (e_cub < plan.tol.cubic_gain * e_lin) & (e_lin > 0)
+    knots = model.knots(b)
+    # every frame is a knot: the linear pair's bound is 1, the spline items' that of the in-memory writer
+    bound = np.where(spline.reshape(C, 3), quantise.CUBIC_PAIR_MAX, 1.0)
+    weight, reach = quantise.item_sensitivity(lay.curve_of, model.basis, C, 1.0, bound)
+    largest = np.abs(knots).max(axis=(0, 3))[None, :, :, None]
+
+    def steps_of(quant: Quantisation) -> np.ndarray:
+        if quant.knot_rms is not None:
+            steps = quantise.budget_steps(weight, reach, quant.knot_rms, quant.knot_cap, largest)
+        else:
+            steps = quantise.refined_steps(2.0 * quant.tolerance / np.maximum(reach, 1e-30), np.zeros((C, 3)),
+                                           largest)
+        if quant.refine is not None:
+            steps = quantise.refined_steps(steps, quant.refine, largest)
+        return steps
+
+    def distances(quant: Quantisation) -> tuple[np.ndarray, np.ndarray]:
+        steps = steps_of(quant)
+        s64 = steps.astype(np.float64)[None, :, :, None]
+        codes = np.rint(knots / s64)
+        stored = (codes * s64).astype(np.float32).astype(np.float64)
+        dist = np.linalg.norm((model.fields(stored) + model.base).astype(np.float64) - X, axis=-1)
+        return dist, codes
+
+    trials: list[dict] = []
+    targets = plan.targets
+    quant = first_quantisation(targets, floor.rms**2, plan.tol)
+    quant.tolerance = plan.tolerance
+
+    def measure(q: Quantisation) -> Errors:
+        if progress is not None:
+            progress(min(len(trials) / 10.0, 1.0), f"window {index + 1}: rounding trial {len(trials) + 1}")
+        return Errors.of(distances(q)[0], lay.curve_of, C)
+
+    quant = search_rounding(targets, floor, quant, plan.tol, measure, trials)
+    dist, codes = distances(quant)
+    if np.abs(codes).max(initial=0) > quantise.MAX_CODE:
+        raise ValueError("knot codes out of range")  # the steps keep them in range
+    dd = dist * dist
+    return WindowCodes(
+        index, np.ascontiguousarray(np.moveaxis(codes, 0, -1)).astype(np.int32), steps_of(quant),
+        e_lin, e_cub, b.min(axis=1).astype(np.float32), b.max(axis=1).astype(np.float32),
+        dd.sum(axis=1), dist.max(axis=1, initial=0.0), np.bincount(lay.curve_of, dd.sum(axis=0), minlength=C),
+        Errors.of(dist, lay.curve_of, C).curve_max, float((d * d).sum()), float(d.max(initial=0.0)), trials,
+        {"tolerance": quant.tolerance, "knot_rms": quant.knot_rms, "knot_cap": quant.knot_cap})
 
 
 def _point_distances(resid: np.ndarray, slots: np.ndarray) -> np.ndarray:
@@ -189,146 +416,55 @@ def _point_distances(resid: np.ndarray, slots: np.ndarray) -> np.ndarray:
     return np.sqrt(np.take(np.moveaxis(sq, 1, 0).reshape(w, -1), slots, axis=1))
 
 
-def _normalised(times: np.ndarray, F: int) -> np.ndarray:
+def _normalised(times: np.ndarray) -> np.ndarray:
     times = np.asarray(times, np.float64)
-    span = times[-1] - times[0] if F > 1 else 1.0
-    return (times - times[0]) / span if span > 0 else np.zeros(F)
+    span = times[-1] - times[0] if len(times) > 1 else 1.0
+    return (times - times[0]) / span if span > 0 else np.zeros(len(times))
 
 
-class _ClipModel:
-    """A fit with a knot at every frame: its rounded clip's errors frame window by frame window, and its
-    parts."""
-
-    def __init__(self, layout: Layout, proj: SpaceProjection, b: np.ndarray, spline: np.ndarray,
-                 poses: Poses, options: FitOptions):
-        self.layout, self.proj, self.b, self.poses, self.options = layout, proj, b, poses, options
-        C = layout.curves.n_curves
-        self.C = C
-        self.kind = proj.kind.reshape(C, 3).astype(np.uint8)
-        self.D = proj.D.reshape(C, 3).astype(np.float32)
-        self.spline = spline.reshape(C, 3)
-        self.u_v = layout.u_per_vertex()
-        cid = layout.curve_of
-        basis = np.zeros((len(cid), 3, 4))
-        u = self.u_v.astype(np.float32).astype(np.float64)
-        Dv = self.D.astype(np.float64)[cid]
-        kv = self.kind[cid]
-        for i, name in enumerate(SPACE_KINDS):
-            sel = kv == i
-            if np.any(sel):
-                basis[sel] = space_basis(u[sel][:, None], Dv[sel], name)[:, 0, :]
-        self.basis = basis  # (V, 3, 4): the evaluator's space basis
-        N = layout.mask.shape[1]
-        padded = np.zeros((C * N, 3, 4))
-        padded[layout.slots] = basis
-        self.padded_basis = np.ascontiguousarray(padded.reshape(C, N, 3, 4))  # the same on the padded curves
-        # every frame is a knot: the linear pair's bound is 1, the spline items' that of the in-memory writer
-        bound = np.where(self.spline, quantise.CUBIC_PAIR_MAX, 1.0)
-        self.weight, self.reach = quantise.item_sensitivity(cid, basis, C, 1.0, bound)
-        self.largest_knot = np.zeros((C, 3))
-        for f0, f1 in _windows(b.shape[1], max(1, (1 << 22) // max(b.shape[0] * 4, 1))):
-            np.maximum(self.largest_knot, np.abs(self._knots(f0, f1)).max(axis=(0, 3)), out=self.largest_knot)
-        self._topologies: dict[float | None, tuple[bytes, np.ndarray]] = {}
-
-    def _knots(self, f0: int, f1: int) -> np.ndarray:
-        """(w, C, 3, 4) float64 knots of frames f0..f1 (balanced space coefficients of their projection)."""
-        bw = self.b[:, f0:f1].astype(np.float64)  # (K, w, 4)
-        k = np.einsum("kab,kwb->kwa", self.proj.to_coef, bw)
-        return np.moveaxis(k.reshape(self.C, 3, f1 - f0, 4), 2, 0)
-
-    def steps(self, quant: Quantisation) -> np.ndarray:
-        """(C, 3) float32 knot steps of a rounding (quantise.knot_steps_rms with the cubic weights at the
-        knots: every frame is a knot, where the stored value is the knot's)."""
-        big = self.largest_knot[None, :, :, None]
-        if quant.knot_rms is not None:
-            steps = quantise.budget_steps(self.weight, self.reach, quant.knot_rms, quant.knot_cap, big)
-        else:
-            steps = quantise.refined_steps(2.0 * quant.tolerance / np.maximum(self.reach, 1e-30),
-                                           np.zeros((self.C, 3)), big)
-        if quant.refine is not None:
-            steps = quantise.refined_steps(steps, quant.refine, big)
-        return steps
-
-    def _fields(self, knots: np.ndarray) -> np.ndarray:
-        """(w, V, 3) float32 knot fields at the vertices of knots (w, C, 3, 4), computed on the padded curves
-        (no (w, V, 3, 4) temporary) in float64 and rounded as the evaluator rounds its fields."""
-        on_curves = np.einsum("cnwk,fcwk->fcnw", self.padded_basis, knots)  # (w, C, N, 3)
-        w = len(knots)
-        return np.take(on_curves.reshape(w, -1, 3), self.layout.slots, axis=1).astype(np.float32)
-
-    def topology(self, quant: Quantisation) -> tuple[bytes, np.ndarray]:
-        """(topology part bytes, base (V, 3) float32 the stored clip adds its fields to)."""
-        if quant.tolerance not in self._topologies:
-            lay = self.layout
-            header, arrays = topology_arrays(lay.curves, self.u_v, self.poses.faces, lay.rest,
-                                             self.options.param_mode, quant.tolerance)
-            topo = decode_topology(header, arrays)
-            packed = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
-            base = np.zeros_like(topo.rest) if lay.absolute else np.asarray(topo.rest, np.float32)
-            self._topologies = {quant.tolerance: (packed, base)}
-        return self._topologies[quant.tolerance]
-
-    def errors(self, quant: Quantisation, X: np.ndarray, window: int, progress: Progress | None, trial: int,
-               full: bool = False) -> Errors | dict[str, Any]:
-        """The stored clip's errors at every frame (one pass); with ``full`` also per frame and per curve
-        sums (for the report)."""
-        if progress is not None:
-            progress(min(trial / 10.0, 1.0), f"rounding trial {trial + 1}")
-        steps = self.steps(quant).astype(np.float64)
-        _, base = self.topology(quant)
-        F, V = X.shape[:2]
-        cid = self.layout.curve_of
-        sq, largest, curve_max = 0.0, 0.0, np.zeros(self.C)
-        frame_sq, frame_max, curve_sq = np.zeros(F), np.zeros(F), np.zeros(self.C)
-        for f0, f1 in _windows(F, window):
-            codes = np.rint(self._knots(f0, f1) / steps[None, :, :, None])
-            stored_knots = (codes * steps[None, :, :, None]).astype(np.float32).astype(np.float64)
-            fields = self._fields(stored_knots)
-            d = np.linalg.norm((fields + base).astype(np.float64) - X[f0:f1], axis=-1)  # (w, V)
-            dd = d * d
-            sq += float(dd.sum())
-            largest = max(largest, float(d.max(initial=0.0)))
-            np.maximum.at(curve_max, cid, d.max(axis=0, initial=0.0))
-            if full:
-                frame_sq[f0:f1], frame_max[f0:f1] = dd.sum(axis=1), d.max(axis=1, initial=0.0)
-                curve_sq += np.bincount(cid, dd.sum(axis=0), minlength=self.C)
-        found = Errors(float(np.sqrt(sq / (F * V))), largest, curve_max)
-        if not full:
-            return found
-        return {"errors": found, "frame_sq": frame_sq, "frame_max": frame_max, "curve_sq": curve_sq}
-
-    def encode(self, quant: Quantisation, X: np.ndarray, window: int, errors: dict) -> ClipParts:
-        """Both parts of the stored clip (the knots as plain tracks), the codes written window by window;
-        ``errors``: the header's error summary."""
-        topology, _ = self.topology(quant)
-        steps = self.steps(quant)
-        F = X.shape[0]
-        codes = np.empty((self.C, 3, 4, F), np.int32)  # the tracks' layout: time last
-        for f0, f1 in _windows(F, window):
-            q = np.rint(self._knots(f0, f1) / steps.astype(np.float64)[None, :, :, None])
-            if np.abs(q).max(initial=0) > quantise.MAX_CODE:
-                raise ValueError("knot codes out of range")  # the steps keep them in range
-            codes[..., f0:f1] = np.moveaxis(q, 0, -1)
-        tracks, order = _tracks(codes)
-        times = np.asarray(self.poses.times, np.float64)
-        S = F - 1
-        header = {"errors": errors, "part": "coefficients", "kind": "dynamic-pde",
-                  "format_version": FORMAT_VERSION, "topology_id": topology_id(topology),
-                  "motion": self.options.motion, "looping": False,
-                  "n_segments": int(S), "n_curves": int(self.C), "n_frames": int(F),
-                  "knot_differences": order, "knot_rank": 0}
-        arrays = {
-            "segment_t": _normalised(times, F),
-            "frame_times": times,
-            "space_kind": self.kind,
-            "time_model": np.where(self.spline, TIME_SPLINE, 0).astype(np.uint8),
-            "m": np.zeros((S, self.C, 3), np.float32),
-            "D": self.D,
-            "knot_step": steps,
-            "knots": tracks,
-        }
-        coefficients = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
-        return ClipParts(topology, coefficients)
+def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes],
+              timings: dict[str, float] | None = None) -> ClipParts:
+    """Join 2: the clip of every window's codes (in window order): the time model of every item from the
+    whole sequence's evidence, the knot tracks, both parts and the fit report."""
+    W = plan.n_windows
+    windows = sorted(windows, key=lambda w: w.index)
+    if [w.index for w in windows] != list(range(W)):
+        raise InputError(f"a windowed fit joins all {W} windows, got {[w.index for w in windows]}")
+    lay, options = plan.layout, plan.options
+    C, F = lay.curves.n_curves, plan.n_frames
+    if options.time_model == "auto":
+        e_lin = np.sum([w.e_lin for w in windows], axis=0)
+        e_cub = np.sum([w.e_cub for w in windows], axis=0)
+        spline = (e_cub < plan.tol.cubic_gain * e_lin) & (e_lin > 0)
+    elif options.time_model == "spline":
+        lo = np.min([w.b_min for w in windows], axis=0)
+        hi = np.max([w.b_max for w in windows], axis=0)
+        spline = (hi > lo).any(axis=-1)
+    else:
+        spline = np.zeros(lay.n_items, bool)
+    codes = np.concatenate([w.codes for w in windows], axis=-1)
+    tracks, order = _tracks(codes)
+    del codes
+    S = F - 1
+    steps = windows[0].steps if W == 1 else np.stack([w.steps for w in windows])
+    report = _report(plan, space, windows, spline)
+    header = {"errors": header_errors(report), "part": "coefficients", "kind": "dynamic-pde",
+              "format_version": FORMAT_VERSION, "topology_id": topology_id(plan.topology),
+              "motion": options.motion, "looping": False, "n_segments": int(S), "n_curves": int(C),
+              "n_frames": int(F), "knot_differences": order, "knot_rank": 0}
+    model_kind = space.kind.reshape(C, 3).astype(np.uint8)
+    arrays = {"segment_t": _normalised(plan.times), "frame_times": plan.times, "space_kind": model_kind,
+              "time_model": np.where(spline.reshape(C, 3), TIME_SPLINE, 0).astype(np.uint8),
+              "m": np.zeros((S, C, 3), np.float32), "D": space.D.reshape(C, 3).astype(np.float32),
+              "knot_step": steps.astype(np.float32), "knots": tracks}
+    if W > 1:
+        arrays["knot_windows"] = plan.bounds.astype(np.uint32)
+    coefficients = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
+    parts = ClipParts(plan.topology, coefficients)
+    if timings:
+        report["timings_s"] = timings
+    parts.report = {**report, "sizes": parts.sizes(F, lay.rest.shape[0])}
+    return parts
 
 
 def _tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
@@ -337,8 +473,9 @@ def _tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
     import zstandard
 
     size = zstandard.ZstdCompressor(level=TRIAL_LEVEL).compress
-    first = _zigzag(np.diff(codes, axis=-1, prepend=0))
-    second = _zigzag(np.diff(np.diff(codes, axis=-1, prepend=0), axis=-1, prepend=0))
+    first = np.diff(codes, axis=-1, prepend=0)
+    second = _zigzag(np.diff(first, axis=-1, prepend=0))
+    first = _zigzag(first)
     return (first, 1) if len(size(first)) <= len(size(second)) else (second, 2)
 
 
@@ -348,30 +485,68 @@ def _zigzag(d: np.ndarray) -> np.ndarray:
     return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
 
 
-def _report(final: dict, floor: Errors, spread: float, targets: Targets, diag: float, options: FitOptions,
-            layout: Layout, poses: Poses, trials: list[dict], quant: Quantisation, sub_report: dict,
-            tol: FitTolerances) -> dict[str, Any]:
-    """The fit report of a windowed fit (the keys of an in-memory fit's report)."""
-    found: Errors = final["errors"]
-    F, V = poses.n_frames, poses.n_vertices
-    counts = np.bincount(layout.curve_of, minlength=layout.curves.n_curves) * F
+def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes], spline: np.ndarray
+            ) -> dict[str, Any]:
+    """The fit report of a windowed fit (the keys of an in-memory fit's report, plus ``windows``)."""
+    lay, targets, diag = plan.layout, plan.targets, plan.diagonal
+    F, V, C = plan.n_frames, lay.rest.shape[0], lay.curves.n_curves
+    frame_sq = np.concatenate([w.frame_sq for w in windows])
+    frame_max = np.concatenate([w.frame_max for w in windows])
+    curve_sq = np.sum([w.curve_sq for w in windows], axis=0)
+    found = Errors(float(np.sqrt(frame_sq.sum() / (F * V))), float(frame_max.max(initial=0.0)),
+                   np.max([w.curve_max for w in windows], axis=0))
+    floor_rms = float(np.sqrt(sum(w.floor_sq for w in windows) / (F * V)))
+    floor = Errors(floor_rms, max(w.floor_max for w in windows), np.zeros(C))
+    counts = np.bincount(lay.curve_of, minlength=C) * F
     met = found.meets(targets)
     rel = (lambda x: x / diag) if diag else (lambda x: None)
+    kg = 100.0 * found.rms * np.sqrt(F * V) / np.sqrt(space.spread) if space.spread > 0 else None
+    K = lay.n_items
     return {
         "rms": found.rms, "max": found.largest, "rel_rms": rel(found.rms), "rel_max": rel(found.largest),
-        "kg": 100.0 * found.rms * np.sqrt(F * V) / np.sqrt(spread) if spread > 0 else None, "diagonal": diag,
-        "frames": F, "vertices": V, "curves": layout.curves.n_curves, "segments": F - 1,
-        "segment_t": _normalised(poses.times, F).tolist(), "segment_frames": list(range(F)),
-        "per_frame_rms": np.sqrt(final["frame_sq"] / V).tolist(),
-        "per_frame_max": final["frame_max"].tolist(),
-        "per_curve_rms": np.sqrt(final["curve_sq"] / np.maximum(counts, 1)).tolist(),
+        "kg": kg, "diagonal": diag, "frames": F, "vertices": V, "curves": C, "segments": F - 1,
+        "segment_t": _normalised(plan.times).tolist(), "segment_frames": list(range(F)),
+        "per_frame_rms": np.sqrt(frame_sq / V).tolist(), "per_frame_max": frame_max.tolist(),
+        "per_curve_rms": np.sqrt(curve_sq / np.maximum(counts, 1)).tolist(),
         "per_curve_max": found.curve_max.tolist(),
         "floor_rms": floor.rms, "floor_rel_rms": rel(floor.rms), "floor_max": floor.largest,
+        "gram_floor_rel_rms": rel(float(np.sqrt(max(space.gram_floor, 0.0) / (F * V)))),
         "float32_vs_float64_max": None, "unrounded_rms": floor.rms, "unrounded_max": floor.largest,
         "targets": {"rms": targets.rms, "max": targets.max}, "target_met": met,
         "floor_exceeds_target": not floor.meets(targets), "adaptive_history": [],
-        "options": options.to_dict(), **sub_report, "dense_fit": True, "windowed": True,
+        "options": plan.options.to_dict(), **plan.report, "dense_fit": True, "windowed": True,
+        "windows": [{"frames": list(plan.window(w.index)), **w.quantisation,
+                     "rms": float(np.sqrt(w.frame_sq.sum() / (len(w.frame_sq) * V))),
+                     "trials": len(w.trials)} for w in windows],
         "segment_cap_reached": False, "every_frame_a_knot": not met,
-        "quantisation_tolerance": quant.tolerance, "quantisation_knot_rms": quant.knot_rms,
-        "quantisation_knot_cap": quant.knot_cap, "rate_control": trials, "tolerances": tol.to_dict(),
+        "quantisation_tolerance": plan.tolerance,
+        "rate_control": [dict(t, window=w.index) for w in windows for t in w.trials],
+        "tolerances": plan.tol.to_dict(), "format_version": FORMAT_VERSION, "knot_rank": 0,
+        "time_models": {"spline": int(spline.sum()), "pde": 0, "linear": int(K - spline.sum())},
     }
+
+
+def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: FitTolerances,
+                 curves: CurveSet | None = None) -> ClipParts:
+    """The clip of ``poses`` fitted in windows of frames, every step in this process (see the module
+    docstring); its report has the keys of an in-memory fit's."""
+    start = time.perf_counter()
+    X = poses.vertices
+    plan = plan_windows(poses, options, tol, sub_progress(progress, 0.0, 0.1), curves)
+    W = plan.n_windows
+    progress(0.1, f"space fit ({plan.n_frames} frames in {W} windows)")
+    space = join_space(plan, (gram_window(plan, X[f0:f1]) for f0, f1 in map(plan.window, range(W))))
+    t_space = time.perf_counter()
+    model = WindowModel(plan, space)
+    codes = []
+    for i in range(W):
+        f0, f1 = plan.window(i)
+        codes.append(encode_window(model, X[f0:f1], i, sub_progress(progress, 0.2 + 0.7 * i / W,
+                                                                    0.2 + 0.7 * (i + 1) / W)))
+    t_codes = time.perf_counter()
+    progress(0.92, "join")
+    parts = join_clip(plan, space, codes)
+    parts.report["timings_s"] = {"curves_and_space": t_space - start, "windows": t_codes - t_space,
+                                 "join": time.perf_counter() - t_codes, "total": time.perf_counter() - start}
+    progress(1.0, "done")
+    return parts

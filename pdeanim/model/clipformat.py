@@ -393,7 +393,10 @@ def _knots(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int
     if r == 0:
         if "knot_weights" in arrays or "knot_basis" in arrays:
             raise ClipFormatError("coefficients with knot_rank 0 must not hold knot_weights or knot_basis")
-        return _finite_knots(quantise.dequantise(codes, steps[None, :, :, None]))
+        per_knot = steps[None] if steps.ndim == 2 else steps[_knot_window(arrays, S, len(steps))]
+        return _finite_knots(quantise.dequantise(codes, per_knot[..., None]))
+    if steps.ndim == 3:
+        raise ClipFormatError("knot steps per window (knot_windows) need knot_rank 0")
     weights = quantise.unzigzag(_need(arrays, "knot_weights", (r, C, 3, 4), "coefficients", "<u4"))
     basis = _need(arrays, "knot_basis", (r, S + 1), "coefficients", "<f4")
     return _finite_knots(knotbasis.knots_from_basis(weights, codes, steps, basis))
@@ -401,8 +404,13 @@ def _knots(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int
 
 def _knot_tracks(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, C: int
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """(knot_step (C, 3) float32, integer codes (S+1, C, 3, 4)) of the ``knots`` time tracks."""
-    steps = _need(arrays, "knot_step", (C, 3), "coefficients", "<f4")
+    """(knot_step (C, 3) float32, or (W, C, 3) with knot_windows, integer codes (S+1, C, 3, 4)) of the
+    ``knots`` time tracks."""
+    if "knot_windows" in arrays:
+        W = len(_need(arrays, "knot_windows", (None,), "coefficients", "<u4")) - 1
+        steps = _need(arrays, "knot_step", (W, C, 3), "coefficients", "<f4")
+    else:
+        steps = _need(arrays, "knot_step", (C, 3), "coefficients", "<f4")
     if np.any(steps <= 0):
         raise ClipFormatError("coefficients knot steps must be positive")
     order = header.get("knot_differences")
@@ -410,6 +418,15 @@ def _knot_tracks(header: dict[str, Any], arrays: dict[str, np.ndarray], S: int, 
         raise ClipFormatError(f"coefficients knot_differences must be 1 or 2, got {order!r}")
     tracks = _need(arrays, "knots", (C, 3, 4, S + 1), "coefficients", "<u4")
     return steps, quantise.decode_knot_tracks(tracks, order)
+
+
+def _knot_window(arrays: dict[str, np.ndarray], S: int, W: int) -> np.ndarray:
+    """(S+1,) the window of every knot: knot_windows (W+1,) are the first knot of each window and S+1,
+    strictly increasing from 0 (§3.4)."""
+    bounds = arrays["knot_windows"].astype(np.int64)
+    if W < 1 or bounds[0] != 0 or bounds[-1] != S + 1 or np.any(np.diff(bounds) <= 0):
+        raise ClipFormatError(f"coefficients knot_windows must rise strictly from 0 to {S + 1}")
+    return np.repeat(np.arange(W), np.diff(bounds))
 
 
 def _finite_knots(knots: np.ndarray) -> np.ndarray:

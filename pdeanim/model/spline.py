@@ -51,11 +51,19 @@ def prefer_spline(b: np.ndarray, t: np.ndarray, gain: float = CUBIC_GAIN) -> np.
     """(K,) bool: the moving items whose tracks b (K, F, W) at normalised times t (F,) the natural spline
     predicts between every other frame no worse than ``gain`` times straight lines do (each parity's interior
     frames predicted from the other parity's frames)."""
+    e_lin, e_cub = spline_evidence(b, t)
+    return (e_cub < gain * e_lin) & (e_lin > 0)
+
+
+def spline_evidence(b: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) squared errors of straight lines and of the natural spline predicting the tracks b (K, F, W) at
+    every other frame from the frames between (both parities summed); zeros below 4 frames. Sums over windows
+    of frames add up to a whole sequence's evidence but for the frames next to window bounds."""
     K, F, _ = b.shape
-    if F < 4:
-        return np.zeros(K, bool)
-    t = np.asarray(t, np.float64)
     e_lin, e_cub = np.zeros(K), np.zeros(K)
+    if F < 4:
+        return e_lin, e_cub
+    t = np.asarray(t, np.float64)
     for parity in (0, 1):
         kept = np.arange(parity, F, 2)
         out = np.setdiff1d(np.arange(kept[0] + 1, kept[-1]), kept)
@@ -66,7 +74,7 @@ def prefer_spline(b: np.ndarray, t: np.ndarray, gain: float = CUBIC_GAIN) -> np.
         lin = (b[:, kept[seg]] * (1.0 - tau)[:, None] + b[:, kept[seg + 1]] * tau[:, None]) - target
         e_lin += np.einsum("kfw,kfw->k", lin, lin)
         e_cub += np.einsum("kfw,kfw->k", cub, cub)
-    return (e_cub < gain * e_lin) & (e_lin > 0)
+    return e_lin, e_cub
 
 
 def natural_tangents(P: np.ndarray, segment_t: np.ndarray) -> np.ndarray:

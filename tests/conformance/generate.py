@@ -9,7 +9,8 @@ evaluator (all four families, D on both sides of D_SWITCH and near 0, trig const
 zero-length segment, large and tiny rigid rotations). Every case is format 1.0; the name says which of its
 optional features it covers: "-spline" cases have items on the natural-spline time model (docs/format.md
 §3.5), "-basis" cases store their knots on a shared low-rank time basis (§3.4), "-pde" cases were fitted with
-the paper's time model alone (the generator checks that the writer did choose what each covers).
+the paper's time model alone, "-windows" cases were fitted in windows of frames and store a knot step per
+window (§3.4) (the generator checks that the writer did choose what each covers).
 """
 
 from __future__ import annotations
@@ -26,12 +27,12 @@ from pdeanim import container
 from pdeanim.clip import ClipParts, load_clip, write_clip_file
 from pdeanim.curveset import CurveSet
 from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
-from pdeanim.fit import FitOptions, fit_poses
+from pdeanim.fit import FitOptions, FitTolerances, fit_poses
 from pdeanim.model.clipformat import TIME_SPLINE, CoefficientData, encode_coefficients, encode_topology
 from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 7
+FIXTURE_VERSION = 8
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -71,6 +72,16 @@ def _smooth_spline(motion: str, time_model: str = "auto") -> Callable[[], ClipPa
     return lambda: _assert_features(fit_poses(_sphere_poses(n_frames=25),
                                               FitOptions(segments=12, motion=motion, time_model=time_model)),
                                     spline=True)
+
+
+def _windows(motion: str) -> ClipParts:
+    """A fit in three windows of frames (a knot at every frame, one knot step per window)."""
+    poses = _sphere_poses(n_frames=25)
+    parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3, motion=motion),
+                      tolerances=FitTolerances(window_fit_values=0, window_values=8 * poses.n_vertices))
+    header, arrays = container.unpack(parts.coefficients)
+    assert arrays["knot_windows"].tolist() == [0, 8, 17, 25] and arrays["knot_step"].shape[0] == 3, arrays
+    return _assert_features(parts, basis=False)
 
 
 def _single_frame_rigid() -> ClipParts:
@@ -265,6 +276,8 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "fit-absolute-chord-smooth-spline": (_smooth_spline("absolute"), {}),
     "fit-rigid-chord-smooth-spline": (_smooth_spline("rigid", "spline"), {}),
     "fit-blend-displacement-chord-loop-basis": (_fit_blend(True), {}),
+    "fit-displacement-chord-windows": (lambda: _windows("displacement"), {}),
+    "fit-absolute-chord-windows": (lambda: _windows("absolute"), {}),
     "synthetic-displacement-paper": (_synthetic_dynamic("displacement", "paper", False), {}),
     "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
     "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),
