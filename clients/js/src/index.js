@@ -1,5 +1,7 @@
 // pdeanim: decode and evaluate pdeanim clips (dynamic-PDE and cyclic-spine) in browsers and node.
 
+import './zstd.js';
+
 export {
   ClipFormatError,
   decodeContainer,

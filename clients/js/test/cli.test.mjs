@@ -7,7 +7,7 @@ import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { splitClipFile } from '../src/index.js';
+import { createEvaluator, decodeClipFile, splitClipFile } from '../src/index.js';
 import { FIXTURES, encodeContainer, expected, manifest, readBytes, storedArrays } from './helpers.mjs';
 
 const BIN = join(dirname(fileURLToPath(import.meta.url)), '..', 'bin', 'pdeanim-eval.mjs');
@@ -54,12 +54,41 @@ test('pdeanim-eval reads the two parts from separate files', () => {
     '--topology',
     join(tmp, 'topo.bin'),
     '--t',
-    '0.25,-0.5',
+    '0.25,1',
     '--out',
     out,
   ]);
   assert.equal(r.status, 0, r.stderr);
   assert.equal(readFileSync(out).byteLength, 2 * c.n_vertices * 3 * 4);
+});
+
+test('pdeanim-eval --t all writes every source frame, as `pdeanim frame --t all`', () => {
+  const c = man.cases.find((x) => x.kind === 'dynamic-pde' && !x.looping);
+  const out = join(tmp, 'all.bin');
+  const r = run([join(FIXTURES, c.clip), '--t', 'all', '--out', out]);
+  assert.equal(r.status, 0, r.stderr);
+  const clip = decodeClipFile(readBytes(join(FIXTURES, c.clip)));
+  const K = clip.frameTimes.length;
+  assert.equal(readFileSync(out).byteLength, K * c.n_vertices * 3 * 4);
+  const got = new Float32Array(Uint8Array.from(readFileSync(out)).buffer);
+  const ft = clip.frameTimes;
+  const last = createEvaluator(clip).evaluate(1);
+  assert.equal((ft[K - 1] - ft[0]) / (ft[K - 1] - ft[0]), 1);
+  assert.deepEqual(got.subarray((K - 1) * c.n_vertices * 3), last);
+});
+
+test('pdeanim-eval: t outside [0, 1] exits 2 for clips that do not loop, wraps for looping ones', () => {
+  const open = man.cases.find((x) => x.kind === 'dynamic-pde' && !x.looping);
+  const r = run([join(FIXTURES, open.clip), '--t', '0.5,-0.5', '--out', join(tmp, 'x.bin')]);
+  assert.equal(r.status, 2);
+  assert.match(r.stderr, /--t must lie in \[0, 1\] for this clip \(it does not loop\), got -0.5/);
+  const loop = man.cases.find((x) => x.kind === 'dynamic-pde' && x.looping);
+  const out = join(tmp, 'wrap.bin');
+  assert.equal(run([join(FIXTURES, loop.clip), '--t', '0.25,1.25', '--out', out]).status, 0);
+  const got = new Float32Array(Uint8Array.from(readFileSync(out)).buffer);
+  const N = loop.n_vertices * 3;
+  const worst = got.subarray(0, N).reduce((m, v, i) => Math.max(m, Math.abs(v - got[N + i])), 0);
+  assert.ok(worst <= 1e-6 * loop.diagonal);
 });
 
 test('pdeanim-eval exits 2 with a reason on bad input', () => {
