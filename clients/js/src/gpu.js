@@ -287,3 +287,4 @@ export function frameNormals(clipPositions, attrs, restNormals, out) {
   }
   return out;
 }
+export { glslHeader, glslPassMain, patchVertexShader } from './glsl.js';
