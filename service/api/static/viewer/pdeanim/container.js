@@ -1,7 +1,14 @@
 // Decode the pdeanim binary container: magic, version, JSON header, little-endian arrays (docs/format.md §1);
 // version 2 arrays may be stored as one zstd frame ("zstd") or byte planes in one zstd frame ("shuffle-zstd").
 
-import { Decompress } from 'fzstd';
+// The zstd decoder is installed by zstd.js (which index.js and three.js import): a Web Worker, which cannot
+// resolve the bare specifier 'fzstd', installs it from a URL instead.
+let Decompress = null;
+
+/** Install the zstd streaming decoder (fzstd's Decompress class) used for encoded arrays. */
+export function setZstdDecompress(cls) {
+  Decompress = cls;
+}
 
 export const MAGIC = 'PDEANIM\0';
 /** The newest container version this build reads. */
@@ -108,6 +115,7 @@ function decodeArrayBytes(stored, encoding, itemsize, count, label) {
   if (declared !== size) {
     throw new ClipFormatError(`${label}: zstd frame holds ${declared} bytes, expected ${size}`);
   }
+  if (Decompress === null) throw new ClipFormatError(`${label}: no zstd decoder installed (import 'pdeanim')`);
   let raw = new Uint8Array(size);
   let got = 0;
   const inflate = new Decompress((chunk) => {

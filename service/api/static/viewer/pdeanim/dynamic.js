@@ -251,12 +251,16 @@ function knotsV3(ch, ca, S, C, r = knotRank(ch, S, 1)) {
   const weights = new Float64Array(r * T); // q * h
   for (let i = 0; i < weights.length; i++) weights[i] = ((z[i] >>> 1) ^ -(z[i] & 1)) * steps[(i % T) >> 2];
   const knots = new Float32Array(n * T);
+  const acc = new Float64Array(T);
   for (let s = 0; s < n; s++) {
-    for (let track = 0; track < T; track++) {
-      let acc = 0;
-      for (let j = 0; j < r; j++) acc += weights[j * T + track] * basis[j * n + s];
-      acc += residual[s * T + track] * steps[track >> 2];
-      knots[s * T + track] = Math.fround(acc);
+    // per track the same order of operations as a loop over j per track, with contiguous reads
+    acc.fill(0);
+    for (let j = 0; j < r; j++) {
+      const b = basis[j * n + s];
+      for (let track = 0, o = j * T; track < T; track++, o++) acc[track] += weights[o] * b;
+    }
+    for (let track = 0, o = s * T; track < T; track++, o++) {
+      knots[o] = Math.fround(acc[track] + residual[o] * steps[track >> 2]);
     }
   }
   checkFinite(knots, 'coefficients knots');
@@ -579,28 +583,73 @@ export function splineWeights(segmentT, s, tau, out, o = 0) {
   return out;
 }
 
-/** CPU evaluator of a decoded dynamic-PDE clip; everything independent of t is computed here once. */
+/**
+ * Normalised clip time t checked against the clip: looping clips take any finite t (they wrap with period
+ * 1), others t in [0, 1] only (as `pdeanim frame --t` and GET /v1/clips/{id}/frame, which refuse the rest).
+ * Throws RangeError; returns t.
+ */
+export function checkTime(t, looping) {
+  if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
+  if (!looping && !(t >= 0 && t <= 1)) {
+    throw new RangeError(`clip time t must lie in [0, 1] for this clip (it does not loop), got ${t}`);
+  }
+  return t;
+}
+
+/**
+ * Rigid clips: turn the values before the rigid motion (V * 3, read as float32, in place in out) by each
+ * vertex's curve rotation rot (C * 9, row-major) and add its centre trans (C * 3).
+ */
+function applyRigid(out, rot, trans, curveOf) {
+  const f = Math.fround;
+  for (let v = 0, i = 0; v < curveOf.length; v++, i += 3) {
+    const x = f(out[i]);
+    const y = f(out[i + 1]);
+    const z = f(out[i + 2]);
+    const c = curveOf[v];
+    const r = c * 9;
+    out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
+    out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
+    out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+  }
+  return out;
+}
+
+/**
+ * Per knot the per-vertex contribution P[s] = knots_s . S(u) ((S+1) x V x 3 float32, like the Python
+ * evaluator) of a decoded dynamic clip.
+ */
+function knotFields(clip) {
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots } = clip;
+  const B = vertexBasis(clip);
+  const fields = new Float32Array((S + 1) * V * 3);
+  for (let s = 0; s <= S; s++) {
+    const off = s * V * 3;
+    const ko = s * C * 12;
+    for (let v = 0; v < V; v++) {
+      const kc = ko + curveOf[v] * 12;
+      for (let w = 0; w < 3; w++) {
+        const b = v * 12 + w * 4;
+        const k = kc + w * 4;
+        fields[off + v * 3 + w] =
+          B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
+      }
+    }
+  }
+  return fields;
+}
+
+/**
+ * CPU evaluator of a decoded dynamic-PDE clip. The per-segment time state (what the GPU path needs each
+ * frame) is set up here; the per-vertex knot fields of the CPU evaluation on first use.
+ */
 export class DynamicEvaluator {
   constructor(clip) {
     this.clip = clip;
-    const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, family, m } = clip;
+    const { nVertices: V, nCurves: C, nSegments: S, curveOf, family, m } = clip;
     this.nVertices = V;
-    const B = vertexBasis(clip);
-    // per knot the per-vertex contribution P[s] (V, 3), float32 like the Python evaluator
-    this.fields = new Float32Array((S + 1) * V * 3);
-    for (let s = 0; s <= S; s++) {
-      const off = s * V * 3;
-      const ko = s * C * 12;
-      for (let v = 0; v < V; v++) {
-        const kc = ko + curveOf[v] * 12;
-        for (let w = 0; w < 3; w++) {
-          const b = v * 12 + w * 4;
-          const k = kc + w * 4;
-          this.fields[off + v * 3 + w] =
-            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
-        }
-      }
-    }
+    this._fields = null;
+    this._tangentFields = null;
     this.item = new Int32Array(V * 3); // (curve, coordinate) item of each value
     for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = curveOf[v] * 3 + w;
     this.mu = new Float64Array(S * C * 3); // signed time constants
@@ -614,14 +663,19 @@ export class DynamicEvaluator {
     let widest = 1;
     for (let s = 0; s < S; s++) {
       const seen = new Map();
+      let last = NaN;
+      let lastK = -1;
       for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
-        let k = seen.get(this.mu[i]);
+        const mu = this.mu[i];
+        let k = mu === last ? lastK : seen.get(mu); // runs of one constant (most items are linear) skip the map
         if (k === undefined) {
           k = seen.size;
-          seen.set(this.mu[i], k);
-          unique.push(this.mu[i]);
+          seen.set(mu, k);
+          unique.push(mu);
         }
         this.muIndex[i] = k;
+        last = mu;
+        lastK = k;
       }
       this.muStart[s + 1] = unique.length;
       widest = Math.max(widest, seen.size);
@@ -640,10 +694,9 @@ export class DynamicEvaluator {
     // same for all its cubic items; cubicSegment (S) whether it has any. Version 4 (Catmull-Rom): weights of
     // the knot fields lo(s), s, s+1, hi(s+1). Version 5 (natural spline, `natural` true): weights of T_s,
     // P_s, P_s+1, T_s+1, with tangentFields ((S+1) x V x 3 float32, the layout of fields) the tangents T_j
-    // of every knot, solved once here
+    // of every knot
     this.cubic = null;
     this.natural = false;
-    this.tangentFields = null;
     const tangents = clip.tangents;
     if (tangents && tangents.some((x) => x === 1)) {
       this.cubic = new Uint8Array(S * C * 3);
@@ -656,12 +709,7 @@ export class DynamicEvaluator {
       }
       this.cubicWeights = new Float64Array(4);
       this.weights = new Float64Array(C * 12); // per item, by prepare(): the four weights it applies
-      if (clip.tangentSpline === 'natural') {
-        this.natural = true;
-        // from the float32 fields, in float64, rounded to float32 (as the reference evaluator)
-        const out = new Float32Array(this.fields.length);
-        this.tangentFields = naturalSplineTangents(clip.segmentT, this.fields, V * 3, out);
-      }
+      this.natural = clip.tangentSpline === 'natural';
     }
     this.pair = new Float64Array(2);
     this.pair2 = new Float64Array(2);
@@ -669,6 +717,25 @@ export class DynamicEvaluator {
       this.rot = new Float64Array(C * 9);
       this.trans = new Float64Array(C * 3);
     }
+  }
+
+  /** Per knot the per-vertex contribution P[s] ((S+1) x V x 3 float32), computed on first use. */
+  get fields() {
+    if (this._fields === null) this._fields = knotFields(this.clip);
+    return this._fields;
+  }
+
+  /**
+   * Natural-spline clips: the tangents T_j of every knot in the layout of fields, solved once on first use
+   * from the float32 fields in float64 and rounded to float32 (as the reference evaluator); else null.
+   */
+  get tangentFields() {
+    if (this._tangentFields === null && this.natural) {
+      const fields = this.fields;
+      const out = new Float32Array(fields.length);
+      this._tangentFields = naturalSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, out);
+    }
+    return this._tangentFields;
   }
 
   /**
@@ -679,7 +746,6 @@ export class DynamicEvaluator {
    * 0, phi0, phi1, 0); returns the segment index.
    */
   prepare(t) {
-    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
     const s = this.locate(t)[0];
     this.segmentState();
     const { phi0, phi1, uPhi0, uPhi1, muIndex } = this;
@@ -702,10 +768,13 @@ export class DynamicEvaluator {
     return s;
   }
 
-  /** Segment, local time and wrapped time of t into this.loc (no allocation); returns this.loc. */
+  /**
+   * Segment, local time and wrapped time of t into this.loc (no allocation); returns this.loc. Throws
+   * RangeError for a t the clip does not take (checkTime).
+   */
   locate(t) {
     const clip = this.clip;
-    return locate(clip.segmentT, t, clip.looping, this.loc);
+    return locate(clip.segmentT, checkTime(t, clip.looping), clip.looping, this.loc);
   }
 
   /**
@@ -733,93 +802,68 @@ export class DynamicEvaluator {
 
   /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
   evaluate(t, out = new Float32Array(this.nVertices * 3)) {
-    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
     if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
     const clip = this.clip;
     const s = this.prepare(t);
-    if (this.cubic !== null && this.cubicSegment[s] === 1) return this._evaluateCubic(s, out);
+    if (this.cubic !== null && this.cubicSegment[s] === 1) this._valuesCubic(s, out);
+    else this._values(s, out);
+    return clip.rigid ? applyRigid(out, this.rot, this.trans, clip.curveOf) : out;
+  }
+
+  /**
+   * The values of segment s before any rigid motion into out: base + phi0 P_s + phi1 P_s+1 per value, the
+   * time part rounded to float32 first in rigid clips (as the reference evaluator).
+   */
+  _values(s, out) {
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
-    const P0 = this.fields.subarray(s * N, (s + 1) * N);
-    const P1 = this.fields.subarray((s + 1) * N, (s + 2) * N);
-    if (!clip.rigid) {
+    const fields = this.fields;
+    const P0 = fields.subarray(s * N, (s + 1) * N);
+    const P1 = fields.subarray((s + 1) * N, (s + 2) * N);
+    if (!this.clip.rigid) {
       for (let i = 0; i < N; i++) {
         const k = item[i];
         out[i] = base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
       }
       return out;
     }
-    const { rot, trans } = this;
-    const curveOf = clip.curveOf;
-    for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {
-      const kx = item[i];
-      const x = Math.fround(base[i] + Math.fround(phi0[kx] * P0[i] + phi1[kx] * P1[i]));
-      const y = Math.fround(base[i + 1] + Math.fround(phi0[kx + 1] * P0[i + 1] + phi1[kx + 1] * P1[i + 1]));
-      const z = Math.fround(base[i + 2] + Math.fround(phi0[kx + 2] * P0[i + 2] + phi1[kx + 2] * P1[i + 2]));
-      const c = curveOf[v];
-      const r = c * 9;
-      out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
-      out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
-      out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+    const f = Math.fround;
+    for (let i = 0; i < N; i++) {
+      const k = item[i];
+      out[i] = f(base[i] + f(phi0[k] * P0[i] + phi1[k] * P1[i]));
     }
     return out;
   }
 
   /**
-   * evaluate() in a segment where some item uses the cubic: its values are ((w_lo P_lo + w_s P_s) +
+   * _values() in a segment where some item uses the cubic: its values are ((w_lo P_lo + w_s P_s) +
    * w_s+1 P_s+1) + w_hi P_hi + base in float32 for the Catmull-Rom cubic of version 4 (docs/format.md §3.10),
    * ((w_0 T_s + w_1 P_s) + w_2 P_s+1) + w_3 T_s+1 + base for the natural spline of version 5 (§3.11), every
-   * product and sum rounded, as the reference evaluator; the other items' as in evaluate().
+   * product and sum rounded, as the reference evaluator; the other items' as in _values().
    */
-  _evaluateCubic(s, out) {
+  _valuesCubic(s, out) {
     const clip = this.clip;
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
     const S = clip.nSegments;
     const f = Math.fround;
-    const field = (j) => this.fields.subarray(j * N, (j + 1) * N);
+    const fields = this.fields;
+    const field = (j) => fields.subarray(j * N, (j + 1) * N);
     const tangent = (j) => this.tangentFields.subarray(j * N, (j + 1) * N);
     // the outer two terms: knot fields lo(s), hi(s+1) (version 4) or tangent fields s, s+1 (version 5)
     const PL = this.natural ? tangent(s) : field(Math.max(s - 1, 0));
     const P0 = field(s);
     const P1 = field(s + 1);
     const PH = this.natural ? tangent(s + 1) : field(Math.min(s + 2, S));
-    const cw = this.cubicWeights;
-    const wl = cw[0];
-    const ws = cw[1];
-    const w1 = cw[2];
-    const wh = cw[3];
+    const [wl, ws, w1, wh] = this.cubicWeights;
     const cubic = this.cubic.subarray(s * clip.nCurves * 3, (s + 1) * clip.nCurves * 3);
-    if (!clip.rigid) {
-      for (let i = 0; i < N; i++) {
-        const k = item[i];
-        out[i] =
-          cubic[k] === 1
-            ? base[i] + f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
-            : base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
-      }
-      return out;
-    }
-    // the value before the rigid motion (float32), as in evaluate()
-    const value = (i, k) =>
-      f(
-        base[i] +
-          (cubic[k] === 1
-            ? f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
-            : f(phi0[k] * P0[i] + phi1[k] * P1[i])),
-      );
-    const { rot, trans } = this;
-    const curveOf = clip.curveOf;
-    for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {
-      const kx = item[i];
-      const x = value(i, kx);
-      const y = value(i + 1, kx + 1);
-      const z = value(i + 2, kx + 2);
-      const c = curveOf[v];
-      const r = c * 9;
-      out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
-      out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
-      out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+    const rigid = Boolean(clip.rigid);
+    for (let i = 0; i < N; i++) {
+      const k = item[i];
+      if (cubic[k] === 1) out[i] = base[i] + f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]));
+      // rigid clips round the plain items' time part to float32 before adding the base
+      else if (rigid) out[i] = base[i] + f(phi0[k] * P0[i] + phi1[k] * P1[i]);
+      else out[i] = base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
     }
     return out;
   }

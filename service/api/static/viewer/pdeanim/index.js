@@ -1,11 +1,14 @@
 // pdeanim: decode and evaluate pdeanim clips (dynamic-PDE and cyclic-spine) in browsers and node.
 
+import './zstd.js';
+
 export {
   ClipFormatError,
   decodeContainer,
   CONTAINER_VERSION,
   CONTAINER_VERSIONS,
   ENCODINGS,
+  setZstdDecompress,
 } from './container.js';
 export {
   decodeClip,
@@ -22,6 +25,7 @@ export {
 } from './clip.js';
 export {
   DynamicEvaluator,
+  checkTime,
   DYNAMIC_FORMAT_VERSION,
   DYNAMIC_FORMAT_VERSIONS,
   DYNAMIC_TOPOLOGY_VERSIONS,
@@ -30,4 +34,4 @@ export {
 } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
 export { spaceBasis, timePair, rigidTimePair, hermiteWeights, locate } from './basis.js';
-export { computeNormals, boundingBoxDiagonal } from './geometry.js';
+export { computeNormals, boundingBoxDiagonal, triangleFrame } from './geometry.js';
