@@ -171,7 +171,7 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
 
 # the clip's first frame on the source glTF against three.js drawing that glTF at its first animation frame:
 # the fit's error (rel. RMS target 2e-3 of the diagonal) moves silhouettes by about a pixel at this size;
-# runs show LOOK_SEEN; the bound leaves room for other rasterisers
+# runs showed 0.006 % (flat) and 0.001 % (smooth) of the pixels; the bound leaves room for other rasterisers
 LOOK_DIFFER = 0.01
 
 
