@@ -115,8 +115,8 @@ FILE_TYPES = {".glb": "model/gltf-binary", ".gltf": "model/gltf+json", ".obj": "
     operation_id="getMeshFile",
     response_class=Response,
     responses={
-        200: {"content": {"model/gltf-binary": {}, "application/octet-stream": {}},
-              "description": "the mesh file as uploaded"},
+        200: {"content": {t: {} for t in sorted(set(FILE_TYPES.values()))},
+              "description": "the mesh file as uploaded (the media type of its extension)"},
         **responses(304, 401, 404, 422),
     },
 )
