@@ -20,6 +20,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import httpx
@@ -28,9 +29,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
-from service_frames import SPOT, run_job  # noqa: E402
+from service_frames import SPOT, check, wait_job  # noqa: E402
 
-from service.demo import FIT, DemoServices, _key  # noqa: E402
+from service.demo import FIT, DemoServices  # noqa: E402
+from service.settings import Settings  # noqa: E402
+from service.store.tenants import issue_key  # noqa: E402
 
 
 def spot_refined(target: int) -> bytes:
@@ -56,6 +59,15 @@ def spot_refined(target: int) -> bytes:
     np.savetxt(buf, np.vstack([t.vertices, t.triangles_center[pick]]), fmt="v %.6f %.6f %.6f")
     np.savetxt(buf, faces + 1, fmt="f %d %d %d")
     return buf.getvalue().encode()
+
+
+def simulate_and_fit(api: httpx.Client, name: str, data: bytes, scene: dict, fit: dict) -> tuple[dict, float]:
+    """Upload the mesh, simulate ``scene`` and fit the poses with ``fit`` in one job; (job, seconds)."""
+    mesh = check(api.post("/v1/meshes", files={"file": (name, data)}))
+    job = check(api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"], "params": scene,
+                                           "then_fit": True, "fit": fit}))
+    start = time.monotonic()
+    return wait_job(api, job["id"], 3 * 3600), time.monotonic() - start
 
 
 def reuse_clip(api: httpx.Client, data: Path) -> dict | None:
@@ -95,12 +107,12 @@ def main() -> int:
         data.mkdir(parents=True, exist_ok=True)
         services = DemoServices(data)
         try:
-            key, url = _key(data), services.start()
+            key, url = issue_key(Settings(data_dir=data), "demo"), services.start()
             with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=600) as api:
                 clip = reuse_clip(api, data)
                 if clip is None or clip["info"].get("n_vertices") != args.vertices:
-                    job, _, total = run_job(api, "spot_50k.obj", spot_refined(args.vertices),
-                                            {"frames": args.frames, "target_tets": 1500}, FIT)
+                    job, total = simulate_and_fit(api, "spot_50k.obj", spot_refined(args.vertices),
+                                                  {"frames": args.frames, "target_tets": 1500}, FIT)
                     clip = api.get(f"/v1/clips/{job['result']['clip_id']}").json()
                     (data / "clip.json").write_text(json.dumps({"clip_id": clip["id"]}))
                     print(f"simulate + fit: {total:.0f} s")

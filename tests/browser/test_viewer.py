@@ -169,6 +169,58 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
         shutil.copy(shot["path"], services.log_dir / f"{kind}-{Path(shot['path']).name}")
 
 
+# the clip's first frame on the source glTF against three.js drawing that glTF at its first animation frame:
+# the fit's error (rel. RMS target 2e-3 of the diagonal) moves silhouettes by about a pixel at this size;
+# runs showed 0.006 % (flat) and 0.001 % (smooth) of the pixels; the bound leaves room for other rasterisers
+LOOK_DIFFER = 0.01
+
+
+@pytest.mark.parametrize("flat", [True, False], ids=["flat", "smooth"])
+def test_viewer_plays_on_the_source_gltf_with_its_look(services, flat, tmp_path):
+    """The mesh was uploaded as a textured, skinned GLB (flat: no normals, unwelded): the viewer plays the
+    clip on that glTF (texture, flat or smooth shading kept) and its first frame looks like three.js's own
+    rendering of the source at its first animation frame."""
+    from tests.browser.models import creature_glb
+
+    key = make_key(services.backend, "look")
+    api = client(services, key)
+    glb = creature_glb(flat)
+    mesh = api.post("/v1/meshes", files={"file": ("creature.glb", glb, "model/gltf-binary")})
+    assert mesh.status_code == 201, mesh.text
+    mid = mesh.json()["id"]
+    got = api.get(f"/v1/meshes/{mid}/file")
+    assert got.status_code == 200 and got.content == glb
+    assert got.headers["content-type"] == "model/gltf-binary"
+    poses = api.post(f"/v1/meshes/{mid}/poses", params={"fps": 10},
+                     files={"file": ("creature.glb", glb, "model/gltf-binary")})
+    assert poses.status_code == 201, poses.text
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses.json()["id"], "params": {}})
+    assert r.status_code == 202, r.text
+    job = wait_job(api, r.json()["id"], timeout=300)
+    assert job["state"] == "succeeded", (job, services.logs())
+    cid = job["result"]["clip_id"]
+    shots = [{"t": 0.0, "mode": "cpu", "path": str(tmp_path / "cpu.png")},
+             {"t": 0.0, "mode": "gpu", "path": str(tmp_path / "gpu.png")}]
+    reference = {"t": 0.0, "fileUrl": f"{services.url}/v1/meshes/{mid}/file", "key": key,
+                 "clipPath": str(tmp_path / "clip.png"), "referencePath": str(tmp_path / "reference.png")}
+    result = run_viewer(services, tmp_path, {"url": f"{services.url}/viewer#clip={cid}&key={key}&aa=0",
+                                             "shots": shots, "reference": reference})
+    assert result["info"]["model"] == "gltf", result["info"]
+    assert result["reference"]["flat"] is flat  # GLTFLoader shades a glTF without normals flat
+    clip_img, ref_img = (canvas_part(load_png(reference[k])) for k in ("clipPath", "referencePath"))
+    background = ref_img[2, 2]
+    covered = (np.abs(ref_img - background).sum(axis=2) > 30).mean()
+    assert covered > 0.02, f"the model covers {covered:.1%} of the view"
+    differ = (np.abs(clip_img - ref_img).max(axis=2) > 40).mean()
+    print(f"look ({'flat' if flat else 'smooth'}): {differ:.3%} of the pixels differ by more than 40 levels, "
+          f"model {covered:.1%} of the view")
+    assert differ < LOOK_DIFFER, f"{differ:.2%} of the pixels differ from three.js's rendering of the source"
+    gpu, cpu = (canvas_part(load_png(s["path"])) for s in shots)
+    assert (np.abs(gpu - cpu).max(axis=2) > 40).mean() < 0.005  # no facets on the GPU path
+    for path in (reference["clipPath"], reference["referencePath"], shots[1]["path"]):
+        shutil.copy(path, services.log_dir / f"look-{'flat' if flat else 'smooth'}-{Path(path).name}")
+
+
 def test_viewer_without_a_valid_key_says_why(services, clips, tmp_path):
     job = {"url": f"{services.url}/viewer#clip={clips['dynamic-pde']}&key=pda_wrong",
            "out": str(tmp_path / "r.json")}

@@ -21,7 +21,8 @@ try {
   result.info = await page.evaluate(() => {
     const v = window.pdeanimViewer;
     return { mode: v.mode, gpuUnavailableReason: v.gpuUnavailableReason, nVertices: v.clip.nVertices,
-      kind: v.clip.kind, sizes: v.sizes(), stats: document.querySelector('#stats').innerText };
+      kind: v.clip.kind, sizes: v.sizes(), stats: document.querySelector('#stats').innerText, model: v.model,
+      timings: v.timings, gpuBytes: v.gpuBytes };
   });
   result.positions = [];
   for (const t of job.times ?? []) {
@@ -34,6 +35,29 @@ try {
     await page.evaluate((t) => window.pdeanimViewer.show(t), shot.t);
     await page.screenshot({ path: shot.path });
     result.shots.push({ ...shot, mode });
+  }
+  if (job.reference) {
+    // the source glTF drawn by three.js alone (GLTFLoader, its own animation at time t * duration) with the
+    // viewer's camera and lights, next to the clip's frame at t on it
+    const r = job.reference;
+    await page.evaluate((t) => window.pdeanimViewer.show(t), r.t);
+    await page.screenshot({ path: r.clipPath });
+    result.reference = await page.evaluate(async ({ url, key, t }) => {
+      const { GLTFLoader } = await import('three/addons/loaders/GLTFLoader.js');
+      const THREE = await import('three');
+      const res = await fetch(url, { headers: { Authorization: `Bearer ${key}` } });
+      const gltf = await new GLTFLoader().parseAsync(await res.arrayBuffer(), '');
+      const mixer = new THREE.AnimationMixer(gltf.scene);
+      const anim = gltf.animations[0];
+      mixer.clipAction(anim).play();
+      mixer.setTime(t * anim.duration);
+      await window.pdeanimViewer.swapModel(gltf.scene);
+      let flat = false;
+      gltf.scene.traverse((o) => { if (o.isMesh) flat = flat || Boolean(o.material.flatShading); });
+      return { flat, model: window.pdeanimViewer.model };
+    }, { url: r.fileUrl, key: r.key, t: r.t });
+    await page.screenshot({ path: r.referencePath });
+    await page.evaluate(() => window.pdeanimViewer.swapModel(null));
   }
   result.info.statsAfter = await page.evaluate(() => document.querySelector('#stats').innerText);
   writeFileSync(job.out, JSON.stringify(result));

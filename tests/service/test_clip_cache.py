@@ -20,7 +20,7 @@ def _item(name: str) -> CachedClip:
 
 
 def test_array_bytes_counts_the_evaluation_tables_once():
-    item = _item("fit-blend-displacement-chord-loop-v3.clip")
+    item = _item("fit-blend-displacement-chord-loop-basis.clip")
     fields = item.clip._knot_fields  # (S+1, V*3) float32: the table that grows with segments x vertices
     assert fields.nbytes > 0
     assert item.nbytes >= fields.nbytes
@@ -29,8 +29,8 @@ def test_array_bytes_counts_the_evaluation_tables_once():
 
 
 def test_the_cache_drops_the_least_recent_clips_beyond_its_bytes_and_keeps_the_newest():
-    names = ["fit-blend-displacement-chord-loop-v3.clip", "synthetic-blend-displacement-paper-v3.clip",
-             "synthetic-blend-rigid-chord-loop-v3.clip"]
+    names = ["fit-blend-displacement-chord-loop-basis.clip", "synthetic-blend-displacement-paper-basis.clip",
+             "synthetic-blend-rigid-chord-loop-basis.clip"]
     items = {n: _item(n) for n in names}
     smallest = min(i.nbytes for i in items.values())
     cache = ClipCache(max_entries=32, max_bytes=smallest + 1)  # never room for two clips

@@ -258,3 +258,19 @@ def test_topology_belongs_to_a_clip(api, services, sphere):
     with client(services[0], make_key(services[0].backend, "mallory")) as mallory:
         assert_error(mallory.get(f"/v1/clips/{fit['id']}/topology"), 404, "not_found")
     assert_error(client(services[0], None).get(f"/v1/clips/{fit['id']}/topology"), 401, "unauthorized")
+
+
+def test_mesh_file_is_served_as_uploaded_with_its_media_type(api, services, sphere, data_dir):
+    mid = sphere["mesh_id"]
+    r = api.get(f"/v1/meshes/{mid}/file")
+    assert r.status_code == 200, r.text
+    assert r.content == (data_dir / "fish_eel.obj").read_bytes()
+    assert r.headers["content-type"].split(";")[0] == "model/obj"
+    assert r.headers["cache-control"] == PRIVATE
+    assert f'filename="{mid}.obj"' in r.headers["content-disposition"]
+    again = api.get(f"/v1/meshes/{mid}/file", headers={"If-None-Match": r.headers["etag"]})
+    assert again.status_code == 304 and again.content == b""
+    assert_error(api.get("/v1/meshes/mesh_00000000000000000000000000000000/file"), 404, "not_found")
+    with client(services[0], make_key(services[0].backend, "mallory")) as mallory:
+        assert_error(mallory.get(f"/v1/meshes/{mid}/file"), 404, "not_found")
+    assert_error(client(services[0], None).get(f"/v1/meshes/{mid}/file"), 401, "unauthorized")

@@ -34,6 +34,7 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
         "uploadMesh",
         "getMesh",
         "getMeshTopology",
+        "getMeshFile",
         "uploadPoses",
         "getPoses",
         "createJob",

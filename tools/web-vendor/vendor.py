@@ -24,6 +24,10 @@ NPM_FILES: dict[str, list[tuple[str, str]]] = {
     "three": [("build/three.module.js", "three/three.module.js"),
               ("build/three.core.js", "three/three.core.js"),
               ("examples/jsm/controls/OrbitControls.js", "three/addons/controls/OrbitControls.js"),
+              # the viewer plays clips on the mesh's original glTF (GLTFLoader and what it imports)
+              ("examples/jsm/loaders/GLTFLoader.js", "three/addons/loaders/GLTFLoader.js"),
+              ("examples/jsm/utils/BufferGeometryUtils.js", "three/addons/utils/BufferGeometryUtils.js"),
+              ("examples/jsm/utils/SkeletonUtils.js", "three/addons/utils/SkeletonUtils.js"),
               ("LICENSE", "three/LICENSE")],
     # ESM build, mapped to the bare specifier "fzstd" by the viewer's import map (.js: served as JavaScript)
     "fzstd": [("esm/index.mjs", "fzstd/fzstd.js"), ("LICENSE", "fzstd/LICENSE")],

@@ -5,11 +5,12 @@ import { readFileSync, writeFileSync } from 'node:fs';
 import { parseArgs } from 'node:util';
 import { ClipFormatError, createEvaluator, loadClip, splitClipFile } from '../src/index.js';
 
-const USAGE = `usage: pdeanim-eval CLIP --t T1,T2,... --out FILE.bin
-       pdeanim-eval --coefficients COEF --topology TOPO --t T1,T2,... --out FILE.bin
+const USAGE = `usage: pdeanim-eval CLIP --t T1,T2,...|all --out FILE.bin
+       pdeanim-eval --coefficients COEF --topology TOPO --t T1,T2,...|all --out FILE.bin
 
 Evaluates a pdeanim clip (a CLIP file, or its two parts) at normalised times t and writes the positions
-as little-endian float32 (K, V, 3) in the original vertex order (K times, V vertices).`;
+as little-endian float32 (K, V, 3) in the original vertex order (K times, V vertices). --t all: every
+source frame. Clips that do not loop take t in [0, 1]; looping ones any t (period 1), as \`pdeanim frame\`.`;
 
 class UsageError extends Error {}
 
@@ -28,7 +29,15 @@ function read(path, what) {
   }
 }
 
+/** The source frames' normalised times (t of frame k), as `pdeanim frame --t all`. */
+function frameTimes(clip) {
+  const ft = clip.frameTimes;
+  const span = ft.length > 1 ? ft[ft.length - 1] - ft[0] : 0;
+  return Array.from(ft, (x) => (span > 0 ? (x - ft[0]) / span : 0));
+}
+
 function parseTimes(text) {
+  if (String(text).trim().toLowerCase() === 'all') return 'all';
   const parts = String(text)
     .split(',')
     .map((s) => s.trim());
@@ -52,6 +61,21 @@ function joinValues(argv) {
     } else out.push(argv[i]);
   }
   return out;
+}
+
+/** The clip's two parts from a CLIP file (the positional) or from --coefficients and --topology. */
+function readParts(o, positionals) {
+  if (positionals.length === 1) {
+    if (o.coefficients !== undefined || o.topology !== undefined) {
+      throw new UsageError('give either a CLIP file or --coefficients and --topology, not both');
+    }
+    return splitClipFile(read(positionals[0], 'clip file'));
+  }
+  if (o.coefficients === undefined || o.topology === undefined) {
+    throw new UsageError('give a CLIP file, or both --coefficients COEF and --topology TOPO');
+  }
+  const coefficients = read(o.coefficients, 'coefficients part');
+  return { coefficients, topology: read(o.topology, 'topology part') };
 }
 
 async function main(argv) {
@@ -80,22 +104,12 @@ async function main(argv) {
     throw new UsageError(`expected at most one CLIP file, got ${positionals.length} paths`);
   if (o.t === undefined) throw new UsageError('--t is required');
   if (o.out === undefined) throw new UsageError('--out is required');
-  const times = parseTimes(o.t);
-  let topology;
-  let coefficients;
-  if (positionals.length === 1) {
-    if (o.coefficients !== undefined || o.topology !== undefined) {
-      throw new UsageError('give either a CLIP file or --coefficients and --topology, not both');
-    }
-    ({ topology, coefficients } = splitClipFile(read(positionals[0], 'clip file')));
-  } else {
-    if (o.coefficients === undefined || o.topology === undefined) {
-      throw new UsageError('give a CLIP file, or both --coefficients COEF and --topology TOPO');
-    }
-    coefficients = read(o.coefficients, 'coefficients part');
-    topology = read(o.topology, 'topology part');
-  }
+  let times = parseTimes(o.t);
+  const { topology, coefficients } = readParts(o, positionals);
   const clip = await loadClip(topology, coefficients);
+  if (times === 'all') times = frameTimes(clip);
+  const bad = clip.looping ? undefined : times.find((t) => !(t >= 0 && t <= 1));
+  if (bad !== undefined) throw new UsageError(`--t must lie in [0, 1] for this clip (it does not loop), got ${bad}`);
   const ev = createEvaluator(clip);
   const N = clip.nVertices * 3;
   const out = new Float32Array(times.length * N);

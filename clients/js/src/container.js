@@ -1,7 +1,14 @@
 // Decode the pdeanim binary container: magic, version, JSON header, little-endian arrays (docs/format.md §1);
 // an array may be stored as one zstd frame ("zstd") or byte planes in one zstd frame ("shuffle-zstd").
 
-import { Decompress } from 'fzstd';
+// The zstd decoder is installed by zstd.js (which index.js and three.js import): a Web Worker, which cannot
+// resolve the bare specifier 'fzstd', installs it from a URL instead.
+let Decompress = null;
+
+/** Install the zstd streaming decoder (fzstd's Decompress class) used for encoded arrays. */
+export function setZstdDecompress(cls) {
+  Decompress = cls;
+}
 
 export const MAGIC = 'PDEANIM\0';
 /** The container version this build reads (the uint32 at byte 8). */
@@ -122,6 +129,7 @@ function decodeArrayBytes(stored, encoding, itemsize, count, label) {
   if (declared !== size) {
     throw new ClipFormatError(`${label}: zstd frame holds ${declared} bytes, expected ${size}`);
   }
+  if (Decompress === null) throw new ClipFormatError(`${label}: no zstd decoder installed (import 'pdeanim')`);
   let raw = new Uint8Array(size);
   let got = 0;
   const inflate = new Decompress((chunk) => {
@@ -148,6 +156,46 @@ function decodeArrayBytes(stored, encoding, itemsize, count, label) {
     }
   }
   return raw;
+}
+
+/**
+ * One array of a container: its header entry spec checked against the bytes (data starting at byte start)
+ * and decoded into {dtype, shape, data[, encoding]}.
+ */
+function decodeArray(bytes, start, name, spec) {
+  const shape = Array.isArray(spec?.shape) ? spec.shape.map(Number) : null;
+  const dtype = spec?.dtype;
+  if (
+    !shape ||
+    !(dtype in DTYPES) ||
+    shape.some((s) => !Number.isInteger(s) || s < 0) ||
+    !Number.isInteger(spec.offset) ||
+    !Number.isInteger(spec.nbytes) ||
+    spec.offset < 0 ||
+    spec.nbytes < 0
+  ) {
+    throw new ClipFormatError(`bad array entry ${JSON.stringify(name)} in container header`);
+  }
+  const label = `array ${JSON.stringify(name)}`;
+  const encoded = Object.hasOwn(spec, 'encoding');
+  const encoding = spec.encoding;
+  if (encoded && !ENCODINGS.includes(encoding)) {
+    throw new ClipFormatError(
+      `${label} has an unknown encoding ${JSON.stringify(encoding)} (known: ${ENCODINGS.join(', ')})`,
+    );
+  }
+  const count = shape.reduce((a, b) => a * b, 1);
+  const itemsize = DTYPES[dtype][1];
+  if (!Number.isSafeInteger(count * itemsize) || (!encoded && spec.nbytes !== count * itemsize)) {
+    throw new ClipFormatError(`${label} has an inconsistent dtype or size`);
+  }
+  const lo = start + spec.offset;
+  if (lo + spec.nbytes > bytes.byteLength) {
+    throw new ClipFormatError(`${label} lies outside the container (truncated file?)`);
+  }
+  if (!encoded) return { dtype, shape, data: typedArray(bytes, lo, dtype, count) };
+  const raw = decodeArrayBytes(bytes.subarray(lo, lo + spec.nbytes), encoding, itemsize, count, label);
+  return { dtype, shape, data: typedArray(raw, 0, dtype, count), encoding };
 }
 
 /**
@@ -185,43 +233,6 @@ export function decodeContainer(data) {
   const table = header.arrays || {};
   delete header.arrays;
   const arrays = {};
-  for (const [name, spec] of Object.entries(table)) {
-    const shape = Array.isArray(spec?.shape) ? spec.shape.map(Number) : null;
-    const dtype = spec?.dtype;
-    if (
-      !shape ||
-      !(dtype in DTYPES) ||
-      shape.some((s) => !Number.isInteger(s) || s < 0) ||
-      !Number.isInteger(spec.offset) ||
-      !Number.isInteger(spec.nbytes) ||
-      spec.offset < 0 ||
-      spec.nbytes < 0
-    ) {
-      throw new ClipFormatError(`bad array entry ${JSON.stringify(name)} in container header`);
-    }
-    const label = `array ${JSON.stringify(name)}`;
-    const encoded = Object.hasOwn(spec, 'encoding');
-    const encoding = spec.encoding;
-    if (encoded && !ENCODINGS.includes(encoding)) {
-      throw new ClipFormatError(
-        `${label} has an unknown encoding ${JSON.stringify(encoding)} (known: ${ENCODINGS.join(', ')})`,
-      );
-    }
-    const count = shape.reduce((a, b) => a * b, 1);
-    const itemsize = DTYPES[dtype][1];
-    if (!Number.isSafeInteger(count * itemsize) || (!encoded && spec.nbytes !== count * itemsize)) {
-      throw new ClipFormatError(`${label} has an inconsistent dtype or size`);
-    }
-    const lo = start + spec.offset;
-    if (lo + spec.nbytes > bytes.byteLength) {
-      throw new ClipFormatError(`${label} lies outside the container (truncated file?)`);
-    }
-    if (!encoded) {
-      arrays[name] = { dtype, shape, data: typedArray(bytes, lo, dtype, count) };
-    } else {
-      const raw = decodeArrayBytes(bytes.subarray(lo, lo + spec.nbytes), encoding, itemsize, count, label);
-      arrays[name] = { dtype, shape, data: typedArray(raw, 0, dtype, count), encoding };
-    }
-  }
+  for (const [name, spec] of Object.entries(table)) arrays[name] = decodeArray(bytes, start, name, spec);
   return { header, arrays };
 }

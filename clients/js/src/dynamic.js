@@ -218,12 +218,16 @@ function decodeKnots(ch, ca, S, C) {
     const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
     const weights = new Float64Array(r * T); // q * h
     for (let i = 0; i < weights.length; i++) weights[i] = ((z[i] >>> 1) ^ -(z[i] & 1)) * steps[(i % T) >> 2];
+    const acc = new Float64Array(T);
     for (let s = 0; s < n; s++) {
-      for (let track = 0; track < T; track++) {
-        let acc = 0;
-        for (let j = 0; j < r; j++) acc += weights[j * T + track] * basis[j * n + s];
-        acc += residual[s * T + track] * steps[track >> 2];
-        knots[s * T + track] = Math.fround(acc);
+      // per track the same order of operations as a loop over j per track, with contiguous reads
+      acc.fill(0);
+      for (let j = 0; j < r; j++) {
+        const b = basis[j * n + s];
+        for (let track = 0, o = j * T; track < T; track++, o++) acc[track] += weights[o] * b;
+      }
+      for (let track = 0, o = s * T; track < T; track++, o++) {
+        knots[o] = Math.fround(acc[track] + residual[o] * steps[track >> 2]);
       }
     }
   }
@@ -275,6 +279,45 @@ function count(header, key, part) {
   return value;
 }
 
+/** Per vertex its curve (V) from the curves' order and offsets; order must be a permutation of 0..V-1. */
+function curveOfVertices(order, offsets, V) {
+  const curveOf = new Int32Array(V).fill(-1);
+  for (let c = 0; c + 1 < offsets.length; c++) {
+    for (let i = offsets[c]; i < offsets[c + 1]; i++) {
+      const v = order[i];
+      if (v < 0 || v >= V || curveOf[v] !== -1) {
+        throw new ClipFormatError('topology curves are invalid: order must be a permutation of the vertices');
+      }
+      curveOf[v] = c;
+    }
+  }
+  return curveOf;
+}
+
+/** The rigid tracks of a rigid clip's coefficients part (docs/format.md §3.7): boundaries, centre, knots, mu. */
+function rigidTracks(ca, C) {
+  const rs = need(ca, 'rigid_segment_t', [null], 'coefficients', F8).data;
+  const Sr = rs.length - 1;
+  if (Sr < 1 || !nondecreasing(rs)) {
+    throw new ClipFormatError('rigid segment boundaries must be non-decreasing with at least one segment');
+  }
+  const rigid = { segmentT: rs, centre: need(ca, 'rigid_centre', [C, 3], 'coefficients', F4).data };
+  for (const name of ['rot', 'trans']) {
+    rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients', F4).data;
+    const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients', F4).data;
+    if (mu.some((x) => x <= -Math.PI)) throw new ClipFormatError('rigid trig time constants must be above -pi');
+    rigid[`${name}Mu`] = mu;
+  }
+  return rigid;
+}
+
+/** The coefficients header's motion mode, one of MOTIONS. */
+function motionOf(ch) {
+  const motion = String(ch.motion);
+  if (!MOTIONS.includes(motion)) throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
+  return motion;
+}
+
 /** Validate and decode the topology and coefficients containers of a dynamic-PDE clip (format 1.x). */
 export function decodeDynamic(topo, coef) {
   const th = topo.header;
@@ -290,16 +333,7 @@ export function decodeDynamic(topo, coef) {
   if (C < 0 || offsets[0] !== 0 || offsets[C] !== V || !nondecreasing(offsets)) {
     throw new ClipFormatError('topology curves are invalid: offsets must run from 0 to n_vertices');
   }
-  const curveOf = new Int32Array(V).fill(-1);
-  for (let c = 0; c < C; c++) {
-    for (let i = offsets[c]; i < offsets[c + 1]; i++) {
-      const v = order[i];
-      if (v < 0 || v >= V || curveOf[v] !== -1) {
-        throw new ClipFormatError('topology curves are invalid: order must be a permutation of the vertices');
-      }
-      curveOf[v] = c;
-    }
-  }
+  const curveOf = curveOfVertices(order, offsets, V);
   const u = toVertexOrder(t.uCurve, uColumns, order);
   for (let i = 0; i < u.length; i++) {
     if (!(u[i] >= 0 && u[i] <= 1)) throw new ClipFormatError('topology curve parameters u must lie in [0, 1]');
@@ -313,28 +347,11 @@ export function decodeDynamic(topo, coef) {
   }
   const { family, m } = familyOf(ca, S, C);
   const timeModel = timeModelOf(ca, C, m, S, segT);
-  const motion = String(ch.motion);
-  if (!MOTIONS.includes(motion))
-    throw new ClipFormatError(`unknown motion mode ${JSON.stringify(ch.motion)}`);
+  const motion = motionOf(ch);
   const D = need(ca, 'D', [C, 3], 'coefficients', F4).data;
   const knots = decodeKnots(ch, ca, S, C);
   const frameTimes = need(ca, 'frame_times', [null], 'coefficients', F8).data;
-  let rigid = null;
-  if (motion === 'rigid') {
-    const rs = need(ca, 'rigid_segment_t', [null], 'coefficients', F8).data;
-    const Sr = rs.length - 1;
-    if (Sr < 1 || !nondecreasing(rs)) {
-      throw new ClipFormatError('rigid segment boundaries must be non-decreasing with at least one segment');
-    }
-    rigid = { segmentT: rs, centre: need(ca, 'rigid_centre', [C, 3], 'coefficients', F4).data };
-    for (const name of ['rot', 'trans']) {
-      rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients', F4).data;
-      const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients', F4).data;
-      if (mu.some((x) => x <= -Math.PI))
-        throw new ClipFormatError('rigid trig time constants must be above -pi');
-      rigid[`${name}Mu`] = mu;
-    }
-  }
+  const rigid = motion === 'rigid' ? rigidTracks(ca, C) : null;
   return {
     kind: 'dynamic-pde',
     nVertices: V,
@@ -507,28 +524,73 @@ export function splineWeights(segmentT, s, tau, out, o = 0) {
   return out;
 }
 
-/** CPU evaluator of a decoded dynamic-PDE clip; everything independent of t is computed here once. */
+/**
+ * Normalised clip time t checked against the clip: looping clips take any finite t (they wrap with period
+ * 1), others t in [0, 1] only (as `pdeanim frame --t` and GET /v1/clips/{id}/frame, which refuse the rest).
+ * Throws RangeError; returns t.
+ */
+export function checkTime(t, looping) {
+  if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
+  if (!looping && !(t >= 0 && t <= 1)) {
+    throw new RangeError(`clip time t must lie in [0, 1] for this clip (it does not loop), got ${t}`);
+  }
+  return t;
+}
+
+/**
+ * Rigid clips: turn the values before the rigid motion (V * 3, read as float32, in place in out) by each
+ * vertex's curve rotation rot (C * 9, row-major) and add its centre trans (C * 3).
+ */
+function applyRigid(out, rot, trans, curveOf) {
+  const f = Math.fround;
+  for (let v = 0, i = 0; v < curveOf.length; v++, i += 3) {
+    const x = f(out[i]);
+    const y = f(out[i + 1]);
+    const z = f(out[i + 2]);
+    const c = curveOf[v];
+    const r = c * 9;
+    out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
+    out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
+    out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+  }
+  return out;
+}
+
+/**
+ * Per knot the per-vertex contribution P[s] = knots_s . S(u) ((S+1) x V x 3 float32, like the Python
+ * evaluator) of a decoded dynamic clip.
+ */
+function knotFields(clip) {
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots } = clip;
+  const B = vertexBasis(clip);
+  const fields = new Float32Array((S + 1) * V * 3);
+  for (let s = 0; s <= S; s++) {
+    const off = s * V * 3;
+    const ko = s * C * 12;
+    for (let v = 0; v < V; v++) {
+      const kc = ko + curveOf[v] * 12;
+      for (let w = 0; w < 3; w++) {
+        const b = v * 12 + w * 4;
+        const k = kc + w * 4;
+        fields[off + v * 3 + w] =
+          B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
+      }
+    }
+  }
+  return fields;
+}
+
+/**
+ * CPU evaluator of a decoded dynamic-PDE clip. The per-segment time state (what the GPU path needs each
+ * frame) is set up here; the per-vertex knot fields of the CPU evaluation on first use.
+ */
 export class DynamicEvaluator {
   constructor(clip) {
     this.clip = clip;
-    const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, family, m } = clip;
+    const { nVertices: V, nCurves: C, nSegments: S, curveOf, family, m } = clip;
     this.nVertices = V;
-    const B = vertexBasis(clip);
-    // per knot the per-vertex contribution P[s] (V, 3), float32 like the Python evaluator
-    this.fields = new Float32Array((S + 1) * V * 3);
-    for (let s = 0; s <= S; s++) {
-      const off = s * V * 3;
-      const ko = s * C * 12;
-      for (let v = 0; v < V; v++) {
-        const kc = ko + curveOf[v] * 12;
-        for (let w = 0; w < 3; w++) {
-          const b = v * 12 + w * 4;
-          const k = kc + w * 4;
-          this.fields[off + v * 3 + w] =
-            B[b] * knots[k] + B[b + 1] * knots[k + 1] + B[b + 2] * knots[k + 2] + B[b + 3] * knots[k + 3];
-        }
-      }
-    }
+    this._fields = null;
+    this._tangentFields = null;
     this.item = new Int32Array(V * 3); // (curve, coordinate) item of each value
     for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = curveOf[v] * 3 + w;
     this.mu = new Float64Array(S * C * 3); // signed time constants
@@ -542,14 +604,19 @@ export class DynamicEvaluator {
     let widest = 1;
     for (let s = 0; s < S; s++) {
       const seen = new Map();
+      let last = NaN;
+      let lastK = -1;
       for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
-        let k = seen.get(this.mu[i]);
+        const mu = this.mu[i];
+        let k = mu === last ? lastK : seen.get(mu); // runs of one constant (most items are linear) skip the map
         if (k === undefined) {
           k = seen.size;
-          seen.set(this.mu[i], k);
-          unique.push(this.mu[i]);
+          seen.set(mu, k);
+          unique.push(mu);
         }
         this.muIndex[i] = k;
+        last = mu;
+        lastK = k;
       }
       this.muStart[s + 1] = unique.length;
       widest = Math.max(widest, seen.size);
@@ -566,15 +633,11 @@ export class DynamicEvaluator {
     // clip takes the plain path below). spline (C * 3) is 1 for the items on it, in every segment;
     // cubicWeights are the segment's four weights on T_s, P_s, P_s+1, T_s+1 (float32-rounded), the same for
     // all its spline items, with tangentFields ((S+1) x V x 3 float32, the layout of fields) the tangents
-    // T_j of every knot, solved once here
+    // T_j of every knot, solved on first use
     this.spline = clip.timeModel ?? null;
-    this.tangentFields = null;
     if (this.spline !== null) {
       this.cubicWeights = new Float64Array(4);
       this.weights = new Float64Array(C * 12); // per item, by prepare(): the four weights it applies
-      // from the float32 fields, in float64, rounded to float32 (as the reference evaluator)
-      const out = new Float32Array(this.fields.length);
-      this.tangentFields = naturalSplineTangents(clip.segmentT, this.fields, V * 3, out);
     }
     this.pair = new Float64Array(2);
     this.pair2 = new Float64Array(2);
@@ -584,6 +647,25 @@ export class DynamicEvaluator {
     }
   }
 
+  /** Per knot the per-vertex contribution P[s] ((S+1) x V x 3 float32), computed on first use. */
+  get fields() {
+    if (this._fields === null) this._fields = knotFields(this.clip);
+    return this._fields;
+  }
+
+  /**
+   * Clips with spline items: the tangents T_j of every knot in the layout of fields, solved once on first use
+   * from the float32 fields in float64 and rounded to float32 (as the reference evaluator); else null.
+   */
+  get tangentFields() {
+    if (this._tangentFields === null && this.spline !== null) {
+      const fields = this.fields;
+      const out = new Float32Array(fields.length);
+      this._tangentFields = naturalSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, out);
+    }
+    return this._tangentFields;
+  }
+
   /**
    * The per-curve state at t (everything t changes before the per-vertex sums): fills this.phi0, this.phi1
    * (C * 3 time pairs of the segment), for rigid clips this.rot (C * 9) and this.trans (C * 3), and for
@@ -591,7 +673,6 @@ export class DynamicEvaluator {
    * the spline's float32-rounded ones, or 0, phi0, phi1, 0); returns the segment index.
    */
   prepare(t) {
-    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
     const s = this.locate(t)[0];
     this.segmentState();
     const { phi0, phi1, uPhi0, uPhi1, muIndex } = this;
@@ -614,10 +695,13 @@ export class DynamicEvaluator {
     return s;
   }
 
-  /** Segment, local time and wrapped time of t into this.loc (no allocation); returns this.loc. */
+  /**
+   * Segment, local time and wrapped time of t into this.loc (no allocation); returns this.loc. Throws
+   * RangeError for a t the clip does not take (checkTime).
+   */
   locate(t) {
     const clip = this.clip;
-    return locate(clip.segmentT, t, clip.looping, this.loc);
+    return locate(clip.segmentT, checkTime(t, clip.looping), clip.looping, this.loc);
   }
 
   /**
@@ -644,90 +728,65 @@ export class DynamicEvaluator {
 
   /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
   evaluate(t, out = new Float32Array(this.nVertices * 3)) {
-    if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
     if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
     const clip = this.clip;
     const s = this.prepare(t);
-    if (this.spline !== null) return this._evaluateSpline(s, out);
+    if (this.spline !== null) this._valuesSpline(s, out);
+    else this._values(s, out);
+    return clip.rigid ? applyRigid(out, this.rot, this.trans, clip.curveOf) : out;
+  }
+
+  /**
+   * The values of segment s before any rigid motion into out: base + phi0 P_s + phi1 P_s+1 per value, the
+   * time part rounded to float32 first in rigid clips (as the reference evaluator).
+   */
+  _values(s, out) {
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
-    const P0 = this.fields.subarray(s * N, (s + 1) * N);
-    const P1 = this.fields.subarray((s + 1) * N, (s + 2) * N);
-    if (!clip.rigid) {
+    const fields = this.fields;
+    const P0 = fields.subarray(s * N, (s + 1) * N);
+    const P1 = fields.subarray((s + 1) * N, (s + 2) * N);
+    if (!this.clip.rigid) {
       for (let i = 0; i < N; i++) {
         const k = item[i];
         out[i] = base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
       }
       return out;
     }
-    const { rot, trans } = this;
-    const curveOf = clip.curveOf;
-    for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {
-      const kx = item[i];
-      const x = Math.fround(base[i] + Math.fround(phi0[kx] * P0[i] + phi1[kx] * P1[i]));
-      const y = Math.fround(base[i + 1] + Math.fround(phi0[kx + 1] * P0[i + 1] + phi1[kx + 1] * P1[i + 1]));
-      const z = Math.fround(base[i + 2] + Math.fround(phi0[kx + 2] * P0[i + 2] + phi1[kx + 2] * P1[i + 2]));
-      const c = curveOf[v];
-      const r = c * 9;
-      out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
-      out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
-      out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+    const f = Math.fround;
+    for (let i = 0; i < N; i++) {
+      const k = item[i];
+      out[i] = f(base[i] + f(phi0[k] * P0[i] + phi1[k] * P1[i]));
     }
     return out;
   }
 
   /**
-   * evaluate() of a clip with spline items: their values are ((w_0 T_s + w_1 P_s) + w_2 P_s+1) + w_3 T_s+1
+   * _values() of a clip with spline items: their values are ((w_0 T_s + w_1 P_s) + w_2 P_s+1) + w_3 T_s+1
    * + base (docs/format.md §3.5), every product and sum rounded to float32, as the reference evaluator; the
-   * other items' as in evaluate().
+   * other items' as in _values().
    */
-  _evaluateSpline(s, out) {
+  _valuesSpline(s, out) {
     const clip = this.clip;
     const { phi0, phi1, item, base } = this;
     const N = this.nVertices * 3;
     const f = Math.fround;
-    const field = (j) => this.fields.subarray(j * N, (j + 1) * N);
+    const fields = this.fields;
+    const field = (j) => fields.subarray(j * N, (j + 1) * N);
     const tangent = (j) => this.tangentFields.subarray(j * N, (j + 1) * N);
     const PL = tangent(s);
     const P0 = field(s);
     const P1 = field(s + 1);
     const PH = tangent(s + 1);
-    const cw = this.cubicWeights;
-    const wl = cw[0];
-    const ws = cw[1];
-    const w1 = cw[2];
-    const wh = cw[3];
+    const [wl, ws, w1, wh] = this.cubicWeights;
     const spline = this.spline;
-    if (!clip.rigid) {
-      for (let i = 0; i < N; i++) {
-        const k = item[i];
-        out[i] =
-          spline[k] === 1
-            ? base[i] + f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
-            : base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
-      }
-      return out;
-    }
-    // the value before the rigid motion (float32), as in evaluate()
-    const value = (i, k) =>
-      f(
-        base[i] +
-          (spline[k] === 1
-            ? f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]))
-            : f(phi0[k] * P0[i] + phi1[k] * P1[i])),
-      );
-    const { rot, trans } = this;
-    const curveOf = clip.curveOf;
-    for (let v = 0, i = 0; v < this.nVertices; v++, i += 3) {
-      const kx = item[i];
-      const x = value(i, kx);
-      const y = value(i + 1, kx + 1);
-      const z = value(i + 2, kx + 2);
-      const c = curveOf[v];
-      const r = c * 9;
-      out[i] = rot[r] * x + rot[r + 1] * y + rot[r + 2] * z + trans[c * 3];
-      out[i + 1] = rot[r + 3] * x + rot[r + 4] * y + rot[r + 5] * z + trans[c * 3 + 1];
-      out[i + 2] = rot[r + 6] * x + rot[r + 7] * y + rot[r + 8] * z + trans[c * 3 + 2];
+    const rigid = Boolean(clip.rigid);
+    for (let i = 0; i < N; i++) {
+      const k = item[i];
+      if (spline[k] === 1) out[i] = base[i] + f(f(f(f(wl * PL[i]) + f(ws * P0[i])) + f(w1 * P1[i])) + f(wh * PH[i]));
+      // rigid clips round the plain items' time part to float32 before adding the base
+      else if (rigid) out[i] = base[i] + f(phi0[k] * P0[i] + phi1[k] * P1[i]);
+      else out[i] = base[i] + phi0[k] * P0[i] + phi1[k] * P1[i];
     }
     return out;
   }

@@ -1,4 +1,5 @@
-// Small geometry helpers: area-weighted vertex normals and the bounding-box diagonal.
+// Small geometry helpers: area-weighted vertex normals, the bounding-box diagonal, and the orthonormal frame
+// of a triangle (the GPU path turns each vertex normal with the frame of one of its triangles).
 
 /** Area-weighted vertex normals (V, 3) of positions (V * 3) and faces (T * 3) into out; returns out. */
 export function computeNormals(positions, faces, out = new Float32Array(positions.length)) {
@@ -44,4 +45,56 @@ export function boundingBoxDiagonal(positions) {
     }
   }
   return positions.length ? Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) : 0;
+}
+
+/**
+ * Orthonormal frame of triangle (p, a, b) of positions (vertex i at pos[3i..3i+2]) into out[o..o+8], rows
+ * t1, t2, n: t1 along p->a, n the triangle normal, t2 = n x t1 (the shaders build the same frame from
+ * evaluated positions). Degenerate edges give zero rows instead of NaN. Allocation-free; returns out.
+ */
+export function triangleFrame(pos, p, a, b, out, o = 0) {
+  const p3 = p * 3;
+  const e1x = pos[a * 3] - pos[p3];
+  const e1y = pos[a * 3 + 1] - pos[p3 + 1];
+  const e1z = pos[a * 3 + 2] - pos[p3 + 2];
+  const e2x = pos[b * 3] - pos[p3];
+  const e2y = pos[b * 3 + 1] - pos[p3 + 1];
+  const e2z = pos[b * 3 + 2] - pos[p3 + 2];
+  const l1 = Math.hypot(e1x, e1y, e1z) || 1;
+  const t1x = e1x / l1;
+  const t1y = e1y / l1;
+  const t1z = e1z / l1;
+  let nx = e1y * e2z - e1z * e2y;
+  let ny = e1z * e2x - e1x * e2z;
+  let nz = e1x * e2y - e1y * e2x;
+  const ln = Math.hypot(nx, ny, nz) || 1;
+  nx /= ln;
+  ny /= ln;
+  nz /= ln;
+  out[o] = t1x;
+  out[o + 1] = t1y;
+  out[o + 2] = t1z;
+  out[o + 3] = ny * t1z - nz * t1y;
+  out[o + 4] = nz * t1x - nx * t1z;
+  out[o + 5] = nx * t1y - ny * t1x;
+  out[o + 6] = nx;
+  out[o + 7] = ny;
+  out[o + 8] = nz;
+  return out;
+}
+
+/** Shape quality of triangle (p, a, b): |e1 x e2| / (|e1|^2 + |e2|^2), 0 when degenerate. */
+export function triangleQuality(pos, p, a, b) {
+  const p3 = p * 3;
+  const e1x = pos[a * 3] - pos[p3];
+  const e1y = pos[a * 3 + 1] - pos[p3 + 1];
+  const e1z = pos[a * 3 + 2] - pos[p3 + 2];
+  const e2x = pos[b * 3] - pos[p3];
+  const e2y = pos[b * 3 + 1] - pos[p3 + 1];
+  const e2z = pos[b * 3 + 2] - pos[p3 + 2];
+  const cx = e1y * e2z - e1z * e2y;
+  const cy = e1z * e2x - e1x * e2z;
+  const cz = e1x * e2y - e1y * e2x;
+  const den = e1x * e1x + e1y * e1y + e1z * e1z + e2x * e2x + e2y * e2y + e2z * e2z;
+  return den > 0 ? Math.hypot(cx, cy, cz) / den : 0;
 }

@@ -7,6 +7,7 @@ import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
+import { createEvaluator, decodeClipFile } from '../src/index.js';
 import {
   FIXTURES,
   edited,
@@ -42,13 +43,17 @@ for (const c of [
   man.cases.find((x) => x.kind === 'cyclic-spine'),
 ]) {
   test(`pdeanim-eval writes the expected frames of ${c.name}`, () => {
+    // the manifest's times the clip takes (those in [0, 1] unless it loops) and their rows of expected
+    const rows = c.t.map((t, k) => k).filter((k) => c.looping || (c.t[k] >= 0 && c.t[k] <= 1));
+    assert.ok(rows.length >= 3);
     const out = join(tmp, `${c.name}.bin`);
-    const r = run([join(FIXTURES, c.clip), '--t', c.t.join(','), '--out', out]);
+    const r = run([join(FIXTURES, c.clip), '--t', rows.map((k) => c.t[k]).join(','), '--out', out]);
     assert.equal(r.status, 0, r.stderr);
     const got = readF32LE(out);
     const want = expected(c);
-    assert.equal(got.length, c.t.length * c.n_vertices * 3);
-    const worst = got.reduce((m, v, i) => Math.max(m, Math.abs(v - want[i])), 0);
+    const N = c.n_vertices * 3;
+    assert.equal(got.length, rows.length * N);
+    const worst = got.reduce((m, v, i) => Math.max(m, Math.abs(v - want[rows[Math.floor(i / N)] * N + (i % N)])), 0);
     assert.ok(worst <= 1e-6 * c.diagonal, `max deviation ${worst}`);
   });
 }
@@ -65,12 +70,41 @@ test('pdeanim-eval reads the two parts from separate files', () => {
     '--topology',
     join(tmp, 'topo.bin'),
     '--t',
-    '0.25,-0.5',
+    '0.25,1',
     '--out',
     out,
   ]);
   assert.equal(r.status, 0, r.stderr);
   assert.equal(readFileSync(out).byteLength, 2 * c.n_vertices * 3 * 4);
+});
+
+test('pdeanim-eval --t all writes every source frame, as `pdeanim frame --t all`', () => {
+  const c = man.cases.find((x) => x.kind === 'dynamic-pde' && !x.looping);
+  const out = join(tmp, 'all.bin');
+  const r = run([join(FIXTURES, c.clip), '--t', 'all', '--out', out]);
+  assert.equal(r.status, 0, r.stderr);
+  const clip = decodeClipFile(readBytes(join(FIXTURES, c.clip)));
+  const K = clip.frameTimes.length;
+  assert.equal(readFileSync(out).byteLength, K * c.n_vertices * 3 * 4);
+  const got = new Float32Array(Uint8Array.from(readFileSync(out)).buffer);
+  const ft = clip.frameTimes;
+  const last = createEvaluator(clip).evaluate(1);
+  assert.equal((ft[K - 1] - ft[0]) / (ft[K - 1] - ft[0]), 1);
+  assert.deepEqual(got.subarray((K - 1) * c.n_vertices * 3), last);
+});
+
+test('pdeanim-eval: t outside [0, 1] exits 2 for clips that do not loop, wraps for looping ones', () => {
+  const open = man.cases.find((x) => x.kind === 'dynamic-pde' && !x.looping);
+  const r = run([join(FIXTURES, open.clip), '--t', '0.5,-0.5', '--out', join(tmp, 'x.bin')]);
+  assert.equal(r.status, 2);
+  assert.match(r.stderr, /--t must lie in \[0, 1\] for this clip \(it does not loop\), got -0.5/);
+  const loop = man.cases.find((x) => x.kind === 'dynamic-pde' && x.looping);
+  const out = join(tmp, 'wrap.bin');
+  assert.equal(run([join(FIXTURES, loop.clip), '--t', '0.25,1.25', '--out', out]).status, 0);
+  const got = new Float32Array(Uint8Array.from(readFileSync(out)).buffer);
+  const N = loop.n_vertices * 3;
+  const worst = got.subarray(0, N).reduce((m, v, i) => Math.max(m, Math.abs(v - got[N + i])), 0);
+  assert.ok(worst <= 1e-6 * loop.diagonal);
 });
 
 test('pdeanim-eval exits 2 with a reason on bad input', () => {

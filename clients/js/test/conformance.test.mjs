@@ -73,6 +73,11 @@ for (const c of man.cases) {
     const out = new Float32Array(N);
     const tol = man.tolerance_rel_diagonal * c.diagonal;
     c.t.forEach((t, k) => {
+      if (!c.looping && !(t >= 0 && t <= 1)) {
+        // open clips take t in [0, 1] only, as `pdeanim frame` and the HTTP frame route
+        assert.throws(() => ev.evaluate(t, out), /must lie in \[0, 1\] for this clip \(it does not loop\)/);
+        return;
+      }
       ev.evaluate(t, out);
       let worst = 0;
       for (let i = 0; i < N; i++) worst = Math.max(worst, Math.abs(out[i] - want[k * N + i]));
@@ -90,14 +95,15 @@ test('decoding the two parts equals decoding the CLIP file', () => {
   assert.deepEqual(a, b);
 });
 
-test('looping clips repeat with period 1 and open clips clamp', () => {
+test('looping clips repeat with period 1; open clips refuse t outside [0, 1] (RangeError)', () => {
   for (const c of man.cases) {
     const ev = createEvaluator(decodeClipFile(readBytes(join(FIXTURES, c.clip))));
     const diff = (x, y) => Math.max(...ev.evaluate(x).map((v, i) => Math.abs(v - ev.evaluate(y)[i])));
     if (c.looping) assert.ok(diff(0.2, 3.2) <= 1e-6 * c.diagonal, c.name);
     else {
-      assert.equal(diff(-2, 0), 0, c.name);
-      assert.equal(diff(7, 1), 0, c.name);
+      for (const t of [-2, -1e-9, 1 + 1e-9, 7]) assert.throws(() => ev.evaluate(t), RangeError, c.name);
+      assert.equal(ev.evaluate(0).length, c.n_vertices * 3);
+      assert.equal(ev.evaluate(1).length, c.n_vertices * 3);
     }
   }
 });

@@ -1,7 +1,8 @@
-// The GPU path without a browser: a line-by-line JS emulation of the vertex shader (src/gpu.js), fed the
-// same textures, attributes and uniforms, agrees with the CPU evaluator on every fixture (those with items on
-// the natural spline: four weights per item and a tangent texture); normals follow the surface; the three.js
-// integration patches every built-in material and its CPU fallback works.
+// The GPU path without a browser: a JS emulation of the shader's float32 arithmetic (src/glsl.js), fed the
+// same textures, attributes and uniforms, agrees with the CPU evaluator on every fixture to 1e-6 of the
+// diagonal (those with items on the natural spline: four weights per item and a tangent texture); normals
+// follow the surface; ClipPlayer patches every built-in material, its CPU fallback works, and a
+// WebGPURenderer is refused with a reason.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -15,145 +16,21 @@ import {
   decodeClip,
   decodeClipFile,
 } from '../src/index.js';
-import { naturalSplineTangents, splineWeights } from '../src/dynamic.js';
-import { frameNormals, glslHeader, gpuLayout, meshAttributes, timeUniforms } from '../src/gpu.js';
-import { attachClip, attachClipToScene } from '../src/three.js';
+import { naturalSplineTangents, splineWeights, vertexBasis } from '../src/dynamic.js';
+import { frameNormals, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
+import { glslHeader, patchVertexShader } from '../src/glsl.js';
+import { orthonormalBases } from '../src/orthobasis.js';
+import { WEBGPU_REFUSAL, ClipPlayer, attachClip, attachClipToScene } from '../src/three.js';
 import { FIXTURES, fixtureParts, manifest, readBytes, retimed } from './helpers.mjs';
 
 const man = manifest();
 // the fixtures with items on the natural spline (rigid, looping and knot-basis ones among them)
 const splineCases = man.cases.filter((x) => x.spline_items > 0);
+const f = Math.fround;
 
-/**
- * The four weighted terms' (knot, texture) of a clip with spline items: T_s and T_s+1 from the tangent
- * texture around P_s, P_s+1 from the field or knot texture.
- */
-function splineTerms(layout, seg) {
-  const T = layout.textures;
-  const main = layout.mode === 'fields' ? T.field : T.knot;
-  return [
-    [seg, T.tangent],
-    [seg, main],
-    [seg + 1, main],
-    [seg + 1, T.tangent],
-  ];
-}
-
-/** texelFetch of texel i of a {data, width} texture, row-major as pdeFetch addresses it. */
-function fetch(tex, i) {
-  const w = tex.width;
-  const x = i % w;
-  const y = Math.floor(i / w);
-  const o = (y * w + x) * 4;
-  return [...tex.data.subarray(o, o + 4)];
-}
-
-/** The shader's pdeEval(v) in JS (after timeUniforms(layout, t) wrote the per-curve table). */
-function emulate(layout, u, v) {
-  const T = layout.textures;
-  const C = layout.nCurves;
-  if (layout.kind === 'cyclic-spine') {
-    const a = fetch(T.vertex, v * 3);
-    const w = fetch(T.vertex, v * 3 + 1);
-    const rl = fetch(T.vertex, v * 3 + 2)[0];
-    let ca = 0;
-    let cl = w[0] * u.sw + w[1] * u.cw;
-    if (layout.rotate) {
-      const g = w[2] * u.sw + w[3] * u.cw;
-      const c = 1 / Math.sqrt(1 + g * g);
-      ca = (c - 1) * a[3] - g * c * rl;
-      cl += g * c * a[3] + (c - 1) * rl;
-    }
-    return [0, 1, 2].map((k) => a[k] + ca * layout.axis[k] + cl * layout.bend[k]);
-  }
-  const fields = layout.mode === 'fields';
-  const K = layout.curveTexels;
-  const head = fetch(T.vertex, fields ? v : v * 4);
-  const c = Math.round(head[0]);
-  const V = layout.nVertices;
-  if (layout.spline) {
-    // four weights per item on T_s, P_s, P_s+1, T_s+1, summed ((l + 0) + 1) + h, then + base
-    const terms = splineTerms(layout, u.seg);
-    const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * K + j));
-    let p = [0, 1, 2].map((w) => {
-      if (fields) {
-        const sum = terms.reduce((acc, [j, tex], i) => acc + f[i][w] * fetch(tex, j * V + v)[w], 0);
-        return head[1 + w] + sum;
-      }
-      const kn = terms.map(([j, tex]) => fetch(tex, (j * C + c) * 3 + w));
-      const b = fetch(T.vertex, v * 4 + 1 + w);
-      const dot = (k) => kn.reduce((a, kj, i) => a + f[i][w] * kj[k], 0) * b[k];
-      return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + dot(k), 0);
-    });
-    if (layout.rigid) {
-      const r = [0, 1, 2].map((i) => fetch(T.curve, c * K + layout.weightTexels + i));
-      p = r.map((row) => row[0] * p[0] + row[1] * p[1] + row[2] * p[2] + row[3]);
-    }
-    return p;
-  }
-  const f0 = fetch(T.curve, c * K);
-  const f1 = fetch(T.curve, c * K + 1);
-  let p = [0, 1, 2].map((w) => {
-    if (fields) {
-      return (
-        head[1 + w] +
-        f0[w] * fetch(T.field, u.seg * V + v)[w] +
-        f1[w] * fetch(T.field, (u.seg + 1) * V + v)[w]
-      );
-    }
-    const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
-    const k1 = fetch(T.knot, ((u.seg + 1) * C + c) * 3 + w);
-    const b = fetch(T.vertex, v * 4 + 1 + w);
-    return head[1 + w] + [0, 1, 2, 3].reduce((s, k) => s + (f0[w] * k0[k] + f1[w] * k1[k]) * b[k], 0);
-  });
-  if (layout.rigid) {
-    const r = [2, 3, 4].map((i) => fetch(T.curve, c * K + i));
-    p = r.map((row) => row[0] * p[0] + row[1] * p[1] + row[2] * p[2] + row[3]);
-  }
-  return p;
-}
-
-/** Sum over the 8 terms of |phi * knot * basis| per coordinate (the scale of float32 rounding on the GPU). */
-function agreesWithCpu(player, clip, t, diagonal) {
-  // the shader's positions (emulated from its uniforms and textures) at t are the CPU evaluator's
-  player.setTime(t);
-  const u = timeUniforms(player.layout, t);
-  const cpu = createEvaluator(clip).evaluate(t);
-  for (let v = 0; v < clip.nVertices; v++) {
-    const g = emulate(player.layout, u, v);
-    for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * diagonal);
-  }
-}
-
-function termMagnitude(layout, u, v) {
-  if (layout.mode !== 'coefficients') return [0, 0, 0];
-  const T = layout.textures;
-  const C = layout.nCurves;
-  const c = Math.round(fetch(T.vertex, v * 4)[0]);
-  if (layout.spline) {
-    const terms = splineTerms(layout, u.seg);
-    const f = [0, 1, 2, 3].map((j) => fetch(T.curve, c * layout.curveTexels + j));
-    return [0, 1, 2].map((w) => {
-      const b = fetch(T.vertex, v * 4 + 1 + w);
-      let sum = 0;
-      terms.forEach(([j, tex], i) => {
-        const kn = fetch(tex, (j * C + c) * 3 + w);
-        for (let k = 0; k < 4; k++) sum += Math.abs(f[i][w] * kn[k] * b[k]);
-      });
-      return sum;
-    });
-  }
-  const f0 = fetch(T.curve, c * layout.curveTexels);
-  const f1 = fetch(T.curve, c * layout.curveTexels + 1);
-  return [0, 1, 2].map((w) => {
-    const k0 = fetch(T.knot, (u.seg * C + c) * 3 + w);
-    const k1 = fetch(T.knot, ((u.seg + 1) * C + c) * 3 + w);
-    const b = fetch(T.vertex, v * 4 + 1 + w);
-    return [0, 1, 2, 3].reduce(
-      (s, k) => s + Math.abs(f0[w] * k0[k] * b[k]) + Math.abs(f1[w] * k1[k] * b[k]),
-      0,
-    );
-  });
+/** The times of a case the clip takes: any for looping clips, [0, 1] for the others. */
+function inRange(c, times) {
+  return c.looping ? times : times.filter((t) => t >= 0 && t <= 1);
 }
 
 /** A fixture's clip. */
@@ -167,44 +44,142 @@ function withoutSpline(c) {
   return decodeClip(topology, retimed(coefficients, { timeModel: () => TIME_PDE }));
 }
 
-for (const [c, mode] of man.cases.flatMap((x) =>
-  x.kind === 'dynamic-pde'
-    ? [
-        [x, 'fields'],
-        [x, 'coefficients'],
-      ]
-    : [[x, 'auto']],
-)) {
-  test(`emulated shader (${mode}) matches the CPU evaluator: ${c.name}`, () => {
+/** texelFetch of texel i of a {data, width} texture, row-major as pdeFetch addresses it. */
+function fetch(tex, i) {
+  const w = tex.width;
+  const o = (Math.floor(i / w) * w + (i % w)) * 4;
+  return [...tex.data.subarray(o, o + 4)];
+}
+
+/** dot(a, b) of two vec4 in float32, as the GPU sums it. */
+function dot4(a, b) {
+  return f(f(f(f(a[0] * b[0]) + f(a[1] * b[1])) + f(a[2] * b[2])) + f(a[3] * b[3]));
+}
+
+/** The shader's pdeEval(v) in float32 arithmetic (after timeUniforms(layout, t) wrote the per-curve table). */
+function emulate(layout, u, v) {
+  const T = layout.textures;
+  if (layout.kind === 'cyclic-spine') {
+    const a = fetch(T.vertex, v * 3);
+    const w = fetch(T.vertex, v * 3 + 1);
+    const rl = fetch(T.vertex, v * 3 + 2)[0];
+    let ca = 0;
+    let cl = f(f(w[0] * f(u.sw)) + f(w[1] * f(u.cw)));
+    if (layout.rotate) {
+      const g = f(f(w[2] * f(u.sw)) + f(w[3] * f(u.cw)));
+      const c = f(1 / f(Math.sqrt(f(1 + f(g * g)))));
+      ca = f(f(f(c - 1) * a[3]) - f(f(g * c) * rl));
+      cl = f(cl + f(f(f(g * c) * a[3]) + f(f(c - 1) * rl)));
+    }
+    return [0, 1, 2].map((k) => f(f(a[k] + f(ca * f(layout.axis[k]))) + f(cl * f(layout.bend[k]))));
+  }
+  const C = layout.nCurves;
+  const K = layout.curveTexels;
+  const head = fetch(T.vertex, v * 4);
+  const c = Math.round(head[0]);
+  const seg = u.seg;
+  let terms;
+  if (layout.spline) {
+    // four weights per item on T_s, P_s, P_s+1, T_s+1
+    terms = [
+      [0, seg, T.tangent],
+      [1, seg, T.knot],
+      [2, seg + 1, T.knot],
+      [3, seg + 1, T.tangent],
+    ];
+  } else {
+    terms = [
+      [0, seg, T.knot],
+      [1, seg + 1, T.knot],
+    ];
+  }
+  let p = [0, 1, 2].map((w) => {
+    // sum of weight * knot coefficients (a vec4), dotted with the vertex's basis row
+    const acc = [0, 0, 0, 0];
+    for (const [slot, j, tex] of terms) {
+      const weight = fetch(T.curve, c * K + slot)[w];
+      const kn = fetch(tex, (j * C + c) * 3 + w);
+      for (let k = 0; k < 4; k++) acc[k] = f(acc[k] + f(weight * kn[k]));
+    }
+    return f(head[1 + w] + dot4(acc, fetch(T.vertex, v * 4 + 1 + w)));
+  });
+  if (layout.rigid) {
+    const r = [0, 1, 2].map((i) => fetch(T.curve, c * K + layout.weightTexels + i));
+    p = r.map((row) => f(dot4([row[0], row[1], row[2], 0], [...p, 0]) + row[3]));
+  }
+  return p;
+}
+
+/** The shader's positions (emulated from its uniforms and textures) at t are the CPU evaluator's. */
+function agreesWithCpu(player, clip, t, diagonal) {
+  player.setTime(t);
+  const u = timeUniforms(player.layout, t);
+  const cpu = createEvaluator(clip).evaluate(t);
+  for (let v = 0; v < clip.nVertices; v++) {
+    const g = emulate(player.layout, u, v);
+    for (let w = 0; w < 3; w++) assert.ok(Math.abs(g[w] - cpu[v * 3 + w]) <= 1e-6 * diagonal);
+  }
+}
+
+for (const c of man.cases) {
+  test(`emulated float32 shader matches the CPU evaluator to 1e-6 of the diagonal: ${c.name}`, () => {
     const clip = loadCase(c);
     // clips with spline items: the table carries four weights per item, on T_s, P_s, P_s+1, T_s+1, with a
     // tangent texture
-    assert.equal(gpuLayout(clip).spline, c.spline_items > 0, c.name);
-    const layout = gpuLayout(clip, { width: 64, mode }); // a narrow texture exercises the 2D texel addressing
+    const layout = gpuLayout(clip, { width: 64 }); // a narrow texture exercises the 2D texel addressing
+    assert.equal(layout.spline, c.spline_items > 0, c.name);
     const ev = createEvaluator(clip);
-    // Mode "fields" holds the CPU path's float32 P_k: 1e-6 of the diagonal. Mode "coefficients" holds the
-    // space basis in float32 (the CPU path multiplies it with the knots in float64): each of the 8 terms
-    // knot * basis carries a relative rounding of 2^-24, so the bound per value is 1e-6 of the diagonal plus
-    // 4 * 2^-24 times the sum of the terms' magnitudes (fitted clips' basis sums cancel: terms reach ~1e3
-    // times the result).
-    for (const t of c.t) {
+    let worst = 0;
+    for (const t of inRange(c, c.t)) {
       const cpu = ev.evaluate(t);
       const u = timeUniforms(layout, t);
       for (let v = 0; v < clip.nVertices; v++) {
         const g = emulate(layout, u, v);
-        let mag = termMagnitude(layout, u, v);
-        if (layout.rigid) mag = mag.map(() => Math.max(...mag)); // the rotation mixes the coordinates
-        for (let w = 0; w < 3; w++) {
-          const tol = 1e-6 * c.diagonal + 4 * 2 ** -24 * mag[w];
-          assert.ok(
-            Math.abs(g[w] - cpu[v * 3 + w]) <= tol,
-            `t = ${t}, v = ${v}: ${g[w]} vs ${cpu[v * 3 + w]}`,
-          );
+        for (let w = 0; w < 3; w++) worst = Math.max(worst, Math.abs(g[w] - cpu[v * 3 + w]));
+      }
+    }
+    // the orthonormal bases keep every term of the float32 sums below the values' scale (orthobasis.js)
+    assert.ok(worst <= 1e-6 * c.diagonal, `${c.name}: ${worst / c.diagonal} of the diagonal`);
+  });
+}
+
+test('orthonormal bases: Q has orthonormal (or zero) columns per curve and coordinate, and Q R = B', () => {
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde')) {
+    const clip = loadCase(c);
+    const { q, r } = orthonormalBases(clip);
+    const B = vertexBasis(clip);
+    for (let cv = 0; cv < clip.nCurves; cv++) {
+      const verts = Array.from(clip.order.subarray(clip.offsets[cv], clip.offsets[cv + 1]));
+      for (let w = 0; w < 3; w++) {
+        const R = r.subarray((cv * 3 + w) * 16, (cv * 3 + w + 1) * 16);
+        for (let i = 0; i < 4; i++) {
+          for (let j = 0; j < 4; j++) {
+            const g = verts.reduce((s, v) => s + q[v * 12 + w * 4 + i] * q[v * 12 + w * 4 + j], 0);
+            if (i === j) assert.ok(Math.abs(g - 1) < 1e-6 || Math.abs(g) < 1e-12, `${c.name} ${g}`);
+            else assert.ok(Math.abs(g) < 1e-6, `${c.name} Q'Q ${g}`);
+          }
+        }
+        for (const v of verts) {
+          for (let j = 0; j < 4; j++) {
+            let qr = 0;
+            for (let i = 0; i <= j; i++) qr += q[v * 12 + w * 4 + i] * R[i * 4 + j];
+            const b = B[v * 12 + w * 4 + j];
+            assert.ok(Math.abs(qr - b) <= 1e-6 * Math.max(1, Math.abs(b)), `${c.name}: ${qr} vs ${b}`);
+          }
         }
       }
     }
-  });
-}
+  }
+});
+
+test('GPU tables are plain typed arrays (a worker can transfer them) and gpuLayout takes them back', () => {
+  const clip = loadCase(man.cases.find((x) => x.motion === 'rigid'));
+  const tables = gpuTables(clip, { width: 128 });
+  for (const t of Object.values(tables.textures)) assert.ok(t.data instanceof Float32Array);
+  const layout = gpuLayout(clip, { tables });
+  assert.equal(layout.textures, tables.textures);
+  assert.equal(structuredClone(tables).width, 128);
+});
 
 test('frame-rotated normals follow the deformed surface', () => {
   // fitted and cyclic clips (real surfaces); not fit-absolute-paper, whose fit folds the 42-vertex sphere
@@ -267,6 +242,7 @@ function meshOf(clip, Material) {
   return new THREE.Mesh(g, new Material({ color: 0x336699 }));
 }
 
+
 test('attachClip patches every built-in material (and the shadow materials) and keeps their settings', () => {
   const c = man.cases.find((x) => x.motion === 'rigid');
   const clip = loadCase(c);
@@ -274,6 +250,7 @@ test('attachClip patches every built-in material (and the shadow materials) and 
     const mesh = meshOf(clip, Material);
     const original = mesh.material;
     const player = attachClip(mesh, clip);
+    assert.ok(player instanceof ClipPlayer);
     assert.notEqual(mesh.material, original);
     assert.equal(mesh.material.type, original.type);
     for (const m of [mesh.material, mesh.customDepthMaterial, mesh.customDistanceMaterial]) {
@@ -284,10 +261,11 @@ test('attachClip patches every built-in material (and the shadow materials) and 
       };
       m.onBeforeCompile(shader, null);
       assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
-      assert.match(shader.vertexShader, /transformed = pdePosition;/);
-      assert.ok(shader.uniforms.pdeFieldTex.value instanceof THREE.DataTexture);
+      // after morphing and skinning: the clip's vertex, mixed by the influence
+      assert.match(shader.vertexShader, /skinning_vertex>\n\tif \(pdeEnabled\) transformed = mix\(transformed, pdePosition, pdeInfluence\);/);
+      assert.ok(shader.uniforms.pdeKnotTex.value instanceof THREE.DataTexture);
       assert.ok(shader.uniforms.pdeCurveTex.value instanceof THREE.DataTexture);
-      assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:fields:true/);
+      assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:true:/);
     }
     assert.equal(player.gpu, true);
     assert.equal(player.uniforms.pdeEnabled.value, true);
@@ -297,7 +275,24 @@ test('attachClip patches every built-in material (and the shadow materials) and 
   }
 });
 
-test('setTime drives the uniforms; the CPU fallback writes the evaluated positions and normals', () => {
+test('unknown options are refused (an ignored option would fail silently)', () => {
+  const clip = loadCase(man.cases.find((x) => x.motion === 'rigid'));
+  assert.throws(() => attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { THREE }), /unknown option\(s\) THREE/);
+  assert.throws(() => attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { gpuMode: 'fields' }), TypeError);
+});
+
+test('a WebGPURenderer is refused with a reason: at attach when given, at the first frame otherwise', () => {
+  const clip = loadCase(man.cases.find((x) => x.motion === 'rigid'));
+  const webgpu = { isWebGPURenderer: true };
+  assert.throws(() => attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { renderer: webgpu }), {
+    message: WEBGPU_REFUSAL,
+  });
+  const mesh = meshOf(clip, THREE.MeshBasicMaterial);
+  attachClip(mesh, clip);
+  assert.throws(() => mesh.onBeforeRender(webgpu, null, null, mesh.geometry, mesh.material, null), /pdeanim\/webgpu/);
+});
+
+test('setTime drives the uniforms; the CPU fallback fills its own attributes, the geometry is kept', () => {
   for (const c of [
     man.cases.find((x) => x.motion === 'rigid' && x.looping && x.spline_items === 0),
     man.cases.find((x) => x.motion === 'rigid' && x.spline_items > 0),
@@ -305,6 +300,7 @@ test('setTime drives the uniforms; the CPU fallback writes the evaluated positio
   ]) {
     const clip = loadCase(c);
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
+    const rest = Float32Array.from(mesh.geometry.getAttribute('position').array);
     const player = attachClip(mesh, clip);
     player.setTime(0.4);
     const table = player.textures.curve ? Float32Array.from(player.textures.curve.image.data) : null;
@@ -319,17 +315,50 @@ test('setTime drives the uniforms; the CPU fallback writes the evaluated positio
       player.setTime(0.45);
       assert.ok(player.textures.curve.version > version);
     }
+    const key = mesh.material.customProgramCacheKey();
     assert.equal(player.useGPU(false), false);
+    assert.notEqual(mesh.material.customProgramCacheKey(), key); // another shader variant
+    const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
+    mesh.material.onBeforeCompile(shader, null);
+    assert.match(shader.vertexShader, /#define PDEANIM_CPU/);
     player.setTime(0.4);
     const cpu = createEvaluator(clip).evaluate(0.4);
-    assert.deepEqual(Array.from(mesh.geometry.getAttribute('position').array), Array.from(cpu));
-    const n = mesh.geometry.getAttribute('normal').array;
-    for (let i = 0; i < n.length; i += 3)
-      assert.ok(Math.abs(Math.hypot(n[i], n[i + 1], n[i + 2]) - 1) < 1e-5);
+    assert.deepEqual(Array.from(mesh.geometry.getAttribute('pdeCpuPosition').array), Array.from(cpu));
+    const n = mesh.geometry.getAttribute('pdeCpuNormal').array;
+    for (let i = 0; i < n.length; i += 3) assert.ok(Math.abs(Math.hypot(n[i], n[i + 1], n[i + 2]) - 1) < 1e-5);
+    assert.deepEqual(Float32Array.from(mesh.geometry.getAttribute('position').array), rest);
     player.useGPU(true);
-    assert.deepEqual(Array.from(mesh.geometry.getAttribute('position').array), Array.from(clip.rest));
     player.detach();
+    assert.equal(mesh.geometry.getAttribute('pdeCpuPosition'), undefined);
   }
+});
+
+test('influence: 1 the clip alone, 0 the mesh as without it (evaluation off), between a mix', () => {
+  const clip = loadCase(man.cases.find((x) => x.motion === 'rigid'));
+  const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
+  assert.equal(player.influence, 1);
+  player.influence = 0.25;
+  assert.equal(player.uniforms.pdeInfluence.value, 0.25);
+  assert.equal(player.uniforms.pdeEnabled.value, true);
+  player.influence = 0;
+  assert.equal(player.uniforms.pdeEnabled.value, false);
+  assert.throws(() => {
+    player.influence = 1.5;
+  }, RangeError);
+});
+
+test('clips that do not loop refuse t outside [0, 1] on the GPU path too; looping ones wrap', () => {
+  const open = loadCase(man.cases.find((x) => x.kind === 'dynamic-pde' && !x.looping));
+  const player = attachClip(meshOf(open, THREE.MeshBasicMaterial), open);
+  assert.throws(() => player.setTime(1.5), /must lie in \[0, 1\]/);
+  player.useGPU(false);
+  assert.throws(() => player.setTime(-0.1), /must lie in \[0, 1\]/);
+  const loop = loadCase(man.cases.find((x) => x.kind === 'dynamic-pde' && x.looping));
+  const lp = attachClip(meshOf(loop, THREE.MeshBasicMaterial), loop);
+  lp.setTime(0.3);
+  const seg = lp.uniforms.pdeSeg.value;
+  lp.setTime(2.3);
+  assert.equal(lp.uniforms.pdeSeg.value, seg);
 });
 
 test('a mesh with split vertices plays through a vertex map', () => {
@@ -348,7 +377,7 @@ test('a mesh with split vertices plays through a vertex map', () => {
   const player = attachClip(mesh, clip, { gpu: false });
   player.setTime(0.7);
   const cpu = createEvaluator(clip).evaluate(0.7);
-  const pos = g.getAttribute('position').array;
+  const pos = g.getAttribute('pdeCpuPosition').array;
   for (let k = 0; k < corners.length; k++) {
     for (let w = 0; w < 3; w++) assert.equal(pos[k * 3 + w], cpu[corners[k] * 3 + w]);
   }
@@ -356,17 +385,6 @@ test('a mesh with split vertices plays through a vertex map', () => {
     Array.from(player.attributes.pdeVertex.filter((_, i) => i % 3 === 0)),
     Array.from(corners),
   );
-});
-
-test('mode auto picks fields within the budget and coefficients above it', () => {
-  const clip = loadCase(man.cases.find((x) => x.name === 'fit-displacement-chord'));
-  assert.equal(gpuLayout(clip).mode, 'fields');
-  assert.ok(gpuLayout(clip).textures.field);
-  const small = gpuLayout(clip, { fieldsBudget: 100 });
-  assert.equal(small.mode, 'coefficients');
-  assert.ok(small.textures.knot && !small.textures.field);
-  assert.match(glslHeader(gpuLayout(clip)), /#define PDEANIM_FIELDS/);
-  assert.doesNotMatch(glslHeader(small), /#define PDEANIM_FIELDS/);
 });
 
 test('small renderer textures: narrow data textures, or the CPU fallback when they do not fit', () => {
@@ -394,20 +412,22 @@ test("normals: 'rest' skips the neighbour evaluations and keeps the normals", ()
   const player = attachClip(mesh, clip, { gpu: false, normals: 'rest' });
   assert.match(mesh.material.customProgramCacheKey(), /:rest:/);
   player.setTime(0.6);
-  assert.deepEqual(Float32Array.from(mesh.geometry.getAttribute('normal').array), rest);
+  const got = mesh.geometry.getAttribute('pdeCpuNormal').array;
+  for (let i = 0; i < got.length; i++) assert.ok(Math.abs(got[i] - rest[i]) < 1e-6);
   assert.throws(
     () => attachClip(meshOf(clip, THREE.MeshBasicMaterial), clip, { normals: 'smooth' }),
     RangeError,
   );
 });
 
-test('the GLSL header declares what the patched chunks use', () => {
+test('the GLSL declares what the patched chunks use; shaders without the chunks are refused', () => {
   const clip = loadCase(man.cases.find((x) => x.kind === 'cyclic-spine'));
   const header = glslHeader(gpuLayout(clip));
   assert.match(header, /#define PDEANIM_CYCLIC/);
-  for (const name of ['pdeVertex', 'pdeNormalFrame', 'pdeVertexTex', 'pdeSinWt', 'pdeCompute']) {
+  for (const name of ['pdeVertex', 'pdeNormalFrame', 'pdeVertexTex', 'pdeSinWt', 'pdeCompute', 'pdeInfluence']) {
     assert.ok(header.includes(name), name);
   }
+  assert.throws(() => patchVertexShader('void main() { gl_Position = vec4(0.0); }', header), /skinning_vertex|common/);
 });
 
 /** Split a clip's mesh into meshes over consecutive vertex ranges (faces inside each range), under root. */
@@ -460,6 +480,7 @@ function splitScene(clip, cuts) {
   return { root, meshes, bounds };
 }
 
+
 test('attachClipToScene places every mesh with its transform (quantised positions too)', () => {
   const c = man.cases.find((x) => x.name === 'fit-rigid-chord');
   const clip = loadCase(c);
@@ -472,16 +493,13 @@ test('attachClipToScene places every mesh with its transform (quantised position
   const rootInverse = root.matrixWorld.clone().invert();
   meshes.forEach((mesh, k) => {
     const rel = rootInverse.clone().multiply(mesh.matrixWorld);
-    const pos = mesh.geometry.getAttribute('position');
-    assert.equal(pos.normalized, false);
+    const pos = mesh.geometry.getAttribute('pdeCpuPosition');
+    assert.ok(mesh.geometry.getAttribute('position').normalized || k > 0); // the mesh's own attribute kept
     for (let i = 0; i < pos.count; i++) {
       const p = new THREE.Vector3(pos.getX(i), pos.getY(i), pos.getZ(i)).applyMatrix4(rel);
       const v = bounds[k] + i;
       // float32 local coordinates through two affine maps: 1e-6 of the diagonal is ~10x the rounding
-      assert.ok(
-        p.distanceTo(new THREE.Vector3().fromArray(cpu, v * 3)) < 1e-6 * c.diagonal,
-        `mesh ${k} v ${v}`,
-      );
+      assert.ok(p.distanceTo(new THREE.Vector3().fromArray(cpu, v * 3)) < 1e-6 * c.diagonal, `mesh ${k} v ${v}`);
     }
     // the GPU uniforms carry the same map
     const e = player.players[k].uniforms.pdeClipToLocal.value.clone().multiply(rel).elements;
@@ -489,8 +507,22 @@ test('attachClipToScene places every mesh with its transform (quantised position
   });
   player.useGPU(true);
   assert.equal(player.gpu, true);
+  assert.ok(player.gpuBytes > player.resources.textureBytes);
   player.detach();
-  assert.ok(meshes[0].geometry.getAttribute('position').normalized); // the quantised attribute is back
+  assert.ok(meshes[0].geometry.getAttribute('position').normalized);
+});
+
+test('meshes that share one geometry each get their own copy (their attributes differ)', () => {
+  const clip = loadCase(man.cases.find((x) => x.name === 'fit-rigid-chord'));
+  const n = clip.nVertices / 3;
+  assert.ok(Number.isInteger(n));
+  const { root, meshes } = splitScene(clip, [n, 2 * n]);
+  meshes[2].geometry = meshes[1].geometry; // two meshes, one geometry (as GLTFLoader makes for one glTF mesh)
+  const player = attachClipToScene(root, clip, { gpu: false });
+  assert.notEqual(meshes[1].geometry, meshes[2].geometry);
+  const first = (m) => m.geometry.getAttribute('pdeVertex').array[0];
+  assert.deepEqual([first(meshes[1]), first(meshes[2])], [n, 2 * n]);
+  player.detach();
 });
 
 test('normals of a transformed mesh are the clip-space normals turned into its frame', () => {
@@ -503,7 +535,7 @@ test('normals of a transformed mesh are the clip-space normals turned into its f
   player.setTime(0.55);
   const rel = root.matrixWorld.clone().invert().multiply(mesh.matrixWorld);
   const nm = new THREE.Matrix3().getNormalMatrix(rel);
-  const nrm = mesh.geometry.getAttribute('normal');
+  const nrm = mesh.geometry.getAttribute('pdeCpuNormal');
   const want = computeNormals(createEvaluator(clip).evaluate(0.55), clip.faces);
   let sum = 0;
   for (let i = 0; i < nrm.count; i++) {
@@ -569,9 +601,9 @@ test('the per-curve table equals every item time pair and is rewritten only when
     const K = layout.curveTexels * 4;
     const d = layout.textures.curve.data;
     let prev = null;
-    for (const t of [...c.t, ...c.t.map((x) => x + 1)]) {
+    for (const t of inRange(c, [...c.t, ...c.t.map((x) => x + 1)])) {
       const u = timeUniforms(layout, t);
-      ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
+      ev.evaluate(c.looping ? t + 0.3 : Math.min(t + 0.3, 1)); // the CPU path moving the shared evaluator must not disturb the table
       const s = ref.prepare(t); // the per-item evaluation (float64), rounded to float32 like the texture
       assert.equal(u.seg, s);
       for (let cw = 0; cw < C * 3; cw++) {
@@ -599,9 +631,9 @@ test('a t with the same segment and local time uploads nothing', () => {
   const c = man.cases.find((x) => x.name === 'fit-displacement-chord');
   const clip = loadCase(c);
   const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
-  player.setTime(1.5);
+  player.setTime(1);
   const version = player.textures.curve.version;
-  player.setTime(2.5); // past the end of a clip that does not loop: clamped to the same state
+  player.setTime(1); // the same state
   assert.equal(player.textures.curve.version, version);
   player.setTime(0.5);
   assert.ok(player.textures.curve.version > version);
@@ -630,9 +662,9 @@ test('spline clips: the table holds each item its four weights (the CPU ones), t
     const d = layout.textures.curve.data;
     let splineItems = 0;
     let prev = null;
-    for (const t of [...c.t, ...c.t.map((x) => x + 1)]) {
+    for (const t of inRange(c, [...c.t, ...c.t.map((x) => x + 1)])) {
       const u = timeUniforms(layout, t);
-      ev.evaluate(t + 0.3); // the CPU path moving the shared evaluator must not disturb the table
+      ev.evaluate(c.looping ? t + 0.3 : Math.min(t + 0.3, 1)); // the CPU path moving the shared evaluator must not disturb the table
       const s = ref.prepare(t);
       assert.equal(u.seg, s);
       const cubic = splineWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
@@ -664,34 +696,21 @@ test('spline clips: the table holds each item its four weights (the CPU ones), t
   }
 });
 
-test('spline clips: a tangent texture in the layout of the field or knot texture, of the same data', () => {
+test('spline clips: a tangent texture in the layout of the knot texture, the spline of its coefficients', () => {
   for (const c of splineCases) {
     const clip = loadCase(c);
-    const { nVertices: V, nCurves: C, nSegments: S } = clip;
-    // mode "fields": per (knot, vertex) the evaluator's float32 tangent fields T xyz
-    const fields = gpuLayout(clip, { width: 64, mode: 'fields' });
-    const T = fields.evaluator.tangentFields;
-    assert.equal(fields.textures.tangent.width, fields.textures.field.width);
-    assert.equal(fields.textures.tangent.height, fields.textures.field.height);
-    for (let i = 0; i < (S + 1) * V; i++) {
-      assert.deepEqual(fetch(fields.textures.tangent, i), [...T.subarray(i * 3, i * 3 + 3), 0], c.name);
-    }
-    // mode "coefficients": per (knot, curve, coordinate) the spline's tangents of the 4 knot coefficients
-    const coef = gpuLayout(clip, { width: 64, mode: 'coefficients' });
-    const want = new Float32Array(clip.knots.length);
-    naturalSplineTangents(clip.segmentT, clip.knots, C * 12, want);
-    assert.equal(coef.textures.tangent.height, coef.textures.knot.height);
-    assert.deepEqual(coef.textures.tangent.data.subarray(0, want.length), want, c.name);
-    assert.ok(coef.maxHeight >= coef.textures.tangent.height);
+    const { nCurves: C } = clip;
+    // per (knot, curve, coordinate) the spline's tangents of the 4 coefficients in the orthonormal basis
+    const layout = gpuLayout(clip, { width: 64 });
+    const coefficients = layout.textures.knot.data.subarray(0, clip.knots.length);
+    const want = naturalSplineTangents(clip.segmentT, coefficients, C * 12, new Float64Array(clip.knots.length));
+    assert.equal(layout.textures.tangent.height, layout.textures.knot.height);
+    const got = layout.textures.tangent.data;
+    // solved from the float64 coefficients (here from their float32 copy): float32 rounding apart
+    want.forEach((x, i) => assert.ok(Math.abs(got[i] - x) <= 1e-5 * (1 + Math.abs(x)), c.name));
+    assert.ok(layout.maxHeight >= layout.textures.tangent.height);
     // the same clip without spline items has none
-    const plain = withoutSpline(c);
-    assert.equal(gpuLayout(plain).textures.tangent, undefined);
-    // mode auto counts the tangent texture: fields while both fit the budget
-    const bytes = (S + 1) * V * 16;
-    assert.equal(gpuLayout(clip, { fieldsBudget: 2 * bytes }).mode, 'fields');
-    assert.equal(gpuLayout(clip, { fieldsBudget: 2 * bytes - 1 }).mode, 'coefficients');
-    assert.equal(gpuLayout(plain, { fieldsBudget: bytes }).mode, 'fields');
-    assert.equal(gpuLayout(plain, { fieldsBudget: bytes - 1 }).mode, 'coefficients');
+    assert.equal(gpuLayout(withoutSpline(c)).textures.tangent, undefined);
   }
   for (const c of man.cases.filter((x) => !(x.spline_items > 0))) {
     assert.equal(gpuLayout(loadCase(c)).textures.tangent, undefined, c.name);
@@ -704,23 +723,21 @@ test('spline clips: GLSL and three.js materials get the spline layout; other cli
     const clip = loadCase(c);
     const plainClip = withoutSpline(c);
     const rigid = motion === 'rigid';
-    for (const mode of ['fields', 'coefficients']) {
-      const header = glslHeader(gpuLayout(clip, { mode }));
-      assert.match(header, /#define PDEANIM_SPLINE\n/);
-      assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
-      assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
-      assert.match(header, /#ifdef PDEANIM_SPLINE\nuniform highp sampler2D pdeTangentTex;\n#endif/);
-      // the Catmull-Rom branch of earlier drafts is gone: no segment count, no define of its own
-      assert.doesNotMatch(header, /PDEANIM_TANGENTS|pdeSegments|PDEANIM_OUTER_TEX/);
-      // without spline items: 2 texels (5 rigid), no spline define
-      const plain = glslHeader(gpuLayout(plainClip, { mode }));
-      assert.doesNotMatch(plain, /#define PDEANIM_SPLINE/);
-      assert.match(plain, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 5 : 2}\\n`));
-      assert.match(plain, /#define PDEANIM_WEIGHT_TEXELS 2\n/);
-    }
+    const header = glslHeader(gpuLayout(clip));
+    assert.match(header, /#define PDEANIM_SPLINE\n/);
+    assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
+    assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
+    assert.match(header, /#ifdef PDEANIM_SPLINE\nuniform highp sampler2D pdeTangentTex;\n#endif/);
+    // the Catmull-Rom branch of earlier drafts is gone: no segment count, no define of its own
+    assert.doesNotMatch(header, /PDEANIM_TANGENTS|pdeSegments|PDEANIM_OUTER_TEX/);
+    // without spline items: 2 texels (5 rigid), no spline define, no tangent texture
     const plainLayout = gpuLayout(plainClip);
+    const plain = glslHeader(plainLayout);
+    assert.doesNotMatch(plain, /#define PDEANIM_SPLINE/);
+    assert.match(plain, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 5 : 2}\\n`));
+    assert.match(plain, /#define PDEANIM_WEIGHT_TEXELS 2\n/);
     assert.equal(plainLayout.spline, false);
-    assert.equal(plainLayout.curveTexels, rigid ? 5 : 2);
+    assert.equal(plainLayout.textures.tangent, undefined);
     // three.js: the tangent texture as a uniform, a program cache key of its own
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
     const player = attachClip(mesh, clip);
@@ -731,11 +748,11 @@ test('spline clips: GLSL and three.js materials get the spline layout; other cli
     assert.match(shader.vertexShader, /#define PDEANIM_SPLINE/);
     assert.equal(shader.uniforms.pdeTangentTex.value, player.textures.tangent);
     const key = mesh.material.customProgramCacheKey();
-    assert.match(key, /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+:spline$/);
+    assert.match(key, /pdeanim:dynamic-pde:\w+:true:frame:\d+:gpu$/);
     const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
     const plainKey = other.mesh.material.customProgramCacheKey();
-    assert.match(plainKey, /pdeanim:dynamic-pde:fields:\w+:frame:\d+:\w+$/);
-    assert.equal(key, `${plainKey}:spline`);
+    assert.match(plainKey, /pdeanim:dynamic-pde:\w+:false:frame:\d+:gpu$/);
+    assert.notEqual(key, plainKey);
     assert.equal(other.uniforms.pdeTangentTex.value, null);
     // the evaluation pass gets the tangent texture too
     let scene = null;

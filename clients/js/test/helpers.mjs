@@ -177,16 +177,21 @@ export function retimed(bytes, { timeModel = null, linear = null, segmentT = nul
 
 /**
  * Times that reach every part of a clip with boundaries segT: every boundary, points just inside and across
- * each segment, a grid, and times outside [0, 1].
+ * each segment, a grid, and for looping clips times outside [0, 1] (the others refuse them).
  */
-export function sampleTimes(segT) {
+export function sampleTimes(segT, looping) {
   const t = Array.from(segT);
   for (let s = 0; s + 1 < segT.length; s++) {
     for (const f of [1e-9, 0.013, 0.25, 0.5, 0.77, 1 - 1e-9]) t.push(segT[s] + f * (segT[s + 1] - segT[s]));
   }
   for (let k = 0; k <= 20; k++) t.push(k / 20);
-  t.push(-0.3, 1.2, 2.61);
+  if (looping) t.push(-0.3, 1.2, 2.61);
   return t;
+}
+
+/** The times of a list that a clip takes: all for a looping clip, those in [0, 1] for the others. */
+export function takenTimes(times, looping) {
+  return looping ? [...times] : times.filter((t) => t >= 0 && t <= 1);
 }
 
 /** The largest absolute difference between two equal-length arrays. */
@@ -207,7 +212,6 @@ export function naiveLocate(segT, t, looping) {
   const tau = Math.min(Math.max((tw - segT[s]) / (len > 0 ? len : 1), 0), 1);
   return [s, tau, tw];
 }
-
 
 /**
  * The natural spline's tangents T_0..T_S of knot values P (S+1) at times t (docs/format.md §3.5.2) from the

@@ -4,6 +4,7 @@
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
+import { spawnSync } from 'node:child_process';
 import { existsSync, readdirSync, readFileSync } from 'node:fs';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -42,4 +43,45 @@ test('MIT licence, ES modules, fzstd the one runtime dependency, three only as a
   assert.equal(lock.packages['node_modules/fzstd'].dependencies, undefined); // nothing pulled in with it
   assert.ok(pkg.peerDependencies.three);
   assert.equal(pkg.peerDependenciesMeta.three.optional, true);
+});
+
+test('npm pack ships the sources, declarations, command, README and licence, and nothing else', () => {
+  const r = spawnSync('npm', ['pack', '--dry-run', '--json', '--ignore-scripts'], { cwd: ROOT, encoding: 'utf8' });
+  assert.equal(r.status, 0, r.stderr);
+  const files = JSON.parse(r.stdout)[0].files.map((f) => f.path).sort();
+  const src = readdirSync(join(ROOT, 'src')).map((f) => `src/${f}`);
+  const types = readdirSync(join(ROOT, 'types')).map((f) => `types/${f}`);
+  const want = ['LICENSE', 'README.md', 'bin/pdeanim-eval.mjs', 'package.json', ...src, ...types].sort();
+  assert.deepEqual(files, want);
+  // every file the exports and sideEffects name is in the tarball
+  for (const target of Object.values(pkg.exports)) {
+    for (const path of typeof target === 'string' ? [target] : Object.values(target)) {
+      assert.ok(files.includes(path.replace(/^\.\//, '')), path);
+    }
+  }
+  for (const path of pkg.sideEffects) assert.ok(files.includes(path.replace(/^\.\//, '')), path);
+});
+
+test('metadata: repository (with its folder), keywords, sideEffects naming the modules with side effects', () => {
+  assert.equal(pkg.repository.type, 'git');
+  assert.match(pkg.repository.url, /^git\+https:\/\//);
+  assert.equal(pkg.repository.directory, 'clients/js');
+  assert.ok(pkg.keywords.includes('three.js') && pkg.keywords.length >= 5);
+  // the modules that install something when imported, and only those
+  const effects = readdirSync(join(ROOT, 'src')).filter((f) =>
+    /^(?:setZstdDecompress\(|self\.onmessage =)/m.test(readFileSync(join(ROOT, 'src', f), 'utf8')),
+  );
+  assert.deepEqual(pkg.sideEffects.map((p) => p.replace('./src/', '')).sort(), effects.sort());
+});
+
+test('the README stands alone: absolute links only, and the options it shows are ones the code takes', async () => {
+  const readme = readFileSync(join(ROOT, 'README.md'), 'utf8');
+  for (const [, href] of readme.matchAll(/\]\(([^)]+)\)/g)) assert.match(href, /^https:\/\//, href);
+  const { PLAYER_OPTIONS } = await import('../src/three.js');
+  // every option named in an attachClip / ClipPlayer call of the README's examples
+  for (const [, opts] of readme.matchAll(/(?:attachClip|attachClipToScene|new ClipPlayer)\([^)]*\{([^}]*)\}/g)) {
+    for (const [, name] of opts.matchAll(/(\w+)\s*(?::|,|$)/g)) {
+      assert.ok([...PLAYER_OPTIONS, 'filter'].includes(name), `README option ${name}`);
+    }
+  }
 });

@@ -15,6 +15,7 @@ import {
   naiveEvaluate,
   retimed,
   sampleTimes,
+  takenTimes,
   worstDeviation,
 } from './helpers.mjs';
 
@@ -34,7 +35,7 @@ function splineCases() {
     const { topology, coefficients } = fixtureParts(c);
     const segT = decodeContainer(coefficients.slice()).arrays.segment_t.data;
     const base = { fixture: c, topology, diagonal: c.diagonal, looping: c.looping };
-    const t = [...c.t, ...sampleTimes(segT)];
+    const t = [...takenTimes(c.t, c.looping), ...sampleTimes(segT, c.looping)];
     if (c.spline_items > 0) out.push({ ...base, name: c.name, coefficients, t });
     if (segT.every((x, j) => j === 0 || x > segT[j - 1]) && segT.length > 2) {
       const timeModel = (cc, w) => (cc % 3 === 0 ? 1 : cc % 3 === 1 ? Number(w === 1) : 0);
@@ -312,7 +313,7 @@ test('with one segment the natural spline is the straight line: both tangents ar
   assert.ok(all.timeModel.every((x) => x === TIME_SPLINE));
   const lines = createEvaluator(decodeClip(topology, retimed(coefficients, { linear: () => true })));
   assert.equal(lines.spline, null);
-  for (const t of [...c.t, ...sampleTimes(all.segmentT)]) {
+  for (const t of [...takenTimes(c.t, c.looping), ...sampleTimes(all.segmentT, c.looping)]) {
     assert.ok(worstDeviation(ev.evaluate(t), lines.evaluate(t)) <= 1e-6 * c.diagonal, `t = ${t}`);
   }
   const N = all.nVertices * 3;
@@ -321,5 +322,17 @@ test('with one segment the natural spline is the straight line: both tangents ar
     const chord = Math.fround((ev.fields[N + i] - ev.fields[i]) / delta);
     assert.equal(ev.tangentFields[i], chord);
     assert.equal(ev.tangentFields[N + i], chord);
+  }
+});
+
+test('spline clips: looping ones repeat with period 1; open ones refuse t outside [0, 1] (RangeError)', () => {
+  for (const c of cases) {
+    const ev = createEvaluator(decodeClip(c.topology, c.coefficients));
+    assert.notEqual(ev.spline, null, c.name);
+    if (c.looping) assert.ok(worstDeviation(ev.evaluate(0.2), ev.evaluate(3.2)) <= 1e-6 * c.diagonal, c.name);
+    else {
+      for (const t of [-2, -1e-9, 1 + 1e-9, 7]) assert.throws(() => ev.evaluate(t), RangeError, c.name);
+      assert.equal(ev.evaluate(1).length, c.fixture.n_vertices * 3, c.name);
+    }
   }
 });

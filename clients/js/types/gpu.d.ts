@@ -13,8 +13,6 @@ export interface FloatTexture {
 
 export interface GpuLayout {
   kind: Clip['kind'];
-  /** 'fields' | 'coefficients' for dynamic clips, 'cyclic' for cyclic ones. */
-  mode: 'fields' | 'coefficients' | 'cyclic';
   rigid: boolean;
   /**
    * Whether some item is on the natural spline (docs/format.md §3.5): the curve table then holds four weight
@@ -36,16 +34,18 @@ export interface GpuLayout {
   /** Weight texels per curve at the start of its table entry (2, or 4 with spline items). */
   weightTexels?: number;
   textures: {
+    /** Per vertex (curve, base xyz) and its orthonormal basis row per coordinate (dynamic clips). */
     vertex: FloatTexture;
-    field?: FloatTexture;
+    /** Per (knot, curve, coordinate) the knots in the curve's orthonormal basis. */
     knot?: FloatTexture;
-    /** Natural-spline tangents of every knot, in the layout of field or knot. */
+    /** Natural-spline tangents of every knot's coefficients (clips with spline items), in the layout of knot. */
     tangent?: FloatTexture;
     /** Per-frame table rewritten by timeUniforms(). */
     curve?: FloatTexture;
   };
-  clip: Clip;
-  /** The CPU evaluator whose per-curve state fills the curve table (dynamic clips). */
+  /** The clip (gpuLayout; absent in gpuTables). */
+  clip?: Clip;
+  /** The CPU evaluator whose per-curve state fills the curve table (dynamic clips; gpuLayout). */
   evaluator?: Evaluator;
   /** Largest texture height (compare with the renderer's MAX_TEXTURE_SIZE). */
   maxHeight: number;
@@ -72,11 +72,15 @@ export interface MeshAttributes {
   pdeNormalFrame: Float32Array;
 }
 
+/** The data textures and constants of a clip as plain typed arrays (a Web Worker can make and transfer them). */
+export declare function gpuTables(clip: Clip, options?: { width?: number }): GpuLayout;
+/** gpuTables (or the given tables) with the clip and its CPU evaluator: what timeUniforms() needs. */
 export declare function gpuLayout(
   clip: Clip,
-  options?: { width?: number; mode?: 'auto' | 'fields' | 'coefficients'; fieldsBudget?: number;
-    evaluator?: Evaluator | null },
+  options?: { width?: number; tables?: GpuLayout | null; evaluator?: Evaluator | null },
 ): GpuLayout;
+/** Bytes of the data textures. */
+export declare function textureBytes(tables: GpuLayout): number;
 /** The uniforms at t; also rewrites layout.textures.curve.data when it changes (upload it then). */
 export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
 export declare function meshAttributes(mesh: {
@@ -85,13 +89,6 @@ export declare function meshAttributes(mesh: {
   normals?: ArrayLike<number> | null;
   index?: ArrayLike<number> | null;
 }): MeshAttributes;
-export declare function triangleFrame(
-  positions: ArrayLike<number>,
-  p: number,
-  a: number,
-  b: number,
-  out: Float64Array,
-): Float64Array;
 export declare function frameNormals(
   clipPositions: ArrayLike<number>,
   attributes: MeshAttributes,
@@ -99,4 +96,10 @@ export declare function frameNormals(
   out: Float32Array,
 ): Float32Array;
 /** GLSL ES 3.00 declarations and functions (pdeCompute() sets pdePosition and pdeNormal). */
-export declare function glslHeader(layout: GpuLayout, options?: { normals?: 'frame' | 'rest' }): string;
+export declare function glslHeader(
+  layout: GpuLayout,
+  options?: { normals?: 'frame' | 'rest'; stage?: 'vertex' | 'fragment'; pass?: boolean; cpu?: boolean },
+): string;
+/** A built-in material's vertex shader with the clip evaluation patched in (mixed by pdeInfluence). */
+export declare function patchVertexShader(vertexShader: string, header: string): string;
+export declare function glslPassMain(): string;

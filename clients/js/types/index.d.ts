@@ -129,7 +129,10 @@ export type Clip = DynamicClip | CyclicClip;
 /** CPU evaluator: positions (V * 3, original vertex order) at normalised clip time t. */
 export interface Evaluator {
   readonly nVertices: number;
-  /** Writes into out (allocated when omitted) and returns it; throws RangeError for a non-finite t. */
+  /**
+   * Writes into out (allocated when omitted) and returns it; throws RangeError for a non-finite t, and for t
+   * outside [0, 1] when the clip does not loop (looping clips wrap with period 1).
+   */
   evaluate(t: number, out?: Float32Array): Float32Array;
 }
 
@@ -226,3 +229,16 @@ export declare function computeNormals(
   out?: Float32Array,
 ): Float32Array;
 export declare function boundingBoxDiagonal(positions: ArrayLike<number>): number;
+
+/** Install the zstd streaming decoder class (fzstd's Decompress); the entry points install fzstd's. */
+export declare function setZstdDecompress(cls: unknown): void;
+/** t checked against the clip: finite, and in [0, 1] unless it loops; throws RangeError. */
+export declare function checkTime(t: number, looping: boolean): number;
+export declare function triangleFrame(
+  positions: ArrayLike<number>,
+  p: number,
+  a: number,
+  b: number,
+  out: Float64Array | Float32Array,
+  offset?: number,
+): Float64Array | Float32Array;

@@ -104,3 +104,27 @@ def get_topology(
         raise ApiError(404, "not_found", f"clip {clip_id!r} does not belong to mesh {mesh_id!r}")
     return immutable_response(request, clip.topology_key, lambda: store.blobs.get(clip.topology_key),
                               "application/octet-stream")
+
+
+FILE_TYPES = {".glb": "model/gltf-binary", ".gltf": "model/gltf+json", ".obj": "model/obj",
+              ".stl": "model/stl", ".ply": "application/octet-stream", ".off": "application/octet-stream"}
+
+
+@router.get(
+    "/v1/meshes/{mesh_id}/file",
+    operation_id="getMeshFile",
+    response_class=Response,
+    responses={
+        200: {"content": {t: {} for t in sorted(set(FILE_TYPES.values()))},
+              "description": "the mesh file as uploaded (the media type of its extension)"},
+        **responses(304, 401, 404, 422),
+    },
+)
+def get_mesh_file(mesh_id: str, request: Request, tenant: TenantDep, session: SessionDep,
+                  store: StoreDep) -> Response:
+    """The file as uploaded (e.g. a GLB with its materials and textures: the viewer plays clips on it)."""
+    row = owned(session, Mesh, mesh_id, tenant, "mesh")
+    suffix = "." + row.filename.rsplit(".", 1)[-1].lower() if "." in row.filename else ""
+    headers = {"Content-Disposition": f'attachment; filename="{mesh_id}{suffix}"'}
+    return immutable_response(request, row.blob_key, lambda: store.blobs.get(row.blob_key),
+                              FILE_TYPES.get(suffix, "application/octet-stream"), headers)

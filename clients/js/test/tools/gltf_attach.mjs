@@ -53,7 +53,7 @@ const frames = tList
     const out = [];
     for (const p of player.players) {
       const rel = rootInverse.clone().multiply(p.mesh.matrixWorld);
-      const pos = p.mesh.geometry.getAttribute('position');
+      const pos = p.mesh.geometry.getAttribute('pdeCpuPosition'); // the CPU path's own attribute
       for (let i = 0; i < pos.count; i++) {
         out.push(new THREE.Vector3(pos.getX(i), pos.getY(i), pos.getZ(i)).applyMatrix4(rel).toArray());
       }
@@ -65,6 +65,7 @@ const after = player.players.map((p) =>
 );
 const influences = (p) => (p.mesh.morphTargetInfluences ? [...p.mesh.morphTargetInfluences] : []);
 const morphWhilePlaying = player.players.map(influences);
+const influenceWhilePlaying = player.influence;
 player.detach();
 const morphAfter = player.players.map(influences);
 process.stdout.write(
@@ -73,6 +74,7 @@ process.stdout.write(
     materialsWhilePlaying: after,
     frames,
     morphWhilePlaying,
+    influenceWhilePlaying,
     morphAfter,
     morphBefore,
   }),

@@ -1,10 +1,14 @@
 // The pdeanim clip viewer: downloads a clip's topology and coefficients from this service (key from the URL
-// fragment), plays it with the JS package (GPU vertex shader or CPU), and compares the bytes it downloaded
-// against raw float32 frames and the animation GLB. window.pdeanimViewer is the handle automated checks use.
+// fragment; decoded in a Web Worker), plays it with the JS package (GPU vertex shader or CPU) on the mesh's
+// original glTF when the clip came from one (its materials, textures and hierarchy), else on a mesh of the
+// clip's own topology, and compares the bytes it downloaded against raw float32 frames and the animation
+// GLB. window.pdeanimViewer is the handle automated checks use.
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import { createEvaluator, fetchClip } from 'pdeanim';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { createEvaluator } from 'pdeanim';
+import { PDEClipLoader, attachClip, attachClipToScene } from 'pdeanim/three.js';
 
 const ROOT = document.querySelector('meta[name="pdeanim-root"]')?.content ?? '';
 const GLB_AUTO_LIMIT = 64 * 1024 * 1024; // measure the animation GLB at once only below this raw size
@@ -19,6 +23,12 @@ function message(text, isError = false) {
   const el = $('message');
   el.textContent = text;
   el.classList.toggle('error', isError);
+}
+
+/** Bytes on the GPU for the clip: data textures plus the per-vertex attributes of its meshes. */
+function gpuBytes(player) {
+  if (player.gpuBytes !== undefined) return player.gpuBytes;
+  return player.resources.textureBytes + player.attributeBytes;
 }
 
 function median(values) {
@@ -102,48 +112,94 @@ class Viewer {
     this.meta = await apiJson(`/v1/clips/${encodeURIComponent(clipId)}`, key);
     const base = `${ROOT}/v1/clips/${encodeURIComponent(clipId)}`;
     const urls = { topology: `${base}/topology`, coefficients: `${base}/coefficients` };
-    const clip = await fetchClip({ ...urls, key });
+    const source = this.meta.mesh_id ? this.sourceGltf(this.meta.mesh_id) : Promise.resolve(null);
+    const timings = { start: performance.now() };
+    const limit = this.renderer.capabilities.maxTextureSize;
+    const loader = new PDEClipLoader().setRequestHeader({ Authorization: `Bearer ${key}` })
+      .setTextureWidth(Math.min(4096, limit));
+    // the download ends when both parts are in: the loader then decodes them off the main thread
+    const clip = await loader.loadAsync(base, (e) => {
+      if (e.lengthComputable && e.loaded === e.total) timings.downloaded ??= performance.now();
+    });
+    timings.decoded = performance.now();
+    timings.downloaded ??= timings.decoded;
     this.evaluator = createEvaluator(clip);
+    const entries = (u) => performance.getEntriesByName(new URL(u, location.href).href).at(-1);
+    const decoded = (u) => entries(u)?.decodedBodySize || 0;
     this.sizes = {
-      topologyWire: wireBytes(urls.topology, clip.bytes.topology),
-      coefficientsWire: wireBytes(urls.coefficients, clip.bytes.coefficients),
-      topology: clip.bytes.topology,
-      coefficients: clip.bytes.coefficients,
+      topologyWire: wireBytes(urls.topology, decoded(urls.topology)),
+      coefficientsWire: wireBytes(urls.coefficients, decoded(urls.coefficients)),
+      topology: decoded(urls.topology),
+      coefficients: decoded(urls.coefficients),
       raw: this.meta.sizes?.raw_float32_bytes
         ?? (this.meta.frames ?? clip.frameTimes.length) * clip.nVertices * 12,
       glb: null,
       glbNote: 'not measured',
     };
-    this.buildMesh(clip);
-    await this.attachPlayer(clip);
+    const gltf = await source.catch((err) => {
+      this.sourceNote = `the mesh's glTF could not be used (${err.message})`;
+      return null;
+    });
+    this.buildModel(clip, gltf);
+    this.attachPlayer(clip);
     this.duration = clip.frameTimes.length > 1
       ? clip.frameTimes[clip.frameTimes.length - 1] - clip.frameTimes[0] : 1;
     if (!(this.duration > 0)) this.duration = 1;
     this.clip = clip; // from here on the animation loop plays it
     this.enableControls();
+    this.renderer.render(this.scene, this.camera);
+    this.renderer.getContext().finish();
+    timings.firstFrame = performance.now();
+    this.timings = timings;
     this.renderStats();
-    message('');
+    message(this.sourceNote ?? '');
     if (this.sizes.raw <= GLB_AUTO_LIMIT) this.measureGlb();
   }
 
-  buildMesh(clip) {
-    const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', new THREE.BufferAttribute(Float32Array.from(clip.rest), 3)
-      .setUsage(THREE.DynamicDrawUsage));
-    geometry.setIndex(new THREE.BufferAttribute(Uint32Array.from(clip.faces), 1));
-    geometry.computeVertexNormals();
-    geometry.getAttribute('normal').setUsage(THREE.DynamicDrawUsage);
-    const material = new THREE.MeshStandardMaterial({ color: 0xd9a066, roughness: 0.55, metalness: 0.05,
-      side: THREE.DoubleSide });
-    this.mesh = new THREE.Mesh(geometry, material);
-    this.scene.add(this.mesh);
-    // frame the whole motion: the bounding box over a few times, not only the rest pose
+  /** The mesh's uploaded file as a glTF scene when it is one (GLB), else null. */
+  async sourceGltf(meshId) {
+    const mesh = await apiJson(`/v1/meshes/${encodeURIComponent(meshId)}`, this.key);
+    if (!/\.(glb|gltf)$/i.test(mesh.filename ?? '')) return null;
+    const res = await fetch(`${ROOT}/v1/meshes/${encodeURIComponent(meshId)}/file`,
+      { headers: { Authorization: `Bearer ${this.key}` } });
+    if (!res.ok) throw new Error(`HTTP ${res.status}`);
+    return new GLTFLoader().parseAsync(await res.arrayBuffer(), '');
+  }
+
+  /** The model to play on: the source glTF's scene (when its vertices are the clip's), else the clip's mesh. */
+  buildModel(clip, gltf) {
+    let count = 0;
+    gltf?.scene.traverse((o) => { if (o.isMesh) count += o.geometry.getAttribute('position').count; });
+    if (gltf && count === clip.nVertices) {
+      this.model = gltf.scene;
+      this.sourceKind = 'gltf';
+    } else {
+      if (gltf) this.sourceNote = `the mesh's glTF has ${count} vertices, the clip ${clip.nVertices}: not used`;
+      const geometry = new THREE.BufferGeometry();
+      geometry.setAttribute('position', new THREE.BufferAttribute(Float32Array.from(clip.rest), 3));
+      geometry.setIndex(new THREE.BufferAttribute(Uint32Array.from(clip.faces), 1));
+      geometry.computeVertexNormals(); // unwelded (flat) meshes come out flat, welded ones smooth
+      const material = new THREE.MeshStandardMaterial({ color: 0xd9a066, roughness: 0.55, metalness: 0.05,
+        side: THREE.DoubleSide });
+      this.model = new THREE.Mesh(geometry, material);
+      this.mesh = this.model;
+      this.sourceKind = 'clip';
+    }
+    this.scene.add(this.model);
+    this.frame(clip);
+  }
+
+  /** Frame the whole motion: the bounding box over a few times, not only the rest pose. */
+  frame(clip) {
     const box = new THREE.Box3();
     const pos = new Float32Array(clip.nVertices * 3);
-    for (const t of [0, 0.25, 0.5, 0.75, 1]) {
+    const times = clip.looping ? [0, 0.25, 0.5, 0.75] : [0, 0.25, 0.5, 0.75, 1];
+    this.model.updateMatrixWorld(true);
+    const toWorld = this.model.matrixWorld;
+    for (const t of times) {
       this.evaluator.evaluate(t, pos);
       for (let i = 0; i < pos.length; i += 3) {
-        box.expandByPoint(new THREE.Vector3(pos[i], pos[i + 1], pos[i + 2]));
+        box.expandByPoint(new THREE.Vector3(pos[i], pos[i + 1], pos[i + 2]).applyMatrix4(toWorld));
       }
     }
     const center = box.getCenter(new THREE.Vector3());
@@ -159,16 +215,11 @@ class Viewer {
     this.controls.update();
   }
 
-  async attachPlayer(clip) {
-    try {
-      const { attachClip } = await import('pdeanim/three.js');
-      this.player = attachClip(this.mesh, clip, { gpu: true, renderer: this.renderer });
-      this.gpuReason = this.player.gpuUnavailableReason ?? null;
-    } catch (err) {
-      this.player = null;
-      this.gpuReason = `the three.js integration could not be loaded (${err.message})`;
-      this.normals = new Float32Array(clip.nVertices * 3);
-    }
+  attachPlayer(clip) {
+    const options = { gpu: true, renderer: this.renderer };
+    this.player = this.sourceKind === 'gltf' ? attachClipToScene(this.model, clip, options)
+      : attachClip(this.mesh, clip, options);
+    this.gpuReason = this.player.gpuUnavailableReason ?? null;
   }
 
   get mode() { return this.player?.gpu ? 'gpu' : 'cpu'; }
@@ -190,14 +241,7 @@ class Viewer {
   /** Move the mesh to normalised time t (GPU: uniforms; CPU: positions and normals rewritten). */
   apply(t) {
     this.t = t;
-    if (this.player) {
-      this.player.setTime(t);
-    } else {
-      const geometry = this.mesh.geometry;
-      this.evaluator.evaluate(t, geometry.getAttribute('position').array);
-      geometry.getAttribute('position').needsUpdate = true;
-      geometry.computeVertexNormals();
-    }
+    this.player.setTime(t);
     $('scrub').value = String(t);
     $('t-value').textContent = t.toFixed(3);
     this.dirty = true;
@@ -227,7 +271,7 @@ class Viewer {
       if (this.playing) {
         const dt = this.last === undefined ? 0 : Math.min((now - this.last) / 1000, 0.1);
         let t = this.t + dt / this.duration;
-        t -= Math.floor(t);
+        t -= Math.floor(t); // clips that do not loop take t in [0, 1] only: replay from 0
         this.apply(t);
       }
       this.last = now;
@@ -288,6 +332,9 @@ class Viewer {
       ['vertices / faces', this.clip ? `${this.clip.nVertices} / ${this.clip.faces.length / 3}` : ''],
       ['source frames', m.frames ?? ''],
       ['evaluation', this.clip ? this.mode.toUpperCase() : ''],
+      ['model', this.sourceKind === 'gltf' ? "the mesh's glTF (its materials)" : "the clip's mesh"],
+      ['GPU data (textures, attributes)', this.player ? fmtBytes(gpuBytes(this.player)) : ''],
+      ['first frame', this.timings ? `${(this.timings.firstFrame - this.timings.downloaded).toFixed(0)} ms after the download` : ''],
       ['downloaded (as served)', `${fmtBytes(downloaded)}`],
       ['  topology', `${fmtBytes(s.topologyWire)} (${fmtBytes(s.topology)} decoded)`],
       ['  coefficients', `${fmtBytes(s.coefficientsWire)} (${fmtBytes(s.coefficients)} decoded)`],
@@ -358,11 +405,27 @@ window.pdeanimViewer = {
   setMode: (mode) => viewer.setMode(mode),
   get mode() { return viewer.mode; },
   get gpuUnavailableReason() { return viewer.gpuReason; },
+  /** What the clip plays on: 'gltf' (the mesh's own glTF) or 'clip' (the clip's topology). */
+  get model() { return viewer.sourceKind; },
+  /** ms: start, downloaded (both parts in), decoded (worker done), firstFrame (drawn, gl.finish). */
+  get timings() { return { ...viewer.timings }; },
+  get gpuBytes() { return gpuBytes(viewer.player); },
   play: () => viewer.play(),
   pause: () => viewer.pause(),
   get t() { return viewer.t; },
   get clip() { return viewer.clip; },
   sizes: () => ({ ...viewer.sizes }),
+  /**
+   * Draw another object in place of the clip's model (null: the clip's model again), with the same camera
+   * and lights; resolves after it has been rendered (screenshot comparisons against the source model).
+   */
+  async swapModel(other) {
+    if (viewer.other) viewer.scene.remove(viewer.other);
+    viewer.other = other ?? null;
+    viewer.model.visible = !other;
+    if (other) viewer.scene.add(other);
+    await nextFrame();
+  },
   measureGlb: () => viewer.measureGlb(),
   frameStats: () => viewer.frameStats(),
   resetFrameStats: () => viewer.resetFrameStats(),

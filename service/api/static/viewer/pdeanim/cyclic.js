@@ -46,17 +46,8 @@ function swimParams(d) {
   return p;
 }
 
-/** Validate and decode the topology and coefficients containers of a cyclic-spine clip. */
-export function decodeCyclic(topo, coef) {
-  checkFormatVersion(topo.header, 'topology');
-  checkFormatVersion(coef.header, 'coefficients');
-  const ta = topo.arrays;
-  const ca = coef.arrays;
-  const missing = ['faces', 'rest', 'vertex_patch', 'vertex_uv'].filter((n) => !ta[n]);
-  if (missing.length)
-    throw new ClipFormatError(`cyclic-spine topology part lacks arrays: ${missing.join(', ')}`);
-  if (!ca.spine) throw new ClipFormatError('cyclic-spine coefficients part lacks arrays: spine');
-  const f = topo.header.frame;
+/** The body frame of a cyclic-spine topology header (origin, axis, lateral, up, x range). */
+function bodyFrame(f) {
   if (!f || typeof f !== 'object') throw new ClipFormatError('bad cyclic-spine clip header: no body frame');
   const frame = {
     origin: vec3(f.origin, 'frame.origin'),
@@ -69,6 +60,20 @@ export function decodeCyclic(topo, coef) {
   if (!Number.isFinite(frame.xMin) || !Number.isFinite(frame.xMax)) {
     throw new ClipFormatError('bad cyclic-spine clip header: frame.x_min/x_max must be numbers');
   }
+  return frame;
+}
+
+/** Validate and decode the topology and coefficients containers of a cyclic-spine clip. */
+export function decodeCyclic(topo, coef) {
+  checkFormatVersion(topo.header, 'topology');
+  checkFormatVersion(coef.header, 'coefficients');
+  const ta = topo.arrays;
+  const ca = coef.arrays;
+  const missing = ['faces', 'rest', 'vertex_patch', 'vertex_uv'].filter((n) => !ta[n]);
+  if (missing.length)
+    throw new ClipFormatError(`cyclic-spine topology part lacks arrays: ${missing.join(', ')}`);
+  if (!ca.spine) throw new ClipFormatError('cyclic-spine coefficients part lacks arrays: spine');
+  const frame = bodyFrame(topo.header.frame);
   const swim = swimParams(coef.header.swim);
   const frames = Number(coef.header.frames ?? 24);
   const spine = ca.spine;

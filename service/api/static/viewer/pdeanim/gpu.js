@@ -1,11 +1,12 @@
-// GPU evaluation data (no three.js import): float textures, per-vertex attributes, per-frame uniforms and
-// the GLSL that evaluates a clip in a vertex shader (docs/format.md has the math; this mirrors the CPU path).
+// GPU evaluation data (no three.js import): float textures, per-vertex attributes and per-frame uniforms of a
+// clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js, the TSL in webgpu.js.
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, naturalSplineTangents, vertexBasis } from './dynamic.js';
+import { DynamicEvaluator, naturalSplineTangents } from './dynamic.js';
+import { triangleFrame, triangleQuality } from './geometry.js';
+import { orthonormalBases, orthonormalCoefficients } from './orthobasis.js';
 
 export const TEXTURE_WIDTH = 4096;
-export const FIELDS_BUDGET_BYTES = 64 * 1024 * 1024;
 
 /** The largest power of two <= width (texel addressing in the shader is then a shift and a mask). */
 function pow2Width(width) {
@@ -20,80 +21,50 @@ function texture(nTexels, width) {
 }
 
 /**
- * Textures and constants of a decoded clip for the vertex shader (independent of the mesh):
- * {kind, mode, rigid, spline, nCurves, nVertices, nSegments, curveTexels, textures: {vertex,
- * field | knot, tangent?, curve}, maxHeight, evaluator}. The `curve` texture is the per-frame table that
+ * The data textures and constants of a decoded clip (independent of the mesh and of three.js; plain typed
+ * arrays, so that a Web Worker can build them and transfer them): {kind, rigid, spline, nCurves, nVertices,
+ * nSegments, width, weightTexels, curveTexels, textures: {vertex, knot, tangent?, curve}, maxHeight} (cyclic
+ * clips: {kind, nVertices, width, textures: {vertex}, axis, bend, rotate, maxHeight}).
+ *
+ * Dynamic clips: per vertex 4 texels (curve, base xyz) and the row of each coordinate's orthonormal space
+ * basis (orthobasis.js); per (knot, curve, coordinate) the knots in that basis; for clips with items on the
+ * natural spline (docs/format.md §3.5: `spline` true) the tangents T_j of every knot's coefficients likewise
+ * (the spline's tridiagonal solve once per clip); the `curve` texture is the per-frame table that
  * timeUniforms() rewrites: per curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for
  * rigid clips, the rows of R with the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's
- * own code (a few us per frame). Clips with items on the natural spline (docs/format.md §3.5: `spline` true)
- * carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz, w_2 xyz, w_3 xyz: the weights of
- * T_s, P_s, P_s+1, T_s+1, or 0, phi0, phi1, 0 for an item off the spline), then the rigid rows; their
- * `tangent` texture holds the tangents T_j of every knot in the layout of the `field` or `knot` texture (the
- * spline's tridiagonal solve applied to the per-vertex fields, or to the knot coefficients, once per clip).
- *
- * mode "fields" (the default while (S+1) x V texels, twice that with natural-spline tangents, fit
- * fieldsBudget bytes) stores every knot's per-vertex contribution P_k = knots_k . S(u) (the CPU evaluator's
- * float32 fields), so the shader only forms base + phi0 P_s + phi1 P_s+1; mode "coefficients" stores the
- * knots and the per-vertex space basis (far
- * smaller, but the shader then sums knot x basis terms in float32, and fitted clips' terms can be ~1e3 times
- * the result: ~1e-5 of the diagonal instead of ~1e-7).
+ * own code. Clips with spline items carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz,
+ * w_2 xyz, w_3 xyz: the weights of T_s, P_s, P_s+1, T_s+1, or 0, phi0, phi1, 0 for an item off the spline),
+ * then the rigid rows.
  */
-export function gpuLayout(
-  clip,
-  { width = TEXTURE_WIDTH, mode = 'auto', fieldsBudget = FIELDS_BUDGET_BYTES, evaluator = null } = {},
-) {
+export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   width = pow2Width(width);
-  if (clip.kind === 'cyclic-spine') return cyclicLayout(clip, width);
+  if (clip.kind === 'cyclic-spine') return cyclicTables(clip, width);
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
-  if (!['auto', 'fields', 'coefficients'].includes(mode)) throw new RangeError(`unknown GPU mode ${mode}`);
-  const ev = evaluator ?? new DynamicEvaluator(clip);
-  const spline = ev.spline !== null;
-  // natural-spline clips keep a tangent texture of the same size beside the fields
-  const fieldBytes = (S + 1) * V * 16 * (spline ? 2 : 1);
-  const useFields = mode === 'fields' || (mode === 'auto' && fieldBytes <= fieldsBudget);
-  const base = ev.base;
-  let textures;
-  if (useFields) {
-    const vertex = texture(V, width); // per vertex: (curve, base xyz)
-    for (let v = 0; v < V; v++) {
-      vertex.data[v * 4] = curveOf[v];
-      vertex.data.set(base.subarray(v * 3, v * 3 + 3), v * 4 + 1);
-    }
-    const field = texture((S + 1) * V, width); // per (knot, vertex): P xyz
-    for (let i = 0; i < (S + 1) * V; i++) field.data.set(ev.fields.subarray(i * 3, i * 3 + 3), i * 4);
-    textures = { vertex, field };
-  } else {
-    const B = vertexBasis(clip);
-    const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
-    for (let v = 0; v < V; v++) {
-      const o = v * 16;
-      vertex.data[o] = curveOf[v];
-      vertex.data.set(base.subarray(v * 3, v * 3 + 3), o + 1);
-      vertex.data.set(B.subarray(v * 12, v * 12 + 12), o + 4);
-    }
-    const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 space coefficients
-    knot.data.set(knots);
-    textures = { vertex, knot };
+  const spline = (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
+  const base = new DynamicEvaluator(clip).base;
+  const { q, r } = orthonormalBases(clip);
+  const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
+  for (let v = 0; v < V; v++) {
+    const o = v * 16;
+    vertex.data[o] = curveOf[v];
+    vertex.data.set(base.subarray(v * 3, v * 3 + 3), o + 1);
+    vertex.data.set(q.subarray(v * 12, v * 12 + 12), o + 4);
   }
+  const coefficients = orthonormalCoefficients(r, knots);
+  const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 basis coefficients
+  knot.data.set(coefficients);
+  const textures = { vertex, knot };
   if (spline) {
-    // natural-spline tangents of every knot, in the layout of the field or knot texture
-    if (useFields) {
-      const tangent = texture((S + 1) * V, width); // per (knot, vertex): T xyz
-      const T = ev.tangentFields;
-      for (let i = 0; i < (S + 1) * V; i++) tangent.data.set(T.subarray(i * 3, i * 3 + 3), i * 4);
-      textures.tangent = tangent;
-    } else {
-      const tangent = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 coefficients
-      naturalSplineTangents(clip.segmentT, knots, C * 12, tangent.data);
-      textures.tangent = tangent;
-    }
+    // natural-spline tangents of every knot's coefficients (linear: the same in either basis)
+    const tangent = texture((S + 1) * C * 3, width);
+    naturalSplineTangents(clip.segmentT, coefficients, C * 12, tangent.data);
+    textures.tangent = tangent;
   }
   const weightTexels = spline ? 4 : 2;
   const curveTexels = weightTexels + (rigid ? 3 : 0);
   textures.curve = texture(C * curveTexels, width);
   return {
     kind: clip.kind,
-    mode: useFields ? 'fields' : 'coefficients',
     rigid: Boolean(rigid),
     spline,
     nCurves: C,
@@ -103,13 +74,27 @@ export function gpuLayout(
     width,
     curveTexels,
     textures,
-    clip,
-    evaluator: ev,
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
 }
 
-function cyclicLayout(clip, width) {
+/**
+ * The tables of gpuTables() with the clip and its CPU evaluator (whose per-segment time state fills the
+ * per-curve table): what timeUniforms() and the shaders need. tables: gpuTables(clip) made elsewhere (in a
+ * Web Worker), else made here; evaluator: the clip's, when the caller has one.
+ */
+export function gpuLayout(clip, { width = TEXTURE_WIDTH, tables = null, evaluator = null } = {}) {
+  const t = tables ?? gpuTables(clip, { width });
+  if (clip.kind === 'cyclic-spine') return { ...t, clip };
+  return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip), tableAt: [-1, NaN, NaN] };
+}
+
+/** Bytes of the data textures of gpuTables() (what the GPU holds for the clip, whatever the mesh). */
+export function textureBytes(tables) {
+  return Object.values(tables.textures).reduce((n, t) => n + t.data.byteLength, 0);
+}
+
+function cyclicTables(clip, width) {
   const ev = new CyclicEvaluator(clip);
   const V = clip.nVertices;
   const vertex = texture(V * 3, width); // per vertex: (rest xyz, ra), (dS, dC, gS, gC), (rl, 0, 0, 0)
@@ -125,7 +110,6 @@ function cyclicLayout(clip, width) {
   }
   return {
     kind: clip.kind,
-    mode: 'cyclic',
     rigid: false,
     spline: false,
     nCurves: 0,
@@ -133,7 +117,6 @@ function cyclicLayout(clip, width) {
     nSegments: 0,
     width,
     textures: { vertex },
-    clip,
     maxHeight: vertex.height,
     axis: ev.axis,
     bend: ev.bend,
@@ -202,19 +185,22 @@ export function timeUniforms(layout, t) {
       }
     }
   }
-  if (layout.rigid) {
-    const { rot, trans } = ev;
-    const R = layout.weightTexels * 4; // the rigid rows follow the weights
-    for (let c = 0, o = R; c < C; c++, o += K) {
-      for (let i = 0; i < 3; i++) {
-        d[o + i * 4] = rot[c * 9 + i * 3];
-        d[o + 1 + i * 4] = rot[c * 9 + i * 3 + 1];
-        d[o + 2 + i * 4] = rot[c * 9 + i * 3 + 2];
-        d[o + 3 + i * 4] = trans[c * 3 + i];
-      }
+  if (layout.rigid) rigidRows(layout, ev, d);
+  return { seg, sw: 0, cw: 0, changed: true };
+}
+
+/** The rigid rows of the per-curve table d (after the weights): (R row i, c_i) of each curve, from ev. */
+function rigidRows(layout, ev, d) {
+  const { rot, trans } = ev;
+  const K = layout.curveTexels * 4;
+  for (let c = 0, o = layout.weightTexels * 4; c < layout.nCurves; c++, o += K) {
+    for (let i = 0; i < 3; i++) {
+      d[o + i * 4] = rot[c * 9 + i * 3];
+      d[o + 1 + i * 4] = rot[c * 9 + i * 3 + 1];
+      d[o + 2 + i * 4] = rot[c * 9 + i * 3 + 2];
+      d[o + 3 + i * 4] = trans[c * 3 + i];
     }
   }
-  return { seg, sw: 0, cw: 0, changed: true };
 }
 
 /**
@@ -235,14 +221,13 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
     nb[i * 2 + 1] = i;
   }
   const nTri = index ? index.length / 3 : n / 3;
-  const corner = index ? (k) => index[k] : (k) => k;
-  const e = new Float64Array(6);
   for (let f = 0; f < nTri; f++) {
     for (let r = 0; r < 3; r++) {
-      const p = corner(f * 3 + r);
-      const a = corner(f * 3 + ((r + 1) % 3));
-      const b = corner(f * 3 + ((r + 2) % 3));
-      const q = triangleQuality(positions, p, a, b, e);
+      const k = f * 3;
+      const p = index ? index[k + r] : k + r;
+      const a = index ? index[k + ((r + 1) % 3)] : k + ((r + 1) % 3);
+      const b = index ? index[k + ((r + 2) % 3)] : k + ((r + 2) % 3);
+      const q = triangleQuality(positions, p, a, b);
       if (q > best[p]) {
         best[p] = q;
         nb[p * 2] = a;
@@ -272,247 +257,31 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
   return { pdeVertex, pdeNormalFrame: frame };
 }
 
-/** Shape quality of triangle (p, a, b): |e1 x e2| / (|e1|^2 + |e2|^2), 0 when degenerate. */
-function triangleQuality(pos, p, a, b, e) {
-  for (let w = 0; w < 3; w++) {
-    e[w] = pos[a * 3 + w] - pos[p * 3 + w];
-    e[3 + w] = pos[b * 3 + w] - pos[p * 3 + w];
-  }
-  const cx = e[1] * e[5] - e[2] * e[4];
-  const cy = e[2] * e[3] - e[0] * e[5];
-  const cz = e[0] * e[4] - e[1] * e[3];
-  const den = e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3] + e[4] * e[4] + e[5] * e[5];
-  return den > 0 ? Math.hypot(cx, cy, cz) / den : 0;
-}
-
-/**
- * Orthonormal frame (rows t1, t2, n) of triangle (p, a, b) of positions (any vertex indexing) into out (9):
- * t1 along p->a, n the triangle normal, t2 = n x t1. The shader builds the same frame from evaluated
- * positions.
- */
-export function triangleFrame(pos, p, a, b, out) {
-  const e1 = [0, 1, 2].map((w) => pos[a * 3 + w] - pos[p * 3 + w]);
-  const e2 = [0, 1, 2].map((w) => pos[b * 3 + w] - pos[p * 3 + w]);
-  const l1 = Math.hypot(...e1) || 1;
-  const t1 = e1.map((x) => x / l1);
-  let nn = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
-  const ln = Math.hypot(...nn) || 1;
-  nn = nn.map((x) => x / ln);
-  const t2 = [nn[1] * t1[2] - nn[2] * t1[1], nn[2] * t1[0] - nn[0] * t1[2], nn[0] * t1[1] - nn[1] * t1[0]];
-  out.set([...t1, ...t2, ...nn]);
-  return out;
-}
-
 /**
  * CPU counterpart of the shader's normals: mesh normals (n * 3) from clip positions (V * 3) and the mesh
- * attributes of meshAttributes(); vertices without a frame keep restNormals. Allocation-free (per frame).
+ * attributes of meshAttributes(); vertices without a frame keep restNormals. Allocation-free after the first
+ * call (per frame).
  */
 export function frameNormals(clipPositions, attrs, restNormals, out) {
   const { pdeVertex, pdeNormalFrame } = attrs;
-  const P = clipPositions;
+  const fr = (frameNormals.scratch ??= new Float64Array(9));
   for (let i = 0; i < pdeVertex.length; i += 3) {
-    const p = pdeVertex[i] * 3;
-    const a = pdeVertex[i + 1] * 3;
-    const b = pdeVertex[i + 2] * 3;
+    const p = pdeVertex[i];
+    const a = pdeVertex[i + 1];
     if (a === p) {
       out[i] = restNormals ? restNormals[i] : 0;
       out[i + 1] = restNormals ? restNormals[i + 1] : 0;
       out[i + 2] = restNormals ? restNormals[i + 2] : 1;
       continue;
     }
-    const e1x = P[a] - P[p];
-    const e1y = P[a + 1] - P[p + 1];
-    const e1z = P[a + 2] - P[p + 2];
-    const e2x = P[b] - P[p];
-    const e2y = P[b + 1] - P[p + 1];
-    const e2z = P[b + 2] - P[p + 2];
-    const l1 = Math.hypot(e1x, e1y, e1z) || 1;
-    const t1x = e1x / l1;
-    const t1y = e1y / l1;
-    const t1z = e1z / l1;
-    let nx = e1y * e2z - e1z * e2y;
-    let ny = e1z * e2x - e1x * e2z;
-    let nz = e1x * e2y - e1y * e2x;
-    const ln = Math.hypot(nx, ny, nz) || 1;
-    nx /= ln;
-    ny /= ln;
-    nz /= ln;
-    const t2x = ny * t1z - nz * t1y;
-    const t2y = nz * t1x - nx * t1z;
-    const t2z = nx * t1y - ny * t1x;
+    triangleFrame(clipPositions, p, a, pdeVertex[i + 2], fr);
     const x = pdeNormalFrame[i];
     const y = pdeNormalFrame[i + 1];
     const z = pdeNormalFrame[i + 2];
-    out[i] = x * t1x + y * t2x + z * nx;
-    out[i + 1] = x * t1y + y * t2y + z * ny;
-    out[i + 2] = x * t1z + y * t2z + z * nz;
+    out[i] = x * fr[0] + y * fr[3] + z * fr[6];
+    out[i + 1] = x * fr[1] + y * fr[4] + z * fr[7];
+    out[i + 2] = x * fr[2] + y * fr[5] + z * fr[8];
   }
   return out;
 }
-
-/**
- * GLSL main() of the evaluation pass: one fragment per clip vertex (row-major in a texture of layout.width
- * columns) writes its position; the mesh shaders (compiled with pass: true) then read three positions per
- * vertex instead of evaluating them.
- */
-export function glslPassMain() {
-  return `void main() {
-  int v = (int(gl_FragCoord.y) << PDEANIM_WIDTH_SHIFT) + int(gl_FragCoord.x);
-  gl_FragColor = v < pdeVertices ? vec4(pdeEval(v), 1.0) : vec4(0.0);
-}
-`;
-}
-
-/** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
-export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass = false } = {}) {
-  const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
-  if (stage === 'vertex') defs.push('#define PDEANIM_VERTEX_STAGE');
-  if (pass) defs.push('#define PDEANIM_PASS');
-  if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
-  if (layout.rigid) defs.push('#define PDEANIM_RIGID');
-  if (layout.spline) defs.push('#define PDEANIM_SPLINE');
-  if (layout.mode === 'fields') defs.push('#define PDEANIM_FIELDS');
-  defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
-  defs.push(`#define PDEANIM_WEIGHT_TEXELS ${layout.weightTexels ?? 0}`);
-  defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
-  defs.push(`#define PDEANIM_WIDTH_MASK ${layout.width - 1}`);
-  return `${defs.join('\n')}
-#ifdef PDEANIM_VERTEX_STAGE
-in vec3 pdeVertex;
-in vec3 pdeNormalFrame;
-#endif
-#ifdef PDEANIM_PASS
-uniform highp sampler2D pdePosTex;
-#endif
-uniform highp sampler2D pdeVertexTex;
-uniform bool pdeEnabled;
-uniform int pdeSeg;
-uniform int pdeCurves;
-uniform int pdeVertices;
-uniform mat4 pdeClipToLocal;
-uniform mat3 pdeNormalToLocal;
-#ifdef PDEANIM_DYNAMIC
-uniform highp sampler2D pdeCurveTex;
-#ifdef PDEANIM_FIELDS
-uniform highp sampler2D pdeFieldTex;
-#else
-uniform highp sampler2D pdeKnotTex;
-#endif
-#ifdef PDEANIM_SPLINE
-uniform highp sampler2D pdeTangentTex;
-#endif
-#endif
-#ifdef PDEANIM_CYCLIC
-uniform float pdeSinWt;
-uniform float pdeCosWt;
-uniform vec3 pdeAxis;
-uniform vec3 pdeBend;
-uniform bool pdeRotate;
-#endif
-vec3 pdePosition;
-vec3 pdeNormal;
-vec4 pdeFetch(highp sampler2D tex, int i) {
-  return texelFetch(tex, ivec2(i & PDEANIM_WIDTH_MASK, i >> PDEANIM_WIDTH_SHIFT), 0);
-}
-#ifdef PDEANIM_DYNAMIC
-vec3 pdeEval(int v) {
-#ifdef PDEANIM_FIELDS
-  vec4 head = pdeFetch(pdeVertexTex, v);
-#else
-  vec4 head = pdeFetch(pdeVertexTex, v * 4);
-#endif
-  int c = int(head.x + 0.5);
-#ifdef PDEANIM_SPLINE
-  // natural spline: weights of T_s, P_s, P_s+1, T_s+1 (0, phi0, phi1, 0 for items off the spline)
-  int sl = pdeSeg;
-  int sh = pdeSeg + 1;
-  vec3 fl = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
-  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
-  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2).xyz;
-  vec3 fh = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3).xyz;
-#ifdef PDEANIM_FIELDS
-  vec3 p = head.yzw + (((fl * pdeFetch(pdeTangentTex, sl * pdeVertices + v).xyz
-    + f0 * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz)
-    + f1 * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz)
-    + fh * pdeFetch(pdeTangentTex, sh * pdeVertices + v).xyz);
-#else
-  vec3 p = head.yzw;
-  for (int w = 0; w < 3; w++) {
-    vec4 kl = pdeFetch(pdeTangentTex, (sl * pdeCurves + c) * 3 + w);
-    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
-    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-    vec4 kh = pdeFetch(pdeTangentTex, (sh * pdeCurves + c) * 3 + w);
-    p[w] += dot(fl[w] * kl + f0[w] * k0 + f1[w] * k1 + fh[w] * kh, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
-  }
-#endif
-#else
-  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
-  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
-#ifdef PDEANIM_FIELDS
-  vec3 p = head.yzw + f0 * pdeFetch(pdeFieldTex, pdeSeg * pdeVertices + v).xyz
-    + f1 * pdeFetch(pdeFieldTex, (pdeSeg + 1) * pdeVertices + v).xyz;
-#else
-  vec3 p = head.yzw;
-  for (int w = 0; w < 3; w++) {
-    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
-    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-    p[w] += dot(f0[w] * k0 + f1[w] * k1, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
-  }
-#endif
-#endif
-#ifdef PDEANIM_RIGID
-  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS);
-  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 1);
-  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 2);
-  p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
-#endif
-  return p;
-}
-#endif
-#ifdef PDEANIM_CYCLIC
-vec3 pdeEval(int v) {
-  vec4 a = pdeFetch(pdeVertexTex, v * 3);
-  vec4 w = pdeFetch(pdeVertexTex, v * 3 + 1);
-  float rl = pdeFetch(pdeVertexTex, v * 3 + 2).x;
-  float ca = 0.0;
-  float cl = w.x * pdeSinWt + w.y * pdeCosWt;
-  if (pdeRotate) {
-    float g = w.z * pdeSinWt + w.w * pdeCosWt;
-    float c = 1.0 / sqrt(1.0 + g * g);
-    float sn = g * c;
-    ca = (c - 1.0) * a.w - sn * rl;
-    cl += sn * a.w + (c - 1.0) * rl;
-  }
-  return a.xyz + ca * pdeAxis + cl * pdeBend;
-}
-#endif
-#ifdef PDEANIM_VERTEX_STAGE
-// a clip vertex's position: read from the pass's texture, or evaluated here
-vec3 pdeAt(int v) {
-#ifdef PDEANIM_PASS
-  return pdeFetch(pdePosTex, v).xyz;
-#else
-  return pdeEval(v);
-#endif
-}
-void pdeCompute() {
-  int v = int(pdeVertex.x + 0.5);
-  int va = int(pdeVertex.y + 0.5);
-  int vb = int(pdeVertex.z + 0.5);
-  vec3 p = pdeAt(v);
-  pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
-  pdeNormal = normal;
-#ifndef PDEANIM_REST_NORMALS
-  if (va != v) {
-    vec3 e1 = pdeAt(va) - p;
-    vec3 e2 = pdeAt(vb) - p;
-    vec3 t1 = normalize(e1);
-    vec3 n = normalize(cross(e1, e2));
-    pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
-      + pdeNormalFrame.z * n));
-  }
-#endif
-}
-#endif
-`;
-}
+export { glslHeader, glslPassMain, patchVertexShader } from './glsl.js';

@@ -1,5 +1,7 @@
 // pdeanim: decode and evaluate pdeanim clips (dynamic-PDE and cyclic-spine) in browsers and node.
 
+import './zstd.js';
+
 export {
   ClipFormatError,
   decodeContainer,
@@ -7,6 +9,7 @@ export {
   CONTAINER_VERSION,
   ENCODINGS,
   FORMAT_VERSION,
+  setZstdDecompress,
 } from './container.js';
 export {
   decodeClip,
@@ -25,9 +28,10 @@ export {
   DynamicEvaluator,
   TIME_PDE,
   TIME_SPLINE,
+  checkTime,
   vertexBasis,
   vertexBase,
 } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
 export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
-export { computeNormals, boundingBoxDiagonal } from './geometry.js';
+export { computeNormals, boundingBoxDiagonal, triangleFrame } from './geometry.js';

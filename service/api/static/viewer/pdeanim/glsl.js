@@ -1,0 +1,205 @@
+// The GLSL that evaluates a clip on the GPU (WebGL 2 through three.js): the evaluation of one clip vertex
+// from the data textures of gpu.js, the vertex-stage code that places a mesh vertex and turns its normal, and
+// the evaluation pass's fragment shader. The math is docs/format.md's; gpu.js's CPU helpers mirror it.
+
+/** The #defines of a layout and the shader variant. */
+function defines(layout, { normals, stage, pass, cpu }) {
+  const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
+  if (stage === 'vertex') defs.push('#define PDEANIM_VERTEX_STAGE');
+  if (pass) defs.push('#define PDEANIM_PASS');
+  if (cpu) defs.push('#define PDEANIM_CPU');
+  if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
+  if (layout.rigid) defs.push('#define PDEANIM_RIGID');
+  if (layout.spline) defs.push('#define PDEANIM_SPLINE');
+  defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
+  defs.push(`#define PDEANIM_WEIGHT_TEXELS ${layout.weightTexels ?? 0}`);
+  defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
+  defs.push(`#define PDEANIM_WIDTH_MASK ${layout.width - 1}`);
+  return defs.join('\n');
+}
+
+const DECLARATIONS = `
+#ifdef PDEANIM_VERTEX_STAGE
+in vec3 pdeVertex;
+in vec3 pdeNormalFrame;
+uniform bool pdeEnabled;
+uniform float pdeInfluence;
+uniform mat4 pdeClipToLocal;
+uniform mat3 pdeNormalToLocal;
+#ifdef PDEANIM_CPU
+in vec3 pdeCpuPosition;
+in vec3 pdeCpuNormal;
+#endif
+#endif
+#ifdef PDEANIM_PASS
+uniform highp sampler2D pdePosTex;
+#endif
+uniform highp sampler2D pdeVertexTex;
+uniform int pdeSeg;
+uniform int pdeCurves;
+uniform int pdeVertices;
+#ifdef PDEANIM_DYNAMIC
+uniform highp sampler2D pdeCurveTex;
+uniform highp sampler2D pdeKnotTex;
+#ifdef PDEANIM_SPLINE
+uniform highp sampler2D pdeTangentTex;
+#endif
+#endif
+#ifdef PDEANIM_CYCLIC
+uniform float pdeSinWt;
+uniform float pdeCosWt;
+uniform vec3 pdeAxis;
+uniform vec3 pdeBend;
+uniform bool pdeRotate;
+#endif
+vec3 pdePosition;
+vec3 pdeNormal;
+vec4 pdeFetch(highp sampler2D tex, int i) {
+  return texelFetch(tex, ivec2(i & PDEANIM_WIDTH_MASK, i >> PDEANIM_WIDTH_SHIFT), 0);
+}
+`;
+
+// one clip vertex: base + per coordinate the weighted knot coefficients dotted with the vertex's basis row
+// (two terms, or four in clips with items on the natural spline), then the curve's rigid motion
+const DYNAMIC_EVAL = `
+#ifdef PDEANIM_DYNAMIC
+vec3 pdeEval(int v) {
+  vec4 head = pdeFetch(pdeVertexTex, v * 4);
+  int c = int(head.x + 0.5);
+  vec3 p = head.yzw;
+#ifdef PDEANIM_SPLINE
+  // natural spline: weights of T_s, P_s, P_s+1, T_s+1 (0, phi0, phi1, 0 for items off the spline)
+  int sl = pdeSeg;
+  int sh = pdeSeg + 1;
+  vec3 fl = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
+  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
+  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2).xyz;
+  vec3 fh = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3).xyz;
+  for (int w = 0; w < 3; w++) {
+    vec4 kl = pdeFetch(pdeTangentTex, (sl * pdeCurves + c) * 3 + w);
+    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
+    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
+    vec4 kh = pdeFetch(pdeTangentTex, (sh * pdeCurves + c) * 3 + w);
+    p[w] += dot(fl[w] * kl + f0[w] * k0 + f1[w] * k1 + fh[w] * kh, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
+  }
+#else
+  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
+  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
+  for (int w = 0; w < 3; w++) {
+    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
+    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
+    p[w] += dot(f0[w] * k0 + f1[w] * k1, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
+  }
+#endif
+#ifdef PDEANIM_RIGID
+  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS);
+  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 1);
+  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 2);
+  p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
+#endif
+  return p;
+}
+#endif
+`;
+
+const CYCLIC_EVAL = `
+#ifdef PDEANIM_CYCLIC
+vec3 pdeEval(int v) {
+  vec4 a = pdeFetch(pdeVertexTex, v * 3);
+  vec4 w = pdeFetch(pdeVertexTex, v * 3 + 1);
+  float rl = pdeFetch(pdeVertexTex, v * 3 + 2).x;
+  float ca = 0.0;
+  float cl = w.x * pdeSinWt + w.y * pdeCosWt;
+  if (pdeRotate) {
+    float g = w.z * pdeSinWt + w.w * pdeCosWt;
+    float c = 1.0 / sqrt(1.0 + g * g);
+    float sn = g * c;
+    ca = (c - 1.0) * a.w - sn * rl;
+    cl += sn * a.w + (c - 1.0) * rl;
+  }
+  return a.xyz + ca * pdeAxis + cl * pdeBend;
+}
+#endif
+`;
+
+// the mesh vertex: its clip vertex's position (read from the pass's texture, or evaluated here) in the
+// mesh's frame, and its normal turned with the frame of its triangle (p, a, b)
+const VERTEX_STAGE = `
+#ifdef PDEANIM_VERTEX_STAGE
+vec3 pdeAt(int v) {
+#ifdef PDEANIM_PASS
+  return pdeFetch(pdePosTex, v).xyz;
+#else
+  return pdeEval(v);
+#endif
+}
+void pdeCompute() {
+#ifdef PDEANIM_CPU
+  // the CPU evaluated this vertex (positions and normals in the mesh's frame)
+  pdePosition = pdeCpuPosition;
+  pdeNormal = pdeCpuNormal;
+#else
+  int v = int(pdeVertex.x + 0.5);
+  int va = int(pdeVertex.y + 0.5);
+  int vb = int(pdeVertex.z + 0.5);
+  vec3 p = pdeAt(v);
+  pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
+  pdeNormal = normal;
+#ifndef PDEANIM_REST_NORMALS
+  if (va != v) {
+    vec3 e1 = pdeAt(va) - p;
+    vec3 e2 = pdeAt(vb) - p;
+    vec3 t1 = normalize(e1);
+    vec3 n = normalize(cross(e1, e2));
+    pdeNormal = normalize(pdeNormalToLocal * (pdeNormalFrame.x * t1 + pdeNormalFrame.y * cross(n, t1)
+      + pdeNormalFrame.z * n));
+  }
+#endif
+#endif
+}
+#endif
+`;
+
+/** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
+export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass = false, cpu = false } = {}) {
+  return `${defines(layout, { normals, stage, pass, cpu })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
+}
+
+/**
+ * GLSL main() of the evaluation pass: one fragment per clip vertex (row-major in a texture of layout.width
+ * columns) writes its position; the mesh shaders (compiled with pass: true) then read three positions per
+ * vertex instead of evaluating them.
+ */
+export function glslPassMain() {
+  return `void main() {
+  int v = (int(gl_FragCoord.y) << PDEANIM_WIDTH_SHIFT) + int(gl_FragCoord.x);
+  gl_FragColor = v < pdeVertices ? vec4(pdeEval(v), 1.0) : vec4(0.0);
+}
+`;
+}
+
+/**
+ * A three.js built-in material's vertex shader with the clip evaluation patched in: computed at the start of
+ * main(), it replaces the position and normal after morphing and skinning, mixed by pdeInfluence (1: the clip
+ * alone, 0: the mesh as it would be drawn without it). Throws when the shader lacks the chunks.
+ */
+export function patchVertexShader(vs, header) {
+  for (const chunk of ['#include <common>', 'void main() {']) {
+    if (!vs.includes(chunk)) throw new Error(`pdeanim: the material's vertex shader has no '${chunk}' to patch`);
+  }
+  // after skinning (built-in mesh materials), else after begin_vertex (points, custom shader materials)
+  const place = ['#include <skinning_vertex>', '#include <begin_vertex>'].find((c) => vs.includes(c));
+  if (!place) throw new Error("pdeanim: the material's vertex shader has no <skinning_vertex> or <begin_vertex> chunk");
+  let out = vs
+    .replace('#include <common>', `#include <common>\n${header}`)
+    .replace('void main() {', 'void main() {\n\tif (pdeEnabled) pdeCompute();')
+    .replace(place, `${place}\n\tif (pdeEnabled) transformed = mix(transformed, pdePosition, pdeInfluence);`);
+  const normalPlace = ['#include <skinnormal_vertex>', '#include <beginnormal_vertex>'].find((c) => vs.includes(c));
+  if (normalPlace) {
+    out = out.replace(
+      normalPlace,
+      `${normalPlace}\n\tif (pdeEnabled) objectNormal = normalize(mix(objectNormal, pdeNormal, pdeInfluence));`,
+    );
+  }
+  return out;
+}

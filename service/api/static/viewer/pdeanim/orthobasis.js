@@ -1,0 +1,90 @@
+// The space basis of each curve re-expressed as orthonormal columns over the curve's vertices, so that the
+// GPU can sum knot x basis products in float32 without cancellation.
+//
+// For a curve c and coordinate w, the values at the curve's n vertices are B k, with B (n x 4) the four
+// space functions at the vertices' u and k the four knot coefficients of a segment boundary. Fitted clips'
+// B is ill-conditioned (its columns nearly dependent), so |B_j k_j| can exceed |B k| by 1e3 and more: summed
+// in float32 that loses ~1e-5 of the diagonal. With B = Q R (Q orthonormal columns, R upper triangular,
+// computed in float64 by Gram-Schmidt with reorthogonalisation) the values are Q (R k): every term of the
+// sum is bounded by the norm of the values over the curve, and R k is a forward product (no inverse, so a
+// rank-deficient B costs nothing).
+
+import { vertexBasis } from './dynamic.js';
+
+/** A column whose part outside the previous columns is below this fraction of its norm is dropped. */
+const DEPENDENT = 1e-13;
+
+/**
+ * Orthonormal bases of a decoded dynamic clip: {q: Float32Array (V * 12): per vertex and coordinate the four
+ * values of Q's row, r: Float64Array (C * 3 * 16): per curve and coordinate R row-major}. Columns of B that
+ * lie (to DEPENDENT) in the span of the previous ones get a zero column in Q and a zero row in R.
+ */
+export function orthonormalBases(clip) {
+  const { nVertices: V, nCurves: C, order, offsets } = clip;
+  const B = vertexBasis(clip); // (V, 3, 4) float64
+  const q = new Float32Array(V * 12);
+  const r = new Float64Array(C * 48);
+  let widest = 0;
+  for (let c = 0; c < C; c++) widest = Math.max(widest, offsets[c + 1] - offsets[c]);
+  const cols = new Float64Array(widest * 4); // Q's columns of one (curve, coordinate), column-major
+  for (let c = 0; c < C; c++) {
+    const first = offsets[c];
+    const n = offsets[c + 1] - first;
+    for (let w = 0; w < 3; w++) {
+      const R = r.subarray((c * 3 + w) * 16, (c * 3 + w + 1) * 16);
+      for (let j = 0; j < 4; j++) {
+        const col = cols.subarray(j * n, (j + 1) * n);
+        for (let i = 0; i < n; i++) col[i] = B[order[first + i] * 12 + w * 4 + j];
+        const norm0 = norm(col);
+        for (let pass = 0; pass < 2; pass++) {
+          // classical Gram-Schmidt, twice: orthogonal to working precision
+          for (let i = 0; i < j; i++) {
+            const qi = cols.subarray(i * n, (i + 1) * n);
+            const d = dot(qi, col);
+            R[i * 4 + j] += d;
+            for (let k = 0; k < n; k++) col[k] -= d * qi[k];
+          }
+        }
+        const rest = norm(col);
+        if (rest > DEPENDENT * norm0 && rest > 0) {
+          R[j * 4 + j] = rest;
+          for (let k = 0; k < n; k++) col[k] /= rest;
+        } else {
+          col.fill(0);
+        }
+      }
+      for (let i = 0; i < n; i++) {
+        const o = order[first + i] * 12 + w * 4;
+        for (let j = 0; j < 4; j++) q[o + j] = cols[j * n + i];
+      }
+    }
+  }
+  return { q, r };
+}
+
+/**
+ * Per-knot coefficients (S+1, C, 3, 4) (knots, or their time tangents) turned into the orthonormal bases'
+ * coefficients R k, in float64, into out (a Float32Array rounds them); returns out.
+ */
+export function orthonormalCoefficients(r, coefficients, out = new Float64Array(coefficients.length)) {
+  const items = r.length / 16; // C * 3
+  for (let o = 0; o < coefficients.length; o += 4) {
+    const R = ((o / 4) % items) * 16;
+    for (let i = 0; i < 4; i++) {
+      let acc = 0;
+      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * coefficients[o + j];
+      out[o + i] = acc;
+    }
+  }
+  return out;
+}
+
+function dot(a, b) {
+  let s = 0;
+  for (let i = 0; i < a.length; i++) s += a[i] * b[i];
+  return s;
+}
+
+function norm(a) {
+  return Math.sqrt(dot(a, a));
+}

@@ -1,0 +1,291 @@
+// ClipPlayer: a decoded clip played on one three.js mesh, keeping the mesh's materials. The clip is evaluated
+// on the GPU (data textures + per-vertex attributes + per-frame uniforms) or, as a fallback, on the CPU into
+// two extra attributes; either way the patched shader puts the clip's vertex in place of the mesh's after
+// morphing and skinning, mixed by `influence` (1: the clip alone; 0: the mesh as without it).
+
+import { BufferAttribute, Matrix3, Matrix4 } from 'three';
+import { computeNormals } from './geometry.js';
+import { frameNormals, meshAttributes } from './gpu.js';
+import { ClipResources } from './resources.js';
+import { webglBackend } from './webgl.js';
+
+const MAP_ATTRIBUTES = ['_pdeanim_vertex', '_PDEANIM_VERTEX'];
+
+/** The options attachClip and ClipPlayer take. */
+export const PLAYER_OPTIONS = Object.freeze([
+  'gpu',
+  'renderer',
+  'pass',
+  'vertexMap',
+  'clipToLocal',
+  'normals',
+  'textureWidth',
+  'maxTextureSize',
+  'tables',
+  'shadows',
+  'frustumCulled',
+  'resources',
+  'influence',
+]);
+
+/** Throw a TypeError naming any option not in allowed (an ignored option would fail silently). */
+export function checkOptions(options, allowed, what) {
+  const unknown = Object.keys(options ?? {}).filter((k) => !allowed.includes(k));
+  if (unknown.length) {
+    throw new TypeError(`${what}: unknown option(s) ${unknown.join(', ')} (known: ${allowed.join(', ')})`);
+  }
+}
+
+/** The clip vertex of every mesh vertex: options.vertexMap, a _pdeanim_vertex attribute, or the identity. */
+function resolveVertexMap(geometry, clip, vertexMap) {
+  const count = geometry.attributes.position.count;
+  let map = vertexMap;
+  if (!map) {
+    const attr = MAP_ATTRIBUTES.map((n) => geometry.getAttribute(n)).find(Boolean);
+    if (attr) map = Int32Array.from({ length: count }, (_, i) => Math.round(attr.getX(i)));
+  }
+  if (!map) {
+    if (count !== clip.nVertices) {
+      throw new Error(
+        `the mesh has ${count} vertices and the clip ${clip.nVertices}: pass options.vertexMap ` +
+          '(the clip vertex of each mesh vertex) or a _pdeanim_vertex attribute',
+      );
+    }
+    map = Int32Array.from({ length: count }, (_, i) => i);
+  }
+  if (map.length !== count || map.some((v) => !(v >= 0 && v < clip.nVertices))) {
+    throw new Error('vertexMap must give a clip vertex (0 .. nVertices - 1) for every mesh vertex');
+  }
+  return Int32Array.from(map);
+}
+
+/** A float copy (n * 3) of a 3-component attribute (dequantised, de-interleaved). */
+function floatCopy(attr) {
+  const out = new Float32Array(attr.count * 3);
+  for (let i = 0; i < attr.count; i++) {
+    out[i * 3] = attr.getX(i);
+    out[i * 3 + 1] = attr.getY(i);
+    out[i * 3 + 2] = attr.getZ(i);
+  }
+  return out;
+}
+
+function toMatrix4(m) {
+  if (!m) return new Matrix4();
+  if (m.isMatrix4) return m.clone();
+  return new Matrix4().fromArray(m);
+}
+
+/** Apply the affine matrix (elements, column-major) to positions (n * 3) into out. */
+function transformPoints(e, src, out) {
+  for (let i = 0; i < src.length; i += 3) {
+    const x = src[i];
+    const y = src[i + 1];
+    const z = src[i + 2];
+    out[i] = e[0] * x + e[4] * y + e[8] * z + e[12];
+    out[i + 1] = e[1] * x + e[5] * y + e[9] * z + e[13];
+    out[i + 2] = e[2] * x + e[6] * y + e[10] * z + e[14];
+  }
+  return out;
+}
+
+/** Apply the 3x3 normal matrix (elements, column-major) to normals (n * 3) and normalise, in place. */
+function transformNormals(e, n) {
+  for (let i = 0; i < n.length; i += 3) {
+    const x = e[0] * n[i] + e[3] * n[i + 1] + e[6] * n[i + 2];
+    const y = e[1] * n[i] + e[4] * n[i + 1] + e[7] * n[i + 2];
+    const z = e[2] * n[i] + e[5] * n[i + 1] + e[8] * n[i + 2];
+    const l = Math.hypot(x, y, z) || 1;
+    n[i] = x / l;
+    n[i + 1] = y / l;
+    n[i + 2] = z / l;
+  }
+  return n;
+}
+
+/**
+ * Play a decoded clip on mesh (a THREE.Mesh, SkinnedMesh or InstancedMesh whose vertices are the clip's, or
+ * mapped to them by options.vertexMap / a _pdeanim_vertex attribute). options: gpu (default true), renderer
+ * (bounds the data textures; with float render targets the clip is evaluated in a pass before drawing),
+ * pass (force that either way), vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip
+ * coordinates to the mesh's local frame; default identity), normals ('frame': turned with each vertex's
+ * triangle, the default; 'rest': one evaluation per vertex, normals kept), textureWidth, maxTextureSize,
+ * tables (from a Web Worker), shadows (default true), frustumCulled (default false), resources (a
+ * ClipResources shared between meshes), influence (default 1). backend: webglBackend, or the WebGPU one.
+ */
+export class ClipPlayer {
+  constructor(mesh, clip, options = {}, backend = webglBackend) {
+    checkOptions(options, PLAYER_OPTIONS, 'ClipPlayer');
+    const { gpu = true, shadows = true, frustumCulled = false, normals = 'frame', influence = 1 } = options;
+    if (normals !== 'frame' && normals !== 'rest') throw new RangeError(`normals must be 'frame' or 'rest'`);
+    backend.check(options.renderer);
+    this.clip = clip;
+    this.mesh = mesh;
+    this.normals = normals;
+    this.backend = backend;
+    this.resources = options.resources ?? new ClipResources(clip, options);
+    this.resources.users++;
+    const { layout, textures, evaluator, gpuReason } = this.resources;
+    Object.assign(this, { layout, textures, evaluator });
+    /** Why the GPU path is unavailable (null when it is available). */
+    this.gpuUnavailableReason = gpuReason;
+    const geometry = mesh.geometry;
+    this.vertexMap = resolveVertexMap(geometry, clip, options.vertexMap);
+    this.clipToLocal = toMatrix4(options.clipToLocal);
+    this.normalToLocal = new Matrix3().getNormalMatrix(this.clipToLocal);
+    this.attributes = this._frameAttributes(geometry);
+    this.pass = backend.usePass(options, normals);
+    this.uniforms = {
+      ...this.resources.uniforms,
+      pdeEnabled: { value: false },
+      pdeInfluence: { value: influence },
+      pdeClipToLocal: { value: this.clipToLocal },
+      pdeNormalToLocal: { value: this.normalToLocal },
+      pdePosTex: { value: null },
+    };
+    this._onGPU = gpu && !gpuReason;
+    this._time = 0;
+    this._attached = true;
+    this._cpu = null; // CPU path buffers, made on first use
+    this._originalCulled = mesh.frustumCulled;
+    mesh.frustumCulled = frustumCulled;
+    this._installed = backend.install(this, { shadows });
+    this.useGPU(this._onGPU);
+  }
+
+  /** pdeVertex and pdeNormalFrame (meshAttributes) from the mesh's rest positions and normals. */
+  _frameAttributes(geometry) {
+    const localToClip = this.clipToLocal.clone().invert();
+    const restLocal = floatCopy(geometry.getAttribute('position'));
+    const restClip = transformPoints(localToClip.elements, restLocal, new Float32Array(restLocal.length));
+    // a geometry without normals (e.g. a flat-shaded glTF) gets its own for the frames only: the mesh's
+    // geometry is not changed
+    const index = geometry.index ? geometry.index.array : null;
+    const normalAttr = geometry.getAttribute('normal');
+    let normalsClip;
+    if (normalAttr) {
+      normalsClip = transformNormals(new Matrix3().getNormalMatrix(localToClip).elements, floatCopy(normalAttr));
+    } else {
+      const faces = index ?? Uint32Array.from({ length: restClip.length / 3 }, (_, i) => i);
+      normalsClip = computeNormals(restClip, faces);
+    }
+    this._restNormalsClip = normalsClip;
+    const attrs = meshAttributes({ vertexMap: this.vertexMap, positions: restClip, normals: normalsClip, index });
+    geometry.setAttribute('pdeVertex', new BufferAttribute(attrs.pdeVertex, 3));
+    geometry.setAttribute('pdeNormalFrame', new BufferAttribute(attrs.pdeNormalFrame, 3));
+    return attrs;
+  }
+
+  /** Whether the GPU evaluates the clip (else the CPU). */
+  get gpu() {
+    return this._onGPU;
+  }
+
+  /** The normalised clip time last shown. */
+  get time() {
+    return this._time;
+  }
+
+  /** How much of the clip is shown: 1 the clip alone, 0 the mesh as without it, between: a linear mix. */
+  get influence() {
+    return this.uniforms.pdeInfluence.value;
+  }
+
+  set influence(w) {
+    if (!(w >= 0 && w <= 1)) throw new RangeError(`influence must lie in [0, 1], got ${w}`);
+    this.uniforms.pdeInfluence.value = w;
+    this.uniforms.pdeEnabled.value = this._attached && w > 0;
+  }
+
+  /** The shader variant of this player (materials' program cache key). */
+  get programKey() {
+    const L = this.layout;
+    const mode = this._onGPU ? (this.pass ? 'pass' : 'gpu') : 'cpu';
+    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}:${this.normals}:${L.width}:${mode}`;
+  }
+
+  /**
+   * Show the clip at normalised time t (GPU: a few uniforms; CPU: positions and normals evaluated). t in
+   * [0, 1] for clips that do not loop (else RangeError), any t for looping ones (period 1). evaluated: the
+   * clip's CPU positions at t when the caller already has them (shared between meshes).
+   */
+  setTime(t, evaluated = null) {
+    if (this._onGPU) this.resources.frame(t);
+    else this._writeCPU(evaluated ?? this.evaluator.evaluate(t, this._cpuBuffers().clip));
+    this._time = t;
+    return this;
+  }
+
+  /** Switch between GPU evaluation and the CPU fallback; returns whether the GPU is used. */
+  useGPU(on) {
+    const gpu = Boolean(on) && !this.gpuUnavailableReason;
+    const changed = gpu !== this._onGPU;
+    this._onGPU = gpu;
+    if (!gpu) this._cpuBuffers();
+    this.uniforms.pdeEnabled.value = this._attached && this.influence > 0;
+    if (changed) this._installed.refresh();
+    this.resources._lastT = null; // the shared state is set again below
+    this.setTime(this._time);
+    return gpu;
+  }
+
+  /** The CPU path's buffers: clip positions, and the attributes the shader reads (made on first use). */
+  _cpuBuffers() {
+    if (this._cpu) return this._cpu;
+    const n = this.vertexMap.length;
+    const geometry = this.mesh.geometry;
+    const position = new BufferAttribute(new Float32Array(n * 3), 3);
+    const normal = new BufferAttribute(new Float32Array(n * 3), 3);
+    geometry.setAttribute('pdeCpuPosition', position);
+    geometry.setAttribute('pdeCpuNormal', normal);
+    this._cpu = { clip: new Float32Array(this.clip.nVertices * 3), position, normal, scratch: new Float32Array(n * 3) };
+    return this._cpu;
+  }
+
+  /** Write the clip positions (V * 3, clip order) and their frame-turned normals for this mesh. */
+  _writeCPU(positions) {
+    const { position, normal, scratch } = this._cpuBuffers();
+    const map = this.vertexMap;
+    for (let i = 0; i < map.length; i++) {
+      const v = map[i] * 3;
+      scratch[i * 3] = positions[v];
+      scratch[i * 3 + 1] = positions[v + 1];
+      scratch[i * 3 + 2] = positions[v + 2];
+    }
+    transformPoints(this.clipToLocal.elements, scratch, position.array);
+    position.needsUpdate = true;
+    if (this.normals === 'rest') normal.array.set(this._restNormalsClip);
+    else frameNormals(positions, this.attributes, this._restNormalsClip, normal.array);
+    transformNormals(this.normalToLocal.elements, normal.array);
+    normal.needsUpdate = true;
+  }
+
+  /** The CPU-evaluated positions (V, 3) in clip vertex order at t (for checks; does not touch the mesh). */
+  positions(t, out = new Float32Array(this.clip.nVertices * 3)) {
+    return this.evaluator.evaluate(t, out);
+  }
+
+  /** Bytes this player adds on the GPU for its mesh (per-vertex attributes), besides the shared textures. */
+  get attributeBytes() {
+    const names = ['pdeVertex', 'pdeNormalFrame', 'pdeCpuPosition', 'pdeCpuNormal'];
+    return names.reduce((n, k) => n + (this.mesh.geometry.getAttribute(k)?.array.byteLength ?? 0), 0);
+  }
+
+  /** Restore the mesh's materials and geometry; the textures are freed with their last player. */
+  detach() {
+    if (!this._attached) return;
+    this._attached = false;
+    this.uniforms.pdeEnabled.value = false;
+    this._installed.uninstall();
+    this.mesh.frustumCulled = this._originalCulled;
+    for (const name of ['pdeVertex', 'pdeNormalFrame', 'pdeCpuPosition', 'pdeCpuNormal']) {
+      this.mesh.geometry.deleteAttribute(name);
+    }
+    if (--this.resources.users === 0) this.resources.dispose();
+  }
+}
+
+/** Play a decoded clip on mesh (see ClipPlayer for the options); returns the player. */
+export function attachClip(mesh, clip, options = {}) {
+  return new ClipPlayer(mesh, clip, options);
+}

@@ -1,0 +1,109 @@
+// ScenePlayer: one clip played on every mesh under a root (e.g. the user's own glTF scene from GLTFLoader, or
+// a GLB that pdeanim wrote), keeping materials, textures, UVs and the node hierarchy.
+
+import { ClipPlayer, PLAYER_OPTIONS, checkOptions } from './player.js';
+import { ClipResources } from './resources.js';
+import { webglBackend } from './webgl.js';
+
+const SCENE_OPTIONS = Object.freeze([
+  ...PLAYER_OPTIONS.filter((k) => !['vertexMap', 'clipToLocal', 'resources'].includes(k)),
+  'filter',
+]);
+
+/**
+ * Play a clip on every mesh under root: meshes in depth-first order take consecutive ranges of the clip's
+ * vertices (the order pdeanim reads a glTF's primitives in, and writes its GLBs in), each placed with its
+ * transform relative to root, so that the clip's coordinates are root's. Skinned meshes play the clip in
+ * place of their skinning (mixed by influence); meshes sharing one geometry get their own copy of it.
+ * options: as ClipPlayer's (without vertexMap, clipToLocal, resources), plus filter(mesh) to skip meshes.
+ */
+export class ScenePlayer {
+  constructor(root, clip, options = {}, backend = webglBackend) {
+    checkOptions(options, SCENE_OPTIONS, 'ScenePlayer');
+    const { filter, ...rest } = options;
+    root.updateMatrixWorld(true);
+    const rootInverse = root.matrixWorld.clone().invert();
+    const meshes = [];
+    root.traverse((o) => {
+      if (o.isMesh && o.geometry?.getAttribute('position') && (!filter || filter(o))) meshes.push(o);
+    });
+    const total = meshes.reduce((n, m) => n + m.geometry.getAttribute('position').count, 0);
+    if (total !== clip.nVertices) {
+      throw new Error(`the meshes under root have ${total} vertices in all and the clip ${clip.nVertices}`);
+    }
+    this.root = root;
+    this.clip = clip;
+    this.resources = new ClipResources(clip, rest);
+    const seen = new Set();
+    let offset = 0;
+    this.players = meshes.map((mesh) => {
+      if (seen.has(mesh.geometry)) mesh.geometry = mesh.geometry.clone(); // its attributes are per mesh
+      seen.add(mesh.geometry);
+      const n = mesh.geometry.getAttribute('position').count;
+      const vertexMap = Int32Array.from({ length: n }, (_, i) => offset + i);
+      offset += n;
+      const clipToLocal = rootInverse.clone().multiply(mesh.matrixWorld).invert();
+      return new ClipPlayer(mesh, clip, { ...rest, vertexMap, clipToLocal, resources: this.resources }, backend);
+    });
+    this._positions = new Float32Array(clip.nVertices * 3);
+    this._time = 0;
+  }
+
+  get evaluator() {
+    return this.resources.evaluator;
+  }
+
+  /** Why the GPU path is unavailable (null when it is available). */
+  get gpuUnavailableReason() {
+    return this.resources.gpuReason;
+  }
+
+  get gpu() {
+    return this.players.every((p) => p.gpu);
+  }
+
+  get time() {
+    return this._time;
+  }
+
+  get influence() {
+    return this.players[0]?.influence ?? 1;
+  }
+
+  set influence(w) {
+    for (const p of this.players) p.influence = w;
+  }
+
+  /** Show normalised time t on every mesh (one CPU evaluation shared by all on the CPU path). */
+  setTime(t) {
+    const cpu = this.players.some((p) => !p.gpu);
+    if (cpu) this.resources.evaluator.evaluate(t, this._positions);
+    for (const p of this.players) p.setTime(t, cpu ? this._positions : null);
+    this._time = t;
+    return this;
+  }
+
+  useGPU(on) {
+    for (const p of this.players) p.useGPU(on);
+    this.setTime(this._time);
+    return this.gpu;
+  }
+
+  positions(t, out = new Float32Array(this.clip.nVertices * 3)) {
+    return this.resources.evaluator.evaluate(t, out);
+  }
+
+  /** Bytes on the GPU for the clip: shared data textures plus every mesh's attributes. */
+  get gpuBytes() {
+    return this.resources.textureBytes + this.players.reduce((n, p) => n + p.attributeBytes, 0);
+  }
+
+  detach() {
+    for (const p of this.players) p.detach();
+  }
+}
+
+/** Play a clip on every mesh under root (see ScenePlayer); returns the player. */
+export function attachClipToScene(root, clip, options = {}) {
+  return new ScenePlayer(root, clip, options);
+}
