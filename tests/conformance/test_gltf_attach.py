@@ -16,7 +16,7 @@ from pdeanim.clip import load_clip, write_clip_file
 from pdeanim.fit import FitOptions, fit_poses
 from pdeanim.gltf.clipexport import clip_animation_glb, clip_frame_glb
 from pdeanim.gltf.layout import gltf_layout
-from pdeanim.gltf.read import read_static_mesh
+from pdeanim.gltf.read import read_animated_poses, read_static_mesh
 from pdeanim.poses import make_poses
 from tests.ci import missing
 from tests.gltf.builders import textured_scene_glb
@@ -79,3 +79,21 @@ def test_attach_to_gltfloader_scene_matches_python(asset, glb):
     assert got.shape == want.shape
     # float32 local coordinates through the nodes' transforms: 1e-6 of the diagonal is ~10x the rounding
     assert np.abs(got - want).max() <= 1e-6 * diag
+    assert [v for m in res["vertexMaps"] for v in m] == list(range(clip.n_vertices))  # nothing was welded
+
+
+def test_attach_to_a_welded_glb_plays_every_vertex_through_its_map(tmp_path):
+    """The Fox (1,728 unwelded corners) exports as 434 welded vertices with a _PDEANIM_VERTEX map (docs/gltf.md):
+    attachClipToScene takes the map as the vertex map, so each written vertex shows its clip vertex."""
+    src = (Path(__file__).resolve().parents[1] / "gltf" / "data" / "Fox.glb").read_bytes()
+    poses = read_animated_poses(src, fps=30, animation="Run")
+    parts = fit_poses(make_poses(poses.vertices[:8].astype(np.float32), poses.faces), FitOptions(segments=2))
+    write_clip_file(tmp_path / "fox.clip", parts)
+    clip = load_clip(parts.topology, parts.coefficients)
+    (tmp_path / "fox.glb").write_bytes(clip_animation_glb(clip, 8.0, layout=gltf_layout(src)))
+    res = _run(tmp_path / "fox.glb", tmp_path / "fox.clip")
+    (vertex_map,) = res["vertexMaps"]
+    assert len(vertex_map) == 434 < clip.n_vertices == 1728
+    want = clip.evaluate(np.asarray(TIMES))[:, vertex_map]
+    diag = float(np.linalg.norm(np.ptp(want[0], axis=0)))
+    assert np.abs(np.asarray(res["frames"]) - want).max() <= 1e-6 * diag

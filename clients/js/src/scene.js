@@ -1,7 +1,7 @@
 // ScenePlayer: one clip played on every mesh under a root (e.g. the user's own glTF scene from GLTFLoader, or
 // a GLB that pdeanim wrote), keeping materials, textures, UVs and the node hierarchy.
 
-import { ClipPlayer, PLAYER_OPTIONS, checkOptions } from './player.js';
+import { ClipPlayer, MAP_ATTRIBUTES, PLAYER_OPTIONS, checkOptions } from './player.js';
 import { ClipResources } from './resources.js';
 import { webglBackend } from './webgl.js';
 
@@ -12,8 +12,9 @@ const SCENE_OPTIONS = Object.freeze([
 
 /**
  * Play a clip on every mesh under root: meshes in depth-first order take consecutive ranges of the clip's
- * vertices (the order pdeanim reads a glTF's primitives in, and writes its GLBs in), each placed with its
- * transform relative to root, so that the clip's coordinates are root's. Skinned meshes play the clip in
+ * vertices (the order pdeanim reads a glTF's primitives in, and writes unwelded GLBs in) or, where every mesh
+ * carries one, the clip vertices of their _pdeanim_vertex attributes (pdeanim's welded GLBs); each is placed
+ * with its transform relative to root, so that the clip's coordinates are root's. Skinned meshes play the clip in
  * place of their skinning (mixed by influence); meshes sharing one geometry get their own copy of it.
  * options: as ClipPlayer's (without vertexMap, clipToLocal, resources), plus filter(mesh) to skip meshes.
  */
@@ -27,8 +28,14 @@ export class ScenePlayer {
     root.traverse((o) => {
       if (o.isMesh && o.geometry?.getAttribute('position') && (!filter || filter(o))) meshes.push(o);
     });
+    const mapped = meshes.filter((m) => MAP_ATTRIBUTES.some((n) => m.geometry.getAttribute(n)));
+    if (mapped.length && mapped.length !== meshes.length) {
+      throw new Error(
+        `${mapped.length} of the ${meshes.length} meshes under root carry a _pdeanim_vertex map: all or none must`,
+      );
+    }
     const total = meshes.reduce((n, m) => n + m.geometry.getAttribute('position').count, 0);
-    if (total !== clip.nVertices) {
+    if (!mapped.length && total !== clip.nVertices) {
       throw new Error(`the meshes under root have ${total} vertices in all and the clip ${clip.nVertices}`);
     }
     this.root = root;
@@ -40,7 +47,8 @@ export class ScenePlayer {
       if (seen.has(mesh.geometry)) mesh.geometry = mesh.geometry.clone(); // its attributes are per mesh
       seen.add(mesh.geometry);
       const n = mesh.geometry.getAttribute('position').count;
-      const vertexMap = Int32Array.from({ length: n }, (_, i) => offset + i);
+      // a welded GLB maps its vertices to the clip's (_pdeanim_vertex); else meshes take consecutive ranges
+      const vertexMap = mapped.length ? undefined : Int32Array.from({ length: n }, (_, i) => offset + i);
       offset += n;
       const clipToLocal = rootInverse.clone().multiply(mesh.matrixWorld).invert();
       return new ClipPlayer(mesh, clip, { ...rest, vertexMap, clipToLocal, resources: this.resources }, backend);

@@ -66,11 +66,57 @@ test('plain knots (rank 0) are float32(p * h) of tracks of order 1 or 2 differen
     assert.equal(arrays.knot_basis, undefined);
     const q = trackIntegers(arrays.knots.data, T, n, header.knot_differences);
     const step = arrays.knot_step.data;
+    const bounds = arrays.knot_windows ? Array.from(arrays.knot_windows.data) : [0, n];
     for (let i = 0; i < n * T; i++) {
-      assert.equal(clip.knots[i], Math.fround(q[i] * step[(i % T) >> 2]), c.name);
+      const win = bounds.findLastIndex((b) => b <= Math.floor(i / T)); // this knot's window of steps
+      assert.equal(clip.knots[i], Math.fround(q[i] * step[win * (T >> 2) + ((i % T) >> 2)]), c.name);
     }
   }
   assert.deepEqual([...orders].sort(), [1, 2]);
+});
+
+const windowsParts = fixtureParts(dynamicCase((c) => c.name.endsWith('-windows')));
+
+test('knot steps per window: each knot takes its window\'s step; the windows rise from 0 to S + 1', () => {
+  const { header, arrays } = decodeContainer(windowsParts.coefficients.slice());
+  const n = header.n_segments + 1;
+  const C = header.n_curves;
+  const bounds = Array.from(arrays.knot_windows.data);
+  assert.ok(bounds.length >= 3 && bounds[0] === 0 && bounds.at(-1) === n);
+  assert.deepEqual(arrays.knot_step.shape, [bounds.length - 1, C, 3]);
+  const clip = decodeClip(windowsParts.topology, windowsParts.coefficients);
+  // one window with the first window's steps decodes the first window's knots alike, the others not
+  const one = edited(windowsParts.coefficients, ({ arrays: a }) => {
+    delete a.knot_windows;
+    a.knot_step = { dtype: '<f4', shape: [C, 3], data: a.knot_step.data.slice(0, C * 3) };
+  });
+  const first = decodeClip(windowsParts.topology, one).knots;
+  const T = C * 12;
+  assert.deepEqual(first.subarray(0, bounds[1] * T), clip.knots.subarray(0, bounds[1] * T));
+  const W = bounds.length - 1;
+  const with_ = (windows, shape = [W, C, 3], extra = {}) =>
+    edited(windowsParts.coefficients, ({ header: h, arrays: a }) => {
+      a.knot_windows = { dtype: '<u4', shape: [windows.length], data: Uint32Array.from(windows) };
+      a.knot_step = { ...a.knot_step, shape, data: a.knot_step.data.slice(0, shape.reduce((x, y) => x * y)) };
+      Object.assign(h, extra.header ?? {});
+      Object.assign(a, extra.arrays ?? {});
+    });
+  const rising = `coefficients knot_windows must rise strictly from 0 to ${n}`;
+  const flipped = [...bounds];
+  [flipped[1], flipped[2]] = [flipped[2], flipped[1]];
+  refused(() => decodeClip(windowsParts.topology, with_(flipped)), rising);
+  refused(() => decodeClip(windowsParts.topology, with_([1, ...bounds.slice(1)])), rising);
+  refused(() => decodeClip(windowsParts.topology, with_([...bounds.slice(0, -1), n - 1])), rising);
+  refused(() => decodeClip(windowsParts.topology, with_(bounds, [C, 3])), /'knot_step' has shape/);
+  refused(() => decodeClip(windowsParts.topology, with_([0, bounds[1], n])), /'knot_step' has shape/);
+  const basis = {
+    header: { knot_rank: 1 },
+    arrays: {
+      knot_weights: { dtype: '<u4', shape: [1, C, 3, 4], data: new Uint32Array(T) },
+      knot_basis: { dtype: '<f4', shape: [1, n], data: new Float32Array(n) },
+    },
+  };
+  refused(() => decodeClip(windowsParts.topology, with_(bounds, [W, C, 3], basis)), /need knot_rank 0/);
 });
 
 test('knots on a basis are the weights on it, summed in order, plus the residual, bit for bit', () => {

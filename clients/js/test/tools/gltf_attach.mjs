@@ -1,6 +1,6 @@
 // Load a GLB with three.js's GLTFLoader (+ MeshoptDecoder), play a CLIP file on it with attachClipToScene on
-// the CPU path, and print JSON: per mesh (depth-first) its name, material names, attribute names, and the
-// positions relative to the scene root at each t. Used by tests/conformance/test_gltf_attach.py.
+// the CPU path, and print JSON: per mesh (depth-first) its name, material names, attribute names, the clip
+// vertex of each of its vertices, and the positions relative to the scene root at each t. Used by tests/conformance/test_gltf_attach.py.
 // Usage: node gltf_attach.mjs FILE.glb FILE.clip T1,T2,...
 
 import { readFileSync } from 'node:fs';
@@ -66,6 +66,7 @@ const after = player.players.map((p) =>
 const influences = (p) => (p.mesh.morphTargetInfluences ? [...p.mesh.morphTargetInfluences] : []);
 const morphWhilePlaying = player.players.map(influences);
 const influenceWhilePlaying = player.influence;
+const vertexMaps = player.players.map((p) => Array.from(p.vertexMap)); // clip vertex of each mesh vertex
 player.detach();
 const morphAfter = player.players.map(influences);
 process.stdout.write(
@@ -77,5 +78,6 @@ process.stdout.write(
     influenceWhilePlaying,
     morphAfter,
     morphBefore,
+    vertexMaps,
   }),
 );

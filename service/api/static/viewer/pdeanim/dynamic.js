@@ -159,12 +159,14 @@ function familyOf(ca, S, C) {
 }
 
 /**
- * knot_step (C, 3) and the integer codes (S+1, C, 3, 4) as float64 (exact integers) of the `knots` time
- * tracks: tracks (C, 3, 4, S+1) of zigzag differences of order knot_differences (1 or 2) along time
- * (docs/format.md §3.3).
+ * knot_step (C, 3), or (W, C, 3) with knot_windows, and the integer codes (S+1, C, 3, 4) as float64 (exact
+ * integers) of the `knots` time tracks: tracks (C, 3, 4, S+1) of zigzag differences of order
+ * knot_differences (1 or 2) along time (docs/format.md §3.3).
  */
 function knotTracks(ch, ca, S, C) {
-  const steps = need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data;
+  const windows = knotWindows(ca, S);
+  const W = windows === null ? 0 : windows.length - 1;
+  const steps = need(ca, 'knot_step', W ? [W, C, 3] : [C, 3], 'coefficients', ['<f4']).data;
   if (steps.some((x) => !(x > 0))) throw new ClipFormatError('coefficients knot steps must be positive');
   const order = ch.knot_differences;
   if (order !== 1 && order !== 2) {
@@ -186,12 +188,26 @@ function knotTracks(ch, ca, S, C) {
       codes[s * T + track] = q;
     }
   }
-  return { steps, codes };
+  return { steps, codes, windows };
+}
+
+/**
+ * The optional knot_windows (W+1,) uint32 (docs/format.md §3.4): the first knot of each window, then S+1,
+ * strictly increasing from 0; null when absent.
+ */
+function knotWindows(ca, S) {
+  if (ca.knot_windows === undefined) return null;
+  const bounds = need(ca, 'knot_windows', [null], 'coefficients', U4).data;
+  const n = bounds.length;
+  let rising = n >= 2 && bounds[0] === 0 && bounds[n - 1] === S + 1;
+  for (let i = 1; i < n && rising; i++) rising = bounds[i] > bounds[i - 1];
+  if (!rising) throw new ClipFormatError(`coefficients knot_windows must rise strictly from 0 to ${S + 1}`);
+  return bounds;
 }
 
 /**
  * Knots (S+1, C, 3, 4) float32 (docs/format.md §3.3-3.4). With knot_rank r = 0: float32(q * h) of the
- * `knots` tracks (h = knot_step[c, w]). With r >= 1: integer weights q (r, C, 3, 4), stored as plain zigzag
+ * `knots` tracks (h = knot_step[c, w], or knot_step[i, c, w] in window i of knot_windows). With r >= 1: integer weights q (r, C, 3, 4), stored as plain zigzag
  * codes (not differences), on r shared time tracks knot_basis (r, S+1), plus residual integers p from the
  * `knots` tracks: float32(sum over j = 0..r-1, in this order from 0, of (q[j, c, w, k] * h) *
  * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double (no fused multiply-add:
@@ -202,7 +218,7 @@ function decodeKnots(ch, ca, S, C) {
   if (!Number.isInteger(r) || r < 0 || r > S + 1) {
     throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${S + 1}, got ${JSON.stringify(r)}`);
   }
-  const { steps, codes: residual } = knotTracks(ch, ca, S, C);
+  const { steps, codes: residual, windows } = knotTracks(ch, ca, S, C);
   const n = S + 1;
   const T = C * 12; // one track per curve, coordinate and coefficient
   const knots = new Float32Array(n * T);
@@ -212,8 +228,15 @@ function decodeKnots(ch, ca, S, C) {
         throw new ClipFormatError(`coefficients with knot_rank 0 must not hold '${name}'`);
       }
     }
-    for (let i = 0; i < knots.length; i++) knots[i] = Math.fround(residual[i] * steps[(i % T) >> 2]);
+    for (let s = 0, win = 0; s < n; s++) {
+      if (windows !== null && s === windows[win + 1]) win++;
+      const h = win * (T >> 2); // this knot's window of steps (one window without knot_windows)
+      for (let track = 0, o = s * T; track < T; track++, o++) {
+        knots[o] = Math.fround(residual[o] * steps[h + (track >> 2)]);
+      }
+    }
   } else {
+    if (windows !== null) throw new ClipFormatError('knot steps per window (knot_windows) need knot_rank 0');
     const z = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
     const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
     const weights = new Float64Array(r * T); // q * h

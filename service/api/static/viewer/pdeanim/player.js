@@ -9,7 +9,7 @@ import { frameNormals, meshAttributes } from './gpu.js';
 import { ClipResources } from './resources.js';
 import { webglBackend } from './webgl.js';
 
-const MAP_ATTRIBUTES = ['_pdeanim_vertex', '_PDEANIM_VERTEX'];
+export const MAP_ATTRIBUTES = ['_pdeanim_vertex', '_PDEANIM_VERTEX'];
 
 /** The options attachClip and ClipPlayer take. */
 export const PLAYER_OPTIONS = Object.freeze([
