@@ -148,11 +148,10 @@ class LoadSampler:
         while not self._stop.wait(15.0):
             self.samples.append(os.getloadavg()[0])
 
-    def stop(self) -> str:
-        """'min..max (mean m)' of the samples."""
+    def stop(self) -> None:
+        """End the sampling."""
         self._stop.set()
-        s = np.array(self.samples)
-        return f"{s.min():.1f}..{s.max():.1f} (mean {s.mean():.1f}, {len(s)} samples)"
+        self.samples.append(os.getloadavg()[0])
 
 
 def write_outputs(results: dict[str, list[dict]], args: argparse.Namespace, head: str) -> str:
@@ -208,6 +207,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def run_record(args: argparse.Namespace, seconds: float, loads: list[float]) -> dict:
+    """The run's time and load, added to those of the runs that --resume continued (OUT/run.json)."""
+    path = args.out / "run.json"
+    prev = json.loads(path.read_text()) if args.resume and path.exists() else {"seconds": 0.0, "loads": []}
+    rec = {"seconds": prev["seconds"] + seconds, "loads": prev["loads"] + loads,
+           "finished": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    path.write_text(json.dumps(rec))
+    return rec
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run every input, write the outputs, print the tables."""
     args = parse_args(argv)
@@ -217,16 +226,19 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, list[dict]] = {}
     if args.resume and (args.out / "results.json").exists():
         results = json.loads((args.out / "results.json").read_text())
-    loads, start = LoadSampler(), time.perf_counter()
+    sampler, start = LoadSampler(), time.perf_counter()
     for name, source in inputs.items():
         if name in results:
             continue
         results[name] = run_sequence(name, source, args)
         (args.out / "results.json").write_text(json.dumps(results, indent=1, default=float))
-    head = (f"Compression peers{' (--quick)' if args.quick else ''}, "
-            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {time.perf_counter() - start:.0f} s, "
-            f"{os.cpu_count()} CPUs, 1-min load average {loads.stop()} (shared machine). The project: {fit}. "
-            f"{versions()}.")
+    sampler.stop()
+    rec = run_record(args, time.perf_counter() - start, sampler.samples)
+    load = np.array(rec["loads"])
+    head = (f"Compression peers{' (--quick)' if args.quick else ''}, finished {rec['finished']}, "
+            f"{rec['seconds']:.0f} s, {os.cpu_count()} CPUs, 1-min load average "
+            f"{load.min():.1f}..{load.max():.1f} (mean {load.mean():.1f}, sampled every 15 s; shared "
+            f"machine). The project: {fit}. {versions()}.")
     text = write_outputs({n: results[n] for n in inputs if n in results}, args, head)
     print(text)
     return 0

@@ -1,6 +1,6 @@
 """The Dem Bones peer of the compression benchmark (PyPI ``py-dem-bones``): linear blend skinning with 8, 16,
-32 and 64 bones and at most 4 influences per vertex, quantised (16-bit rest positions, quaternions and
-translations; 8-bit weights and bone indices), each array zstd -19, faces with meshoptimizer's index codec.
+32 and 64 bones and at most 4 influences per vertex, quantised (rest positions, quaternions and translations
+at 10-16 bits; 8-bit weights and bone indices), each array zstd -19, faces with meshoptimizer's index codec.
 Solves are cached on disk outside the repository (minutes each on the larger sequences)."""
 
 from __future__ import annotations
@@ -13,6 +13,10 @@ from peers_common import faces_code, log, pack_payload, quantise, result
 
 BONES = (8, 16, 32, 64)
 QUICK_BONES = (8, 16)
+PRECISIONS = ((16, 16), (14, 14), (12, 12), (10, 12))
+"""(rest position bits, quaternion and translation bits): the error of a few bones is mostly the skinning's,
+so fewer bits may cost nothing."""
+QUICK_PRECISIONS = ((16, 16), (12, 12))
 ITERATIONS = 30
 INFLUENCES = 4
 
@@ -43,7 +47,8 @@ def skin(rest: np.ndarray, W: np.ndarray, R: np.ndarray, T: np.ndarray) -> np.nd
     return out
 
 
-def quantised_skinning(X: np.ndarray, weights: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, dict]:
+def quantised_skinning(X: np.ndarray, weights: np.ndarray, M: np.ndarray, rest_bits: int,
+                       bone_bits: int) -> tuple[np.ndarray, dict]:
     """The decoded frames and the arrays of a quantised Dem Bones file (top-4 weights renormalised)."""
     from scipy.spatial.transform import Rotation
 
@@ -55,9 +60,9 @@ def quantised_skinning(X: np.ndarray, weights: np.ndarray, M: np.ndarray) -> tup
     Wq = np.zeros_like(Wt)
     np.put_along_axis(Wq, top, w8 / 255.0, 1)
     quat = Rotation.from_matrix(M[..., :3, :3].reshape(-1, 3, 3)).as_quat().reshape(F, B, 4)
-    q_rest, rest_dq, r_rest = quantise(X[0], axis=0, bits=16)
-    q_quat, quat_dq, r_quat = quantise(quat, axis=(0, 2), bits=16)
-    q_tr, tr_dq, r_tr = quantise(M[..., :3, 3], axis=(0, 2), bits=16)
+    q_rest, rest_dq, r_rest = quantise(X[0], axis=0, bits=rest_bits)
+    q_quat, quat_dq, r_quat = quantise(quat, axis=(0, 2), bits=bone_bits)
+    q_tr, tr_dq, r_tr = quantise(M[..., :3, 3], axis=(0, 2), bits=bone_bits)
     Rq = Rotation.from_quat(quat_dq.reshape(-1, 4)).as_matrix().reshape(F, B, 3, 3)
     arrays = {"rest": q_rest, "rest_range": r_rest, "weights": w8, "bones": top.astype(np.uint8),
               "quaternions": q_quat, "quaternion_range": r_quat, "translations": q_tr,
@@ -72,8 +77,10 @@ def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path, qu
     for b in QUICK_BONES if quick else BONES:
         log(f"{name}: dem bones {b} bones")
         sol = solve(name, X, faces, b, cache)
-        approx, arrays = quantised_skinning(X, sol["weights"], sol["transforms"])
-        blob = pack_payload("dembones", {"faces": fc, **arrays})
-        rows.append(result("dembones", f"{b} bones ({sol['weights'].shape[0]} solved)", blob, approx, X,
-                           solve_s=sol["seconds"]))
+        for rest_bits, bone_bits in QUICK_PRECISIONS if quick else PRECISIONS:
+            approx, arrays = quantised_skinning(X, sol["weights"], sol["transforms"], rest_bits, bone_bits)
+            blob = pack_payload("dembones", {"faces": fc, **arrays})
+            solved = sol["weights"].shape[0]
+            setting = f"{b} bones ({solved} solved), rest {rest_bits}-bit, bones {bone_bits}-bit"
+            rows.append(result("dembones", setting, blob, approx, X, solve_s=sol["seconds"]))
     return rows

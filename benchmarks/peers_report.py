@@ -28,11 +28,11 @@ def clip_at(rows: list[dict], target: float) -> dict | None:
 
 
 def peer_cell(r: dict | None, target: float) -> str:
-    """file / wire (setting; rel-max as a multiple of the target) of a peer's best row."""
+    """file / wire (setting; rel-RMS, rel-max as a multiple of the target) of a peer's best row."""
     if r is None:
         return "- (none meets it)"
-    return (f"{nbytes(r['file_bytes'])} / {nbytes(r['wire_bytes'])} ({r['setting']}; max "
-            f"{r['rel_max'] / target:.1f}x)")
+    return (f"{nbytes(r['file_bytes'])} / {nbytes(r['wire_bytes'])} ({r['setting']}; RMS "
+            f"{r['rel_rms']:.2g}, max {r['rel_max'] / target:.2g}x)")
 
 
 def ratios(rows: list[dict], target: float) -> tuple[str, str, str]:
