@@ -67,13 +67,17 @@ def heldout_row(protocol: str, target: float, keep: np.ndarray, idx: np.ndarray,
             "clip_bytes": res.get("bytes"), **extra}
 
 
+def stated_split(n_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(kept frames 0, 4, 8, ..., the left-out frames between the first and last kept one, all left-out)."""
+    keep = np.arange(0, n_frames, STRIDE)
+    left = np.setdiff1d(np.arange(n_frames), keep)
+    return keep, left[left < keep[-1]], left
+
+
 def stated_protocol(name: str, X: np.ndarray, faces: np.ndarray, target: float, work: Path,
                     timeout: float) -> list[dict]:
     """Every 4th frame from 0, fitted at ``target``; in-between frames, and all left-out frames."""
-    F = len(X)
-    keep = np.arange(0, F, STRIDE)
-    left = np.setdiff1d(np.arange(F), keep)
-    inside = left[left < keep[-1]]
+    keep, inside, left = stated_split(len(X))
     if len(keep) < 3 or not len(inside):
         return []
     log(f"{name}: held-out (stated) at {target:g}: {len(keep)} kept, {len(inside)} in between, "
