@@ -1,9 +1,11 @@
-// Rewrite a GLB that uses EXT_meshopt_compression as a plain GLB (every compressed buffer view decoded with
-// meshoptimizer's own decoder), so the benchmark can read it with pdeanim's glTF reader and score it.
+// Rewrite a GLB that uses EXT_meshopt_compression or KHR_meshopt_compression as a plain GLB (every
+// compressed buffer view decoded with meshoptimizer's own decoder), so the benchmark can read it with
+// pdeanim's glTF reader and score it.
 // Usage: node decode_meshopt.mjs IN.glb OUT.glb
 import { readFileSync, writeFileSync } from 'node:fs';
 import { MeshoptDecoder } from 'meshoptimizer';
 
+const MESHOPT = ['EXT_meshopt_compression', 'KHR_meshopt_compression'];
 const [input, output] = process.argv.slice(2);
 const glb = readFileSync(input);
 if (glb.readUInt32LE(0) !== 0x46546c67) throw new Error(`${input} is not a GLB`);
@@ -22,7 +24,7 @@ await MeshoptDecoder.ready;
 const parts = [];
 let size = 0;
 const views = json.bufferViews.map((view) => {
-  const ext = view.extensions && view.extensions.EXT_meshopt_compression;
+  const ext = view.extensions && (view.extensions.EXT_meshopt_compression || view.extensions.KHR_meshopt_compression);
   let data;
   if (ext) {
     const src = bin.subarray(ext.byteOffset || 0, (ext.byteOffset || 0) + ext.byteLength);
@@ -48,7 +50,7 @@ if (pad) { parts.push(new Uint8Array(pad)); size += pad; }
 json.bufferViews = views;
 json.buffers = [{ byteLength: size }];
 for (const key of ['extensionsUsed', 'extensionsRequired']) {
-  if (json[key]) json[key] = json[key].filter((e) => e !== 'EXT_meshopt_compression');
+  if (json[key]) json[key] = json[key].filter((e) => !MESHOPT.includes(e));
 }
 let text = Buffer.from(JSON.stringify(json), 'utf8');
 text = Buffer.concat([text, Buffer.alloc((4 - (text.length % 4)) % 4, 0x20)]);

@@ -1,0 +1,101 @@
+"""Shared parts of the compression benchmark (benchmarks/compression_peers.py): progress lines, zstd, uniform
+quantisation, the file format of the array peers, faces coded for them, result rows and the k search."""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from pdeanim.model.metrics import error_summary  # noqa: E402
+
+FPS = 30.0
+WIRE_LEVEL = 19  # "on the wire": every file zstd -19, as an HTTP content coding
+
+
+def log(msg: str) -> None:
+    """Progress line on stderr with the 1-min load average."""
+    print(f"[{time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.1f}] {msg}", file=sys.stderr, flush=True)
+
+
+def zstd19(blob: bytes | np.ndarray) -> bytes:
+    """zstd -19 of a byte string (an array by its raw bytes)."""
+    import zstandard
+
+    raw = blob.tobytes() if isinstance(blob, np.ndarray) else bytes(blob)
+    return zstandard.ZstdCompressor(level=WIRE_LEVEL).compress(raw)
+
+
+def wire_bytes(file_bytes: bytes) -> int:
+    """Bytes of a file on the wire: its zstd -19 content coding (the clip's parts included)."""
+    return len(zstd19(file_bytes))
+
+
+def quantise(a: np.ndarray, axis: tuple[int, ...] | int | None, bits: int) -> tuple[np.ndarray, np.ndarray,
+                                                                                    np.ndarray]:
+    """Uniform ``bits``-bit quantisation with a [min, max] range over ``axis`` (kept dims): (codes,
+    dequantised float64, ranges float32 (2, ...) that a decoder needs)."""
+    a = np.asarray(a, np.float64)
+    lo = a.min(axis=axis, keepdims=True).astype(np.float32).astype(np.float64)
+    hi = a.max(axis=axis, keepdims=True).astype(np.float32).astype(np.float64)
+    scale = np.where(hi > lo, (hi - lo) / (2**bits - 1), 1.0)
+    q = np.clip(np.rint((a - lo) / scale), 0, 2**bits - 1).astype(np.uint16 if bits <= 16 else np.uint32)
+    return q, lo + q * scale, np.stack([lo, hi]).astype(np.float32)
+
+
+def pack_payload(kind: str, arrays: dict[str, np.ndarray]) -> bytes:
+    """A peer's file: a JSON header (kind, each array's name, dtype and shape) then every array as its own
+    zstd -19 frame (the arrays' codes differ, so separate frames compress them better than one stream)."""
+    head = {"kind": kind, "arrays": [[k, str(v.dtype), list(v.shape)] for k, v in arrays.items()]}
+    js = json.dumps(head, separators=(",", ":")).encode()
+    parts = [struct.pack("<I", len(js)), js]
+    for v in arrays.values():
+        z = zstd19(np.ascontiguousarray(v))
+        parts += [struct.pack("<I", len(z)), z]
+    return b"".join(parts)
+
+
+def faces_code(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """The faces as the array peers ship them: triangles reordered for the vertex cache and coded with
+    meshoptimizer's index codec (a few bits per triangle); vertex order unchanged."""
+    import meshoptimizer
+
+    idx = np.ascontiguousarray(np.asarray(faces, np.uint32).reshape(-1))
+    opt = np.empty_like(idx)
+    meshoptimizer.optimize_vertex_cache(opt, idx, len(idx), n_vertices)
+    return np.frombuffer(meshoptimizer.encode_index_buffer(opt, len(opt), n_vertices), np.uint8)
+
+
+def result(method: str, setting: str, file_bytes: bytes | int, approx: np.ndarray | None, X: np.ndarray,
+           wire: int | None = None, **extra) -> dict:
+    """One result row: file and wire bytes and the errors of ``approx`` against the source frames X."""
+    size = file_bytes if isinstance(file_bytes, int) else len(file_bytes)
+    if wire is None:
+        wire = wire_bytes(file_bytes) if not isinstance(file_bytes, int) else size
+    err = error_summary(X, approx) if approx is not None else extra.pop("errors")
+    return {"method": method, "setting": setting, "file_bytes": int(size), "wire_bytes": int(wire),
+            "rel_rms": err["rel_rms"], "rel_max": err["rel_max"], "kg": err["kg"], **extra}
+
+
+def smallest_meeting(lo: int, hi: int, meets: Callable[[int], bool]) -> int | None:
+    """The smallest n in [lo, hi] with meets(n), by bisection (meets is taken as monotone: once an n meets
+    the target every larger one does); None if hi does not meet it."""
+    if not meets(hi):
+        return None
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if meets(mid):
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo

@@ -1,0 +1,86 @@
+"""The Dem Bones peer of the compression benchmark (PyPI ``py-dem-bones``): linear blend skinning with 8, 16,
+32 and 64 bones and at most 4 influences per vertex, quantised (rest positions, quaternions and translations
+at 10-16 bits; 8-bit weights and bone indices), each array zstd -19, faces with meshoptimizer's index codec.
+Solves are cached on disk outside the repository (minutes each on the larger sequences)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from peers_common import faces_code, log, pack_payload, quantise, result
+
+BONES = (8, 16, 32, 64)
+QUICK_BONES = (8, 16)
+PRECISIONS = ((16, 16), (14, 14), (12, 12), (10, 12))
+"""(rest position bits, quaternion and translation bits): the error of a few bones is mostly the skinning's,
+so fewer bits may cost nothing."""
+QUICK_PRECISIONS = ((16, 16), (12, 12))
+ITERATIONS = 30
+INFLUENCES = 4
+
+
+def solve(name: str, X: np.ndarray, faces: np.ndarray, bones: int, cache: Path) -> dict:
+    """Weights (B, V) and transforms (F, B, 4, 4) of Dem Bones with ``bones`` bones, cached on disk."""
+    path = cache / f"dembones-{name}-{X.shape[0]}x{X.shape[1]}-b{bones}-i{ITERATIONS}.npz"
+    if path.exists():
+        with np.load(path) as d:
+            return {"weights": d["weights"], "transforms": d["transforms"], "seconds": float(d["seconds"])}
+    from py_dem_bones import solve_skinning
+
+    t = time.perf_counter()
+    res = solve_skinning(X[0].astype(np.float64), X.astype(np.float64), bones, faces=faces,
+                         max_influences=INFLUENCES, iterations=ITERATIONS)
+    secs = time.perf_counter() - t
+    cache.mkdir(parents=True, exist_ok=True)
+    np.savez(path, weights=res.weights, transforms=res.transforms, seconds=secs)
+    return {"weights": res.weights, "transforms": res.transforms, "seconds": secs}
+
+
+def skin(rest: np.ndarray, W: np.ndarray, R: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Linear blend skinning: rest (V, 3), weights (V, B), rotations (F, B, 3, 3), translations (F, B, 3)."""
+    out = np.empty((len(R), len(rest), 3))
+    for f in range(len(R)):  # one frame at a time keeps memory at V x B x 3
+        P = np.einsum("bij,vj->bvi", R[f], rest) + T[f][:, None, :]
+        out[f] = np.einsum("vb,bvi->vi", W, P)
+    return out
+
+
+def quantised_skinning(X: np.ndarray, weights: np.ndarray, M: np.ndarray, rest_bits: int,
+                       bone_bits: int) -> tuple[np.ndarray, dict]:
+    """The decoded frames and the arrays of a quantised Dem Bones file (top-4 weights renormalised)."""
+    from scipy.spatial.transform import Rotation
+
+    Wt = weights.T  # (V, B)
+    F, B = M.shape[:2]
+    top = np.argsort(-Wt, axis=1)[:, :INFLUENCES]
+    wv = np.take_along_axis(Wt, top, 1)
+    w8 = np.rint(wv / np.maximum(wv.sum(1, keepdims=True), 1e-12) * 255).astype(np.uint8)
+    Wq = np.zeros_like(Wt)
+    np.put_along_axis(Wq, top, w8 / 255.0, 1)
+    quat = Rotation.from_matrix(M[..., :3, :3].reshape(-1, 3, 3)).as_quat().reshape(F, B, 4)
+    q_rest, rest_dq, r_rest = quantise(X[0], axis=0, bits=rest_bits)
+    q_quat, quat_dq, r_quat = quantise(quat, axis=(0, 2), bits=bone_bits)
+    q_tr, tr_dq, r_tr = quantise(M[..., :3, 3], axis=(0, 2), bits=bone_bits)
+    Rq = Rotation.from_quat(quat_dq.reshape(-1, 4)).as_matrix().reshape(F, B, 3, 3)
+    arrays = {"rest": q_rest, "rest_range": r_rest, "weights": w8, "bones": top.astype(np.uint8),
+              "quaternions": q_quat, "quaternion_range": r_quat, "translations": q_tr,
+              "translation_range": r_tr}
+    return skin(rest_dq, Wq, Rq, tr_dq), arrays
+
+
+def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path, quick: bool) -> list[dict]:
+    """Dem Bones at each bone count, quantised + zstd, faces included."""
+    fc = faces_code(faces, X.shape[1])
+    rows = []
+    for b in QUICK_BONES if quick else BONES:
+        log(f"{name}: dem bones {b} bones")
+        sol = solve(name, X, faces, b, cache)
+        for rest_bits, bone_bits in QUICK_PRECISIONS if quick else PRECISIONS:
+            approx, arrays = quantised_skinning(X, sol["weights"], sol["transforms"], rest_bits, bone_bits)
+            blob = pack_payload("dembones", {"faces": fc, **arrays})
+            solved = sol["weights"].shape[0]
+            setting = f"{b} bones ({solved} solved), rest {rest_bits}-bit, bones {bone_bits}-bit"
+            rows.append(result("dembones", setting, blob, approx, X, solve_s=sol["seconds"]))
+    return rows

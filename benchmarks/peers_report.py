@@ -1,0 +1,166 @@
+"""Tables (markdown, to paste into docs/compression.md) and plots of the compression benchmark's results."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+PEERS = ("gltfpack", "pca", "dembones")
+"""The strongest peers: the wire ratio's yardstick is the smallest of them that meets the target."""
+REFERENCES = ("keyframes",)
+LABELS = {"gltfpack": "gltfpack", "pca": "PCA", "dembones": "Dem Bones", "keyframes": "keyframes"}
+
+
+def nbytes(n: int | None) -> str:
+    """Exact bytes with thousands separators."""
+    return "-" if n is None else f"{n:,}"
+
+
+def best(rows: list[dict], method: str, target: float, key: str = "wire_bytes") -> dict | None:
+    """The smallest (by ``key``) row of ``method`` that meets rel-RMS <= target."""
+    ok = [r for r in rows if r.get("method") == method and r.get("rel_rms") is not None
+          and r["rel_rms"] <= target * (1 + 1e-9)]
+    return min(ok, key=lambda r: r[key]) if ok else None
+
+
+def clip_at(rows: list[dict], target: float) -> dict | None:
+    """The project's row fitted for ``target``."""
+    return next((r for r in rows if r.get("method") == "clip" and r.get("target") == target), None)
+
+
+def peer_cell(r: dict | None, target: float) -> str:
+    """file / wire (setting; rel-RMS, rel-max as a multiple of the target) of a peer's best row."""
+    if r is None:
+        return "- (none meets it)"
+    return (f"{nbytes(r['file_bytes'])} / {nbytes(r['wire_bytes'])} ({r['setting']}; RMS "
+            f"{r['rel_rms']:.2g}, max {r['rel_max'] / target:.2g}x)")
+
+
+def ratios(rows: list[dict], target: float) -> tuple[str, str, str]:
+    """(smallest peer on the wire, wire ratio, file ratio) of the clip at ``target``."""
+    c = clip_at(rows, target)
+    wire = [r for m in PEERS if (r := best(rows, m, target))]
+    file = [r for m in PEERS if (r := best(rows, m, target, "file_bytes"))]
+    if not wire:
+        return "-", "-", "-"
+    w = min(wire, key=lambda r: r["wire_bytes"])
+    f = min(file, key=lambda r: r["file_bytes"])
+    name = f"{LABELS[w['method']]} {nbytes(w['wire_bytes'])}"
+    if c is None or "wire_bytes" not in c:
+        return name, "no clip", "no clip"
+    miss = "" if c["target_met"] else " (target missed)"
+    return (name, f"{c['wire_bytes'] / w['wire_bytes']:.2f}{miss}",
+            f"{c['file_bytes'] / f['file_bytes']:.2f}{miss}")
+
+
+def summary_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
+    """Per sequence and target: the clip and the smallest file of each peer meeting the target."""
+    head = ["sequence", "target", "clip met", "clip rel-RMS", "clip rel-max (x target)", "clip file / wire",
+            *[f"{LABELS[m]} file / wire" for m in (*PEERS, *REFERENCES)], "smallest peer (wire)",
+            "wire ratio", "file ratio"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        for t in targets:
+            c = clip_at(rows, t)
+            if c is None or "wire_bytes" not in c:
+                clip = ["no clip", "-", "-", "-"]
+            else:
+                clip = ["yes" if c["target_met"] else f"NO (exit {c['exit_code']})", f"{c['rel_rms']:.3g}",
+                        f"{c['rel_max']:.3g} ({c['rel_max'] / t:.1f}x)",
+                        f"{nbytes(c['file_bytes'])} / {nbytes(c['wire_bytes'])}"]
+            peers = [peer_cell(best(rows, m, t), t) for m in (*PEERS, *REFERENCES)]
+            lines.append("| " + " | ".join([name, f"{t:g}", *clip, *peers, *ratios(rows, t)]) + " |")
+    return "\n".join(lines)
+
+
+def clip_table(results: dict[str, list[dict]]) -> str:
+    """Every fit of the project: exit code, errors against the target, bytes, segments, time, memory."""
+    head = ["sequence", "target", "exit", "rel-RMS (x target)", "rel-max (x target)", "file", "wire",
+            "format", "segments", "curves", "fit s", "peak MB"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        for r in rows:
+            if r.get("method") != "clip":
+                continue
+            t = r["target"]
+            if "wire_bytes" not in r:
+                lines.append(f"| {name} | {t:g} | failed: {r.get('failed', '')[:80]} |" + " |" * 9)
+                continue
+            lines.append(f"| {name} | {t:g} | {r['exit_code']} | {r['rel_rms']:.3g} ({r['rel_rms'] / t:.2f}) "
+                         f"| {r['rel_max']:.3g} ({r['rel_max'] / t:.1f}) | {nbytes(r['file_bytes'])} | "
+                         f"{nbytes(r['wire_bytes'])} | {r.get('format_version')} | {r.get('segments')} | "
+                         f"{r.get('curves')} | {r['fit_s']:.1f} | {r['peak_mb']:.0f} |")
+    return "\n".join(lines)
+
+
+def heldout_table(results: dict[str, list[dict]]) -> str:
+    """Held-out frames: the stated protocol per target, the earlier one as the last column."""
+    head = ["sequence", "target", "kept / in between / after", "fit exit (rel-RMS on kept)",
+            "clip rel-RMS / rel-max", "linear", "Catmull-Rom", "clip / linear", "clip / Catmull-Rom",
+            "earlier protocol: clip / Catmull-Rom (fit target)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        h = [r for r in rows if r.get("method") == "heldout"]
+        early = next((r for r in h if r["protocol"] == "earlier" and "clip_rel_rms" in r), None)
+        early_cell = "-" if early is None else f"{early['clip_over_catmull_rom']:.3f} ({early['target']:.2g})"
+        for r in (r for r in h if r["protocol"] == "stated"):
+            if "clip_rel_rms" not in r:
+                lines.append(f"| {name} | {r['target']:g} | failed: {r.get('failed', '')[:80]} |" + " |" * 7)
+                continue
+            kept = r.get("kept_rel_rms")
+            lines.append(
+                f"| {name} | {r['target']:g} | {r['kept']} / {r['measured']} / {r.get('trailing', 0)} | "
+                f"{r['fit_exit']} ({'-' if kept is None else f'{kept:.3g}'}) | "
+                f"{r['clip_rel_rms']:.3g} / {r['clip_rel_max']:.3g} | "
+                f"{r['linear_rel_rms']:.3g} / {r['linear_rel_max']:.3g} | "
+                f"{r['catmull_rom_rel_rms']:.3g} / {r['catmull_rom_rel_max']:.3g} | "
+                f"{r['clip_over_linear']:.3f} | {r['clip_over_catmull_rom']:.3f} | {early_cell} |")
+    return "\n".join(lines)
+
+
+def rows_table(name: str, rows: list[dict]) -> str:
+    """Every scored row of one sequence."""
+    lines = [f"#### {name}", "", "| method | setting | file | wire | rel-RMS | rel-max | KG % | notes |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "wire_bytes" not in r:
+            continue
+        notes = [f"{k} {r[k]:.1f}" for k in ("fit_s", "solve_s", "pack_s") if r.get(k) is not None]
+        notes += [f"{k} {r[k]}" for k in ("exit_code", "decoded_vertices") if r.get(k) is not None]
+        kg = "-" if r.get("kg") is None else f"{r['kg']:.3g}"
+        lines.append(f"| {r['method']} | {r['setting']} | {nbytes(r['file_bytes'])} | "
+                     f"{nbytes(r['wire_bytes'])} | {r['rel_rms']:.3g} | {r['rel_max']:.3g} | {kg} | "
+                     f"{', '.join(notes)} |")
+    return "\n".join(lines)
+
+
+def pareto_plot(name: str, rows: list[dict], targets: tuple[float, ...], path: Path) -> None:
+    """Wire bytes vs rel-RMS, log-log: every scored setting of each method, its lower envelope as a line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for m in ("clip", *PEERS, *REFERENCES):
+        pts = sorted((r["wire_bytes"], r["rel_rms"]) for r in rows
+                     if r.get("method") == m and r.get("wire_bytes") and r.get("rel_rms"))
+        if not pts:
+            continue
+        front, low = [], float("inf")
+        for b, e in pts:
+            if e < low:
+                front.append((b, e))
+                low = e
+        line = ax.plot(*zip(*front, strict=True), lw=1.2, label=LABELS.get(m, "clip (pdeanim fit)"))[0]
+        ax.scatter(*zip(*pts, strict=True), s=10, color=line.get_color())
+    for t in targets:
+        ax.axhline(t, color="grey", lw=0.5, ls=":")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("bytes on the wire (zstd -19 of each file)")
+    ax.set_ylabel("rel-RMS (to frame 0's bbox diagonal)")
+    ax.set_title(f"{name}: wire bytes vs error")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
