@@ -31,7 +31,13 @@ from ..curveset import CurveSet
 from ..errors import InputError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.clipformat import TIME_SPLINE, TRIAL_LEVEL, decode_topology, topology_arrays
+from ..model.clipformat import (
+    TIME_SPLINE,
+    TRIAL_LEVEL,
+    decode_topology,
+    segment_t_derivable,
+    topology_arrays,
+)
 from ..model.families import SPACE_KINDS, space_basis
 from ..model.fitcore import items_from_curves, vertex_slots
 from ..model.metrics import bbox_diagonal
@@ -453,7 +459,9 @@ def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes
               "motion": options.motion, "looping": False, "n_segments": int(S), "n_curves": int(C),
               "n_frames": int(F), "knot_differences": order, "knot_rank": 0}
     model_kind = space.kind.reshape(C, 3).astype(np.uint8)
-    arrays = {"segment_t": _normalised(plan.times), "frame_times": plan.times, "space_kind": model_kind,
+    seg_t = _normalised(plan.times)
+    arrays = {**({} if segment_t_derivable(seg_t, plan.times) else {"segment_t": seg_t}),
+              "frame_times": plan.times, "space_kind": model_kind,
               "time_model": np.where(spline.reshape(C, 3), TIME_SPLINE, 0).astype(np.uint8),
               "m": np.zeros((S, C, 3), np.float32), "D": space.D.reshape(C, 3).astype(np.float32),
               "knot_step": steps.astype(np.float32), "knots": tracks}

@@ -186,9 +186,10 @@ def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
         spectrum = knotbasis.track_spectrum(topo.curves, topo.u, family, m, data.D, data.knots)
     knot_arrays, differences, rank = _knot_encoding(data, steps, spectrum, choose, knot_rank)
     header.update(knot_differences=differences, knot_rank=rank)
+    seg_t, frame_times = np.asarray(data.segment_t, np.float64), np.asarray(data.frame_times, np.float64)
     return header, {
-        "segment_t": np.asarray(data.segment_t, np.float64),
-        "frame_times": np.asarray(data.frame_times, np.float64),
+        **({} if segment_t_derivable(seg_t, frame_times) else {"segment_t": seg_t}),
+        "frame_times": frame_times,
         "space_kind": (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8),
         "time_model": spline.astype(np.uint8),
         "m": np.where((family >= 2) & (m > 0), -m, m),
@@ -344,11 +345,36 @@ def _steps(header: dict[str, Any]) -> tuple[float, float, np.ndarray]:
     return u_step, rest_step, origin
 
 
+def frame_segment_t(frame_times: np.ndarray) -> np.ndarray:
+    """The segment boundaries of a clip with a knot at every frame: the frame times normalised to [0, 1]
+    (docs/format.md §3.3), computed as every reader computes them."""
+    ft = np.asarray(frame_times, np.float64)
+    return (ft - ft[0]) / (ft[-1] - ft[0])
+
+
+def segment_t_derivable(seg_t: np.ndarray, frame_times: np.ndarray) -> bool:
+    """Whether ``segment_t`` is what readers derive from the frame times, so that it need not be stored."""
+    if len(seg_t) != len(frame_times) or len(seg_t) < 2 or not frame_times[-1] > frame_times[0]:
+        return False
+    return bool(np.array_equal(seg_t, frame_segment_t(frame_times)))
+
+
+def _segment_t(arrays: dict[str, np.ndarray], S: int) -> np.ndarray:
+    """(S+1,) segment boundaries: stored, or with a knot at every frame derived from ``frame_times``."""
+    if "segment_t" in arrays:
+        return _need(arrays, "segment_t", (S + 1,), "coefficients", "<f8")
+    ft = _need(arrays, "frame_times", (None,), "coefficients", "<f8")
+    if len(ft) != S + 1 or not ft[-1] > ft[0]:
+        raise ClipFormatError("coefficients without segment_t need a knot at every frame (n_segments + 1 "
+                              "frame times) and a last frame time after the first")
+    return frame_segment_t(ft)
+
+
 def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n_curves: int
                         ) -> CoefficientData:
     """Validated coefficient data from a decoded container; raises ClipFormatError."""
     S, C = _count(header, "n_segments", "coefficients"), int(n_curves)
-    seg_t = _need(arrays, "segment_t", (S + 1,), "coefficients", "<f8")
+    seg_t = _segment_t(arrays, S)
     if S < 1 or np.any(np.diff(seg_t) < 0):
         raise ClipFormatError("segment boundaries must be non-decreasing with at least one segment")
     family, signed = _family(arrays, S, C)

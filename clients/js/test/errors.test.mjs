@@ -449,7 +449,9 @@ test('coefficients with bad counts, arrays, space kinds, time constants or bound
     const missing = edited(parts.coefficients, ({ arrays }) => {
       delete arrays[name];
     });
-    bad(missing, `coefficients part has no '${name}' array`);
+    // segment_t may be absent only with a knot at every frame, which this clip has not
+    const why = name === 'segment_t' ? 'coefficients without segment_t need a knot at every frame' : null;
+    bad(missing, why ? new RegExp(why) : `coefficients part has no '${name}' array`);
   }
   for (const [name, dtype, Type, want] of [
     ['space_kind', '<i1', Int8Array, '<u1'],
@@ -670,7 +672,9 @@ test('rigid tracks with bad boundaries, shapes, constants or values are rejected
     const missing = edited(rigidParts.coefficients, ({ arrays }) => {
       delete arrays[name];
     });
-    bad(missing, `coefficients part has no '${name}' array`);
+    // segment_t may be absent only with a knot at every frame, which this clip has not
+    const why = name === 'segment_t' ? 'coefficients without segment_t need a knot at every frame' : null;
+    bad(missing, why ? new RegExp(why) : `coefficients part has no '${name}' array`);
   }
   bad(
     edit('rigid_segment_t', (a) => ({ ...a, data: Float64Array.from(a.data, (x, i) => (i === 1 ? -1 : x)) })),
@@ -695,4 +699,24 @@ test('rigid tracks with bad boundaries, shapes, constants or values are rejected
     edit('rigid_rot_knots', (a) => ({ ...a, data: Float32Array.from(a.data, (x, i) => (i ? x : NaN)) })),
     "coefficients array 'rigid_rot_knots' has non-finite values",
   );
+});
+
+test('segment_t may be left out only with a knot at every frame: it is then the normalised frame times', () => {
+  const dense = manifest().cases.find((c) => c.name.endsWith('-windows'));
+  const p = fixtureParts(dense);
+  const { arrays } = decodeContainer(p.coefficients.slice());
+  assert.equal(arrays.segment_t, undefined); // the writer leaves it out
+  const ft = arrays.frame_times.data;
+  const clip = decodeClip(p.topology, p.coefficients);
+  const span = ft[ft.length - 1] - ft[0];
+  assert.deepEqual(Array.from(clip.segmentT), Array.from(ft, (x) => (x - ft[0]) / span));
+  const flat = edited(p.coefficients, ({ arrays: a }) => {
+    a.frame_times = { ...a.frame_times, data: new Float64Array(ft.length) };
+  });
+  const why = /without segment_t need a knot at every frame/;
+  refused(() => decodeClip(p.topology, flat), why);
+  const few = edited(parts.coefficients, ({ arrays: a }) => {
+    delete a.segment_t;
+  });
+  refused(() => decodeClip(parts.topology, few), why);
 });

@@ -171,7 +171,10 @@ export function retimed(bytes, { timeModel = null, linear = null, segmentT = nul
       if (model[item] === 1 || linear?.(s, Math.floor(item / 3), item % 3)) m[i] = 0;
     }
     arrays.m = { ...arrays.m, data: m };
-    if (segmentT) arrays.segment_t = { ...arrays.segment_t, data: Float64Array.from(segmentT) };
+    if (segmentT) {
+      const data = Float64Array.from(segmentT);
+      arrays.segment_t = { dtype: '<f8', shape: [data.length], data };
+    }
   });
 }
 

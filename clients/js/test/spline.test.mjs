@@ -33,7 +33,7 @@ function splineCases() {
   const out = [];
   for (const c of dynamic) {
     const { topology, coefficients } = fixtureParts(c);
-    const segT = decodeContainer(coefficients.slice()).arrays.segment_t.data;
+    const segT = decodeClip(topology, coefficients).segmentT; // stored, or derived from the frame times
     const base = { fixture: c, topology, diagonal: c.diagonal, looping: c.looping };
     const t = [...takenTimes(c.t, c.looping), ...sampleTimes(segT, c.looping)];
     if (c.spline_items > 0) out.push({ ...base, name: c.name, coefficients, t });

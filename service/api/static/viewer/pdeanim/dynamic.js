@@ -38,6 +38,23 @@ const F4 = ['<f4'];
 const F8 = ['<f8'];
 
 /**
+ * segment_t (S+1) float64, or, where it is not stored (a knot at every frame, docs/format.md §3.3), the frame
+ * times normalised: (frame_times[s] - frame_times[0]) / (frame_times[F-1] - frame_times[0]).
+ */
+function segmentTimes(ca, S) {
+  if (ca.segment_t !== undefined) return need(ca, 'segment_t', [S + 1], 'coefficients', F8).data;
+  const ft = need(ca, 'frame_times', [null], 'coefficients', F8).data;
+  if (ft.length !== S + 1 || !(ft[S] > ft[0])) {
+    throw new ClipFormatError(
+      'coefficients without segment_t need a knot at every frame (n_segments + 1 ' +
+        'frame times) and a last frame time after the first',
+    );
+  }
+  const span = ft[S] - ft[0];
+  return Float64Array.from(ft, (x) => (x - ft[0]) / span);
+}
+
+/**
  * Undo zigzag-coded differences in place order: z (uint32, rows x cols row-major) becomes the running sums
  * along the rows of d = (z >>> 1) ^ -(z & 1), per column, as float64 (exact integers), then value(q, col).
  */
@@ -364,7 +381,7 @@ export function decodeDynamic(topo, coef) {
   const rest = toVertexOrder(t.restCurve, 3, order);
 
   const S = count(ch, 'n_segments', 'coefficients');
-  const segT = need(ca, 'segment_t', [S + 1], 'coefficients', F8).data;
+  const segT = segmentTimes(ca, S);
   if (!(S >= 1) || !nondecreasing(segT)) {
     throw new ClipFormatError('segment boundaries must be non-decreasing with at least one segment');
   }
