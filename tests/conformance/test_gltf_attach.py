@@ -83,8 +83,9 @@ def test_attach_to_gltfloader_scene_matches_python(asset, glb):
 
 
 def test_attach_to_a_welded_glb_plays_every_vertex_through_its_map(tmp_path):
-    """The Fox (1,728 unwelded corners) exports as 434 welded vertices with a _PDEANIM_VERTEX map (docs/gltf.md):
-    attachClipToScene takes the map as the vertex map, so each written vertex shows its clip vertex."""
+    """The Fox (1,728 unwelded corners) exports as 434 welded vertices with a _PDEANIM_VERTEX map
+    (docs/gltf.md): attachClipToScene takes it as the vertex map, so each written vertex shows its clip
+    vertex."""
     src = (Path(__file__).resolve().parents[1] / "gltf" / "data" / "Fox.glb").read_bytes()
     poses = read_animated_poses(src, fps=30, animation="Run")
     parts = fit_poses(make_poses(poses.vertices[:8].astype(np.float32), poses.faces), FitOptions(segments=2))

@@ -1,5 +1,5 @@
-"""segment_t is left out of a clip with a knot at every frame (docs/format.md §3.3): readers derive it from the
-frame times, bit for bit what the writer had, and refuse its absence anywhere else."""
+"""segment_t is left out of a clip with a knot at every frame (docs/format.md §3.3): readers derive it from
+the frame times, bit for bit what the writer had, and refuse its absence anywhere else."""
 
 from __future__ import annotations
 
