@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -401,7 +401,8 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
             progress(min(len(trials) / 10.0, 1.0), f"window {index + 1}: rounding trial {len(trials) + 1}")
         return Errors.of(distances(q)[0], lay.curve_of, C)
 
-    quant = search_rounding(targets, floor, quant, plan.tol, measure, trials)
+    tol = replace(plan.tol, quant_fill=plan.tol.window_quant_fill)
+    quant = search_rounding(targets, floor, quant, tol, measure, trials)
     dist, codes = distances(quant)
     if np.abs(codes).max(initial=0) > quantise.MAX_CODE:
         raise ValueError("knot codes out of range")  # the steps keep them in range
