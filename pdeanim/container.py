@@ -67,9 +67,10 @@ def pack(header: dict[str, Any], arrays: dict[str, np.ndarray],
     for name, arr in arrays.items():
         a = _canonical(arr)
         entry = {"dtype": a.dtype.str.replace("|", "<"), "shape": list(a.shape), "offset": offset}
-        raw = a.tobytes()
         if name in encodings:
             raw, entry["encoding"] = _encode_chosen(a, encodings[name], level)
+        else:
+            raw = a.tobytes()
         entry["nbytes"] = len(raw)
         table[name] = entry
         chunks.append(raw + b"\0" * (_pad8(len(raw)) - len(raw)))
@@ -100,9 +101,8 @@ def _encode(a: np.ndarray, encoding: str, level: int = ZSTD_LEVEL) -> bytes:
 
     if encoding not in ENCODINGS:
         raise ValueError(f"unknown container encoding {encoding!r} (known: {', '.join(ENCODINGS)})")
-    raw = a.tobytes()
-    if encoding == "shuffle-zstd":
-        raw = np.frombuffer(raw, np.uint8).reshape(-1, a.dtype.itemsize).T.tobytes()
+    flat = a.reshape(-1).view(np.uint8)  # the canonical array's bytes, not a copy
+    raw = flat.reshape(-1, a.dtype.itemsize).T.tobytes() if encoding == "shuffle-zstd" else flat.data
     writer = zstandard.ZstdCompressor(level=level, write_content_size=True, write_checksum=True)
     return writer.compress(raw)
 

@@ -54,7 +54,10 @@ from .report import header_errors
 from .spacestage import space_fit
 
 CURVE_FRAMES = 128
-"""Frames, evenly spaced, on which the curves of a windowed fit are chosen."""
+"""Frames, evenly spaced, on which the curves of a windowed fit are chosen, at most ..."""
+CURVE_VALUES = 1 << 20
+"""... and at most this many frame-vertex values (an in-memory space fit takes a few hundred bytes each), but
+at least MIN_WINDOW_FRAMES frames."""
 MIN_WINDOW_FRAMES = 8
 """Frames per window at least (the time-model evidence needs a few frames on either side)."""
 
@@ -188,10 +191,11 @@ class WindowPlan:
 
 def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress: Progress | None = None,
                  curves: CurveSet | None = None) -> WindowPlan:
-    """Step 1: the curves (chosen on CURVE_FRAMES evenly spaced frames as an in-memory fit chooses them,
-    unless given), the rest pose's rounding and the windows of ``poses``."""
+    """Step 1: the curves (chosen on evenly spaced frames, CURVE_FRAMES and CURVE_VALUES at most, as an
+    in-memory fit chooses them, unless given), the rest pose's rounding and the windows of ``poses``."""
     F, V = poses.n_frames, poses.n_vertices
-    picked = np.unique(np.round(np.linspace(0, F - 1, min(F, CURVE_FRAMES))).astype(np.int64))
+    n_picked = min(F, CURVE_FRAMES, max(MIN_WINDOW_FRAMES, CURVE_VALUES // max(V, 1)))
+    picked = np.unique(np.round(np.linspace(0, F - 1, n_picked)).astype(np.int64))
     sub = make_poses(np.asarray(poses.vertices[picked]), poses.faces, poses.times[picked])
     sf = space_fit(sub, options, curves, progress or (lambda *_: None), tol)
     layout = Layout.of(sf.curves, poses.vertices[0], options.motion == "absolute")
@@ -332,7 +336,11 @@ class WindowModel:
         N = lay.mask.shape[1]
         padded = np.zeros((C * N, 3, 4))
         padded[lay.slots] = basis
-        self.padded_basis = np.ascontiguousarray(padded.reshape(C, N, 3, 4))
+        # (C * 3, N, 4): each item's basis on its padded curve, so that fields are one batched product
+        by_item = np.moveaxis(padded.reshape(C, N, 3, 4), 2, 1)  # (C, 3, N, 4)
+        self.item_basis = np.ascontiguousarray(by_item).reshape(-1, N, 4)
+        c, n = np.divmod(lay.slots, N)
+        self.rows = ((c * 3)[:, None] + np.arange(3)[None, :]) * N + n[:, None]  # (V, 3) rows of the fields
         self.base = plan.base()
 
     def knots(self, b: np.ndarray) -> np.ndarray:
@@ -341,11 +349,12 @@ class WindowModel:
         return np.moveaxis(k.reshape(self.C, 3, b.shape[1], 4), 2, 0)
 
     def fields(self, knots: np.ndarray) -> np.ndarray:
-        """(w, V, 3) float32 knot fields at the vertices of knots (w, C, 3, 4), computed on the padded curves
-        (no (w, V, 3, 4) temporary) in float64 and rounded as the evaluator rounds its fields."""
-        on_curves = np.einsum("cnwk,fcwk->fcnw", self.padded_basis, knots)  # (w, C, N, 3)
-        slots = self.plan.layout.slots
-        return np.take(on_curves.reshape(len(knots), -1, 3), slots, axis=1).astype(np.float32)
+        """(V, 3, w) float32 knot fields at the vertices of knots (C * 3, 4, w), computed on the padded curves
+        (no (V, 3, 4, w) temporary) in float64 and rounded as the evaluator rounds its fields; frames last, so
+        that gathering a vertex copies a contiguous run."""
+        on_curves = np.matmul(self.item_basis, knots)  # (C * 3, N, w)
+        w = knots.shape[-1]
+        return np.take(on_curves.reshape(-1, w), self.rows, axis=0).astype(np.float32)
 
 
 def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: Progress | None = None
@@ -357,7 +366,6 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     f0, f1 = plan.window(index)
     if len(frames) != f1 - f0:
         raise InputError(f"window {index} has {f1 - f0} frames, got {len(frames)}")
-    X = np.asarray(frames, np.float64)
     Yk = lay.item_rows(frames)
     b = Yk @ model.proj.U  # (K, w, 4)
     d = _point_distances(Yk - b @ np.swapaxes(model.proj.U, 1, 2), lay.slots)
@@ -367,11 +375,14 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     t = _normalised(plan.times)[f0:f1]
     e_lin, e_cub = spline_evidence(b, t)
     spline = (e_cub < plan.tol.cubic_gain * e_lin) & (e_lin > 0)
-    knots = model.knots(b)
+    knots = model.knots(b)  # (w, C, 3, 4)
+    largest = np.abs(knots).max(axis=(0, 3))[None, :, :, None]
+    knots = np.ascontiguousarray(np.moveaxis(knots, 0, -1))  # (C, 3, 4, w): the tracks' layout
     # every frame is a knot: the linear pair's bound is 1, the spline items' that of the in-memory writer
     bound = np.where(spline.reshape(C, 3), quantise.CUBIC_PAIR_MAX, 1.0)
     weight, reach = quantise.item_sensitivity(lay.curve_of, model.basis, C, 1.0, bound)
-    largest = np.abs(knots).max(axis=(0, 3))[None, :, :, None]
+    target_t = np.ascontiguousarray(np.moveaxis(np.asarray(frames, np.float64), 0, -1))  # (V, 3, w)
+    base = model.base[:, :, None]
 
     def steps_of(quant: Quantisation) -> np.ndarray:
         if quant.knot_rms is not None:
@@ -384,12 +395,13 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
         return steps
 
     def distances(quant: Quantisation) -> tuple[np.ndarray, np.ndarray]:
-        steps = steps_of(quant)
-        s64 = steps.astype(np.float64)[None, :, :, None]
+        """(V, w) distances of the stored clip to the frames, and the codes (C, 3, 4, w)."""
+        s64 = steps_of(quant).astype(np.float64)[:, :, None, None]
         codes = np.rint(knots / s64)
-        stored = (codes * s64).astype(np.float32).astype(np.float64)
-        dist = np.linalg.norm((model.fields(stored) + model.base).astype(np.float64) - X, axis=-1)
-        return dist, codes
+        stored = (codes * s64).astype(np.float32).astype(np.float64).reshape(C * 3, 4, -1)
+        diff = (model.fields(stored) + base).astype(np.float64)
+        diff -= target_t
+        return np.sqrt(np.einsum("vcw,vcw->vw", diff, diff)), codes
 
     trials: list[dict] = []
     targets = plan.targets
@@ -399,7 +411,7 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     def measure(q: Quantisation) -> Errors:
         if progress is not None:
             progress(min(len(trials) / 10.0, 1.0), f"window {index + 1}: rounding trial {len(trials) + 1}")
-        return Errors.of(distances(q)[0], lay.curve_of, C)
+        return Errors.of(distances(q)[0].T, lay.curve_of, C)
 
     tol = replace(plan.tol, quant_fill=plan.tol.window_quant_fill)
     quant = search_rounding(targets, floor, quant, tol, measure, trials)
@@ -408,10 +420,10 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
         raise ValueError("knot codes out of range")  # the steps keep them in range
     dd = dist * dist
     return WindowCodes(
-        index, np.ascontiguousarray(np.moveaxis(codes, 0, -1)).astype(np.int32), steps_of(quant),
-        e_lin, e_cub, b.min(axis=1).astype(np.float32), b.max(axis=1).astype(np.float32),
-        dd.sum(axis=1), dist.max(axis=1, initial=0.0), np.bincount(lay.curve_of, dd.sum(axis=0), minlength=C),
-        Errors.of(dist, lay.curve_of, C).curve_max, float((d * d).sum()), float(d.max(initial=0.0)), trials,
+        index, codes.astype(np.int32), steps_of(quant), e_lin, e_cub, b.min(axis=1).astype(np.float32),
+        b.max(axis=1).astype(np.float32), dd.sum(axis=0), dist.max(axis=0, initial=0.0),
+        np.bincount(lay.curve_of, dd.sum(axis=1), minlength=C), Errors.of(dist.T, lay.curve_of, C).curve_max,
+        float((d * d).sum()), float(d.max(initial=0.0)), trials,
         {"tolerance": quant.tolerance, "knot_rms": quant.knot_rms, "knot_cap": quant.knot_cap})
 
 
@@ -431,8 +443,9 @@ def _normalised(times: np.ndarray) -> np.ndarray:
 
 def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes],
               timings: dict[str, float] | None = None) -> ClipParts:
-    """Join 2: the clip of every window's codes (in window order): the time model of every item from the
-    whole sequence's evidence, the knot tracks, both parts and the fit report."""
+    """Join 2: the clip of every window's codes: the time model of every item from the whole sequence's
+    evidence, the knot tracks, both parts and the fit report. Each window's codes are released (set to None)
+    once copied into the clip's."""
     W = plan.n_windows
     windows = sorted(windows, key=lambda w: w.index)
     if [w.index for w in windows] != list(range(W)):
@@ -449,9 +462,11 @@ def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes
         spline = (hi > lo).any(axis=-1)
     else:
         spline = np.zeros(lay.n_items, bool)
-    codes = np.concatenate([w.codes for w in windows], axis=-1)
+    codes = np.empty((C, 3, 4, F), np.int32)
+    for w in windows:  # each window's codes are released once copied
+        f0, f1 = plan.window(w.index)
+        codes[..., f0:f1], w.codes = w.codes, None
     tracks, order = _tracks(codes)
-    del codes
     S = F - 1
     steps = windows[0].steps if W == 1 else np.stack([w.steps for w in windows])
     report = _report(plan, space, windows, spline)
@@ -476,22 +491,37 @@ def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes
     return parts
 
 
+TRACK_SAMPLE = 1 << 22
+"""Codes on which the order of the track differences is chosen (evenly spaced curves, all their tracks)."""
+
+
 def _tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
-    """(uint32 tracks (C, 3, 4, F), order): zigzag differences of the codes along time, of order 1 or 2,
-    whichever compresses smaller at the trial level (the in-memory encoder's rule)."""
+    """(uint32 tracks (C, 3, 4, F), order): zigzag differences of the int32 codes along time, of order 1 or 2,
+    whichever compresses smaller at the trial level on a sample of the curves (the in-memory encoder's rule),
+    computed in place: ``codes`` becomes the tracks."""
     import zstandard
 
     size = zstandard.ZstdCompressor(level=TRIAL_LEVEL).compress
-    first = np.diff(codes, axis=-1, prepend=0)
-    second = _zigzag(np.diff(first, axis=-1, prepend=0))
-    first = _zigzag(first)
-    return (first, 1) if len(size(first)) <= len(size(second)) else (second, 2)
+    C = codes.shape[0]
+    picked = np.linspace(0, C - 1, max(1, min(C, TRACK_SAMPLE // max(codes[0].size, 1))))
+    first = np.diff(codes[np.unique(picked.astype(np.int64))], axis=-1, prepend=0)
+    second = np.diff(first, axis=-1, prepend=0)
+    order = 1 if len(size(_zigzag(first))) <= len(size(_zigzag(second))) else 2
+    for _ in range(order):
+        for t in range(codes.shape[-1] - 1, 0, -1):  # backwards: each difference reads the value before it
+            codes[..., t] -= codes[..., t - 1]
+    return _zigzag(codes), order
 
 
 def _zigzag(d: np.ndarray) -> np.ndarray:
-    """uint32 zigzag codes of int32 differences (the int32 range is checked: codes stay within MAX_CODE)."""
-    d = d.astype(np.int32)
-    return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
+    """uint32 zigzag codes of int32 differences, in place (codes stay within MAX_CODE, so their differences
+    of order 1 and 2 fit in int32)."""
+    d = np.asarray(d, np.int32)
+    negative = d < 0
+    z = d.view(np.uint32)
+    z <<= np.uint32(1)
+    np.bitwise_xor(z, np.uint32(0xFFFFFFFF), out=z, where=negative)
+    return z
 
 
 def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes], spline: np.ndarray
