@@ -3,7 +3,7 @@ memory of ``pdeanim fit`` with the CLI's defaults, each fit in a fresh child pro
 
     .venv/bin/python benchmarks/fit_scale.py [--quick] [--parts a,b,c] [--repeats N] [--json PATH]
 
-(a) every sequence of /work/shared/data/sequences at rel-RMS 3e-3 and 1e-3 (medians of 3 runs);
+(a) every sequence of ../shared/data/sequences (``--data``) at rel-RMS 3e-3 and 1e-3 (medians of 3 runs);
 (b) long inputs made here and cached in benchmarks/.cache/ (gitignored): a ~34k-vertex spot simulated by
     ``pdeanim simulate`` for 1,000 frames, and shared sequences ping-ponged in time with a smooth
     perturbation, up to ~42 M frame-vertices (1 run each);
@@ -37,9 +37,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.fit_scale_inputs import (  # noqa: E402
-    SEQUENCES,
     LongInput,
     ensure_input,
+    find_sequences,
     input_shape,
     parse_long_input,
 )
@@ -59,6 +59,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--repeats", type=int, help="runs per row, median reported (default 3 for the "
                     "sequences, 1 for the long inputs)")
     ap.add_argument("--json", type=Path, help="also write every figure to this JSON file")
+    ap.add_argument("--data", type=Path, help="folder of the shared sequences (default $PDEANIM_SEQUENCES or "
+                    "../shared/data/sequences)")
     ap.add_argument("--sequences", help="comma-separated stems of (a) (default: every .npz of the folder)")
     ap.add_argument("--targets", type=parse_floats, help="rel-RMS targets of (a) (default 3e-3,1e-3)")
     ap.add_argument("--long-inputs", help=f"inputs of (b), spot-sim:FRAMES[:VERTICES] or SEQUENCE:FRAMES "
@@ -73,10 +75,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = ap.parse_args(argv)
     if args.repeats is not None and args.repeats < 1:
         ap.error("--repeats must be >= 1")
+    args.data = find_sequences(args.data)
+    if "a" in args.parts and args.data is None:
+        ap.error("part a needs the shared sequences: give --data DIR or set PDEANIM_SEQUENCES")
     if args.sequences or args.quick:
         args.sequences = (args.sequences or QUICK_SEQUENCES).split(",")
     else:
-        args.sequences = sorted(p.stem for p in SEQUENCES.glob("*.npz"))
+        args.sequences = sorted(p.stem for p in args.data.glob("*.npz")) if args.data else []
+    missing = [s for s in args.sequences if "a" in args.parts and not (args.data / f"{s}.npz").exists()]
+    if missing:
+        ap.error(f"no {', '.join(missing)} in {args.data}")
     args.targets = args.targets or ([3e-3] if args.quick else [3e-3, 1e-3])
     try:
         args.long_inputs = [parse_long_input(t) for t in
@@ -211,13 +219,13 @@ def fit_row(name: str, path: Path, target: float, repeats: int, timeout: float, 
 def part_sequences(args: argparse.Namespace, work: Path) -> list[dict]:
     """(a) every chosen shared sequence at every target."""
     print(markdown_table([], header=True), flush=True)
-    return [fit_row(stem, SEQUENCES / f"{stem}.npz", target, args.seq_repeats, args.timeout, work)
+    return [fit_row(stem, args.data / f"{stem}.npz", target, args.seq_repeats, args.timeout, work)
             for stem in args.sequences for target in args.targets]
 
 
-def prepare(item: LongInput) -> None:
+def prepare(item: LongInput, sequences: Path | None) -> None:
     """Make a long input unless cached, saying how long it took."""
-    made = ensure_input(item, CONSOLE)
+    made = ensure_input(item, CONSOLE, sequences)
     if made["made"] != "cached":
         print(f"   made {item.name} ({made['made']}, {made['seconds']:.0f} s, load {loads()[0]})"
               + (f": {made['said']}" if made.get("said") else ""), flush=True)
@@ -226,7 +234,7 @@ def prepare(item: LongInput) -> None:
 def part_long(args: argparse.Namespace, work: Path) -> list[dict]:
     """(b) the long inputs, made (or read from the cache) first."""
     for item in args.long_inputs:
-        prepare(item)
+        prepare(item, args.data)
     print(markdown_table([], header=True), flush=True)
     return [fit_row(item.name, item.path, target, args.long_repeats, args.timeout, work)
             for item in args.long_inputs for target in args.long_targets]
@@ -237,7 +245,7 @@ def part_service(args: argparse.Namespace) -> dict:
     from benchmarks.fit_scale_service import service_runs
 
     item = args.service_input
-    prepare(item)
+    prepare(item, args.data)
     extra = dict(kv.split("=", 1) for kv in args.service_env)
     result = service_runs(item.path, item.name, args.long_targets[0], args.service_workers, extra,
                           args.timeout)

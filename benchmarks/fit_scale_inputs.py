@@ -6,6 +6,7 @@ with a smooth, low-frequency perturbation so that no two passes are alike. Nothi
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import time
 from dataclasses import dataclass
@@ -15,7 +16,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "benchmarks" / ".cache"
-SEQUENCES = Path("/work/shared/data/sequences")
 SPOT = ROOT / "tests" / "data" / "spot.obj"
 FPS = 30.0
 INPUTS_VERSION = 1
@@ -45,6 +45,16 @@ class LongInput:
         if self.kind == "spot-sim":
             return CACHE / f"spot{self.vertices}_sim{self.frames}_v{INPUTS_VERSION}.npz"
         return CACHE / f"{self.source}_pingpong{self.frames}_v{INPUTS_VERSION}.npz"
+
+
+def find_sequences(data: Path | None) -> Path | None:
+    """The folder of the shared sequences: ``data``, else $PDEANIM_SEQUENCES, else ../shared/data/sequences
+    next to the repository (as benchmarks/compression_peers.py); None if none of them exists."""
+    candidates = [data] if data else []
+    if os.environ.get("PDEANIM_SEQUENCES"):
+        candidates.append(Path(os.environ["PDEANIM_SEQUENCES"]))
+    candidates += [p / "shared" / "data" / "sequences" for p in (ROOT.parent, ROOT.parent.parent)]
+    return next((c for c in candidates if c.is_dir()), None)
 
 
 def parse_long_input(text: str) -> LongInput:
@@ -157,10 +167,10 @@ def make_spot_sim(item: LongInput, console: list[str]) -> dict:
             "said": done.stdout.strip()}
 
 
-def make_tiled(item: LongInput) -> dict:
-    """Write the tiled, perturbed sequence to ``item.path``."""
+def make_tiled(item: LongInput, sequences: Path) -> dict:
+    """Write the tiled, perturbed sequence to ``item.path`` (the source read from ``sequences``)."""
     started = time.perf_counter()
-    vertices, faces = tiled_poses(SEQUENCES / f"{item.source}.npz", item.frames)
+    vertices, faces = tiled_poses(sequences / f"{item.source}.npz", item.frames)
     tmp = item.path.with_suffix(".partial.npz")
     with open(tmp, "wb") as fh:
         np.savez(fh, vertices=vertices, faces=faces)
@@ -168,12 +178,16 @@ def make_tiled(item: LongInput) -> dict:
     return {"made": "ping-pong + perturbation", "seconds": round(time.perf_counter() - started, 1)}
 
 
-def ensure_input(item: LongInput, console: list[str]) -> dict:
+def ensure_input(item: LongInput, console: list[str], sequences: Path | None) -> dict:
     """Make ``item`` unless it is cached; how it was made (``cached`` when it was already there)."""
     if item.path.exists():
         return {"made": "cached"}
     CACHE.mkdir(parents=True, exist_ok=True)
-    return make_spot_sim(item, console) if item.kind == "spot-sim" else make_tiled(item)
+    if item.kind == "spot-sim":
+        return make_spot_sim(item, console)
+    if sequences is None:
+        raise SystemExit(f"{item.name} needs the shared sequences: give --data DIR or set PDEANIM_SEQUENCES")
+    return make_tiled(item, sequences)
 
 
 def input_shape(path: Path) -> tuple[int, int]:

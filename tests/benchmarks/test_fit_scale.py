@@ -43,6 +43,15 @@ def test_bad_arguments_are_usage_errors(argv, capsys):
     assert exc.value.code == 2
 
 
+def test_sequences_come_from_the_data_folder(tmp_path):
+    np.savez(tmp_path / "walk.npz", vertices=np.zeros((2, 3, 3), np.float32),
+             faces=np.zeros((1, 3), np.int32))
+    args = fit_scale.parse_args(["--parts", "a", "--data", str(tmp_path)])
+    assert args.data == tmp_path and args.sequences == ["walk"]
+    with pytest.raises(SystemExit):
+        fit_scale.parse_args(["--parts", "a", "--data", str(tmp_path), "--sequences", "walk,run"])
+
+
 def test_long_input_recipes_and_names():
     assert parse_long_input("spot-sim:1000") == LongInput("spot-sim", 1000, vertices=34_000)
     assert parse_long_input("spot-sim:60:20000").name == "spot-sim 20k x 60"
