@@ -54,7 +54,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The command line; ``--quick`` fills what was not given with a small subset."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
-                    help="a subset for development: 2 sequences at 3e-3, one tiled input of 100 frames")
+                    help="a subset for development: 2 sequences at 3e-3 (1 run each), one tiled input of "
+                         "100 frames for (b) and (c)")
     ap.add_argument("--parts", default="a,b,c", type=parse_parts, help="which parts to run (a,b,c)")
     ap.add_argument("--repeats", type=int, help="runs per row, median reported (default 3 for the "
                     "sequences, 1 for the long inputs)")
