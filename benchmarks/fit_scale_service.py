@@ -26,7 +26,8 @@ a job crawl on a host whose cores other processes keep busy, as on this shared m
 def raised_settings(poses: Path, frames: int, vertices: int) -> dict[str, str]:
     """The documented settings (environment) that this input needs above their defaults: the upload size, the
     frame and vertex counts, and the job memory limit that the fit's estimate is checked against."""
-    from pdeanim.model.budget import fit_memory_bytes
+    from pdeanim.fit.budget import fit_memory_bytes
+
     from service.settings import Settings
 
     defaults = Settings(data_dir=Path(tempfile.gettempdir()))
