@@ -27,7 +27,6 @@ def raised_settings(poses: Path, frames: int, vertices: int) -> dict[str, str]:
     """The documented settings (environment) that this input needs above their defaults: the upload size, the
     frame and vertex counts, and the job memory limit that the fit's estimate is checked against."""
     from pdeanim.fit.budget import fit_memory_bytes
-
     from service.settings import Settings
 
     defaults = Settings(data_dir=Path(tempfile.gettempdir()))
