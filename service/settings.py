@@ -54,6 +54,13 @@ class Settings(BaseSettings):
         1024**3, ge=0, description="memory of the parsed clips kept in each API process (their evaluation "
         "tables grow with segments x vertices); the least recently used are dropped beyond it, the newest is "
         "always kept; 0 = no bound")
+    warm_start: bool = Field(True, description="each API process imports the clip modules and loads the "
+                             "compiled kernels (a few tiny bundled clips) before it accepts requests")
+    clip_invalidation_seconds: float = Field(
+        0.25, ge=0, le=5, description="a clip deleted through one API process is no longer served by any "
+        "other within this: each re-checks the clips it holds this often (a query every quarter of it) and "
+        "DELETE answers this long after its commit, so requests sent after the answer get 404 everywhere; "
+        "0 = a query on every cached frame request")
     cors_origins: str = Field("", description="comma-separated origins allowed by CORS (``*`` for any); "
                               "empty = CORS off")
     frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0, description="encoded frame and animation GLBs "

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import asynccontextmanager, suppress
 
 from fastapi import FastAPI
 
@@ -14,11 +15,13 @@ from .cache import BodyCache, ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
 from .guard import RequestGuard
+from .invalidation import DeletionWatch
 from .memory import keep_freed_memory
 from .middleware import install_http_middleware
 from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 from .threads import single_threaded_blas
+from .warmup import warm_clip_routes
 
 API_VERSION = "1.0.0"
 DESCRIPTION = (
@@ -36,11 +39,17 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         keep_freed_memory()
         single_threaded_blas()  # frames are computed concurrently: BLAS threads would fight them
+        if settings.warm_start:  # before the first request is accepted (uvicorn accepts after start-up)
+            warm_clip_routes()
         own = app.state.store is None
         clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:
             app.state.store = Store.open(settings)
+        watch = asyncio.create_task(app.state.deletions.run(app.state.store))
         yield
+        watch.cancel()
+        with suppress(asyncio.CancelledError):
+            await watch
         if own:
             app.state.store.close()
 
@@ -49,6 +58,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.store = store
     app.state.clip_cache = ClipCache(settings.max_clip_cache, settings.clip_cache_bytes)
     app.state.frame_cache = BodyCache(settings.frame_cache_bytes)
+    app.state.deletions = DeletionWatch(app.state.clip_cache, app.state.frame_cache,
+                                        settings.clip_invalidation_seconds)
     app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
     install_error_handlers(app)
     app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,

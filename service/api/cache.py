@@ -52,16 +52,30 @@ def array_bytes(obj: Any, depth: int = 3) -> int:
     return walk(obj, depth)
 
 
+class _Loading:
+    """A clip being loaded: the requests that want it meanwhile wait on ``done`` instead of loading it."""
+
+    def __init__(self) -> None:
+        self.done = threading.Event()
+        self.item: CachedClip | None = None
+        self.error: BaseException | None = None
+
+
 class ClipCache:
     """LRU of at most ``max_entries`` clips holding at most ``max_bytes`` of arrays in total (the most recent
-    clip is kept whatever its size); loading happens outside the lock (a duplicate load is harmless)."""
+    clip is kept whatever its size). A clip is loaded once however many requests ask for it meanwhile (they
+    wait for that load; other clips' requests go on), outside the lock. Ids marked gone (deleted, seen by
+    this process or by :class:`service.api.invalidation.DeletionWatch`) are never kept again."""
 
-    def __init__(self, max_entries: int, max_bytes: int = 0):
+    def __init__(self, max_entries: int, max_bytes: int = 0, max_gone: int = 100_000):
         self.max_entries = max(1, int(max_entries))
         self.max_bytes = max(0, int(max_bytes))  # 0: no byte bound
+        self.max_gone = max(1, int(max_gone))
         self._items: OrderedDict[str, CachedClip] = OrderedDict()
         self._sizes: dict[str, int] = {}
         self._size = 0
+        self._loading: dict[str, _Loading] = {}
+        self._gone: OrderedDict[str, None] = OrderedDict()
         self._lock = threading.Lock()
         self.hits = self.misses = 0
 
@@ -75,34 +89,76 @@ class ClipCache:
             return item
 
     def get(self, clip_id: str, load: Callable[[], CachedClip]) -> CachedClip:
-        """The cached clip, or ``load()`` it and keep it, evicting the least recently used."""
+        """The cached clip, or ``load()`` it (once, whoever else asks meanwhile) and keep it, evicting the
+        least recently used; a load's exception reaches every request that waited for it."""
         with self._lock:
             item = self._items.get(clip_id)
             if item is not None:
                 self._items.move_to_end(clip_id)
                 self.hits += 1
                 return item
-            self.misses += 1
-        item = load()
-        size = item.nbytes if self.max_bytes else 0
+            pending = self._loading.get(clip_id)
+            owner = pending is None
+            if owner:
+                pending = self._loading[clip_id] = _Loading()
+                self.misses += 1
+        if not owner:
+            pending.done.wait()
+            if pending.error is not None:
+                raise pending.error
+            return pending.item
+        try:
+            pending.item = load()
+        except BaseException as exc:
+            pending.error = exc
+            raise
+        finally:
+            self._finish(clip_id, pending)
+        return pending.item
+
+    def _finish(self, clip_id: str, pending: _Loading) -> None:
+        """Keep a finished load (unless it failed or the clip was marked gone meanwhile), wake its waiters."""
+        item = pending.item
+        size = item.nbytes if self.max_bytes and item is not None else 0
         with self._lock:
-            self._drop(clip_id)
-            self._items[clip_id] = item
-            self._sizes[clip_id] = size
-            self._size += size
-            while len(self._items) > self.max_entries or (
-                    self.max_bytes and self._size > self.max_bytes and len(self._items) > 1):
-                self._drop(next(iter(self._items)))
-        return item
+            self._loading.pop(clip_id, None)
+            if pending.error is None and item is not None and clip_id not in self._gone:
+                self._drop(clip_id)
+                self._items[clip_id] = item
+                self._sizes[clip_id] = size
+                self._size += size
+                while len(self._items) > self.max_entries or (
+                        self.max_bytes and self._size > self.max_bytes and len(self._items) > 1):
+                    self._drop(next(iter(self._items)))
+        pending.done.set()
 
     def _drop(self, clip_id: str) -> None:
         if self._items.pop(clip_id, None) is not None:
             self._size -= self._sizes.pop(clip_id, 0)
 
     def evict(self, clip_id: str) -> None:
-        """Forget a clip (deleted), so this process answers 404 for it from now on."""
+        """Forget a deleted clip, so this process answers 404 for it from now on."""
+        self.forget([clip_id])
+
+    def forget(self, clip_ids: list[str]) -> None:
+        """Drop deleted clips and mark them gone: a load of one in flight now is not kept, and
+        :meth:`is_gone` says so to the request that made it."""
         with self._lock:
-            self._drop(clip_id)
+            for clip_id in clip_ids:
+                self._drop(clip_id)
+                self._gone[clip_id] = None
+                self._gone.move_to_end(clip_id)
+            while len(self._gone) > self.max_gone:
+                self._gone.popitem(last=False)
+
+    def is_gone(self, clip_id: str) -> bool:
+        """Whether the clip was found deleted (no I/O)."""
+        return clip_id in self._gone
+
+    def tracked(self) -> list[str]:
+        """Ids of the clips cached or being loaded: the ones whose deletion this process must notice."""
+        with self._lock:
+            return [*self._items, *self._loading]
 
     def size(self) -> int:
         """Bytes of the cached clips' arrays (0 when the cache has no byte bound)."""
@@ -145,6 +201,14 @@ class BodyCache:
             while self._size > self.max_bytes:
                 _, evicted = self._items.popitem(last=False)
                 self._size -= len(evicted)
+
+    def drop_where(self, match: Callable[[Hashable], bool]) -> int:
+        """Remove the bodies whose key ``match``es (a deleted clip's frames); returns how many."""
+        with self._lock:
+            keys = [k for k in self._items if match(k)]
+            for k in keys:
+                self._size -= len(self._items.pop(k))
+        return len(keys)
 
     @property
     def size(self) -> int:

@@ -21,6 +21,7 @@ from ..encoding import negotiated_response
 from ..errors import ApiError
 from ..exports import FrameWriter, check_fps, export_job_hint, source_layout_loader
 from ..httpcache import IMMUTABLE, NO_COMPRESSION, etag_matches, immutable_response
+from ..invalidation import not_found
 from ..schemas import ClipOut
 
 router = APIRouter(tags=["clips"])
@@ -145,6 +146,9 @@ async def get_frame(clip_id: str, request: Request, tenant: TenantDep,
     item = state.clip_cache.peek(clip_id)
     if item is None:
         item = await run_in_threadpool(_load, clip_id, state.store, state.clip_cache)
+    await state.deletions.ensure(state.store)  # no I/O unless this process fell behind its checks
+    if state.clip_cache.is_gone(clip_id):
+        raise not_found(clip_id)
     _owned(item, clip_id, tenant)
     if not math.isfinite(t) or (not item.clip.looping and not 0.0 <= t <= 1.0):
         raise ApiError(422, "t_out_of_range", f"t must lie in [0, 1] for this clip, got {t}")
@@ -188,6 +192,9 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
     settings = store.settings
     check_fps(fps, settings)
     item = _cached(clip_id, tenant, store, cache)
+    request.app.state.deletions.ensure_blocking(store)
+    if cache.is_gone(clip_id):
+        raise not_found(clip_id)
     estimate = estimate_export(item.clip, fps, settings.max_frames)
     if estimate.raw_frame_bytes > settings.max_sync_export_bytes:
         raise ApiError(413, "export_too_large",

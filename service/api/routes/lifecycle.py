@@ -3,15 +3,16 @@ poses, clips and jobs) or a clip, removing the blobs nothing references any more
 
 from __future__ import annotations
 
+import time
 from typing import Literal
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 from sqlalchemy import select
 
 from ...store.lifecycle import delete_clip, delete_mesh
 from ...store.models import ClipRecord, Job, Mesh, PosesRecord
 from ..access import responses
-from ..deps import ClipCacheDep, SessionDep, StoreDep, TenantDep
+from ..deps import SessionDep, StoreDep, TenantDep
 from ..errors import ApiError
 from ..pages import (
     CURSOR_PATTERN,
@@ -93,23 +94,33 @@ def list_jobs(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, cursor
 
 @router.delete("/v1/meshes/{mesh_id}", operation_id="deleteMesh", response_model=DeletedOut, tags=["meshes"],
                responses=responses(401, 404, 422))
-def remove_mesh(mesh_id: str, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep) -> DeletedOut:
+def remove_mesh(mesh_id: str, request: Request, tenant: TenantDep, store: StoreDep) -> DeletedOut:
     """Delete the mesh with its poses, clips and jobs (queued and running jobs are cancelled first: a running
-    one stops at its worker's next heartbeat); blobs that nothing else references are removed."""
+    one stops at its worker's next heartbeat); blobs that nothing else references are removed. Answers once
+    no API process serves its clips any more (PDEANIM_CLIP_INVALIDATION_SECONDS after the commit)."""
     done = delete_mesh(store, mesh_id, tenant)
     if done is None:
         raise ApiError(404, "not_found", f"mesh {mesh_id!r} not found")
-    for clip_id in done.clip_ids:
-        cache.evict(clip_id)
+    _settle(request, done.clip_ids)
     return DeletedOut(**done.summary())
 
 
 @router.delete("/v1/clips/{clip_id}", operation_id="deleteClip", response_model=DeletedOut, tags=["clips"],
                responses=responses(401, 404, 422))
-def remove_clip(clip_id: str, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep) -> DeletedOut:
-    """Delete the clip; its blobs are removed unless another clip uses them."""
+def remove_clip(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep) -> DeletedOut:
+    """Delete the clip; its blobs are removed unless another clip uses them. Answers once no API process
+    serves it any more (PDEANIM_CLIP_INVALIDATION_SECONDS after the commit)."""
     done = delete_clip(store, clip_id, tenant)
     if done is None:
         raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
-    cache.evict(clip_id)
+    _settle(request, done.clip_ids)
     return DeletedOut(**done.summary())
+
+
+def _settle(request: Request, clip_ids: list[str]) -> None:
+    """Forget deleted clips here at once, then wait out the other API processes' check interval (see
+    service/api/invalidation.py), so that no process serves them to a request sent after the answer."""
+    watch = request.app.state.deletions
+    if clip_ids:
+        watch.forget(clip_ids)
+        time.sleep(watch.bound)
