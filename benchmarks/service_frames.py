@@ -1,10 +1,21 @@
 """Frame-serving benchmark (loopback only): ``wrk -t2 -c16`` against the service as a user starts it
 (``pdeanim serve --with-workers 1``, the embedded default) and, in the same run, against a bare FastAPI
 app (two uvicorn processes, ``bare_frames_app.py``) answering a body of the same size; requests/s, p50,
-p99 and the ratio to the bare app, medians of several rounds, idle and with two job workers busy
-simulating and fitting; plus the animation GLB time (30 fps, 2 s clip of 15k vertices).
+p99 and the ratio to the bare app, medians of several rounds, for the clip shapes users make:
 
-    .venv/bin/python benchmarks/service_frames.py [--rounds 3] [--seconds 8] [--connections 16]
+- ``captured``: a captured, noisy sequence (samba, its first 60 frames, two copies side by side: 19,942
+  vertices), uploaded as poses and fitted at rel. RMS 3e-3;
+- ``simulated``: ``simulate`` of the repository's spot mesh (2,930 vertices, 120 frames), fitted at 3e-3;
+- ``long``: many frames (pdance, 201 frames x 7,061 vertices), fitted at 3e-3;
+- ``generated``: the smooth generated sway of a 20k-vertex spot (the benchmark's clip before 2026-12-02).
+
+For each shape: the API is restarted and wrk runs at once for ``--fresh-seconds`` (a fresh process: its
+first requests), then the warm rounds; the in-process parts (load, evaluate, normals, frame GLB) and the
+clip's segments and curves are printed with the table. Optionally (not ``--skip-busy``) the first shape
+again with two job workers busy, and (``--animation``) the animation GLB time of the first shape's clip.
+
+    .venv/bin/python benchmarks/service_frames.py [--shapes captured,simulated,long] [--rounds 3]
+        [--seconds 8] [--fresh-seconds 4] [--connections 16] [--sequences DIR]
 
 Needs ``wrk`` (Debian package, installed by ``script/setup``). Each request asks for a random t drawn per
 request by a wrk Lua script: ``player`` t on the 30 fps grid of the clip (what a player at a fixed frame
@@ -33,12 +44,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from service.api.encoding import GZIP_LEVEL as GZIP_ROUTE_LEVEL  # noqa: E402
 from service.cli import CONSOLE  # noqa: E402
 from service.settings import Settings  # noqa: E402
 from service.store.tenants import issue_key  # noqa: E402
 
 SPOT = ROOT / "tests" / "data" / "spot.obj"
+SEQUENCES = Path("/work/shared/data/sequences")  # research sequences: never shipped with the project
+TARGET = 3e-3  # rel. RMS of the fits
 FPS, SECONDS_OF_CLIP = 30, 2.0
 
 LUA = r"""
@@ -187,6 +199,8 @@ class Services:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.bare_url = ""
+        self.service: subprocess.Popen | None = None
+        self.bare: subprocess.Popen | None = None
 
     def _spawn(self, cmd: list[str], env: dict | None = None) -> subprocess.Popen:
         proc = subprocess.Popen(cmd, env=env or self.env, stdout=self.log, stderr=subprocess.STDOUT,
@@ -194,20 +208,42 @@ class Services:
         self.procs.append(proc)
         return proc
 
-    def start_service(self) -> None:
-        """The service as a user starts it; waits for /healthz."""
-        proc = self._spawn([*CONSOLE, "serve", "--port", str(self.port), "--with-workers", "1",
-                            *self.serve_args])
-        wait_http(self.url + "/healthz", proc)
+    def start_service(self) -> float:
+        """The service as a user starts it (stopping a running one first: fresh API processes); waits for
+        /healthz and returns the seconds from the start to its first answer."""
+        if self.service is not None:
+            self._stop_one(self.service)
+        started = time.monotonic()
+        self.service = self._spawn([*CONSOLE, "serve", "--port", str(self.port), "--with-workers", "1",
+                                    *self.serve_args])
+        wait_http(self.url + "/healthz", self.service)
+        return time.monotonic() - started
 
     def start_bare(self, body_bytes: int) -> None:
-        """The bare FastAPI app with two uvicorn processes, answering ``body_bytes`` per request."""
+        """The bare FastAPI app with two uvicorn processes, answering ``body_bytes`` per request (a running
+        one is stopped first)."""
+        if self.bare is not None:
+            self._stop_one(self.bare)
         port = free_port()
         env = {**os.environ, "BARE_BODY_BYTES": str(body_bytes), "PYTHONPATH": str(ROOT)}
-        proc = self._spawn([sys.executable, "-m", "uvicorn", "benchmarks.bare_frames_app:app", "--port",
-                            str(port), "--workers", "2", "--log-level", "warning", "--no-access-log"], env)
+        self.bare = self._spawn([sys.executable, "-m", "uvicorn", "benchmarks.bare_frames_app:app", "--port",
+                                 str(port), "--workers", "2", "--log-level", "warning", "--no-access-log"],
+                                env)
         self.bare_url = f"http://127.0.0.1:{port}"
-        wait_http(self.bare_url + "/frame?t=0.5", proc)
+        wait_http(self.bare_url + "/frame?t=0.5", self.bare)
+
+    def _stop_one(self, proc: subprocess.Popen) -> None:
+        """SIGTERM one started process group and wait for it (kill after 30 s)."""
+        import signal
+
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        self.procs.remove(proc)
 
     def add_worker(self) -> None:
         """One more job worker (``pdeanim worker``) on the same data directory."""
@@ -264,8 +300,9 @@ def wait_busy(api: httpx.Client, ids: list[str], seconds: float = 120) -> None:
 
 def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path, label: str,
             busy: tuple[httpx.Client, list[str]] | None = None) -> list[dict]:
-    """Rounds of (bare, project) wrk runs for each t mode; one row per mode with medians."""
-    grid = int(round(SECONDS_OF_CLIP * FPS))
+    """Rounds of (bare, project) wrk runs for each t mode; one row per mode with medians (player t: on the
+    clip's frames, a player at the clip's own rate)."""
+    grid = max(int(clip.get("frames") or round(SECONDS_OF_CLIP * FPS) + 1) - 1, 1)
     rows = []
     for mode, g in (("player", grid), ("continuous", 0)):
         samples: dict[str, list[dict]] = {"bare": [], "project": []}
@@ -280,7 +317,7 @@ def measure(services: Services, key: str, clip: dict, args: argparse.Namespace, 
             loads.append(os.getloadavg()[0])
         med = {who: {k: statistics.median(s[k] for s in runs) for k in runs[0]}
                for who, runs in samples.items()}
-        row = {"label": label, "t": mode,
+        row = {"label": label, "shape": args.shape, "t": mode,
                **{f"{who}_{k}": round(v, 2) for who, m in med.items() for k, v in m.items()},
                "ratio": round(statistics.median(p["rps"] / b["rps"] for p, b in
                                                 zip(samples["project"], samples["bare"], strict=True)), 3),
@@ -334,10 +371,16 @@ def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
     try:
         with store.sessions() as session:
             row = session.get(ClipRecord, clip_id)
-        clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+        topology, coefficients = store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key)
     finally:
         store.close()
     out: dict = {}
+    loads = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        clip = load_clip(topology, coefficients)
+        loads.append((time.perf_counter() - t0) * 1000)
+    out["load_ms"] = round(statistics.median(loads), 1)
     if which == "frame":
         writer, normals = FrameGlb(clip.faces, clip.n_vertices), FaceNormals(clip.faces, clip.n_vertices)
         at = np.asarray(clip.evaluate(0.5), np.float32).reshape(-1, 3)
@@ -369,29 +412,99 @@ def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    """The README table of the rows."""
-    out = ["| load | t per request | `pdeanim serve` requests/s | p50 | p99 | bare app requests/s | p50 "
-           "| p99 | ratio | load avg |", "|---|---|---|---|---|---|---|---|---|---|"]
+    """The performance.md table of the rows."""
+    out = ["| clip | process | t per request | `pdeanim serve` requests/s | p50 | p99 | bare app requests/s "
+           "| p50 | p99 | ratio | load avg |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        out.append(f"| {r['label']} | {r['t']} | {r['project_rps']:.0f} | {r['project_p50_ms']:.1f} ms "
-                   f"| {r['project_p99_ms']:.1f} ms | {r['bare_rps']:.0f} | {r['bare_p50_ms']:.1f} ms "
-                   f"| {r['bare_p99_ms']:.1f} ms | {r['ratio']:.2f} | {r['load1']:.1f} |")
+        bare = (f"{r['bare_rps']:.0f} | {r['bare_p50_ms']:.1f} ms | {r['bare_p99_ms']:.1f} ms | "
+                f"{r['ratio']:.2f}" if "bare_rps" in r else "| | |")
+        out.append(f"| {r['shape']} | {r['label']} | {r['t']} | {r['project_rps']:.0f} | "
+                   f"{r['project_p50_ms']:.1f} ms | {r['project_p99_ms']:.1f} ms | {bare} "
+                   f"| {r['load1']:.1f} |")
     return "\n".join(out)
 
 
+def parts_table(parts: list[dict]) -> str:
+    """The in-process costs of each shape's clip (CPU ms, one BLAS thread as in the API)."""
+    out = ["| clip | vertices | frames | segments | curves | frame GLB | load the clip | new frame CPU "
+           "| evaluate | normals | load avg |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for p in parts:
+        out.append(f"| {p['shape']} | {p['vertices']:,} | {p['frames']} | {p['segments']} | {p['curves']} | "
+                   f"{p['body_bytes']:,} B | {p['load_ms']:.0f} ms | {p['frame_cpu_ms']:.2f} ms | "
+                   f"{p['evaluate_cpu_ms']:.2f} ms | {p['normals_cpu_ms']:.2f} ms | {p['load1']:.1f} |")
+    return "\n".join(out)
+
+
+def fresh_round(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path) -> dict:
+    """Restart the API (fresh processes) and drive it with new frames from its first answer on."""
+    startup = services.start_service()
+    r = wrk(f"{services.url}/v1/clips/{clip['id']}/frame?t=", key, 0, args.fresh_seconds, args.connections,
+            script)
+    row = {"label": f"fresh, first {args.fresh_seconds} s", "shape": args.shape, "t": "continuous",
+           **{f"project_{k}": round(v, 2) for k, v in r.items()}, "startup_s": round(startup, 2),
+           "load1": round(os.getloadavg()[0], 2)}
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def make_clip(api: httpx.Client, shape: str, sequences: Path) -> dict:
+    """Fit the clip of ``shape`` through the API (see service_frames_shapes.py)."""
+    from benchmarks import service_frames_shapes as shapes
+
+    if shape == "simulated":
+        return shapes.simulated(api, SPOT, TARGET, check, wait_job)
+    if shape == "generated":
+        return fitted_clip(api, 20_000)
+    vertices, faces = (shapes.captured if shape == "captured" else shapes.long)(sequences)
+    return shapes.fit_uploaded(api, shape, vertices, faces, TARGET, obj_bytes, check, wait_job)
+
+
+def measure_shape(services: Services, api: httpx.Client, key: str, clip: dict, args: argparse.Namespace,
+                  script: Path) -> tuple[list[dict], dict]:
+    """Fresh-process round, warm rounds and in-process parts of one shape's clip."""
+    body = len(check_bytes(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5})))
+    services.start_bare(body)
+    rows = [fresh_round(services, key, clip, args, script)]
+    rows += measure(services, key, clip, args, script, "warm")
+    here = in_process_ms(services.data_dir, clip["id"], "frame")
+    part = {"shape": args.shape, "vertices": clip["info"]["n_vertices"], "frames": clip["frames"],
+            "segments": clip["segments"], "curves": clip["curves"], "body_bytes": body,
+            "load1": round(os.getloadavg()[0], 2), **here}
+    print(json.dumps(part), flush=True)
+    return rows, part
+
+
+def check_bytes(r: httpx.Response) -> bytes:
+    """The body of a successful response; raises with the body otherwise."""
+    if r.status_code >= 400:
+        raise RuntimeError(f"HTTP {r.status_code} {r.request.url}: {r.text[:300]}")
+    return r.content
+
+
 def main() -> int:
-    """Build the clips, start everything, measure, print the table."""
+    """Build the clips, start everything, measure each shape, print the tables."""
+    from benchmarks.service_frames_shapes import DESCRIPTIONS, SHAPES
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shapes", default="captured,simulated,long",
+                    help=f"comma-separated clip shapes among {', '.join(SHAPES)}")
     ap.add_argument("--rounds", type=int, default=3, help="wrk runs per configuration (medians are reported)")
     ap.add_argument("--seconds", type=int, default=8, help="duration of one wrk run")
+    ap.add_argument("--fresh-seconds", type=int, default=4, help="the wrk run right after a restart")
     ap.add_argument("--connections", type=int, default=16)
+    ap.add_argument("--sequences", type=Path, default=SEQUENCES, help="folder of samba.npz and pdance.npz")
     ap.add_argument("--serve-args", default="", help="extra `pdeanim serve` arguments, e.g. '--workers 1'")
-    ap.add_argument("--skip-busy", action="store_true", help="only the idle measurement")
-    ap.add_argument("--format-version", type=int, choices=[1, 2, 3, 4, 5],
-                    help="clip format of the fitted clips (default: the fit's default)")
+    ap.add_argument("--skip-busy", action="store_true", help="no run with two busy job workers")
+    ap.add_argument("--animation", action="store_true", help="also time the first shape's animation GLB")
     args = ap.parse_args()
-    print(f"load average at start: {os.getloadavg()}, CPUs: {os.cpu_count()}", flush=True)
+    shape_list = [x.strip() for x in args.shapes.split(",") if x.strip()]
+    unknown = sorted(set(shape_list) - set(SHAPES))
+    if unknown:
+        ap.error(f"unknown shapes {unknown}: choose among {', '.join(SHAPES)}")
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    print(f"{started}; load average at start: {os.getloadavg()}, CPUs: {os.cpu_count()}", flush=True)
     rows: list[dict] = []
+    parts: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as tmp:
         script = Path(tmp) / "frames.lua"
         script.write_text(LUA)
@@ -401,31 +514,41 @@ def main() -> int:
             services.start_service()
             with httpx.Client(base_url=services.url, headers={"Authorization": f"Bearer {key}"},
                               timeout=300) as api:
-                clip = fitted_clip(api, 20_000, args.format_version)
-                anim_clip = fitted_clip(api, 15_000, args.format_version)
-                body = len(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5}).content)
-                print(f"frame clip {clip['id']}: {clip['info']['n_vertices']} vertices, "
-                      f"{clip['segments']} segments, format version {args.format_version or 'default'}, "
-                      f"frame GLB {body:,} B", flush=True)
-                services.start_bare(body)
-                anim = animation_ms(api, anim_clip["id"])
-                print(f"animation GLB over HTTP, {anim_clip['info']['n_vertices']} vertices, {FPS} fps over "
-                      f"{SECONDS_OF_CLIP:g} s: {anim}", flush=True)
-                here = in_process_ms(Path(tmp), clip["id"], "frame")
-                here |= in_process_ms(Path(tmp), anim_clip["id"], "animation")
-                print(f"in process, 20k-vertex frame and 15k-vertex animation (gzip: the route's level "
-                      f"{GZIP_ROUTE_LEVEL}, gzip6: the middleware's): {here} "
-                      f"(load {os.getloadavg()[0]:.1f})", flush=True)
-                rows += measure(services, key, clip, args, script, "idle (1 job worker idle)")
+                clips = {}
+                for shape in shape_list:
+                    t0 = time.monotonic()
+                    clips[shape] = make_clip(api, shape, args.sequences)
+                    c = clips[shape]
+                    print(f"{shape} ({DESCRIPTIONS[shape]}): clip {c['id']}, "
+                          f"{c['info']['n_vertices']} vertices, {c['frames']} frames, "
+                          f"{c['segments']} segments, "
+                          f"{c['curves']} curves "
+                          f"(made in {time.monotonic() - t0:.0f} s)", flush=True)
+                for shape in shape_list:
+                    args.shape = shape
+                    shape_rows, part = measure_shape(services, api, key, clips[shape], args, script)
+                    rows += shape_rows
+                    parts.append(part)
+                first = clips[shape_list[0]]
+                args.shape = shape_list[0]
+                if args.animation:
+                    print(f"animation GLB over HTTP of the {shape_list[0]} clip, {FPS} fps: "
+                          f"{animation_ms(api, first['id'])}", flush=True)
                 if not args.skip_busy:
                     services.add_worker()
-                    ids = busy_jobs(api, clip["poses_id"])
+                    ids = busy_jobs(api, first["poses_id"])
                     wait_busy(api, ids)
-                    rows += measure(services, key, clip, args, script, "2 job workers busy", (api, ids))
+                    services.start_bare(len(check_bytes(api.get(f"/v1/clips/{first['id']}/frame",
+                                                                 params={"t": 0.5}))))
+                    rows += measure(services, key, first, args, script, "warm, 2 job workers busy",
+                                    (api, ids))
         finally:
             services.stop()
-    print(f"load average at end: {os.getloadavg()}")
+    print(f"load average at end: {os.getloadavg()}; started {started}, ended "
+          f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print(table(rows))
+    print()
+    print(parts_table(parts))
     return 0
 
 
