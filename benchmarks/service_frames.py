@@ -30,6 +30,7 @@ import gzip
 import io
 import json
 import os
+import signal
 import socket
 import statistics
 import subprocess
@@ -208,14 +209,14 @@ class Services:
         self.procs.append(proc)
         return proc
 
-    def start_service(self) -> float:
-        """The service as a user starts it (stopping a running one first: fresh API processes); waits for
-        /healthz and returns the seconds from the start to its first answer."""
+    def start_service(self, env: dict[str, str] | None = None) -> float:
+        """The service as a user starts it (stopping a running one first: fresh API processes), with extra
+        environment ``env``; waits for /healthz and returns the seconds from the start to its first answer."""
         if self.service is not None:
             self._stop_one(self.service)
         started = time.monotonic()
         self.service = self._spawn([*CONSOLE, "serve", "--port", str(self.port), "--with-workers", "1",
-                                    *self.serve_args])
+                                    *self.serve_args], {**self.env, **(env or {})})
         wait_http(self.url + "/healthz", self.service)
         return time.monotonic() - started
 
@@ -435,12 +436,22 @@ def parts_table(parts: list[dict]) -> str:
     return "\n".join(out)
 
 
-def fresh_round(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path) -> dict:
-    """Restart the API (fresh processes) and drive it with new frames from its first answer on."""
-    startup = services.start_service()
+FRESH = {  # how a fresh process starts: label -> its extra environment
+    "fresh": {},
+    "fresh, no preload": {"PDEANIM_PRELOAD_CLIPS": "0"},
+    "fresh, cold (no warm start)": {"PDEANIM_WARM_START": "false"},
+}
+
+
+def fresh_round(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path,
+                label: str) -> dict:
+    """Restart the API (fresh processes, started as FRESH[label] says) and drive it with new frames from its
+    first answer on."""
+    startup = services.start_service(FRESH[label])
     r = wrk(f"{services.url}/v1/clips/{clip['id']}/frame?t=", key, 0, args.fresh_seconds, args.connections,
             script)
-    row = {"label": f"fresh, first {args.fresh_seconds} s", "shape": args.shape, "t": "continuous",
+    row = {"label": f"{label} (up in {startup:.1f} s), first {args.fresh_seconds} s", "shape": args.shape,
+           "t": "continuous",
            **{f"project_{k}": round(v, 2) for k, v in r.items()}, "startup_s": round(startup, 2),
            "load1": round(os.getloadavg()[0], 2)}
     print(json.dumps(row), flush=True)
@@ -464,8 +475,8 @@ def measure_shape(services: Services, api: httpx.Client, key: str, clip: dict, a
     """Fresh-process round, warm rounds and in-process parts of one shape's clip."""
     body = len(check_bytes(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5})))
     services.start_bare(body)
-    rows = [fresh_round(services, key, clip, args, script)]
-    rows += measure(services, key, clip, args, script, "warm")
+    rows = [fresh_round(services, key, clip, args, script, label) for label in reversed(FRESH)]
+    rows += measure(services, key, clip, args, script, "warm")  # the last restart: the default one
     here = in_process_ms(services.data_dir, clip["id"], "frame")
     part = {"shape": args.shape, "vertices": clip["info"]["n_vertices"], "frames": clip["frames"],
             "segments": clip["segments"], "curves": clip["curves"], "body_bytes": body,
@@ -497,6 +508,7 @@ def main() -> int:
     ap.add_argument("--skip-busy", action="store_true", help="no run with two busy job workers")
     ap.add_argument("--animation", action="store_true", help="also time the first shape's animation GLB")
     args = ap.parse_args()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))  # stop the services on the way out
     shape_list = [x.strip() for x in args.shapes.split(",") if x.strip()]
     unknown = sorted(set(shape_list) - set(SHAPES))
     if unknown:

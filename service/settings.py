@@ -56,6 +56,9 @@ class Settings(BaseSettings):
         "always kept; 0 = no bound")
     warm_start: bool = Field(True, description="each API process imports the clip modules and loads the "
                              "compiled kernels (a few tiny bundled clips) before it accepts requests")
+    preload_clips: int = Field(4, ge=0, description="with warm_start, each API process also decodes this "
+                               "many of the newest clips before it accepts requests (their first frame "
+                               "requests then wait for no load); 0 = none")
     clip_invalidation_seconds: float = Field(
         0.25, ge=0, le=5, description="a clip deleted through one API process is no longer served by any "
         "other within this: each re-checks the clips it holds this often (a query every quarter of it) and "

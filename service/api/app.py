@@ -7,6 +7,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager, suppress
 
 from fastapi import FastAPI
+from starlette.concurrency import run_in_threadpool
 
 from ..settings import Settings
 from ..store.context import Store
@@ -21,7 +22,7 @@ from .middleware import install_http_middleware
 from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 from .threads import single_threaded_blas
-from .warmup import warm_clip_routes
+from .warmup import preload_recent_clips, warm_clip_routes
 
 API_VERSION = "1.0.0"
 DESCRIPTION = (
@@ -45,6 +46,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:
             app.state.store = Store.open(settings)
+        if settings.warm_start:
+            await run_in_threadpool(preload_recent_clips, app.state.store, app.state.clip_cache,
+                                    settings.preload_clips)
         watch = asyncio.create_task(app.state.deletions.run(app.state.store))
         yield
         watch.cancel()

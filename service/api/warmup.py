@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 log = logging.getLogger("pdeanim.api")
 WARMUP_DIR = Path(__file__).resolve().parent / "warmup"
@@ -46,3 +47,33 @@ def warm_clip_routes() -> float:
     seconds = time.perf_counter() - started
     log.info("warm start: clip modules and kernels ready in %.2f s", seconds)
     return seconds
+
+
+def preload_recent_clips(store: Any, cache: Any, count: int) -> list[str]:
+    """Decode the ``count`` newest clips (any tenant) into ``cache`` before requests arrive, so that the first
+    frame requests of a fresh process do not wait for their clip (0.25-0.3 s for 20k vertices, more for long
+    or dense clips); returns the ids loaded. A clip that fails to load is logged and skipped."""
+    if count <= 0:
+        return []
+    from sqlalchemy import select
+
+    from ..store.models import ClipRecord
+    from .routes.clips import load_into
+
+    started = time.perf_counter()
+    try:
+        with store.sessions() as session:
+            ids = list(session.scalars(select(ClipRecord.id).order_by(ClipRecord.created_at.desc())
+                                       .limit(count)))
+    except Exception as exc:  # noqa: BLE001 - the database may be down at start: requests answer 503 then
+        log.warning("preloading clips skipped: %r", exc)
+        return []
+    loaded = []
+    for clip_id in ids:
+        try:
+            load_into(cache, clip_id, store)
+            loaded.append(clip_id)
+        except Exception as exc:  # noqa: BLE001 - a damaged clip answers its own requests with the error
+            log.warning("preloading clip %s failed: %r", clip_id, exc)
+    log.info("warm start: %d newest clip(s) decoded in %.2f s", len(loaded), time.perf_counter() - started)
+    return loaded

@@ -1,7 +1,8 @@
 """Deletes take effect in every API process: two real ``pdeanim serve`` processes on one database (one HTTP
 process each, so each keeps its own clip and frame caches), clips warmed in the second, then deleted through
 the first while the second is under load. Every request sent to the second after the DELETE answered gets
-404: frames, animations, coefficients, metadata. Also the clip cache's one-load-per-clip and its gone ids."""
+404: frames, animations, coefficients, metadata. The processes warm their kernels before taking requests.
+Also the clip cache's one load per clip, and its gone ids."""
 
 from __future__ import annotations
 
@@ -132,6 +133,9 @@ def test_a_delete_through_one_process_is_seen_by_the_other_under_load(two_apis, 
         assert all(s == 200 for _, s in load.after(mesh_deleted_at, kept)), "the other clips stay served"
         assert before and set(before) == {200}, "B served the clip before the DELETE"
         assert api_b.get(f"/v1/clips/{by_mesh}/frame", params={"t": 0.25}).status_code == 200
+    log = b.log("server")  # warm start: the kernels were loaded before the process took requests
+    assert "warm start: clip modules and kernels ready" in log, log[-3000:]
+    assert log.index("warm start: clip modules") < log.index("Application startup complete"), log[-3000:]
 
 
 def test_the_clip_cache_loads_a_clip_once_for_all_waiters_and_never_keeps_a_gone_one():

@@ -51,6 +51,11 @@ def _load(clip_id: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
     return cache.get(clip_id, load)
 
 
+def load_into(cache, clip_id: str, store: Store) -> CachedClip:  # noqa: ANN001 - a ClipCache
+    """The clip from ``cache``, loaded into it first if needed (blocking: database and blobs)."""
+    return _load(clip_id, store, cache)
+
+
 def _owned(item: CachedClip, clip_id: str, tenant: str) -> CachedClip:
     if item.tenant_id != tenant:
         raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
