@@ -174,8 +174,11 @@ def wait_http(url: str, proc: subprocess.Popen, seconds: float = 120) -> None:
     raise RuntimeError(f"{url} did not answer within {seconds} s")
 
 
-def wrk(url_path: str, key: str, grid: int, seconds: float, connections: int, script: Path) -> dict:
-    """One wrk run (2 threads): requests/s, p50 and p99 in ms; raises on any non-2xx answer or error."""
+def wrk(url_path: str, key: str, grid: int, seconds: float, connections: int, script: Path,
+        allow_none: bool = False) -> dict:
+    """One wrk run (2 threads): requests/s, p50 and p99 in ms; raises on any non-2xx answer or error, and
+    when no request finished unless ``allow_none`` (a cold process may answer none in the run: rps 0,
+    latencies NaN)."""
     base, path = url_path.split("/", 3)[2], "/" + url_path.split("/", 3)[3]
     env = {**os.environ, "BENCH_PATH": path, "BENCH_GRID": str(grid), "BENCH_AUTH": key}
     cmd = ["wrk", "-t2", f"-c{connections}", f"-d{seconds}s", "--timeout", "10s", "-s", str(script),
@@ -183,6 +186,8 @@ def wrk(url_path: str, key: str, grid: int, seconds: float, connections: int, sc
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
     line = next(ln for ln in out.splitlines() if ln.startswith("BENCH "))
     r = json.loads(line.removeprefix("BENCH "))
+    if allow_none and not r["requests"] and not r["errors"]:
+        return {"rps": 0.0, "p50_ms": float("nan"), "p99_ms": float("nan")}
     if r["errors"] or not r["requests"]:
         raise RuntimeError(f"wrk saw {r['errors']} errors / {r['requests']} requests on {url_path}:\n{out}")
     return {"rps": r["requests"] / (r["us"] / 1e6), "p50_ms": r["p50_us"] / 1000,
@@ -449,7 +454,7 @@ def fresh_round(services: Services, key: str, clip: dict, args: argparse.Namespa
     first answer on."""
     startup = services.start_service(FRESH[label])
     r = wrk(f"{services.url}/v1/clips/{clip['id']}/frame?t=", key, 0, args.fresh_seconds, args.connections,
-            script)
+            script, allow_none=True)
     row = {"label": f"{label} (up in {startup:.1f} s), first {args.fresh_seconds} s", "shape": args.shape,
            "t": "continuous",
            **{f"project_{k}": round(v, 2) for k, v in r.items()}, "startup_s": round(startup, 2),
@@ -501,7 +506,10 @@ def main() -> int:
                     help=f"comma-separated clip shapes among {', '.join(SHAPES)}")
     ap.add_argument("--rounds", type=int, default=3, help="wrk runs per configuration (medians are reported)")
     ap.add_argument("--seconds", type=int, default=8, help="duration of one wrk run")
-    ap.add_argument("--fresh-seconds", type=int, default=4, help="the wrk run right after a restart")
+    ap.add_argument("--fresh-seconds", type=int, default=6, help="the wrk run right after a restart")
+    ap.add_argument("--data-dir", type=Path, default=None,
+                    help="keep the service's data here and reuse the clips fitted by an earlier run with the "
+                         "same folder (default: a temporary folder)")
     ap.add_argument("--connections", type=int, default=16)
     ap.add_argument("--sequences", type=Path, default=SEQUENCES, help="folder of samba.npz and pdance.npz")
     ap.add_argument("--serve-args", default="", help="extra `pdeanim serve` arguments, e.g. '--workers 1'")
@@ -517,7 +525,9 @@ def main() -> int:
     print(f"{started}; load average at start: {os.getloadavg()}, CPUs: {os.cpu_count()}", flush=True)
     rows: list[dict] = []
     parts: list[dict] = []
-    with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="pdeanim-bench-") as scratch:
+        tmp = str(args.data_dir or scratch)
+        Path(tmp).mkdir(parents=True, exist_ok=True)
         script = Path(tmp) / "frames.lua"
         script.write_text(LUA)
         services = Services(Path(tmp), args.serve_args.split(), 0)
@@ -526,10 +536,16 @@ def main() -> int:
             services.start_service()
             with httpx.Client(base_url=services.url, headers={"Authorization": f"Bearer {key}"},
                               timeout=300) as api:
+                made = Path(tmp) / "clips.json"  # shape -> clip id, for --data-dir reruns
+                known = json.loads(made.read_text()) if made.exists() else {}
                 clips = {}
                 for shape in shape_list:
                     t0 = time.monotonic()
-                    clips[shape] = make_clip(api, shape, args.sequences)
+                    old = known.get(shape) and api.get(f"/v1/clips/{known[shape]}")
+                    clips[shape] = old.json() if old and old.status_code == 200 else make_clip(
+                        api, shape, args.sequences)
+                    known[shape] = clips[shape]["id"]
+                    made.write_text(json.dumps(known))
                     c = clips[shape]
                     print(f"{shape} ({DESCRIPTIONS[shape]}): clip {c['id']}, "
                           f"{c['info']['n_vertices']} vertices, {c['frames']} frames, "
