@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager, suppress
 
@@ -24,6 +25,7 @@ from .routes.pages import install_pages
 from .threads import single_threaded_blas
 from .warmup import preload_recent_clips, warm_clip_routes
 
+log = logging.getLogger("pdeanim.api")
 API_VERSION = "1.0.0"
 DESCRIPTION = (
     "Turn a deforming 3D mesh into a compact dynamic-PDE coefficient clip, and evaluate frames of it. "
@@ -54,6 +56,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         watch.cancel()
         with suppress(asyncio.CancelledError):
             await watch
+        log.info("deletion checks: %d; requests that found the last one stale and waited: %d",
+                 app.state.deletions.checks, app.state.deletions.waits)
         if own:
             app.state.store.close()
 

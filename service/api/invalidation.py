@@ -37,7 +37,7 @@ class DeletionWatch:
         self.checked_at = float("-inf")  # monotonic start of the newest check that completed
         self._lock = threading.Lock()
         self._pending: tuple[float, asyncio.Future] | None = None  # (start, future) of the check in flight
-        self.checks = 0
+        self.checks = self.waits = 0  # checks made; requests that found the last one stale and waited
 
     def fresh(self, now: float | None = None) -> bool:
         """Whether a completed check started within ``bound`` seconds of ``now`` (no I/O)."""
@@ -76,6 +76,7 @@ class DeletionWatch:
         now = time.monotonic()
         if self.fresh(now):
             return
+        self.waits += 1
         pending = self._pending
         if pending is None or pending[0] < now - self.bound:
             pending = self._start(store)
@@ -84,6 +85,7 @@ class DeletionWatch:
     def ensure_blocking(self, store: Any) -> None:
         """:meth:`ensure` for routes running in the thread pool (a check of their own when stale)."""
         if not self.fresh():
+            self.waits += 1
             self.check(store)
 
     def _start(self, store: Any) -> tuple[float, asyncio.Future]:
