@@ -446,6 +446,7 @@ FRESH = {  # how a fresh process starts: label -> its extra environment
     "fresh, no preload": {"PDEANIM_PRELOAD_CLIPS": "0"},
     "fresh, cold (no warm start)": {"PDEANIM_WARM_START": "false"},
 }
+FRESH_NAMES = {"fresh": "default", "fresh, no preload": "nopreload", "fresh, cold (no warm start)": "cold"}
 
 
 def fresh_round(services: Services, key: str, clip: dict, args: argparse.Namespace, script: Path,
@@ -480,7 +481,10 @@ def measure_shape(services: Services, api: httpx.Client, key: str, clip: dict, a
     """Fresh-process round, warm rounds and in-process parts of one shape's clip."""
     body = len(check_bytes(api.get(f"/v1/clips/{clip['id']}/frame", params={"t": 0.5})))
     services.start_bare(body)
-    rows = [fresh_round(services, key, clip, args, script, label) for label in reversed(FRESH)]
+    labels = [label for label in reversed(FRESH) if FRESH_NAMES[label] in args.fresh.split(",")]
+    rows = [fresh_round(services, key, clip, args, script, label) for label in labels]
+    if "fresh" not in labels:
+        services.start_service()  # the warm rounds run on the default start
     rows += measure(services, key, clip, args, script, "warm")  # the last restart: the default one
     here = in_process_ms(services.data_dir, clip["id"], "frame")
     part = {"shape": args.shape, "vertices": clip["info"]["n_vertices"], "frames": clip["frames"],
@@ -507,6 +511,9 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=3, help="wrk runs per configuration (medians are reported)")
     ap.add_argument("--seconds", type=int, default=8, help="duration of one wrk run")
     ap.add_argument("--fresh-seconds", type=int, default=6, help="the wrk run right after a restart")
+    ap.add_argument("--fresh", default="cold,nopreload,default",
+                    help="fresh-process rounds: cold (no warm start), nopreload (warm start without the "
+                         "newest clips), default")
     ap.add_argument("--data-dir", type=Path, default=None,
                     help="keep the service's data here and reuse the clips fitted by an earlier run with the "
                          "same folder (default: a temporary folder)")

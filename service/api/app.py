@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager, suppress
+from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from starlette.concurrency import run_in_threadpool
@@ -51,11 +50,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         if settings.warm_start:
             await run_in_threadpool(preload_recent_clips, app.state.store, app.state.clip_cache,
                                     settings.preload_clips)
-        watch = asyncio.create_task(app.state.deletions.run(app.state.store))
+        stop_checks = app.state.deletions.start(app.state.store)
         yield
-        watch.cancel()
-        with suppress(asyncio.CancelledError):
-            await watch
+        stop_checks.set()
         log.info("deletion checks: %d; requests that found the last one stale and waited: %d",
                  app.state.deletions.checks, app.state.deletions.waits)
         if own:
