@@ -424,8 +424,9 @@ def table(rows: list[dict]) -> str:
     for r in rows:
         bare = (f"{r['bare_rps']:.0f} | {r['bare_p50_ms']:.1f} ms | {r['bare_p99_ms']:.1f} ms | "
                 f"{r['ratio']:.2f}" if "bare_rps" in r else "| | |")
-        out.append(f"| {r['shape']} | {r['label']} | {r['t']} | {r['project_rps']:.0f} | "
-                   f"{r['project_p50_ms']:.1f} ms | {r['project_p99_ms']:.1f} ms | {bare} "
+        lat = ("none finished | none finished" if not r["project_rps"] else
+               f"{r['project_p50_ms']:.1f} ms | {r['project_p99_ms']:.1f} ms")
+        out.append(f"| {r['shape']} | {r['label']} | {r['t']} | {r['project_rps']:.0f} | {lat} | {bare} "
                    f"| {r['load1']:.1f} |")
     return "\n".join(out)
 
