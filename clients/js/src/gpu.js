@@ -1,10 +1,10 @@
 // GPU evaluation data (no three.js import): float textures, per-vertex attributes and per-frame uniforms of a
-// clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js, the TSL in webgpu.js.
+// clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js.
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, naturalSplineTangents } from './dynamic.js';
+import { DynamicEvaluator, naturalSplineTangents, vertexBase } from './dynamic.js';
 import { triangleFrame, triangleQuality } from './geometry.js';
-import { orthonormalBases, orthonormalCoefficients } from './orthobasis.js';
+import { orthonormalBases } from './orthobasis.js';
 
 export const TEXTURE_WIDTH = 4096;
 
@@ -12,6 +12,15 @@ export const TEXTURE_WIDTH = 4096;
 function pow2Width(width) {
   if (!(width >= 1)) throw new RangeError(`texture width must be >= 1, got ${width}`);
   return 2 ** Math.floor(Math.log2(width));
+}
+
+/**
+ * The row length of a clip's textures: the smallest power of two at least the square root of the largest
+ * texture's texels (so that a row of padding is small against the texture), at most width.
+ */
+export function fittedWidth(nTexels, width = TEXTURE_WIDTH) {
+  const most = pow2Width(width);
+  return Math.min(most, 2 ** Math.ceil(Math.log2(Math.max(1, Math.sqrt(nTexels)))));
 }
 
 /** A float RGBA texture of n texels, rows of w (a power of two): {data (padded), width, height}. */
@@ -23,46 +32,41 @@ function texture(nTexels, width) {
 /**
  * The data textures and constants of a decoded clip (independent of the mesh and of three.js; plain typed
  * arrays, so that a Web Worker can build them and transfer them): {kind, rigid, spline, nCurves, nVertices,
- * nSegments, width, weightTexels, curveTexels, textures: {vertex, knot, tangent?, curve}, maxHeight} (cyclic
- * clips: {kind, nVertices, width, textures: {vertex}, axis, bend, rotate, maxHeight}).
+ * nSegments, width, coefficientTexels, curveTexels, textures: {vertex, curve}, r, tangents, maxHeight}
+ * (cyclic clips: {kind, nVertices, width, textures: {vertex}, axis, bend, rotate, maxHeight}). width is at
+ * most the option's (fittedWidth).
  *
  * Dynamic clips: per vertex 4 texels (curve, base xyz) and the row of each coordinate's orthonormal space
- * basis (orthobasis.js); per (knot, curve, coordinate) the knots in that basis; for clips with items on the
- * natural spline (docs/format.md §3.5: `spline` true) the tangents T_j of every knot's coefficients likewise
- * (the spline's tridiagonal solve once per clip); the `curve` texture is the per-frame table that
- * timeUniforms() rewrites: per curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for
- * rigid clips, the rows of R with the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's
- * own code. Clips with spline items carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz,
- * w_2 xyz, w_3 xyz: the weights of T_s, P_s, P_s+1, T_s+1, or 0, phi0, phi1, 0 for an item off the spline),
- * then the rigid rows.
+ * basis (orthobasis.js); the `curve` texture is the per-frame table that timeUniforms() rewrites: per curve
+ * and coordinate the four coefficients of the current frame in that basis (the time weights applied to the
+ * segment's knots, and R, in float64 on the CPU), then for rigid clips the rows of R with the centroid
+ * (R row i, c_i). The knots stay on the CPU (the clip's own array): the GPU holds one frame of them, not
+ * every knot. r (Float64Array, C * 3 * 16) is each item's R; tangents (or null) the natural-spline tangents
+ * of every knot's coefficients in the orthonormal bases (orthonormalTangents) for clips with items on the
+ * spline (docs/format.md §3.5).
  */
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
-  width = pow2Width(width);
-  if (clip.kind === 'cyclic-spine') return cyclicTables(clip, width);
-  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
+  if (clip.kind === 'cyclic-spine') return cyclicTables(clip, fittedWidth(clip.nVertices * 3, width));
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, rigid } = clip;
+  width = fittedWidth(Math.max(V * 4, C * (rigid ? 6 : 3)), width);
   const spline = (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
-  const base = new DynamicEvaluator(clip).base;
+  const base = vertexBase(clip);
   const { q, r } = orthonormalBases(clip);
   const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
+  const d = vertex.data;
   for (let v = 0; v < V; v++) {
     const o = v * 16;
-    vertex.data[o] = curveOf[v];
-    vertex.data.set(base.subarray(v * 3, v * 3 + 3), o + 1);
-    vertex.data.set(q.subarray(v * 12, v * 12 + 12), o + 4);
+    d[o] = curveOf[v];
+    d[o + 1] = base[v * 3];
+    d[o + 2] = base[v * 3 + 1];
+    d[o + 3] = base[v * 3 + 2];
+    for (let k = 0; k < 12; k++) d[o + 4 + k] = q[v * 12 + k];
   }
-  const coefficients = orthonormalCoefficients(r, knots);
-  const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 basis coefficients
-  knot.data.set(coefficients);
-  const textures = { vertex, knot };
-  if (spline) {
-    // natural-spline tangents of every knot's coefficients (linear: the same in either basis)
-    const tangent = texture((S + 1) * C * 3, width);
-    naturalSplineTangents(clip.segmentT, coefficients, C * 12, tangent.data);
-    textures.tangent = tangent;
-  }
-  const weightTexels = spline ? 4 : 2;
-  const curveTexels = weightTexels + (rigid ? 3 : 0);
-  textures.curve = texture(C * curveTexels, width);
+  const tangents = spline ? orthonormalTangents(clip, r) : null;
+  const coefficientTexels = 3;
+  const curveTexels = coefficientTexels + (rigid ? 3 : 0);
+  const curve = texture(C * curveTexels, width);
+  const textures = { vertex, curve };
   return {
     kind: clip.kind,
     rigid: Boolean(rigid),
@@ -70,12 +74,35 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
     nCurves: C,
     nVertices: V,
     nSegments: S,
-    weightTexels,
+    coefficientTexels,
     width,
     curveTexels,
     textures,
+    r,
+    tangents,
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
+}
+
+/**
+ * The natural-spline tangents (docs/format.md §3.5) of every knot's coefficients in the items' orthonormal
+ * bases, R k (Float32Array in the layout of clip.knots; one tridiagonal solve per clip, in float64). In that
+ * basis they are on the scale of the values: the raw knots of ill-conditioned items can be 1e3 times larger
+ * than R k, and float32 tangents of those would lose that factor when R is applied.
+ */
+function orthonormalTangents(clip, r) {
+  const { knots } = clip;
+  const items = r.length / 16; // C * 3
+  const rk = new Float64Array(knots.length);
+  for (let o = 0; o < knots.length; o += 4) {
+    const R = ((o / 4) % items) * 16;
+    for (let i = 0; i < 4; i++) {
+      let acc = 0;
+      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * knots[o + j];
+      rk[o + i] = acc;
+    }
+  }
+  return naturalSplineTangents(clip.segmentT, rk, items * 4, new Float32Array(knots.length));
 }
 
 /**
@@ -129,7 +156,8 @@ function cyclicTables(clip, width) {
  * phase of a cyclic one) and `changed`: whether the per-curve table layout.textures.curve.data was rewritten
  * (dynamic clips; upload it only then). The table is left as it is when t maps to the same segment, local
  * time (and rigid time) as at the previous call; otherwise each distinct time constant of the segment is
- * evaluated once (fitted clips have a few hundred, most items are linear) and the C x 3 pairs are gathered.
+ * evaluated once (fitted clips have a few hundred, most items are linear) and every item's coefficients of
+ * the frame are formed (frameCoefficients).
  */
 export function timeUniforms(layout, t) {
   if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -149,51 +177,74 @@ export function timeUniforms(layout, t) {
   last[1] = loc[1];
   last[2] = loc[2];
   ev.segmentState();
-  const { uPhi0, uPhi1, muIndex } = ev;
+  frameCoefficients(layout, ev, seg);
+  if (layout.rigid) rigidRows(layout, ev, layout.textures.curve.data);
+  return { seg, sw: 0, cw: 0, changed: true };
+}
+
+/**
+ * Per item (c, w) of segment seg the coefficients of the frame in the item's orthonormal basis, into the
+ * per-curve table (texel c * curveTexels + w): R applied to the time-weighted knots (phi0, phi1 on P_s,
+ * P_s+1; spline items w_1, w_2 on P_s, P_s+1 plus w_0, w_3 on the tangents T_s, T_s+1, already in that
+ * basis), in float64, rounded once to float32.
+ */
+function frameCoefficients(layout, ev, seg) {
+  const { knots } = layout.clip;
+  const { r, tangents } = layout;
+  const C = layout.nCurves;
   const d = layout.textures.curve.data;
   const K = layout.curveTexels * 4;
-  const C = layout.nCurves;
-  if (!layout.spline) {
-    for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K, j += 3) {
-      const kx = muIndex[j];
-      const ky = muIndex[j + 1];
-      const kz = muIndex[j + 2];
-      d[o] = uPhi0[kx];
-      d[o + 1] = uPhi0[ky];
-      d[o + 2] = uPhi0[kz];
-      d[o + 4] = uPhi1[kx];
-      d[o + 5] = uPhi1[ky];
-      d[o + 6] = uPhi1[kz];
-    }
-  } else {
-    // four weights per item: the segment's spline weights (docs/format.md §3.5) or (0, phi0, phi1, 0)
-    const { spline, cubicWeights: cw } = ev;
-    for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K) {
-      for (let w = 0; w < 3; w++, j++) {
-        if (spline[c * 3 + w] === 1) {
-          d[o + w] = cw[0];
-          d[o + 4 + w] = cw[1];
-          d[o + 8 + w] = cw[2];
-          d[o + 12 + w] = cw[3];
-        } else {
-          const k = muIndex[j];
-          d[o + w] = 0;
-          d[o + 4 + w] = uPhi0[k];
-          d[o + 8 + w] = uPhi1[k];
-          d[o + 12 + w] = 0;
-        }
+  const { uPhi0, uPhi1, muIndex } = ev;
+  const spline = layout.spline ? ev.spline : null;
+  const cw = ev.cubicWeights;
+  const k0 = seg * C * 12; // knot s of item 0
+  const k1 = k0 + C * 12; // knot s + 1
+  for (let c = 0, o = 0, i = 0; c < C; c++, o += K) {
+    for (let w = 0; w < 3; w++, i++) {
+      const a = k0 + i * 4;
+      const b = k1 + i * 4;
+      const cubic = spline !== null && spline[i] === 1;
+      let p0, p1;
+      if (cubic) {
+        p0 = cw[1];
+        p1 = cw[2];
+      } else {
+        const m = muIndex[seg * C * 3 + i];
+        p0 = uPhi0[m];
+        p1 = uPhi1[m];
       }
+      const x0 = p0 * knots[a] + p1 * knots[b];
+      const x1 = p0 * knots[a + 1] + p1 * knots[b + 1];
+      const x2 = p0 * knots[a + 2] + p1 * knots[b + 2];
+      const x3 = p0 * knots[a + 3] + p1 * knots[b + 3];
+      // R x (R upper triangular, row-major per item)
+      const R = i * 16;
+      let y0 = r[R] * x0 + r[R + 1] * x1 + r[R + 2] * x2 + r[R + 3] * x3;
+      let y1 = r[R + 5] * x1 + r[R + 6] * x2 + r[R + 7] * x3;
+      let y2 = r[R + 10] * x2 + r[R + 11] * x3;
+      let y3 = r[R + 15] * x3;
+      if (cubic) {
+        const wl = cw[0];
+        const wh = cw[3];
+        y0 += wl * tangents[a] + wh * tangents[b];
+        y1 += wl * tangents[a + 1] + wh * tangents[b + 1];
+        y2 += wl * tangents[a + 2] + wh * tangents[b + 2];
+        y3 += wl * tangents[a + 3] + wh * tangents[b + 3];
+      }
+      const t = o + w * 4;
+      d[t] = y0;
+      d[t + 1] = y1;
+      d[t + 2] = y2;
+      d[t + 3] = y3;
     }
   }
-  if (layout.rigid) rigidRows(layout, ev, d);
-  return { seg, sw: 0, cw: 0, changed: true };
 }
 
 /** The rigid rows of the per-curve table d (after the weights): (R row i, c_i) of each curve, from ev. */
 function rigidRows(layout, ev, d) {
   const { rot, trans } = ev;
   const K = layout.curveTexels * 4;
-  for (let c = 0, o = layout.weightTexels * 4; c < layout.nCurves; c++, o += K) {
+  for (let c = 0, o = layout.coefficientTexels * 4; c < layout.nCurves; c++, o += K) {
     for (let i = 0; i < 3; i++) {
       d[o + i * 4] = rot[c * 9 + i * 3];
       d[o + 1 + i * 4] = rot[c * 9 + i * 3 + 1];

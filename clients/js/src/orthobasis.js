@@ -62,23 +62,6 @@ export function orthonormalBases(clip) {
   return { q, r };
 }
 
-/**
- * Per-knot coefficients (S+1, C, 3, 4) (knots, or their time tangents) turned into the orthonormal bases'
- * coefficients R k, in float64, into out (a Float32Array rounds them); returns out.
- */
-export function orthonormalCoefficients(r, coefficients, out = new Float64Array(coefficients.length)) {
-  const items = r.length / 16; // C * 3
-  for (let o = 0; o < coefficients.length; o += 4) {
-    const R = ((o / 4) % items) * 16;
-    for (let i = 0; i < 4; i++) {
-      let acc = 0;
-      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * coefficients[o + j];
-      out[o + i] = acc;
-    }
-  }
-  return out;
-}
-
 function dot(a, b) {
   let s = 0;
   for (let i = 0; i < a.length; i++) s += a[i] * b[i];

@@ -46,8 +46,6 @@ export class ClipResources {
       pdeCurves: { value: L.nCurves ?? 0 },
       pdeVertices: { value: L.nVertices },
       pdeVertexTex: { value: this.textures.vertex },
-      pdeKnotTex: { value: this.textures.knot ?? null },
-      pdeTangentTex: { value: this.textures.tangent ?? null },
       pdeCurveTex: { value: this.textures.curve ?? null },
       pdeAxis: { value: L.axis ? [...L.axis] : [1, 0, 0] },
       pdeBend: { value: L.bend ? [...L.bend] : [0, 1, 0] },
