@@ -34,11 +34,10 @@ in vec3 pdeCpuNormal;
 uniform highp sampler2D pdePosTex;
 #endif
 uniform highp sampler2D pdeVertexTex;
-uniform int pdeSeg;
-uniform int pdeCurves;
 uniform int pdeVertices;
 #ifdef PDEANIM_DYNAMIC
-uniform highp sampler2D pdeCurveTex;
+uniform highp sampler2D pdeFrameTex;
+uniform int pdeDirect;
 #endif
 #ifdef PDEANIM_CYCLIC
 uniform float pdeSinWt;
@@ -54,21 +53,22 @@ vec4 pdeFetch(highp sampler2D tex, int i) {
 }
 `;
 
-// one clip vertex: base + per coordinate the frame's coefficients of its curve (the per-curve table, written
-// by the CPU each frame) dotted with the vertex's basis row, then the curve's rigid motion
+// one clip vertex v (the GPU's numbering, gpu.js): a direct vertex's position from the per-frame table,
+// else base + per coordinate the frame's coefficients of its curve (from the per-frame table, after the
+// direct positions) dotted with the vertex's basis row, then the curve's rigid motion
 const DYNAMIC_EVAL = `
 #ifdef PDEANIM_DYNAMIC
 vec3 pdeEval(int v) {
-  vec4 head = pdeFetch(pdeVertexTex, v * 4);
-  int c = int(head.x + 0.5);
+  if (v < pdeDirect) return pdeFetch(pdeFrameTex, v).xyz;
+  int r = (v - pdeDirect) * 4;
+  vec4 head = pdeFetch(pdeVertexTex, r);
+  int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   vec3 p = head.yzw;
-  for (int w = 0; w < 3; w++) {
-    p[w] += dot(pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + w), pdeFetch(pdeVertexTex, v * 4 + 1 + w));
-  }
+  for (int w = 0; w < 3; w++) p[w] += dot(pdeFetch(pdeFrameTex, c + w), pdeFetch(pdeVertexTex, r + 1 + w));
 #ifdef PDEANIM_RIGID
-  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_COEFFICIENT_TEXELS);
-  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_COEFFICIENT_TEXELS + 1);
-  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_COEFFICIENT_TEXELS + 2);
+  vec4 r0 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS);
+  vec4 r1 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 1);
+  vec4 r2 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 2);
   p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
 #endif
   return p;

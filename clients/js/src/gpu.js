@@ -32,41 +32,55 @@ function texture(nTexels, width) {
 /**
  * The data textures and constants of a decoded clip (independent of the mesh and of three.js; plain typed
  * arrays, so that a Web Worker can build them and transfer them): {kind, rigid, spline, nCurves, nVertices,
- * nSegments, width, coefficientTexels, curveTexels, textures: {vertex, curve}, r, tangents, maxHeight}
- * (cyclic clips: {kind, nVertices, width, textures: {vertex}, axis, bend, rotate, maxHeight}). width is at
- * most the option's (fittedWidth).
+ * nSegments, width, nDirect, coefficientTexels, curveTexels, gpuIndex, gpuCurve, textures: {vertex, frame},
+ * r, tangents, direct: {q, base, curve}, maxHeight} (cyclic clips: {kind, nVertices, width, textures:
+ * {vertex}, axis, bend, rotate, maxHeight}). width is at most the option's (fittedWidth).
  *
- * Dynamic clips: per vertex 4 texels (curve, base xyz) and the row of each coordinate's orthonormal space
- * basis (orthobasis.js); the `curve` texture is the per-frame table that timeUniforms() rewrites: per curve
- * and coordinate the four coefficients of the current frame in that basis (the time weights applied to the
- * segment's knots, and R, in float64 on the CPU), then for rigid clips the rows of R with the centroid
- * (R row i, c_i). The knots stay on the CPU (the clip's own array): the GPU holds one frame of them, not
- * every knot. r (Float64Array, C * 3 * 16) is each item's R; tangents (or null) the natural-spline tangents
- * of every knot's coefficients in the orthonormal bases (orthonormalTangents) for clips with items on the
- * spline (docs/format.md §3.5).
+ * Dynamic clips. The GPU numbers the clip vertices gpuIndex[v] (the pdeVertex attribute and the evaluation
+ * pass use these numbers): first the nDirect vertices of short curves (at most curveTexels vertices: their
+ * positions take no more texels than the curve's coefficients would), whose positions the CPU writes into
+ * the per-frame table each frame; then the others, with 4 texels each in the `vertex` texture: (GPU curve
+ * gpuCurve[c], base xyz) and the row of each coordinate's orthonormal space basis (orthobasis.js). The
+ * `frame` texture is the per-frame table that timeUniforms() rewrites: a position per direct vertex, then per
+ * GPU curve and coordinate the four coefficients of the current frame in that basis (the time weights
+ * applied to the segment's knots, and R, in float64 on the CPU), then for rigid clips the rows of R with the
+ * centroid (R row i, c_i). The knots stay on the CPU (the clip's own array): the GPU holds one frame, not
+ * every knot. r (Float64Array, C * 3 * 16) is each item's R; tangents (or null) the natural-spline tangents of
+ * every knot's coefficients in the orthonormal bases (orthonormalTangents) for clips with items on the spline
+ * (docs/format.md §3.5); direct the basis rows (q, nDirect * 12), bases (nDirect * 3) and curves of the
+ * direct vertices in GPU order.
  */
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   if (clip.kind === 'cyclic-spine') return cyclicTables(clip, fittedWidth(clip.nVertices * 3, width));
-  const { nVertices: V, nCurves: C, nSegments: S, curveOf, rigid } = clip;
-  width = fittedWidth(Math.max(V * 4, C * (rigid ? 6 : 3)), width);
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, offsets, rigid } = clip;
   const spline = (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
+  const coefficientTexels = 3;
+  const curveTexels = coefficientTexels + (rigid ? 3 : 0);
+  const { gpuIndex, gpuCurve, nDirect, nGpuCurves } = gpuNumbering(curveOf, offsets, curveTexels);
+  const frameTexels = nDirect + nGpuCurves * curveTexels;
+  width = fittedWidth(Math.max((V - nDirect) * 4, frameTexels), width);
   const base = vertexBase(clip);
   const { q, r } = orthonormalBases(clip);
-  const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
+  const vertex = texture((V - nDirect) * 4, width); // per GPU vertex: (curve, base xyz), basis x, y, z
   const d = vertex.data;
+  const direct = { q: new Float32Array(nDirect * 12), base: new Float32Array(nDirect * 3), curve: new Int32Array(nDirect) };
   for (let v = 0; v < V; v++) {
-    const o = v * 16;
-    d[o] = curveOf[v];
+    const g = gpuIndex[v];
+    if (g < nDirect) {
+      direct.curve[g] = curveOf[v];
+      direct.base.set(base.subarray(v * 3, v * 3 + 3), g * 3);
+      direct.q.set(q.subarray(v * 12, v * 12 + 12), g * 12);
+      continue;
+    }
+    const o = (g - nDirect) * 16;
+    d[o] = gpuCurve[curveOf[v]];
     d[o + 1] = base[v * 3];
     d[o + 2] = base[v * 3 + 1];
     d[o + 3] = base[v * 3 + 2];
     for (let k = 0; k < 12; k++) d[o + 4 + k] = q[v * 12 + k];
   }
   const tangents = spline ? orthonormalTangents(clip, r) : null;
-  const coefficientTexels = 3;
-  const curveTexels = coefficientTexels + (rigid ? 3 : 0);
-  const curve = texture(C * curveTexels, width);
-  const textures = { vertex, curve };
+  const textures = { vertex, frame: texture(frameTexels, width) };
   return {
     kind: clip.kind,
     rigid: Boolean(rigid),
@@ -74,14 +88,43 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
     nCurves: C,
     nVertices: V,
     nSegments: S,
+    nDirect,
     coefficientTexels,
     width,
     curveTexels,
+    gpuIndex,
+    gpuCurve,
     textures,
     r,
     tangents,
+    direct,
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
+}
+
+/**
+ * The GPU's numbering of a clip's vertices and curves: curves of at most `short` vertices are direct (the
+ * CPU places their vertices), numbered first in clip order; the others follow in clip order, and their
+ * curves get GPU curve numbers 0.. (gpuCurve, -1 for direct curves).
+ */
+function gpuNumbering(curveOf, offsets, short) {
+  const V = curveOf.length;
+  const C = offsets.length - 1;
+  const gpuCurve = new Int32Array(C);
+  let nGpuCurves = 0;
+  let nDirect = 0;
+  for (let c = 0; c < C; c++) {
+    const n = offsets[c + 1] - offsets[c];
+    if (n <= short) {
+      gpuCurve[c] = -1;
+      nDirect += n;
+    } else gpuCurve[c] = nGpuCurves++;
+  }
+  const gpuIndex = new Int32Array(V);
+  for (let v = 0, nextDirect = 0, nextGpu = nDirect; v < V; v++) {
+    gpuIndex[v] = gpuCurve[curveOf[v]] < 0 ? nextDirect++ : nextGpu++;
+  }
+  return { gpuIndex, gpuCurve, nDirect, nGpuCurves };
 }
 
 /**
@@ -153,11 +196,11 @@ function cyclicTables(clip, width) {
 
 /**
  * The state at t: returns the uniforms {seg, sw, cw} (segment of the dynamic clip; sin and cos of the swim
- * phase of a cyclic one) and `changed`: whether the per-curve table layout.textures.curve.data was rewritten
+ * phase of a cyclic one) and `changed`: whether the per-frame table layout.textures.frame.data was rewritten
  * (dynamic clips; upload it only then). The table is left as it is when t maps to the same segment, local
  * time (and rigid time) as at the previous call; otherwise each distinct time constant of the segment is
- * evaluated once (fitted clips have a few hundred, most items are linear) and every item's coefficients of
- * the frame are formed (frameCoefficients).
+ * evaluated once (fitted clips have a few hundred, most items are linear), every item's coefficients of the
+ * frame are formed (frameCoefficients) and the table written (writeFrame).
  */
 export function timeUniforms(layout, t) {
   if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -177,79 +220,103 @@ export function timeUniforms(layout, t) {
   last[1] = loc[1];
   last[2] = loc[2];
   ev.segmentState();
-  frameCoefficients(layout, ev, seg);
-  if (layout.rigid) rigidRows(layout, ev, layout.textures.curve.data);
+  layout.y ??= new Float64Array(layout.nCurves * 12);
+  writeFrame(layout, ev, frameCoefficients(layout, ev, seg, layout.y), layout.textures.frame.data);
   return { seg, sw: 0, cw: 0, changed: true };
 }
 
 /**
- * Per item (c, w) of segment seg the coefficients of the frame in the item's orthonormal basis, into the
- * per-curve table (texel c * curveTexels + w): R applied to the time-weighted knots (phi0, phi1 on P_s,
- * P_s+1; spline items w_1, w_2 on P_s, P_s+1 plus w_0, w_3 on the tangents T_s, T_s+1, already in that
- * basis), in float64, rounded once to float32.
+ * Per item (c, w) of segment seg the coefficients of the frame in the item's orthonormal basis, into y
+ * (C * 12, float64): R applied to the time-weighted knots (phi0, phi1 on P_s, P_s+1; spline items w_1, w_2
+ * on P_s, P_s+1 plus w_0, w_3 on the tangents T_s, T_s+1, already in that basis).
  */
-function frameCoefficients(layout, ev, seg) {
+function frameCoefficients(layout, ev, seg, y) {
   const { knots } = layout.clip;
   const { r, tangents } = layout;
   const C = layout.nCurves;
-  const d = layout.textures.curve.data;
-  const K = layout.curveTexels * 4;
   const { uPhi0, uPhi1, muIndex } = ev;
   const spline = layout.spline ? ev.spline : null;
   const cw = ev.cubicWeights;
   const k0 = seg * C * 12; // knot s of item 0
   const k1 = k0 + C * 12; // knot s + 1
-  for (let c = 0, o = 0, i = 0; c < C; c++, o += K) {
-    for (let w = 0; w < 3; w++, i++) {
-      const a = k0 + i * 4;
-      const b = k1 + i * 4;
-      const cubic = spline !== null && spline[i] === 1;
-      let p0, p1;
-      if (cubic) {
-        p0 = cw[1];
-        p1 = cw[2];
-      } else {
-        const m = muIndex[seg * C * 3 + i];
-        p0 = uPhi0[m];
-        p1 = uPhi1[m];
-      }
-      const x0 = p0 * knots[a] + p1 * knots[b];
-      const x1 = p0 * knots[a + 1] + p1 * knots[b + 1];
-      const x2 = p0 * knots[a + 2] + p1 * knots[b + 2];
-      const x3 = p0 * knots[a + 3] + p1 * knots[b + 3];
-      // R x (R upper triangular, row-major per item)
-      const R = i * 16;
-      let y0 = r[R] * x0 + r[R + 1] * x1 + r[R + 2] * x2 + r[R + 3] * x3;
-      let y1 = r[R + 5] * x1 + r[R + 6] * x2 + r[R + 7] * x3;
-      let y2 = r[R + 10] * x2 + r[R + 11] * x3;
-      let y3 = r[R + 15] * x3;
-      if (cubic) {
-        const wl = cw[0];
-        const wh = cw[3];
-        y0 += wl * tangents[a] + wh * tangents[b];
-        y1 += wl * tangents[a + 1] + wh * tangents[b + 1];
-        y2 += wl * tangents[a + 2] + wh * tangents[b + 2];
-        y3 += wl * tangents[a + 3] + wh * tangents[b + 3];
-      }
-      const t = o + w * 4;
-      d[t] = y0;
-      d[t + 1] = y1;
-      d[t + 2] = y2;
-      d[t + 3] = y3;
+  for (let i = 0; i < C * 3; i++) {
+    const a = k0 + i * 4;
+    const b = k1 + i * 4;
+    const cubic = spline !== null && spline[i] === 1;
+    let p0, p1;
+    if (cubic) {
+      p0 = cw[1];
+      p1 = cw[2];
+    } else {
+      const m = muIndex[seg * C * 3 + i];
+      p0 = uPhi0[m];
+      p1 = uPhi1[m];
+    }
+    const x0 = p0 * knots[a] + p1 * knots[b];
+    const x1 = p0 * knots[a + 1] + p1 * knots[b + 1];
+    const x2 = p0 * knots[a + 2] + p1 * knots[b + 2];
+    const x3 = p0 * knots[a + 3] + p1 * knots[b + 3];
+    // R x (R upper triangular, row-major per item)
+    const R = i * 16;
+    const o = i * 4;
+    y[o] = r[R] * x0 + r[R + 1] * x1 + r[R + 2] * x2 + r[R + 3] * x3;
+    y[o + 1] = r[R + 5] * x1 + r[R + 6] * x2 + r[R + 7] * x3;
+    y[o + 2] = r[R + 10] * x2 + r[R + 11] * x3;
+    y[o + 3] = r[R + 15] * x3;
+    if (cubic) {
+      const wl = cw[0];
+      const wh = cw[3];
+      y[o] += wl * tangents[a] + wh * tangents[b];
+      y[o + 1] += wl * tangents[a + 1] + wh * tangents[b + 1];
+      y[o + 2] += wl * tangents[a + 2] + wh * tangents[b + 2];
+      y[o + 3] += wl * tangents[a + 3] + wh * tangents[b + 3];
     }
   }
+  return y;
 }
 
-/** The rigid rows of the per-curve table d (after the weights): (R row i, c_i) of each curve, from ev. */
-function rigidRows(layout, ev, d) {
-  const { rot, trans } = ev;
+/**
+ * The per-frame table d from the coefficients y (frameCoefficients): each direct vertex its position (basis
+ * row . y + base, then its curve's rigid motion, in float64), then per GPU curve its three coefficient
+ * texels and, for rigid clips, its rigid rows.
+ */
+function writeFrame(layout, ev, y, d) {
+  const { nDirect, gpuCurve, direct } = layout;
+  const { q, base, curve } = direct;
+  const rot = layout.rigid ? ev.rot : null;
+  const trans = layout.rigid ? ev.trans : null;
+  for (let g = 0; g < nDirect; g++) {
+    const c = curve[g];
+    const Q = g * 12;
+    const Y = c * 12;
+    const o = g * 4;
+    for (let w = 0; w < 3; w++) {
+      const k = Q + w * 4;
+      const j = Y + w * 4;
+      d[o + w] = base[g * 3 + w] + (q[k] * y[j] + q[k + 1] * y[j + 1] + q[k + 2] * y[j + 2] + q[k + 3] * y[j + 3]);
+    }
+    if (rot !== null) {
+      const x = d[o];
+      const yy = d[o + 1];
+      const z = d[o + 2];
+      const R = c * 9;
+      for (let i = 0; i < 3; i++) {
+        d[o + i] = rot[R + i * 3] * x + rot[R + i * 3 + 1] * yy + rot[R + i * 3 + 2] * z + trans[c * 3 + i];
+      }
+    }
+  }
   const K = layout.curveTexels * 4;
-  for (let c = 0, o = layout.coefficientTexels * 4; c < layout.nCurves; c++, o += K) {
+  for (let c = 0; c < layout.nCurves; c++) {
+    const cg = gpuCurve[c];
+    if (cg < 0) continue;
+    const o = nDirect * 4 + cg * K;
+    for (let k = 0; k < 12; k++) d[o + k] = y[c * 12 + k];
+    if (rot === null) continue;
     for (let i = 0; i < 3; i++) {
-      d[o + i * 4] = rot[c * 9 + i * 3];
-      d[o + 1 + i * 4] = rot[c * 9 + i * 3 + 1];
-      d[o + 2 + i * 4] = rot[c * 9 + i * 3 + 2];
-      d[o + 3 + i * 4] = trans[c * 3 + i];
+      d[o + 12 + i * 4] = rot[c * 9 + i * 3];
+      d[o + 13 + i * 4] = rot[c * 9 + i * 3 + 1];
+      d[o + 14 + i * 4] = rot[c * 9 + i * 3 + 2];
+      d[o + 15 + i * 4] = trans[c * 3 + i];
     }
   }
 }
@@ -306,6 +373,20 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
     for (let k = 0; k < 3; k++) frame[i * 3 + k] = fr[k * 3] * nx + fr[k * 3 + 1] * ny + fr[k * 3 + 2] * nz;
   }
   return { pdeVertex, pdeNormalFrame: frame };
+}
+
+/**
+ * The attributes the shader reads, from meshAttributes(): pdeVertex with the GPU's vertex numbers (gpuIndex
+ * of gpuTables(); null: the clip's), and pdeNormalFrame as normalised int16 (a unit vector: 3e-5 is plenty
+ * for shading, at half the bytes). {pdeVertex: Float32Array, pdeNormalFrame: Int16Array}.
+ */
+export function gpuAttributes(attrs, gpuIndex = null) {
+  const pdeVertex = gpuIndex ? attrs.pdeVertex.map((v) => gpuIndex[v]) : Float32Array.from(attrs.pdeVertex);
+  const pdeNormalFrame = new Int16Array(attrs.pdeNormalFrame.length);
+  for (let i = 0; i < pdeNormalFrame.length; i++) {
+    pdeNormalFrame[i] = Math.round(Math.max(-1, Math.min(1, attrs.pdeNormalFrame[i])) * 32767);
+  }
+  return { pdeVertex, pdeNormalFrame };
 }
 
 /**

@@ -5,7 +5,7 @@
 
 import { BufferAttribute, Matrix3, Matrix4 } from 'three';
 import { computeNormals } from './geometry.js';
-import { frameNormals, meshAttributes } from './gpu.js';
+import { frameNormals, gpuAttributes, meshAttributes } from './gpu.js';
 import { ClipResources } from './resources.js';
 import { webglBackend } from './webgl.js';
 
@@ -171,8 +171,10 @@ export class ClipPlayer {
     }
     this._restNormalsClip = normalsClip;
     const attrs = meshAttributes({ vertexMap: this.vertexMap, positions: restClip, normals: normalsClip, index });
-    geometry.setAttribute('pdeVertex', new BufferAttribute(attrs.pdeVertex, 3));
-    geometry.setAttribute('pdeNormalFrame', new BufferAttribute(attrs.pdeNormalFrame, 3));
+    // the shader's copy: the GPU's vertex numbers, the frame normals as normalised int16
+    const gpu = gpuAttributes(attrs, this.layout.gpuIndex ?? null);
+    geometry.setAttribute('pdeVertex', new BufferAttribute(gpu.pdeVertex, 3));
+    geometry.setAttribute('pdeNormalFrame', new BufferAttribute(gpu.pdeNormalFrame, 3, true));
     return attrs;
   }
 

@@ -72,14 +72,17 @@ function emulate(layout, u, v) {
     }
     return [0, 1, 2].map((k) => f(f(a[k] + f(ca * f(layout.axis[k]))) + f(cl * f(layout.bend[k]))));
   }
-  const K = layout.curveTexels;
-  const head = fetch(T.vertex, v * 4);
-  const c = Math.round(head[0]);
+  // the GPU numbers the clip vertices: direct ones first (their positions in the per-frame table)
+  const g = layout.gpuIndex[v];
+  if (g < layout.nDirect) return fetch(T.frame, g).slice(0, 3);
+  const r = (g - layout.nDirect) * 4;
+  const head = fetch(T.vertex, r);
+  const c = layout.nDirect + Math.round(head[0]) * layout.curveTexels;
   // the frame's coefficients of the curve (per coordinate a vec4) dotted with the vertex's basis row
-  let p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(fetch(T.curve, c * K + w), fetch(T.vertex, v * 4 + 1 + w))));
+  let p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(fetch(T.frame, c + w), fetch(T.vertex, r + 1 + w))));
   if (layout.rigid) {
-    const r = [0, 1, 2].map((i) => fetch(T.curve, c * K + layout.coefficientTexels + i));
-    p = r.map((row) => f(dot4([row[0], row[1], row[2], 0], [...p, 0]) + row[3]));
+    const rows = [0, 1, 2].map((i) => fetch(T.frame, c + layout.coefficientTexels + i));
+    p = rows.map((row) => f(dot4([row[0], row[1], row[2], 0], [...p, 0]) + row[3]));
   }
   return p;
 }
@@ -153,7 +156,13 @@ test('GPU tables are plain typed arrays (a worker can transfer them) and gpuLayo
   assert.equal(layout.textures, tables.textures);
   // rows as long as the clip needs (a power of two), at most the width asked for
   assert.ok(tables.width <= 128 && Number.isInteger(Math.log2(tables.width)));
-  assert.equal(tables.width, fittedWidth(clip.nVertices * 4, 128));
+  const gpuCurves = tables.gpuCurve.filter((c) => c >= 0).length;
+  const needed = {
+    vertex: (clip.nVertices - tables.nDirect) * 4,
+    frame: tables.nDirect + gpuCurves * tables.curveTexels,
+  };
+  assert.equal(tables.width, fittedWidth(Math.max(needed.vertex, needed.frame), 128));
+  for (const [k, t] of Object.entries(tables.textures)) assert.ok(t.width * t.height - Math.max(1, needed[k]) < t.width, k);
   assert.deepEqual(structuredClone(tables), tables);
 });
 
@@ -239,7 +248,7 @@ test('attachClip patches every built-in material (and the shadow materials) and 
       assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
       // after morphing and skinning: the clip's vertex, mixed by the influence
       assert.match(shader.vertexShader, /skinning_vertex>\n\tif \(pdeEnabled\) transformed = mix\(transformed, pdePosition, pdeInfluence\);/);
-      assert.ok(shader.uniforms.pdeCurveTex.value instanceof THREE.DataTexture);
+      assert.ok(shader.uniforms.pdeFrameTex.value instanceof THREE.DataTexture);
       assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:true:/);
     }
     assert.equal(player.gpu, true);
@@ -278,17 +287,17 @@ test('setTime drives the uniforms; the CPU fallback fills its own attributes, th
     const rest = Float32Array.from(mesh.geometry.getAttribute('position').array);
     const player = attachClip(mesh, clip);
     player.setTime(0.4);
-    const table = player.textures.curve ? Float32Array.from(player.textures.curve.image.data) : null;
-    const version = player.textures.curve?.version;
+    const table = player.textures.frame ? Float32Array.from(player.textures.frame.image.data) : null;
+    const version = player.textures.frame?.version;
     const u = timeUniforms(player.layout, 0.4);
     assert.equal(player.uniforms.pdeSeg.value, u.seg);
     assert.equal(player.uniforms.pdeSinWt.value, u.sw);
     if (table) {
-      assert.deepEqual(Float32Array.from(player.textures.curve.image.data), table);
+      assert.deepEqual(Float32Array.from(player.textures.frame.image.data), table);
       player.setTime(0.4); // the same t: no new upload
-      assert.equal(player.textures.curve.version, version);
+      assert.equal(player.textures.frame.version, version);
       player.setTime(0.45);
-      assert.ok(player.textures.curve.version > version);
+      assert.ok(player.textures.frame.version > version);
     }
     const key = mesh.material.customProgramCacheKey();
     assert.equal(player.useGPU(false), false);
@@ -598,9 +607,11 @@ function referenceTangents(clip, r) {
   return naturalSplineTangents(clip.segmentT, rk, clip.nCurves * 12, new Float64Array(n));
 }
 
-test('the per-curve table holds each item its frame coefficients (R times the weighted knots), then the rigid rows', () => {
+test('the per-frame table: direct vertices their positions, then per GPU curve its coefficients (R times the weighted knots) and rigid rows', () => {
   const cases = man.cases.filter((x) => x.kind === 'dynamic-pde');
   assert.ok(cases.length >= 5 && cases.some((x) => x.spline_items > 0) && cases.some((x) => x.motion === 'rigid'));
+  let directSeen = 0;
+  let gpuSeen = 0;
   for (const c of cases) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
@@ -608,33 +619,53 @@ test('the per-curve table holds each item its frame coefficients (R times the we
     assert.equal(layout.coefficientTexels, 3);
     assert.equal(layout.curveTexels, layout.rigid ? 6 : 3);
     assert.equal(layout.spline, c.spline_items > 0);
-    // the knots stay on the CPU: the GPU holds the vertex texture and one frame of coefficients
-    assert.deepEqual(Object.keys(layout.textures).sort(), ['curve', 'vertex']);
+    // the knots stay on the CPU: the GPU holds the vertex records and one frame
+    assert.deepEqual(Object.keys(layout.textures).sort(), ['frame', 'vertex']);
+    // direct vertices: those of curves with at most curveTexels vertices, numbered first
+    const C = clip.nCurves;
+    const length = (k) => clip.offsets[k + 1] - clip.offsets[k];
+    let nDirect = 0;
+    for (let k = 0; k < C; k++) if (length(k) <= layout.curveTexels) nDirect += length(k);
+    assert.equal(layout.nDirect, nDirect, c.name);
+    assert.deepEqual([...layout.gpuIndex].sort((a, b) => a - b), [...Array(clip.nVertices).keys()]);
+    for (let v = 0; v < clip.nVertices; v++) {
+      assert.equal(layout.gpuIndex[v] < nDirect, length(clip.curveOf[v]) <= layout.curveTexels);
+    }
+    directSeen += nDirect;
+    gpuSeen += clip.nVertices - nDirect;
     const { r } = orthonormalBases(clip);
     const tangents = layout.spline ? referenceTangents(clip, r) : null;
     const ref = createEvaluator(clip);
-    const C = clip.nCurves;
     const K = layout.curveTexels * 4;
-    const d = layout.textures.curve.data;
+    const d = layout.textures.frame.data;
     let prev = null;
     for (const t of inRange(c, [...c.t, ...c.t.map((x) => x + 1)])) {
       const u = timeUniforms(layout, t);
       ev.evaluate(c.looping ? t + 0.3 : Math.min(t + 0.3, 1)); // the CPU path moving the shared evaluator must not disturb the table
+      const cpu = ref.evaluate(t);
       const s = ref.prepare(t);
       assert.equal(u.seg, s);
-      for (let i = 0; i < C * 3; i++) {
-        const want = referenceCoefficients(clip, ref, r, tangents, s, i);
-        const scale = Math.hypot(...want) + 1e-30;
-        const o = Math.floor(i / 3) * K + (i % 3) * 4;
-        // float32 rounding (and the float32 tangents) apart
-        for (let k = 0; k < 4; k++) assert.ok(Math.abs(d[o + k] - want[k]) <= 1e-6 * scale, `${c.name} t = ${t}`);
+      for (let v = 0; v < clip.nVertices; v++) {
+        const g = layout.gpuIndex[v];
+        if (g >= nDirect) continue;
+        // placed on the CPU in float64: the CPU evaluator's positions, float32 rounding apart
+        for (let w = 0; w < 3; w++) assert.ok(Math.abs(d[g * 4 + w] - cpu[v * 3 + w]) <= 1e-7 * c.diagonal, c.name);
       }
-      if (layout.rigid) {
-        for (let k = 0; k < C; k++) {
-          for (let i = 0; i < 3; i++) {
-            assert.equal(d[k * K + 12 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
-            assert.equal(d[k * K + 15 + i * 4], Math.fround(ref.trans[k * 3 + i]));
-          }
+      for (let k = 0; k < C; k++) {
+        const cg = layout.gpuCurve[k];
+        assert.equal(cg < 0, length(k) <= layout.curveTexels);
+        if (cg < 0) continue;
+        const o = nDirect * 4 + cg * K;
+        for (let w = 0; w < 3; w++) {
+          const want = referenceCoefficients(clip, ref, r, tangents, s, k * 3 + w);
+          const scale = Math.hypot(...want) + 1e-30;
+          // float32 rounding (and the float32 tangents) apart
+          for (let j = 0; j < 4; j++) assert.ok(Math.abs(d[o + w * 4 + j] - want[j]) <= 1e-6 * scale, `${c.name} t = ${t}`);
+        }
+        if (!layout.rigid) continue;
+        for (let i = 0; i < 3; i++) {
+          assert.equal(d[o + 12 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
+          assert.equal(d[o + 15 + i * 4], Math.fround(ref.trans[k * 3 + i]));
         }
       }
       const loc = ref.locate(t);
@@ -643,6 +674,7 @@ test('the per-curve table holds each item its frame coefficients (R times the we
       prev = key;
     }
   }
+  assert.ok(directSeen > 0 && gpuSeen > 0, 'the fixtures have both kinds of vertices');
 });
 
 test('a t with the same segment and local time uploads nothing', () => {
@@ -650,11 +682,11 @@ test('a t with the same segment and local time uploads nothing', () => {
   const clip = loadCase(c);
   const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
   player.setTime(1);
-  const version = player.textures.curve.version;
+  const version = player.textures.frame.version;
   player.setTime(1); // the same state
-  assert.equal(player.textures.curve.version, version);
+  assert.equal(player.textures.frame.version, version);
   player.setTime(0.5);
-  assert.ok(player.textures.curve.version > version);
+  assert.ok(player.textures.frame.version > version);
   player.detach();
 });
 
@@ -692,7 +724,7 @@ test('spline clips: one shader for every time model (the CPU forms the coefficie
     const player = attachClip(mesh, clip);
     const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
     mesh.material.onBeforeCompile(shader, null);
-    assert.equal(shader.uniforms.pdeCurveTex.value, player.textures.curve);
+    assert.equal(shader.uniforms.pdeFrameTex.value, player.textures.frame);
     assert.equal(shader.uniforms.pdeKnotTex, undefined);
     const key = mesh.material.customProgramCacheKey();
     assert.match(key, /pdeanim:dynamic-pde:\w+:true:frame:\d+:gpu$/);
@@ -715,7 +747,7 @@ test('spline clips: one shader for every time model (the CPU forms the coefficie
     passed.setTime(0.2);
     passMesh.onBeforeRender(renderer, null, null, passMesh.geometry, passMesh.material, null);
     const quad = scene.children[0].material;
-    assert.equal(quad.uniforms.pdeCurveTex.value, passed.textures.curve);
+    assert.equal(quad.uniforms.pdeFrameTex.value, passed.textures.frame);
     assert.match(quad.fragmentShader, /#define PDEANIM_CURVE_TEXELS/);
     // the GPU path and the CPU fallback agree on the positions it shows, with and without spline items
     agreesWithCpu(player, clip, 0.43, c.diagonal);
