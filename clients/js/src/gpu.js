@@ -134,18 +134,34 @@ function gpuNumbering(curveOf, offsets, short) {
  * than R k, and float32 tangents of those would lose that factor when R is applied.
  */
 function orthonormalTangents(clip, r) {
-  const { knots } = clip;
-  const items = r.length / 16; // C * 3
-  const rk = new Float64Array(knots.length);
-  for (let o = 0; o < knots.length; o += 4) {
-    const R = ((o / 4) % items) * 16;
-    for (let i = 0; i < 4; i++) {
-      let acc = 0;
-      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * knots[o + j];
-      rk[o + i] = acc;
+  const { knots, segmentT } = clip;
+  const cols = r.length / 4; // C * 3 items (R: 16 numbers each) of 4 coefficients: one track per coefficient
+  const n = knots.length / cols;
+  const out = new Float32Array(knots.length);
+  // a block of tracks at a time (a float64 copy of every knot would be 8 bytes per knot coefficient)
+  const B = Math.min(cols, 1024);
+  const rk = new Float64Array(n * B);
+  const tb = new Float64Array(n * B);
+  for (let t0 = 0; t0 < cols; t0 += B) {
+    const nb = Math.min(B, cols - t0);
+    const values = nb === B ? rk : rk.subarray(0, n * nb);
+    for (let s = 0; s < n; s++) {
+      for (let k = 0; k < nb; k += 4) {
+        const o = s * cols + t0 + k; // 4 coefficients of one item at knot s
+        const R = ((t0 + k) / 4) * 16;
+        for (let i = 0; i < 4; i++) {
+          let acc = 0;
+          for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * knots[o + j];
+          values[s * nb + k + i] = acc;
+        }
+      }
+    }
+    const tangents = naturalSplineTangents(segmentT, values, nb, nb === B ? tb : tb.subarray(0, n * nb));
+    for (let s = 0; s < n; s++) {
+      for (let k = 0; k < nb; k++) out[s * cols + t0 + k] = tangents[s * nb + k];
     }
   }
-  return naturalSplineTangents(clip.segmentT, rk, items * 4, new Float32Array(knots.length));
+  return out;
 }
 
 /**
