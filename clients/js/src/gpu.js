@@ -180,6 +180,23 @@ export function textureBytes(tables) {
   return Object.values(tables.textures).reduce((n, t) => n + t.data.byteLength, 0);
 }
 
+/** Bytes of the evaluation pass's position texture (RGBA float32, a texel per clip vertex, rows of width). */
+export function passBytes(layout) {
+  return layout.width * Math.max(1, Math.ceil(layout.nVertices / layout.width)) * 16;
+}
+
+/** Bytes of the shader's per-vertex attributes (gpuAttributes: pdeVertex 3 float32, pdeNormalFrame 3 int16). */
+export const ATTRIBUTE_BYTES_PER_VERTEX = 3 * 4 + 3 * 2;
+
+/**
+ * GPU bytes of a clip played on meshVertices mesh vertices (default: the clip's): its data textures, the
+ * evaluation pass's texture (pass: default true) and the shader's attributes; what ClipPlayer.gpuBytes
+ * reports for one mesh.
+ */
+export function gpuBytes(layout, { meshVertices = layout.nVertices, pass = true } = {}) {
+  return textureBytes(layout) + (pass ? passBytes(layout) : 0) + meshVertices * ATTRIBUTE_BYTES_PER_VERTEX;
+}
+
 function cyclicTables(clip, width) {
   const ev = new CyclicEvaluator(clip);
   const V = clip.nVertices;
@@ -215,8 +232,8 @@ function cyclicTables(clip, width) {
  * phase of a cyclic one) and `changed`: whether the per-frame table layout.textures.frame.data was rewritten
  * (dynamic clips; upload it only then). The table is left as it is when t maps to the same segment, local
  * time (and rigid time) as at the previous call; otherwise each distinct time constant of the segment is
- * evaluated once (fitted clips have a few hundred, most items are linear), every item's coefficients of the
- * frame are formed (frameCoefficients) and the table written (writeFrame).
+ * evaluated once (fitted clips have a few hundred, most items are linear) and the table written (writeFrame:
+ * weighted sums of the segment's knots in the orthonormal bases, segmentRows, made once per segment).
  */
 export function timeUniforms(layout, t) {
   if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -236,67 +253,103 @@ export function timeUniforms(layout, t) {
   last[1] = loc[1];
   last[2] = loc[2];
   ev.segmentState();
-  layout.y ??= new Float64Array(layout.nCurves * 12);
-  writeFrame(layout, ev, frameCoefficients(layout, ev, seg, layout.y), layout.textures.frame.data);
+  writeFrame(layout, ev, seg, layout.textures.frame.data);
   return { seg, sw: 0, cw: 0, changed: true };
 }
 
+/** R k of every item's 4 knot coefficients at one knot (knots from offset o, C * 12 of them) into out (float64). */
+function orthonormalRow(r, knots, o, out) {
+  for (let i = 0; i < out.length; i += 4) {
+    const R = i * 4; // item i / 4, 16 numbers of R each
+    const k0 = knots[o + i];
+    const k1 = knots[o + i + 1];
+    const k2 = knots[o + i + 2];
+    const k3 = knots[o + i + 3];
+    out[i] = r[R] * k0 + r[R + 1] * k1 + r[R + 2] * k2 + r[R + 3] * k3;
+    out[i + 1] = r[R + 5] * k1 + r[R + 6] * k2 + r[R + 7] * k3;
+    out[i + 2] = r[R + 10] * k2 + r[R + 11] * k3;
+    out[i + 3] = r[R + 15] * k3;
+  }
+  return out;
+}
+
 /**
- * Per item (c, w) of segment seg the coefficients of the frame in the item's orthonormal basis, into y
- * (C * 12, float64): R applied to the time-weighted knots (phi0, phi1 on P_s, P_s+1; spline items w_1, w_2
- * on P_s, P_s+1 plus w_0, w_3 on the tangents T_s, T_s+1, already in that basis).
+ * What a segment's frames share, made when t enters another segment: the knots at both ends in the items'
+ * orthonormal bases (a, b: C * 12 float64) and, for clips with spline items, the spline tangents there (tl,
+ * th, already in that basis), so that a frame's coefficients are a weighted sum of rows per item.
  */
-function frameCoefficients(layout, ev, seg, y) {
-  const { knots } = layout.clip;
-  const { r, tangents } = layout;
+function segmentRows(layout, seg) {
   const C = layout.nCurves;
+  const spline = layout.tangents !== null;
+  const rows = (layout.rows ??= {
+    seg: -1,
+    a: new Float64Array(C * 12),
+    b: new Float64Array(C * 12),
+    tl: spline ? new Float64Array(C * 12) : null,
+    th: spline ? new Float64Array(C * 12) : null,
+    y: new Float64Array(C * 12), // the frame's coefficients
+  });
+  if (rows.seg === seg) return rows;
+  const { knots } = layout.clip;
+  const row = (j, out, tangentsOut) => {
+    orthonormalRow(layout.r, knots, j * C * 12, out);
+    // a float64 copy: every row the frame loop reads is then of one type
+    if (spline) tangentsOut.set(layout.tangents.subarray(j * C * 12, (j + 1) * C * 12));
+  };
+  if (rows.seg >= 0 && seg === rows.seg + 1) {
+    // playing forward: the knot at the segment's start is the previous segment's end
+    [rows.a, rows.b, rows.tl, rows.th] = [rows.b, rows.a, rows.th, rows.tl];
+    row(seg + 1, rows.b, rows.th);
+  } else {
+    row(seg, rows.a, rows.tl);
+    row(seg + 1, rows.b, rows.th);
+  }
+  rows.seg = seg;
+  return rows;
+}
+
+/**
+ * Every item's coefficients of the frame in its orthonormal basis into rows.y (float64): phi0, phi1 on the
+ * segment's knots; spline items w_0..w_3 on T_s, P_s, P_s+1, T_s+1.
+ */
+function frameCoefficients(layout, ev, seg, rows) {
+  const n = layout.nCurves * 3;
   const { uPhi0, uPhi1, muIndex } = ev;
   const spline = layout.spline ? ev.spline : null;
   const cw = ev.cubicWeights;
-  const k0 = seg * C * 12; // knot s of item 0
-  const k1 = k0 + C * 12; // knot s + 1
-  for (let i = 0; i < C * 3; i++) {
-    const a = k0 + i * 4;
-    const b = k1 + i * 4;
-    const cubic = spline !== null && spline[i] === 1;
-    let p0, p1;
-    if (cubic) {
-      p0 = cw[1];
-      p1 = cw[2];
+  // the segment's spline weights (the same for every spline item), read once: not destructured per item
+  const wl = spline !== null ? cw[0] : 0;
+  const w0 = spline !== null ? cw[1] : 0;
+  const w1 = spline !== null ? cw[2] : 0;
+  const wh = spline !== null ? cw[3] : 0;
+  const { a, b, tl, th, y } = rows;
+  for (let i = 0, mu = seg * n; i < n; i++) {
+    const j = i * 4;
+    if (spline !== null && spline[i] === 1) {
+      y[j] = wl * tl[j] + w0 * a[j] + w1 * b[j] + wh * th[j];
+      y[j + 1] = wl * tl[j + 1] + w0 * a[j + 1] + w1 * b[j + 1] + wh * th[j + 1];
+      y[j + 2] = wl * tl[j + 2] + w0 * a[j + 2] + w1 * b[j + 2] + wh * th[j + 2];
+      y[j + 3] = wl * tl[j + 3] + w0 * a[j + 3] + w1 * b[j + 3] + wh * th[j + 3];
     } else {
-      const m = muIndex[seg * C * 3 + i];
-      p0 = uPhi0[m];
-      p1 = uPhi1[m];
-    }
-    const x0 = p0 * knots[a] + p1 * knots[b];
-    const x1 = p0 * knots[a + 1] + p1 * knots[b + 1];
-    const x2 = p0 * knots[a + 2] + p1 * knots[b + 2];
-    const x3 = p0 * knots[a + 3] + p1 * knots[b + 3];
-    // R x (R upper triangular, row-major per item)
-    const R = i * 16;
-    const o = i * 4;
-    y[o] = r[R] * x0 + r[R + 1] * x1 + r[R + 2] * x2 + r[R + 3] * x3;
-    y[o + 1] = r[R + 5] * x1 + r[R + 6] * x2 + r[R + 7] * x3;
-    y[o + 2] = r[R + 10] * x2 + r[R + 11] * x3;
-    y[o + 3] = r[R + 15] * x3;
-    if (cubic) {
-      const wl = cw[0];
-      const wh = cw[3];
-      y[o] += wl * tangents[a] + wh * tangents[b];
-      y[o + 1] += wl * tangents[a + 1] + wh * tangents[b + 1];
-      y[o + 2] += wl * tangents[a + 2] + wh * tangents[b + 2];
-      y[o + 3] += wl * tangents[a + 3] + wh * tangents[b + 3];
+      const m = muIndex[mu + i];
+      const p0 = uPhi0[m];
+      const p1 = uPhi1[m];
+      y[j] = p0 * a[j] + p1 * b[j];
+      y[j + 1] = p0 * a[j + 1] + p1 * b[j + 1];
+      y[j + 2] = p0 * a[j + 2] + p1 * b[j + 2];
+      y[j + 3] = p0 * a[j + 3] + p1 * b[j + 3];
     }
   }
   return y;
 }
 
 /**
- * The per-frame table d from the coefficients y (frameCoefficients): each direct vertex its position (basis
- * row . y + base, then its curve's rigid motion, in float64), then per GPU curve its three coefficient
- * texels and, for rigid clips, its rigid rows.
+ * The per-frame table d of segment seg at the evaluator's time state: each direct vertex its position (basis
+ * row . the frame's coefficients + base, then its curve's rigid motion, in float64), then per GPU curve its
+ * three coefficient texels and, for rigid clips, its rigid rows.
  */
-function writeFrame(layout, ev, y, d) {
+function writeFrame(layout, ev, seg, d) {
+  const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg));
   const { nDirect, gpuCurve, direct } = layout;
   const { q, base, curve } = direct;
   const rot = layout.rigid ? ev.rot : null;

@@ -273,6 +273,14 @@ export class ClipPlayer {
     return names.reduce((n, k) => n + (this.mesh.geometry.getAttribute(k)?.array.byteLength ?? 0), 0);
   }
 
+  /**
+   * Bytes on the GPU for the clip on this mesh: the shared data textures, the evaluation pass's texture
+   * (when the pass runs) and this mesh's attributes.
+   */
+  get gpuBytes() {
+    return this.resources.textureBytes + (this.resources.extras.pass?.bytes ?? 0) + this.attributeBytes;
+  }
+
   /** Restore the mesh's materials and geometry; the textures are freed with their last player. */
   detach() {
     if (!this._attached) return;

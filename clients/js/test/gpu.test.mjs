@@ -16,7 +16,7 @@ import {
   decodeClipFile,
 } from '../src/index.js';
 import { naturalSplineTangents, vertexBasis } from '../src/dynamic.js';
-import { fittedWidth, frameNormals, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
+import { fittedWidth, frameNormals, gpuBytes, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
 import { glslHeader, patchVertexShader } from '../src/glsl.js';
 import { orthonormalBases } from '../src/orthobasis.js';
 import { WEBGPU_REFUSAL, ClipPlayer, attachClip, attachClipToScene } from '../src/three.js';
@@ -755,5 +755,30 @@ test('spline clips: one shader for every time model (the CPU forms the coefficie
     player.detach();
     other.detach();
     passed.detach();
+  }
+});
+
+/**
+ * GPU memory against the download (docs/performance.md, JavaScript client): every fixture's textures,
+ * evaluation pass and attributes on a mesh of its own topology stay under 8x the bytes of its two parts (the
+ * service's download), as ClipPlayer.gpuBytes reports them.
+ */
+test('GPU bytes of every fixture stay under 8x its download (textures, pass, attributes)', () => {
+  const renderer = {
+    extensions: { has: (name) => name === 'EXT_color_buffer_float' },
+    capabilities: { maxTextureSize: 4096 },
+  };
+  for (const c of man.cases) {
+    const { topology, coefficients } = fixtureParts(c);
+    const download = topology.byteLength + coefficients.byteLength;
+    const clip = loadCase(c);
+    const layout = gpuLayout(clip);
+    const bytes = gpuBytes(layout);
+    assert.ok(bytes <= 8 * download, `${c.name}: ${bytes} GPU bytes, ${(bytes / download).toFixed(1)}x its ${download}`);
+    // the player reports the same figure once its pass exists
+    const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip, { renderer });
+    assert.equal(player.pass, true);
+    assert.equal(player.gpuBytes, bytes, c.name);
+    player.detach();
   }
 });
