@@ -642,47 +642,58 @@ function knotFields(clip) {
 }
 
 /**
+ * The per-segment time constants of a dynamic clip, indexed so that a frame evaluates each distinct one once:
+ * {mu (S * C * 3 signed constants), muUnique, muStart (S+1: segment s has muUnique[muStart[s]..muStart[s+1])),
+ * muIndex (per segment and item, the index into them), widest (most distinct constants in a segment)}. Plain
+ * typed arrays: a Web Worker can make them and transfer them.
+ */
+export function timeIndex(clip) {
+  const { nCurves: C, nSegments: S, family, m } = clip;
+  const mu = new Float64Array(S * C * 3); // signed time constants
+  for (let i = 0; i < mu.length; i++) mu[i] = (family[i] >= 2 ? -1 : 1) * m[i];
+  // per segment its distinct time constants (fitted clips have a few hundred at most, most items linear)
+  const muIndex = new Int32Array(S * C * 3);
+  const unique = [];
+  const muStart = new Int32Array(S + 1);
+  let widest = 1;
+  for (let s = 0; s < S; s++) {
+    const seen = new Map();
+    let last = NaN;
+    let lastK = -1;
+    for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
+      const x = mu[i];
+      let k = x === last ? lastK : seen.get(x); // runs of one constant (most items are linear) skip the map
+      if (k === undefined) {
+        k = seen.size;
+        seen.set(x, k);
+        unique.push(x);
+      }
+      muIndex[i] = k;
+      last = x;
+      lastK = k;
+    }
+    muStart[s + 1] = unique.length;
+    widest = Math.max(widest, seen.size);
+  }
+  return { mu, muIndex, muUnique: Float64Array.from(unique), muStart, widest };
+}
+
+/**
  * CPU evaluator of a decoded dynamic-PDE clip. The per-segment time state (what the GPU path needs each
  * frame) is set up here; the per-vertex knot fields of the CPU evaluation on first use.
  */
 export class DynamicEvaluator {
-  constructor(clip) {
+  /** prepared: timeIndex(clip) made elsewhere (a Web Worker builds it with the GPU tables), else made here. */
+  constructor(clip, prepared = null) {
     this.clip = clip;
-    const { nVertices: V, nCurves: C, nSegments: S, curveOf, family, m } = clip;
+    const { nVertices: V, nCurves: C } = clip;
     this.nVertices = V;
     this._fields = null;
     this._tangentFields = null;
     this.item = new Int32Array(V * 3); // (curve, coordinate) item of each value
-    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = curveOf[v] * 3 + w;
-    this.mu = new Float64Array(S * C * 3); // signed time constants
-    for (let i = 0; i < this.mu.length; i++) this.mu[i] = (family[i] >= 2 ? -1 : 1) * m[i];
-    // per segment its distinct time constants (fitted clips have a few hundred at most, most items linear):
-    // muUnique[muStart[s]..muStart[s+1]) and per item the index muIndex into them, so a frame evaluates
-    // each distinct time pair once and gathers the C * 3 pairs from them
-    this.muIndex = new Int32Array(S * C * 3);
-    const unique = [];
-    this.muStart = new Int32Array(S + 1);
-    let widest = 1;
-    for (let s = 0; s < S; s++) {
-      const seen = new Map();
-      let last = NaN;
-      let lastK = -1;
-      for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
-        const mu = this.mu[i];
-        let k = mu === last ? lastK : seen.get(mu); // runs of one constant (most items are linear) skip the map
-        if (k === undefined) {
-          k = seen.size;
-          seen.set(mu, k);
-          unique.push(mu);
-        }
-        this.muIndex[i] = k;
-        last = mu;
-        lastK = k;
-      }
-      this.muStart[s + 1] = unique.length;
-      widest = Math.max(widest, seen.size);
-    }
-    this.muUnique = Float64Array.from(unique);
+    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = clip.curveOf[v] * 3 + w;
+    const { mu, muIndex, muUnique, muStart, widest } = prepared ?? timeIndex(clip);
+    Object.assign(this, { mu, muIndex, muUnique, muStart });
     this.uPhi0 = new Float64Array(widest); // the distinct pairs of the current segment
     this.uPhi1 = new Float64Array(widest);
     this.loc = [0, 0, 0]; // segment, tau, wrapped t of the last locate()

@@ -2,7 +2,7 @@
 // clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js.
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, naturalSplineTangents, vertexBase } from './dynamic.js';
+import { DynamicEvaluator, naturalSplineTangents, timeIndex, vertexBase } from './dynamic.js';
 import { triangleFrame, triangleQuality } from './geometry.js';
 import { orthonormalBases } from './orthobasis.js';
 
@@ -48,7 +48,7 @@ function texture(nTexels, width) {
  * every knot. r (Float64Array, C * 3 * 16) is each item's R; tangents (or null) the natural-spline tangents of
  * every knot's coefficients in the orthonormal bases (orthonormalTangents) for clips with items on the spline
  * (docs/format.md §3.5); direct the basis rows (q, nDirect * 12), bases (nDirect * 3) and curves of the
- * direct vertices in GPU order.
+ * direct vertices in GPU order; timeIndex the CPU evaluator's index of time constants (dynamic.js).
  */
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   if (clip.kind === 'cyclic-spine') return cyclicTables(clip, fittedWidth(clip.nVertices * 3, width));
@@ -98,6 +98,7 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
     r,
     tangents,
     direct,
+    timeIndex: timeIndex(clip), // for the CPU evaluator (a worker makes it off the main thread)
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
 }
@@ -172,7 +173,7 @@ function orthonormalTangents(clip, r) {
 export function gpuLayout(clip, { width = TEXTURE_WIDTH, tables = null, evaluator = null } = {}) {
   const t = tables ?? gpuTables(clip, { width });
   if (clip.kind === 'cyclic-spine') return { ...t, clip };
-  return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip), tableAt: [-1, NaN, NaN] };
+  return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip, t.timeIndex), tableAt: [-1, NaN, NaN] };
 }
 
 /** Bytes of the data textures of gpuTables() (what the GPU holds for the clip, whatever the mesh). */

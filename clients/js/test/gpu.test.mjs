@@ -782,3 +782,15 @@ test('GPU bytes of every fixture stay under 8x its download (textures, pass, att
     player.detach();
   }
 });
+
+test('the CPU evaluator takes the time index made with the GPU tables (in a worker) and evaluates the same', () => {
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde').slice(0, 6)) {
+    const clip = loadCase(c);
+    clip.gpuTables = structuredClone(gpuTables(clip)); // as a worker transfers them
+    const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
+    assert.equal(player.evaluator.muIndex, clip.gpuTables.timeIndex.muIndex, c.name);
+    const t = inRange(c, [0.37, 0.9])[0];
+    assert.deepEqual(player.evaluator.evaluate(t), createEvaluator(clip).evaluate(t), c.name);
+    player.detach();
+  }
+});

@@ -50,6 +50,8 @@ export interface GpuLayout {
   tangents?: Float32Array | null;
   /** The direct vertices' basis rows, bases and curves, in GPU order (the CPU places them). */
   direct?: { q: Float32Array; base: Float32Array; curve: Int32Array };
+  /** The CPU evaluator's index of time constants (dynamic clips; made with the tables, in a worker). */
+  timeIndex?: object;
   /** The clip (gpuLayout; absent in gpuTables). */
   clip?: Clip;
   /** The CPU evaluator whose per-curve state fills the frame table (dynamic clips; gpuLayout). */

@@ -27,7 +27,7 @@ export class ClipResources {
     let made = tables ?? clip.gpuTables ?? null;
     if (made && made.width > width) made = null; // made for wider textures than this renderer takes
     this.clip = clip;
-    this.evaluator = createEvaluator(clip);
+    this.evaluator = createEvaluator(clip, made?.timeIndex ?? null); // the worker's index of time constants
     this.layout = gpuLayout(clip, { width, tables: made, evaluator: this.evaluator });
     /** Why the GPU cannot evaluate this clip (null when it can). */
     this.gpuReason =
