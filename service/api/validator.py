@@ -74,7 +74,10 @@ def _child(conn, target: str, args: tuple, budget: int) -> None:  # noqa: ANN001
             resource.setrlimit(resource.RLIMIT_AS, (limit, resource.RLIM_INFINITY))
         conn.send(("ok", getattr(ingest, target)(*args)))
     except InputError as exc:
-        conn.send(("input", int(getattr(exc, "status", 422)), exc.code, str(exc)))
+        if isinstance(exc.__cause__, MemoryError):  # a reader's "does not fit in memory": the budget's
+            conn.send(("memory",))
+        else:
+            conn.send(("input", int(getattr(exc, "status", 422)), exc.code, str(exc)))
     except MemoryError:
         conn.send(("memory",))
     except BaseException as exc:  # noqa: BLE001 - a reader failing on a hostile file is the file's fault
