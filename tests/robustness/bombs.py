@@ -81,8 +81,9 @@ def meshopt_count_bomb(count: int) -> bytes:
 
 
 def accessor_count_bomb(count: int) -> bytes:
-    """A tetrahedron whose POSITION accessor declares ``count`` vertices (past 2^31)."""
-    doc, raw = _tetra_doc(count=count)
+    """A tetrahedron plus an accessor, used by nothing, that declares ``count`` values (past 2^31)."""
+    doc, raw = _tetra_doc()
+    doc["accessors"].append({"componentType": 5126, "count": count, "type": "SCALAR"})
     return pack_glb(doc, raw)
 
 
