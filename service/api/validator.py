@@ -110,7 +110,10 @@ def _died(proc: multiprocessing.process.BaseProcess, settings: Settings) -> ApiE
     """The error for a child that exited without an answer (killed, crashed in native code)."""
     code = proc.exitcode
     if code is not None and code < 0:
-        name = signal.Signals(-code).name if -code in signal.Signals._value2member_map_ else str(-code)
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
         if -code == signal.SIGKILL and settings.upload_memory_bytes:
             return _over_memory(settings.upload_memory_bytes)
         return ApiError(422, "invalid_upload", f"the file cannot be read: its reader died ({name})")
