@@ -45,7 +45,10 @@ def warm() -> None:
     from multiprocessing import forkserver
 
     context()
-    forkserver.ensure_running()
+    try:
+        forkserver.ensure_running()
+    except (OSError, ImportError, RuntimeError) as exc:  # the first upload will try again and answer
+        log.warning("could not start the upload validators' forkserver: %s", exc)
 
 
 def _address_space() -> int:
