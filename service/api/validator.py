@@ -131,6 +131,12 @@ def run_checked(target: str, args: tuple, settings: Settings) -> Any:
     proc = ctx.Process(target=_child, args=(sender, target, args, settings.upload_memory_bytes), daemon=True)
     try:
         proc.start()
+    except OSError as exc:  # no process could be started (fork or memory limits of the host)
+        receiver.close()
+        sender.close()
+        raise ApiError(503, "unavailable", f"cannot start an upload validator now ({exc}); retry later",
+                       headers={"Retry-After": str(RETRY_AFTER_SECONDS)}) from exc
+    try:
         sender.close()
         if not receiver.poll(settings.upload_timeout_seconds):
             proc.kill()
