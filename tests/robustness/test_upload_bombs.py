@@ -189,13 +189,14 @@ def test_uploads_past_the_limit_get_503_with_retry_after(api) -> None:
     slow = threading.Thread(target=lambda: answer.append(
         httpx.post(svc.url + "/v1/meshes", content=body(), headers=headers, timeout=60)))
     slow.start()
+    scratch = Path(svc.backend.env["PDEANIM_DATA_DIR"]) / "tmp"
     try:
         assert sending.wait(30)
-        deadline = time.monotonic() + 30
-        while True:  # the slow upload holds the slot once the server has read its first bytes
-            r = http.post("/v1/meshes", files={"file": ("other.glb", data)})
-            if r.status_code == 503 or time.monotonic() > deadline:
-                break
+        deadline = time.monotonic() + 60
+        while not list(scratch.glob("upload-*")):  # the slow upload holds its slot and is being written
+            assert time.monotonic() < deadline, "the slow upload never reached the server's scratch file"
+            time.sleep(0.05)
+        r = http.post("/v1/meshes", files={"file": ("other.glb", data)})
         assert r.status_code == 503 and r.headers.get("Retry-After") == "2", r.text  # noqa: PLR2004
         assert "PDEANIM_MAX_CONCURRENT_UPLOADS" in r.json()["error"]["message"]
     finally:
