@@ -18,6 +18,7 @@ under "data" instead of offset/nbytes (and no encoding).
 from __future__ import annotations
 
 import json
+import math
 import struct
 from typing import Any
 
@@ -131,8 +132,15 @@ def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str
     return np.frombuffer(raw, dtype=dtype, count=count)
 
 
-def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError."""
+MAX_DECODED_BYTES = 8 * 1024**3
+"""Default cap on what the compressed arrays of one container may decode to in total (their declared sizes
+are summed before any is decompressed)."""
+
+
+def unpack(blob: bytes,
+           max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError, also
+    when the compressed arrays declare more than ``max_decoded_bytes`` in total (checked before decoding)."""
     if len(blob) < _PREFIX.size:
         raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
@@ -147,28 +155,39 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         header = json.loads(bytes(blob[_PREFIX.size:start]).decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
+    entries = [_entry(name, spec, start, len(blob)) for name, spec in header.pop("arrays", {}).items()]
+    decoded = sum(count * dtype.itemsize for _, _, dtype, _, count, _, _, encoding in entries if encoding)
+    if decoded > max_decoded_bytes:
+        raise ClipFormatError(f"the container's compressed arrays declare {decoded} decoded bytes, over the "
+                              f"limit of {max_decoded_bytes}")
     arrays: dict[str, np.ndarray] = {}
-    for name, spec in header.pop("arrays", {}).items():
-        try:
-            dtype = np.dtype(spec["dtype"])
-            shape = tuple(int(s) for s in spec["shape"])
-            lo, n = start + int(spec["offset"]), int(spec["nbytes"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
-        count = int(np.prod(shape, dtype=np.int64))
-        encoding = spec.get("encoding")
-        if "encoding" in spec and not isinstance(encoding, str):
-            raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
-        if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (
-                encoding is None and n != count * dtype.itemsize):
-            raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")
-        if lo < start or lo + n > len(blob):
-            raise ClipFormatError(f"array {name!r} lies outside the container (truncated file?)")
+    for name, _, dtype, shape, count, lo, n, encoding in entries:
         if encoding is None:
             arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
         else:
             arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
     return header, arrays
+
+
+def _entry(name: str, spec: Any, start: int, size: int) -> tuple:
+    """(name, spec, dtype, shape, count, offset, stored bytes, encoding) of one array entry of a container
+    header, checked against the container's ``size`` (raises ClipFormatError)."""
+    try:
+        dtype = np.dtype(spec["dtype"])
+        shape = tuple(int(s) for s in spec["shape"])
+        lo, n = start + int(spec["offset"]), int(spec["nbytes"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
+    count = math.prod(shape)  # exact: an absurd shape must not wrap around to a small count
+    encoding = spec.get("encoding")
+    if "encoding" in spec and not isinstance(encoding, str):
+        raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
+    if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (
+            encoding is None and n != count * dtype.itemsize):
+        raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")
+    if lo < start or lo + n > size:
+        raise ClipFormatError(f"array {name!r} lies outside the container (truncated file?)")
+    return name, spec, dtype, shape, count, lo, n, encoding
 
 
 def with_header(blob: bytes, extra: dict[str, Any]) -> bytes:
