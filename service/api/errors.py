@@ -64,6 +64,12 @@ def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
 
 def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
     parts, errors = [], exc.errors()
+    broken = [e for e in errors if e.get("type") == "json_invalid"]
+    if broken:  # not JSON at all: a malformed request (400), not a well-formed one with invalid values (422)
+        where = tuple(broken[0].get("loc", ()))[1:2]
+        at = f" at character {where[0]}" if where else ""
+        return JSONResponse(error_body("bad_request", f"malformed JSON body{at}: "
+                                       f"{broken[0].get('ctx', {}).get('error', 'JSON decode error')}"), 400)
     for err in errors[:5]:
         loc = ".".join(str(p) for p in err.get("loc", ()))
         parts.append(f"{loc}: {err.get('msg', 'invalid')}")

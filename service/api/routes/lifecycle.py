@@ -1,5 +1,5 @@
 """Lifecycle: list a tenant's meshes, poses, clips and jobs (cursor pages, filters); delete a mesh (with its
-poses, clips and jobs) or a clip, removing the blobs nothing references any more."""
+poses, clips and jobs) or a clip (with its export jobs), removing the blobs nothing references any more."""
 
 from __future__ import annotations
 
@@ -64,7 +64,9 @@ def list_poses(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, curso
             responses=responses(401, 422))
 def list_clips(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, cursor: str | None = CURSOR,
                mesh_id: str | None = Query(None, **ID), poses_id: str | None = Query(None, **ID),
-               kind: str | None = Query(None, max_length=40, description='producer, e.g. "fit" or "cyclic"'),
+               kind: Literal["dynamic-pde", "cyclic-spine"] | None = Query(
+                   None, description='the clip\'s model: "dynamic-pde" (fit jobs, gait cycles) or '
+                   '"cyclic-spine" (cyclic jobs in spine mode)'),
                ) -> ClipPage:
     """The tenant's clips, newest first; filter by mesh, poses and kind."""
     query = select(ClipRecord).where(ClipRecord.tenant_id == tenant)
@@ -80,7 +82,7 @@ def list_clips(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, curso
             responses=responses(401, 422))
 def list_jobs(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, cursor: str | None = CURSOR,
               state: Literal["queued", "running", "succeeded", "failed", "cancelled"] | None = Query(None),
-              kind: Literal["simulate", "fit", "cyclic"] | None = Query(None),
+              kind: Literal["simulate", "fit", "cyclic", "export"] | None = Query(None),
               mesh_id: str | None = Query(None, **ID)) -> JobPage:
     """The tenant's jobs, newest first; filter by state, kind and mesh."""
     query = select(Job).where(Job.tenant_id == tenant)
@@ -107,7 +109,8 @@ def remove_mesh(mesh_id: str, tenant: TenantDep, store: StoreDep, cache: ClipCac
 @router.delete("/v1/clips/{clip_id}", operation_id="deleteClip", response_model=DeletedOut, tags=["clips"],
                responses=responses(401, 404, 422))
 def remove_clip(clip_id: str, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep) -> DeletedOut:
-    """Delete the clip; its blobs are removed unless another clip uses them."""
+    """Delete the clip with its export jobs (active ones cancelled first); its blobs and the exports' GLBs
+    are removed unless another row uses them."""
     done = delete_clip(store, clip_id, tenant)
     if done is None:
         raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
