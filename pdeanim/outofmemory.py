@@ -19,8 +19,9 @@ def gib(n: int) -> str:
 
 
 def allocation_bytes(exc: BaseException) -> int | None:
-    """Bytes the failed allocation asked for: numpy's array allocation errors carry it; None otherwise."""
-    size = getattr(exc, "_total_size", None)
+    """Bytes the failed allocation asked for: numpy's array allocation errors (and OutOfMemoryError) carry
+    it; None otherwise."""
+    size = getattr(exc, "_total_size", None) or getattr(exc, "needed", None)  # numpy's, or ours re-described
     return int(size) if isinstance(size, int) and size > 0 else None
 
 
