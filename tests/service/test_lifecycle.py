@@ -373,5 +373,10 @@ def test_malformed_json_is_400_and_head_answers_like_get(api, services):
         assert head.headers["content-type"] == get.headers["content-type"]
         assert head.headers.get("etag") == get.headers.get("etag")
     assert api.head("/v1/meshes/mesh_nope").status_code == 404
+    mesh = upload(api, "tet.obj", OBJ + b"# gravity test\n").json()
+    heavy = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
+                                       "params": {"gravity": [1e308] * 3}})  # was a ZeroDivisionError x3
+    assert heavy.status_code == 422 and heavy.json()["error"]["code"] == "invalid_parameter", heavy.text
+    assert "gravity" in heavy.json()["error"]["message"] and "1e+06" in heavy.json()["error"]["message"]
     cancel = api.head("/v1/jobs/job_nope/cancel")  # a POST-only path: 405 naming the methods it has
     assert cancel.status_code == 405 and "POST" in cancel.headers["allow"]
