@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pdeanim.outofmemory import out_of_memory
 from service.store.scratch import alive, die_with_parent
 
 PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "trimesh", "worker.stages"]
@@ -173,9 +174,8 @@ MEMORY_ADVICE = {"simulate": "lower frames or target_tets", "fit": "fit fewer fr
 
 
 def job_out_of_memory(exc: MemoryError, kind: str, memory: int) -> Exception:
-    """The OutOfMemoryError of a job: the failed allocation, the job's limit and the settings that help."""
-    from pdeanim.outofmemory import out_of_memory
-
+    """The OutOfMemoryError of a job: the failed allocation, the job's limit and the settings that help
+    (everything it needs is imported already: it runs where memory ran out)."""
     lower = MEMORY_ADVICE.get(kind, "lower the job's sizes")
     if not memory:
         return out_of_memory(exc, f"{lower}, or set PDEANIM_JOB_MEMORY_BYTES on a machine with more memory")
