@@ -14,7 +14,7 @@ import pytest
 
 from service.store.scratch import alive
 
-from .harness import Services, client, make_key
+from .harness import ROOT, Services, client, make_key
 from .test_worker import HEAVY, children, job_processes, submit, wait_state
 
 pytestmark = pytest.mark.slow
@@ -51,6 +51,30 @@ def wait_healthy(url: str, proc, timeout: float = 120.0) -> None:  # noqa: ANN00
             pass
         time.sleep(0.1)
     raise TimeoutError(f"{url} did not answer /healthz within {timeout} s")
+
+
+def test_a_zombie_is_not_alive_and_die_with_parent_kills_the_child():
+    """A process killed but not reaped yet counts as gone; a child that armed the parent-death signal dies
+    with its parent (here a middle process that exits at once)."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    deadline = time.monotonic() + 30
+    while alive(proc.pid) and time.monotonic() < deadline:  # exited, still unreaped: a zombie
+        time.sleep(0.02)
+    assert not alive(proc.pid) and Path(f"/proc/{proc.pid}").exists()
+    proc.wait()
+    script = ("import os, subprocess, sys\n"
+              "from service.store.scratch import die_with_parent\n"
+              "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'], "
+              "stdout=subprocess.DEVNULL, "
+              "preexec_fn=lambda: die_with_parent(os.getppid()))\n"
+              "print(child.pid, flush=True)\n")  # and exit at once, leaving the sleeper
+    middle = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert middle.returncode == 0, middle.stderr
+    assert wait_gone([int(middle.stdout.split()[0])]) == [], "the child outlived its parent"
 
 
 def test_sigkilled_worker_takes_its_job_process_along(backend, tmp_path, data_dir):
