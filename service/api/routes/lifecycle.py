@@ -1,5 +1,5 @@
 """Lifecycle: list a tenant's meshes, poses, clips and jobs (cursor pages, filters); delete a mesh (with its
-poses, clips and jobs) or a clip (with its export jobs), removing the blobs nothing references any more."""
+poses, clips and jobs) or a clip, removing the blobs nothing references any more."""
 
 from __future__ import annotations
 
@@ -109,8 +109,7 @@ def remove_mesh(mesh_id: str, tenant: TenantDep, store: StoreDep, cache: ClipCac
 @router.delete("/v1/clips/{clip_id}", operation_id="deleteClip", response_model=DeletedOut, tags=["clips"],
                responses=responses(401, 404, 422))
 def remove_clip(clip_id: str, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep) -> DeletedOut:
-    """Delete the clip with its export jobs (active ones cancelled first); its blobs and the exports' GLBs
-    are removed unless another row uses them."""
+    """Delete the clip; its blobs are removed unless another clip uses them."""
     done = delete_clip(store, clip_id, tenant)
     if done is None:
         raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
