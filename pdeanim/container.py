@@ -45,6 +45,8 @@ EXPANSION_FLOOR = 64 << 20
 EXPANSION_FLOOR)`` bytes in all once decoded, before decoding any: a small file must not make a reader
 allocate gigabytes (zstd packs 4 GiB of zeros into 131 KB). Measured on 250 parts of real clips: at most 47x
 (the topology of a 34k-vertex fit, 227 KB -> 10.6 MB); 10x is common."""
+MAX_DECODED_BYTES = 8 * 1024**3
+"""... and whatever their size, never more than this (the default of :func:`unpack`'s cap)."""
 ALLOWED_DTYPES = ("<f4", "<f8", "<i4", "<u4", "<i2", "<u2", "<u1", "<i1")
 _PREFIX = struct.Struct("<8sII")
 
@@ -138,8 +140,10 @@ def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str
     return np.frombuffer(raw, dtype=dtype, count=count)
 
 
-def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError."""
+def unpack(blob: bytes,
+           max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError, also
+    when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding)."""
     if len(blob) < _PREFIX.size:
         raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
@@ -155,12 +159,12 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
     entries = [_entry(name, spec, start, len(blob)) for name, spec in _array_table(header).items()]
-    declared = sum(size for *_, size in entries)
-    if declared > max_decoded_bytes(len(blob)):
+    declared, limit = sum(size for *_, size in entries), decoded_limit(len(blob), max_decoded_bytes)
+    if declared > limit:
         raise ClipFormatError(
-            f"the container's arrays declare {declared} bytes once decoded, more than "
-            f"{max_decoded_bytes(len(blob))} for a container of {len(blob)} bytes (at most {MAX_EXPANSION}x "
-            f"its size, or {EXPANSION_FLOOR} bytes): a damaged or forged file")
+            f"the container's arrays declare {declared} bytes once decoded, more than {limit} for a "
+            f"container of {len(blob)} bytes (at most {MAX_EXPANSION}x its size or {EXPANSION_FLOOR} bytes, "
+            f"and never over {max_decoded_bytes}): a damaged or forged file")
     arrays: dict[str, np.ndarray] = {}
     for name, dtype, shape, lo, n, encoding, size in entries:
         count = size // dtype.itemsize
@@ -171,9 +175,10 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     return header, arrays
 
 
-def max_decoded_bytes(stored: int) -> int:
-    """The most bytes a container of ``stored`` bytes may declare for its decoded arrays (MAX_EXPANSION)."""
-    return max(MAX_EXPANSION * stored, EXPANSION_FLOOR)
+def decoded_limit(stored: int, cap: int = MAX_DECODED_BYTES) -> int:
+    """The most bytes a container of ``stored`` bytes may declare for its decoded arrays: MAX_EXPANSION times
+    its size (at least EXPANSION_FLOOR), and never more than ``cap``."""
+    return min(max(MAX_EXPANSION * stored, EXPANSION_FLOOR), cap)
 
 
 def _array_table(header: dict[str, Any]) -> dict[str, Any]:

@@ -189,7 +189,11 @@ def test_declared_sizes_past_the_expansion_limit_are_refused_before_decoding():
     assert len(blob) < 64 << 10  # 1 GiB of zeros in a few tens of KB
     with pytest.raises(ClipFormatError, match="declare 1073741824 bytes once decoded"):
         container.unpack(blob)
-    assert container.max_decoded_bytes(10 << 20) == container.MAX_EXPANSION * (10 << 20)
+    assert container.decoded_limit(1 << 20) == container.MAX_EXPANSION * (1 << 20)
+    assert container.decoded_limit(100 << 20) == container.MAX_DECODED_BYTES  # 8 GiB at most
+    with pytest.raises(ClipFormatError, match="never over 1000"):
+        container.unpack(container.pack({"part": "x"}, {"z": np.zeros(2000, np.uint8)}),
+                         max_decoded_bytes=1000)
     big = np.zeros(2 << 20, np.uint8)  # 2 MiB of zeros packs into ~100 bytes: under the 64 MiB floor
     _, arrays = container.unpack(container.pack({"part": "x"}, {"z": big}, {"z": "zstd"}))
     assert arrays["z"].nbytes == big.nbytes
