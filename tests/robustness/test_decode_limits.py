@@ -109,7 +109,8 @@ def _container_declaring(shape: list[int]) -> bytes:
 def test_container_declaring_huge_arrays_is_refused_before_decompressing(shape: list[int]) -> None:
     """Declared sizes past the cap (and shapes whose product wraps around int64) are refused from the
     header."""
-    refused_quickly(lambda: container.unpack(_container_declaring(shape)), ClipFormatError, "declare .* bytes once decoded, more than")
+    refused_quickly(lambda: container.unpack(_container_declaring(shape)), ClipFormatError,
+                    "declare .* bytes once decoded, more than")
 
 
 @pytest.mark.parametrize("kind", ["nodes", "primitives"])
