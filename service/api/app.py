@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -12,6 +13,7 @@ from starlette.concurrency import run_in_threadpool
 from ..settings import Settings
 from ..store.context import Store
 from ..store.scratch import clean_stale
+from . import validator
 from .cache import BodyCache, ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
@@ -22,6 +24,7 @@ from .middleware import install_http_middleware
 from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 from .threads import single_threaded_blas
+from .validator import UploadSlots
 from .warmup import preload_recent_clips, warm_clip_routes
 
 log = logging.getLogger("pdeanim.api")
@@ -47,6 +50,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:
             app.state.store = Store.open(settings)
+        threading.Thread(target=validator.warm, name="validator-warm", daemon=True).start()
         if settings.warm_start:
             await run_in_threadpool(preload_recent_clips, app.state.store, app.state.clip_cache,
                                     settings.preload_clips)
@@ -66,6 +70,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.deletions = DeletionWatch(app.state.clip_cache, app.state.frame_cache,
                                         settings.clip_invalidation_seconds)
     app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
+    app.state.upload_slots = UploadSlots(settings.max_concurrent_uploads)
     install_error_handlers(app)
     app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,
                        max_json_bytes=settings.max_json_bytes, log_access=settings.access_log)

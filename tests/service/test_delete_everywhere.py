@@ -160,3 +160,14 @@ def test_the_clip_cache_loads_a_clip_once_for_all_waiters_and_never_keeps_a_gone
         t.join(30)
     assert len(loads) == 1 and len(got) == 8 and len({id(g) for g in got}) == 1
     assert cache.is_gone("c1") and cache.peek("c1") is None and cache.tracked() == []
+
+
+def test_the_bundled_warm_up_clips_load_and_warm_without_a_warning(caplog):
+    from service.api.warmup import warm_clip_routes, warmup_clips
+
+    assert len(warmup_clips()) >= 6
+    for path in warmup_clips():
+        assert load_clip_file(path).n_vertices > 0
+    with caplog.at_level("WARNING", logger="pdeanim.api"):
+        warm_clip_routes()
+    assert not [r for r in caplog.records if r.levelname == "WARNING"], caplog.text
