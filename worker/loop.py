@@ -156,8 +156,11 @@ class Worker:
         """A fit planned in windows enqueues its window tasks; a window task's success advances its fit job
         (the join's writes the clip), and the intermediates go once the fit job succeeded."""
         if job.parent_id is None:
-            if not windows.split(self.store.queue, job, int(result["windowed"]["windows"])):
+            n_windows = int(result["windowed"]["windows"])
+            if not windows.split(self.store.queue, job, n_windows):
                 log.warning("job %s attempt %d was fenced out; its plan is discarded", job.id, job.attempt)
+                if self._state(job.id) in ("cancelled", None):  # no newer attempt will use the plan
+                    windows.release_blobs(self.store.blobs, job.id, n_windows)
             return
         state = windows.task_done(self.store.queue, job, result)
         if state is None:
