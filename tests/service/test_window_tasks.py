@@ -91,14 +91,15 @@ def tasks(store: Store, job_id: str) -> list[Job]:
                                     .order_by(Job.created_at, Job.window_index)))
 
 
-def wait_for(condition, what: str, timeout: float = 240):  # noqa: ANN001, ANN201
-    """Poll ``condition()`` until it is truthy (a generous deadline: the machine is shared)."""
+def wait_for(condition, what: str, svc: Services, timeout: float = 600):  # noqa: ANN001, ANN201
+    """Poll ``condition()`` until it is truthy (a generous deadline: the machine is shared); a timeout
+    says what the processes logged."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if got := condition():
             return got
         time.sleep(0.05)
-    raise TimeoutError(f"never happened: {what}")
+    raise TimeoutError(f"never happened: {what}\n{svc.logs()}")
 
 
 def running_marker(hold: Path, index: int) -> Path | None:
@@ -123,13 +124,13 @@ def test_killed_worker_reruns_its_window_alone(backend, tmp_path, spot_poses):
         (hold / "hold-encode-1").touch()
         with client(svc, make_key(backend, "alice")) as api:
             job_id = submit(api, spot_poses)
-            wait_for(lambda: running_marker(hold, 1), "window 1 encoding")
+            wait_for(lambda: running_marker(hold, 1), "window 1 encoding", svc)
             task = wait_for(lambda: next((t for t in tasks(store, job_id) if t.phase == "encode"
                                           and t.window_index == 1 and t.state == "running"), None),
-                            "the running task of window 1")
+                            "the running task of window 1", svc)
             os.kill(int(task.worker_id.rsplit(":", 1)[1]), signal.SIGKILL)
             (hold / "hold-encode-1").unlink()
-            job = wait_job(api, job_id, timeout=400)
+            job = wait_job(api, job_id, timeout=900)
             assert job["state"] == "succeeded", job
             assert job["result"]["windows"] == N_WINDOWS and job["result"]["windows_done"] == N_WINDOWS
             listed = api.get("/v1/jobs").json()["items"]
@@ -162,7 +163,7 @@ def test_cancel_and_progress_of_a_windowed_job(backend, tmp_path, spot_poses):
         (hold / "hold-encode-2").touch()
         with client(svc, make_key(backend, "alice")) as api:
             job_id = submit(api, spot_poses)
-            wait_for(lambda: running_marker(hold, 2), "window 2 encoding")
+            wait_for(lambda: running_marker(hold, 2), "window 2 encoding", svc)
             job = api.get(f"/v1/jobs/{job_id}").json()
             assert job["state"] == "running" and job["result"]["windows"] == N_WINDOWS
             assert job["result"]["windows_done"] == 2
@@ -171,12 +172,12 @@ def test_cancel_and_progress_of_a_windowed_job(backend, tmp_path, spot_poses):
             r = api.post(f"/v1/jobs/{job_id}/cancel")
             assert r.status_code == 200 and r.json()["state"] == "cancelled", r.text
             wait_for(lambda: all(t.state in ("succeeded", "cancelled") for t in tasks(store, job_id)),
-                     "every window task ended")
+                     "every window task ended", svc)
             (hold / "hold-encode-2").unlink()
             states = {(t.phase, t.window_index): t.state for t in tasks(store, job_id)}
             assert all(states[("encode", i)] == "cancelled" for i in range(2, N_WINDOWS)), states
             log = svc.log_dir / "worker0.log"
-            wait_for(lambda: "cancelled or deleted" in log.read_text(), "the worker stopped the window")
+            wait_for(lambda: "cancelled or deleted" in log.read_text(), "the worker stopped the window", svc)
         with store.sessions() as session:
             assert session.scalar(select(func.count()).select_from(ClipRecord)) == 0
         assert not store.blobs.exists(f"windowed/{job_id}/frames.f32")
