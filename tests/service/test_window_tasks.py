@@ -69,7 +69,7 @@ def services_with(backend, tmp_path: Path, workers: int, **env: str) -> Services
              "PDEANIM_TEST_HOLD_DIR": str(hold), "PDEANIM_JOB_SCHED_IDLE": "false", **env}
     svc = Services(backend, tmp_path / "logs", env_extra=extra)
     svc.log_dir.mkdir(parents=True, exist_ok=True)
-    svc.start_server()
+    svc.start_server("--workers", "1")  # one HTTP process: starts within the deadline on a loaded machine
     for _ in range(workers):
         svc.start_worker()
     return svc
