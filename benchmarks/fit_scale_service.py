@@ -143,7 +143,9 @@ def start(data_dir: Path, env: dict[str, str], workers: int) -> tuple[Launcher, 
 
     key = issue_key(Settings(data_dir=data_dir), "bench")
     launcher = Launcher(data_dir / "logs", {**os.environ, "PDEANIM_DATA_DIR": str(data_dir), **env})
-    launcher.start_server("--with-workers", str(workers), "--log-level", "warning")
+    # one HTTP process: the job does not use more, and on a loaded host the supervisor of several restarted
+    # them while they started (the first request after /healthz was then cut off)
+    launcher.start_server("--with-workers", str(workers), "--workers", "1", "--log-level", "warning")
     return launcher, key
 
 
