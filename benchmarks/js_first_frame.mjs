@@ -52,7 +52,8 @@ try {
     const first = results[0];
     const gpu = first.texture_bytes + first.attribute_bytes + first.pass_bytes;
     console.log(`${worker ? 'worker' : 'main thread'}: first frame ${m('first_frame_ms').toFixed(0)} ms after the download ` +
-      `(decode ${m('decode_ms').toFixed(0)} ms, attach + draw ${m('attach_and_draw_ms').toFixed(0)} ms; longest main-thread ` +
+      `(decode ${m('decode_ms').toFixed(0)} ms, attach + draw ${m('attach_and_draw_ms').toFixed(0)} ms = ` +
+      `${m('attach_ms').toFixed(0)} + ${m('draw_ms').toFixed(0)}; longest main-thread ` +
       `task ${m('longest_main_task_ms').toFixed(0)} ms), runs: ${results.map((x) => x.first_frame_ms.toFixed(0)).join(', ')}`);
     if (worker) {
       console.log(`clip: ${first.vertices} vertices, ${first.curves} curves, ${first.segments} segments; ` +

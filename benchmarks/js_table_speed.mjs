@@ -1,5 +1,5 @@
 // Per-frame JavaScript of the GPU path of the JavaScript client (clients/js): timeUniforms(), which rewrites
-// the per-curve table (time pairs, rigid rotations) the shader reads, on dynamic-PDE clips with thousands of
+// the per-frame table (each curve's coefficients of the frame, short curves' positions, rigid rotations) the shader reads, on dynamic-PDE clips with thousands of
 // curves. Median of 3 runs of 2000 pseudo-random t (each run's median per call), after a JIT warm-up; also
 // the cost when t moves within a frame but maps to the same segment and tau (a paused or clamped clip).
 // Run: node benchmarks/js_table_speed.mjs CLIP [CLIP...]   (CLIP: a .clip file written by the Python library, or
@@ -33,8 +33,9 @@ for (const path of process.argv.slice(2)) {
       ? decodeClip(readFileSync(parts[0]), readFileSync(parts[1]))
       : decodeClipFile(readFileSync(path));
   if (clip.kind !== 'dynamic-pde') continue;
-  const layout = gpuLayout(clip, { mode: 'coefficients' }); // the table does not depend on the mode
-  const ts = Array.from({ length: 2000 }, () => rand() * 1.2 - 0.1);
+  const layout = gpuLayout(clip);
+  // times the clip takes: any for a looping clip, [0, 1] otherwise (others are refused)
+  const ts = Array.from({ length: 2000 }, () => (clip.looping ? rand() * 1.2 - 0.1 : rand()));
   for (const t of ts.slice(0, 300)) timeUniforms(layout, t); // warm-up (JIT)
   const runs = [];
   for (let r = 0; r < 3; r++) {
@@ -45,11 +46,11 @@ for (const path of process.argv.slice(2)) {
     });
     runs.push(median(per));
   }
-  // the same segment and tau as the previous call (t past the end of a clamped clip)
+  // the same segment and tau as the previous call (a paused clip; one period later for a looping one)
   const same = [];
   for (let i = 0; i < 2000; i++) {
     const a = performance.now();
-    timeUniforms(layout, 1.5 + i);
+    timeUniforms(layout, clip.looping ? 0.5 + i : 0.5);
     same.push(performance.now() - a);
   }
   console.log(

@@ -18,6 +18,7 @@ under "data" instead of offset/nbytes (and no encoding).
 from __future__ import annotations
 
 import json
+import math
 import struct
 from typing import Any
 
@@ -38,6 +39,14 @@ CHOICE_BYTES = 1 << 18
 one, and on large arrays the two levels rarely pick differently (one of 15 arrays of an elephant-gallop clip,
 272 bytes of 1.06 MB). On small ones they can (the rest positions of AnimatedMorphSphere: 1,393 bytes as
 picked at level 3, 1,151 at level 19), and compressing both at the final level costs little."""
+MAX_EXPANSION = 1024
+EXPANSION_FLOOR = 64 << 20
+"""Readers refuse a container whose arrays declare more than ``max(MAX_EXPANSION x its size,
+EXPANSION_FLOOR)`` bytes in all once decoded, before decoding any: a small file must not make a reader
+allocate gigabytes (zstd packs 4 GiB of zeros into 131 KB). Measured on 250 parts of real clips: at most 47x
+(the topology of a 34k-vertex fit, 227 KB -> 10.6 MB); 10x is common."""
+MAX_DECODED_BYTES = 8 * 1024**3
+"""... and whatever their size, never more than this (the default of :func:`unpack`'s cap)."""
 ALLOWED_DTYPES = ("<f4", "<f8", "<i4", "<u4", "<i2", "<u2", "<u1", "<i1")
 _PREFIX = struct.Struct("<8sII")
 
@@ -131,8 +140,10 @@ def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str
     return np.frombuffer(raw, dtype=dtype, count=count)
 
 
-def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError."""
+def unpack(blob: bytes,
+           max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError, also
+    when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding)."""
     if len(blob) < _PREFIX.size:
         raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
@@ -147,28 +158,56 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         header = json.loads(bytes(blob[_PREFIX.size:start]).decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
+    entries = [_entry(name, spec, start, len(blob)) for name, spec in _array_table(header).items()]
+    declared, limit = sum(size for *_, size in entries), decoded_limit(len(blob), max_decoded_bytes)
+    if declared > limit:
+        raise ClipFormatError(
+            f"the container's arrays declare {declared} bytes once decoded, more than {limit} for a "
+            f"container of {len(blob)} bytes (at most {MAX_EXPANSION}x its size or {EXPANSION_FLOOR} bytes, "
+            f"and never over {max_decoded_bytes}): a damaged or forged file")
     arrays: dict[str, np.ndarray] = {}
-    for name, spec in header.pop("arrays", {}).items():
-        try:
-            dtype = np.dtype(spec["dtype"])
-            shape = tuple(int(s) for s in spec["shape"])
-            lo, n = start + int(spec["offset"]), int(spec["nbytes"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
-        count = int(np.prod(shape, dtype=np.int64))
-        encoding = spec.get("encoding")
-        if "encoding" in spec and not isinstance(encoding, str):
-            raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
-        if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (
-                encoding is None and n != count * dtype.itemsize):
-            raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")
-        if lo < start or lo + n > len(blob):
-            raise ClipFormatError(f"array {name!r} lies outside the container (truncated file?)")
+    for name, dtype, shape, lo, n, encoding, size in entries:
+        count = size // dtype.itemsize
         if encoding is None:
             arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
         else:
             arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
     return header, arrays
+
+
+def decoded_limit(stored: int, cap: int = MAX_DECODED_BYTES) -> int:
+    """The most bytes a container of ``stored`` bytes may declare for its decoded arrays: MAX_EXPANSION times
+    its size (at least EXPANSION_FLOOR), and never more than ``cap``."""
+    return min(max(MAX_EXPANSION * stored, EXPANSION_FLOOR), cap)
+
+
+def _array_table(header: dict[str, Any]) -> dict[str, Any]:
+    """The header's ``arrays`` entry (removed from ``header``); ClipFormatError unless it is an object."""
+    table = header.pop("arrays", {}) if isinstance(header, dict) else None
+    if not isinstance(table, dict):
+        raise ClipFormatError("container header must be a JSON object with an 'arrays' object")
+    return table
+
+
+def _entry(name: str, spec: Any, start: int, total: int) -> tuple:
+    """(name, dtype, shape, offset, stored bytes, encoding, decoded bytes) of one array entry, checked
+    against the container's size; raises ClipFormatError."""
+    try:
+        dtype = np.dtype(spec["dtype"])
+        shape = tuple(int(s) for s in spec["shape"])
+        lo, n = start + int(spec["offset"]), int(spec["nbytes"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ClipFormatError(f"bad array entry {name!r} in container header") from exc
+    encoding = spec.get("encoding")
+    if "encoding" in spec and not isinstance(encoding, str):
+        raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
+    size = math.prod(shape) * dtype.itemsize  # Python integers: a forged shape cannot wrap around
+    if spec["dtype"] not in ALLOWED_DTYPES or min(shape, default=0) < 0 or n < 0 or (
+            encoding is None and n != size):
+        raise ClipFormatError(f"array {name!r} has an inconsistent dtype or size")
+    if lo < start or lo + n > total:
+        raise ClipFormatError(f"array {name!r} lies outside the container (truncated file?)")
+    return name, dtype, shape, lo, n, encoding, size
 
 
 def with_header(blob: bytes, extra: dict[str, Any]) -> bytes:

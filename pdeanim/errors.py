@@ -68,3 +68,16 @@ class TargetNotMetError(InputError):
 
     code = "target_not_met"
     status = 422
+
+
+class OutOfMemoryError(PdeanimError, MemoryError):
+    """The work needed more memory than the process may use (an allocation failed under its limit); retrying
+    under the same limit fails the same way. A MemoryError too, so handlers of plain ones catch it.
+    ``needed`` is the failed allocation in bytes (None if unknown), ``limit`` the limit in force in bytes
+    (None if none was found)."""
+
+    code = "out_of_memory"
+
+    def __init__(self, message: str, needed: int | None = None, limit: int | None = None):
+        self.needed, self.limit = needed, limit
+        super().__init__(message)

@@ -90,7 +90,10 @@ def read_npz(source: str | Path | bytes, names: tuple[str, ...], check: Checker,
             return out
     except InputError:
         raise
-    except MemoryError as exc:
-        raise error("the .npz arrays do not fit in memory") from exc
+    except MemoryError as exc:  # not bad input: the process's memory limit (CLI exit 4, job out_of_memory)
+        from .outofmemory import out_of_memory
+
+        raise out_of_memory(exc, "the .npz arrays do not fit in memory: use fewer frames or vertices, or "
+                                 "raise the limit") from exc
     except _FAILURES as exc:
         raise error(f"not a valid .npz file ({type(exc).__name__}: {exc})") from exc

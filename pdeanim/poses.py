@@ -155,14 +155,21 @@ def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None)
 
 
 def save_poses(path: str | Path, poses: Poses) -> None:
-    """Write POSES.npz (the bytes of :func:`poses_to_bytes`)."""
-    Path(path).write_bytes(poses_to_bytes(poses))
+    """Write POSES.npz (the bytes of :func:`poses_to_bytes`), streamed to the file (no copy in memory)."""
+    with open(path, "wb") as fh:
+        _write_npz(fh, poses)
 
 
 def poses_to_bytes(poses: Poses) -> bytes:
     """The POSES.npz file as bytes, float32 vertices, int32 faces and float64 times (what
     ``GET /v1/poses/{id}`` serves and ``pdeanim simulate`` writes)."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, vertices=poses.vertices.astype(np.float32), faces=poses.faces.astype(np.int32),
-                        times=poses.times.astype(np.float64))
+    _write_npz(buf, poses)
     return buf.getvalue()
+
+
+def _write_npz(fh: io.IOBase, poses: Poses) -> None:
+    """POSES.npz into a binary file object (arrays already in their canonical dtypes are not copied)."""
+    np.savez_compressed(fh, vertices=poses.vertices.astype(np.float32, copy=False),
+                        faces=poses.faces.astype(np.int32, copy=False),
+                        times=poses.times.astype(np.float64, copy=False))

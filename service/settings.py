@@ -47,6 +47,21 @@ class Settings(BaseSettings):
     max_faces: int = Field(1_000_000, gt=0)
     max_frames: int = Field(2_000, gt=0)
     max_pose_bytes: int = Field(1024**3, gt=0, description="inflated size of an uploaded poses .npz's arrays")
+    max_decoded_bytes: int = Field(1024**3, gt=0, description="what decoding one glTF upload may allocate "
+                                   "in total (EXT_meshopt_compression views and decoded accessors); checked "
+                                   "from the declared sizes before decoding")
+    max_gltf_json_bytes: int = Field(32 * 1024**2, gt=0, description="size of a glTF upload's JSON")
+    max_gltf_json_depth: int = Field(64, gt=0, description="nesting depth of a glTF upload's JSON")
+    max_gltf_nodes: int = Field(20_000, gt=0, description="nodes a glTF upload may declare")
+    max_gltf_primitives: int = Field(20_000, gt=0, description="mesh primitives a glTF upload's scene may "
+                                     "place")
+    max_gltf_accessors: int = Field(100_000, gt=0, description="accessors a glTF upload may declare")
+    upload_memory_bytes: int = Field(2 * 1024**3, ge=0, description="address space the validation of one "
+                                     "upload may add to its child process (RLIMIT_AS over the preloaded "
+                                     "libraries); over it: 413; 0 = no limit")
+    upload_timeout_seconds: float = Field(120.0, gt=0, description="longest validation of one upload")
+    max_concurrent_uploads: int = Field(2, ge=1, description="uploads one API process receives and "
+                                        "validates at once; more: 503 with Retry-After")
     max_json_bytes: int = Field(1024**2, gt=0, description="largest non-upload request body (job requests)")
     max_header_bytes: int = Field(32 * 1024, gt=0, description="largest total size of a request's headers")
     access_log: bool = Field(True, description="one log line per request (logger pdeanim.access, level INFO)")
@@ -111,6 +126,14 @@ class Settings(BaseSettings):
         tol = FitTolerances()
         changes = {"window_fit_values": self.fit_window_fit_values, "window_values": self.fit_window_values}
         return replace(tol, **{k: v for k, v in changes.items() if v})
+
+    def gltf_limits(self):  # noqa: ANN201 - pdeanim.gltf.document.GltfLimits (imported when needed)
+        """The glTF declared-size limits of uploads, from these settings."""
+        from pdeanim.gltf.document import GltfLimits
+
+        return GltfLimits(max_json_bytes=self.max_gltf_json_bytes, max_json_depth=self.max_gltf_json_depth,
+                          max_decoded_bytes=self.max_decoded_bytes, max_nodes=self.max_gltf_nodes,
+                          max_primitives=self.max_gltf_primitives, max_accessors=self.max_gltf_accessors)
 
     def resolved_data_dir(self) -> Path:
         """The data directory as an absolute path (created on demand)."""

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from service.store.scratch import alive
+from pdeanim.outofmemory import out_of_memory
+from service.store.scratch import alive, die_with_parent
 
 PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "trimesh", "worker.stages"]
 
@@ -33,11 +34,17 @@ def child_context() -> multiprocessing.context.BaseContext:
     return ctx
 
 
+def _orphaned(parent_pid: int) -> bool:
+    """Whether the worker (``parent_pid``) is gone: nobody will take this attempt's result."""
+    return os.getppid() == 1 or not alive(parent_pid)
+
+
 def _watch_parent(parent_pid: int) -> None:
+    """Backstop of the parent-death signal (where prctl is unavailable): exit once the worker is gone."""
     while True:
         time.sleep(1.0)
-        if os.getppid() == 1 or not alive(parent_pid):
-            os._exit(3)  # the worker is gone: nobody will take our result
+        if _orphaned(parent_pid):
+            os._exit(3)
 
 
 def _warm_blas() -> None:
@@ -79,7 +86,12 @@ def lower_priority(nice: int, cpu_shares: int = 0, cgroup_root: Path = CGROUP_V1
 
 
 def child_main(conn, job: dict[str, Any], settings_json: str, parent_pid: int) -> None:  # noqa: ANN001
-    """Entry point of the child: run the job's stage, send the outcome on ``conn``, and exit at once."""
+    """Entry point of the child: run the job's stage, send the outcome on ``conn``, and exit at once. It dies
+    with its parent (the worker's forkserver, which exits when the worker does): SIGKILL by the kernel, so
+    no job process outlives a killed worker."""
+    die_with_parent()
+    if _orphaned(parent_pid):  # the worker died before the signal was armed
+        os._exit(3)
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
     code = 0
     try:
@@ -126,17 +138,49 @@ def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
         conn.send(("done", result))
     except InputError as exc:
         conn.send(("error", exc.code, str(exc), False))
-    except MemoryError:
-        conn.send(("error", "out_of_memory", f"the job needs more memory than its limit of "
-                   f"{memory / 2**30:.2f} GiB ({memory} bytes; PDEANIM_JOB_MEMORY_BYTES or "
-                   f"PDEANIM_JOB_MEMORY_FRACTION): lower "
-                   "frames, target_tets or the poses' size, or raise the limit", True))
-    except Exception as exc:  # noqa: BLE001 - unexpected: reported for a retry
+    except MemoryError as exc:  # the same limit fails the same way: not retried
+        conn.send(("error", "out_of_memory", str(job_out_of_memory(exc, job["kind"], memory)), False))
+    except DETERMINISTIC as exc:  # the job is deterministic: the same input fails the same way again
+        traceback.print_exc()
+        conn.send(("error", "computation_error", computation_error(exc, job["kind"]), False))
+    except Exception as exc:  # noqa: BLE001 - unexpected (I/O, the blob store): reported for a retry
         traceback.print_exc()
         conn.send(("error", type(exc).__name__, f"{type(exc).__name__}: {exc}", True))
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
         sys.stderr.flush()
+
+
+DETERMINISTIC = (ArithmeticError, ValueError, LookupError, TypeError, AssertionError)
+"""Errors of a stage's computation (not of I/O): jobs are deterministic for the same input and seed, so
+these recur on every attempt and fail the job at once (error code ``computation_error``) instead of after
+PDEANIM_MAX_ATTEMPTS tries."""
+
+
+def computation_error(exc: BaseException, kind: str) -> str:
+    """The message of a deterministic failure: the error, where it was raised, and that it is final."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = ""
+    if frames:
+        where = f" at {'/'.join(Path(frames[-1].filename).parts[-2:])}:{frames[-1].lineno}"
+    return (f"the {kind} job failed with {type(exc).__name__}: {exc}{where}; not retried (the same input "
+            "fails the same way): the input or parameters reach a case the checks at submission do not "
+            "catch yet")
+
+
+MEMORY_ADVICE = {"simulate": "lower frames or target_tets", "fit": "fit fewer frames or a coarser mesh",
+                 "cyclic": "lower frames, n_curves or points", "export": "export at a lower fps"}
+"""What to lower, per job kind, when a job runs out of memory."""
+
+
+def job_out_of_memory(exc: MemoryError, kind: str, memory: int) -> Exception:
+    """The OutOfMemoryError of a job: the failed allocation, the job's limit and the settings that help
+    (everything it needs is imported already: it runs where memory ran out)."""
+    lower = MEMORY_ADVICE.get(kind, "lower the job's sizes")
+    if not memory:
+        return out_of_memory(exc, f"{lower}, or set PDEANIM_JOB_MEMORY_BYTES on a machine with more memory")
+    return out_of_memory(exc, f"{lower}, or raise PDEANIM_JOB_MEMORY_BYTES (now {memory} bytes) or "
+                              "PDEANIM_JOB_MEMORY_FRACTION", (memory, "job memory limit"))
 
 
 @dataclass

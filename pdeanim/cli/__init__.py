@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
-from ..errors import InputError, ParameterError, PdeanimError
+from ..errors import InputError, OutOfMemoryError, ParameterError, PdeanimError
 from . import cyclic, export, fit, frame, simulate
 
 
@@ -24,6 +24,18 @@ class Command(Protocol):
 COMMANDS: tuple[Command, ...] = (simulate, fit, frame, export, cyclic)
 LIBRARY_COMMANDS = frozenset({"simulate", "fit", "frame", "export", "cyclic"})
 """Names of the library's sub-commands (their ``--out`` is checked before any work starts)."""
+EXIT_OUT_OF_MEMORY = 4
+"""Exit code of a command that ran out of memory (an allocation failed under the process's limit)."""
+RAISE_LIMIT = "or raise the limit (ulimit -v, or the container's memory)"
+MEMORY_ADVICE = {
+    "simulate": f"lower --frames or --tets, {RAISE_LIMIT}",
+    "fit": "fit fewer frames (a part of the poses) or a coarser mesh: a fit needs about 480 bytes per frame "
+           f"x vertex plus 0.5 GiB (pdeanim.fit.budget), {RAISE_LIMIT}",
+    "frame": f"ask for fewer times at once (--t), {RAISE_LIMIT}",
+    "export": f"export at a lower --fps, {RAISE_LIMIT}",
+    "cyclic": f"lower --frames, --curves or --points, {RAISE_LIMIT}",
+}
+"""What would help, per command, when it runs out of memory."""
 
 
 def build_parser(extra_commands: Sequence[Command] = ()) -> argparse.ArgumentParser:
@@ -58,7 +70,8 @@ def check_writable(path: str) -> None:
 
 
 def main(argv: list[str] | None = None, extra_commands: Sequence[Command] = ()) -> int:
-    """Entry point: parse, run the sub-command, and turn library errors into a message and exit code 2."""
+    """Entry point: parse, run the sub-command, and turn library errors into a message and an exit code: 2 bad
+    input, 4 out of memory (EXIT_OUT_OF_MEMORY), 1 other failures."""
     parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -71,11 +84,23 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Command] = ()) 
     except InputError as exc:
         print(f"pdeanim {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except (MemoryError, OutOfMemoryError) as exc:
+        return _out_of_memory(args.command, exc)
     except PdeanimError as exc:
         print(f"pdeanim {args.command}: failed: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 130
+
+
+def _out_of_memory(command: str, exc: BaseException) -> int:
+    """Say what ran out of memory, under which limit and what would help; EXIT_OUT_OF_MEMORY."""
+    from ..outofmemory import out_of_memory
+
+    if not isinstance(exc, OutOfMemoryError):
+        exc = out_of_memory(exc, MEMORY_ADVICE.get(command, RAISE_LIMIT))
+    print(f"pdeanim {command}: failed: {exc}", file=sys.stderr)
+    return EXIT_OUT_OF_MEMORY
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -2,7 +2,8 @@
 
 Exit codes: 0 the target was met (or none was set, or ``--best-effort``); 3 the target was not met: the best
 clip found is still written and stderr says what was achieved against what was asked (and why the search
-stopped, e.g. the segment cap); 2 bad input; 1 other failures.
+stopped, e.g. the segment cap); 2 bad input; 4 out of memory (the message names the failed allocation, the
+limit in force and what to lower); 1 other failures.
 """
 
 from __future__ import annotations
@@ -95,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     progress = cli_progress("fit", args.quiet)
     try:
         parts = fit_poses(poses, options, progress=progress)
+    except MemoryError as exc:
+        raise out_of_memory_in_fit(exc, poses.n_frames, poses.n_vertices) from None
     finally:
         if progress is not None:
             progress.close()
@@ -108,6 +111,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"pdeanim fit: {shortfall} (the best clip found was written to {args.out})", file=sys.stderr)
         return 0 if args.best_effort else EXIT_TARGET_NOT_MET
     return 0
+
+
+def out_of_memory_in_fit(exc: MemoryError, n_frames: int, n_vertices: int) -> Exception:
+    """The OutOfMemoryError of a fit, with what a fit of this size is estimated to need."""
+    from ..errors import OutOfMemoryError
+    from ..fit.budget import fit_memory_bytes
+    from ..outofmemory import gib, out_of_memory
+
+    if isinstance(exc, OutOfMemoryError):
+        return exc
+    need = fit_memory_bytes(n_frames, n_vertices)
+    advice = (f"a fit of {n_frames} frames x {n_vertices} vertices needs about {gib(need)} "
+              "(pdeanim.fit.budget): fit fewer frames (a part of the poses) or a coarser mesh, or raise the "
+              "limit (ulimit -v, or the container's memory)")
+    return out_of_memory(exc, advice)
 
 
 def write_pictures(poses, parts, out_dir: str, name: str) -> dict:  # noqa: ANN001

@@ -8,14 +8,15 @@ import binascii
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote
 
 import numpy as np
 
-from ..errors import InputError, PosesInputError
-from .glb import COMPONENT_DTYPES, GLB_MAGIC, TYPE_SIZES, unpack_glb
+from ..errors import InputError, LimitError, PosesInputError
+from .glb import COMPONENT_DTYPES, GLB_MAGIC, TYPE_SIZES, split_glb
 
 _NORM_DIVISOR = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 MAX_ACCESSOR_VALUES = 60_000_000  # cap on components of one accessor not backed by checked buffer data
@@ -24,6 +25,58 @@ MALFORMED = (KeyError, TypeError, ValueError, AttributeError, IndexError, Overfl
 # required extensions that change how geometry is stored and that this reader cannot decode
 UNSUPPORTED_GEOMETRY = ("KHR_draco_mesh_compression", "KHR_meshopt_compression", "EXT_mesh_gpu_instancing")
 MESHOPT = "EXT_meshopt_compression"  # decoded here (pdeanim.gltf.meshopt)
+MAX_COUNT = 2**31 - 1  # glTF counts are 32-bit; a larger one is refused before anything is allocated
+
+
+@dataclass(frozen=True)
+class GltfLimits:
+    """Explicit limits on what a glTF asset may declare, checked against the JSON before the work it
+    declares is done (each names its service setting in the error)."""
+
+    max_json_bytes: int = 32 * 1024**2
+    max_json_depth: int = 64
+    max_decoded_bytes: int = 1024**3  # decoded meshopt views + decoded accessors (float64), in total
+    max_nodes: int = 20_000
+    max_primitives: int = 20_000
+    max_accessors: int = 100_000
+
+
+def json_depth(raw: bytes) -> int:
+    """The deepest nesting of arrays and objects in JSON text (brackets inside strings ignored), found with
+    a few vectorised passes instead of a recursive parser (Python's json module raises RecursionError past
+    about 1,000 levels)."""
+    text = np.frombuffer(raw, np.uint8)
+    at = np.flatnonzero((text == ord('"')) | (text == ord("\\")))  # quotes and backslashes, in order
+    quotes = at[text[at] == ord('"')]
+    if len(at) > len(quotes):  # a quote after an odd run of backslashes is escaped: drop it
+        index = np.arange(len(text))
+        last_plain = np.maximum.accumulate(np.where(text != ord("\\"), index, -1))
+        run = quotes - 1 - last_plain[np.maximum(quotes - 1, 0)]
+        quotes = quotes[(run % 2 == 0) | (quotes == 0)]
+    folded = text | 0x20  # "[" -> "{" and "]" -> "}" (no other byte folds onto them)
+    brackets = np.flatnonzero((folded == ord("{")) | (folded == ord("}")))
+    outside = np.searchsorted(quotes, brackets) % 2 == 0  # an even number of quotes before it
+    kind = text[brackets[outside]]
+    steps = np.where((kind == ord("[")) | (kind == ord("{")), 1, -1)
+    return int(np.cumsum(steps).max()) if steps.size else 0
+
+
+def parse_json(raw: bytes, limits: GltfLimits, error: type[InputError]) -> dict[str, Any]:
+    """The glTF JSON object of ``raw``, after its size and nesting depth were checked against ``limits``."""
+    if len(raw) > limits.max_json_bytes:
+        raise LimitError("glTF JSON size in bytes", len(raw), limits.max_json_bytes,
+                         "PDEANIM_MAX_GLTF_JSON_BYTES")
+    depth = json_depth(raw)
+    if depth > limits.max_json_depth:
+        raise LimitError("glTF JSON nesting depth", depth, limits.max_json_depth,
+                         "PDEANIM_MAX_GLTF_JSON_DEPTH")
+    try:
+        doc = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise error(f"not a glTF file (its JSON does not parse): {exc}") from exc
+    if not isinstance(doc, dict):
+        raise error("glTF JSON must be an object")
+    return doc
 
 
 @contextmanager
@@ -41,8 +94,11 @@ class GltfDocument:
     """The JSON of a glTF asset with its buffers loaded; ``error`` is the InputError class raised on
     defects."""
 
-    def __init__(self, doc: dict[str, Any], buffers: list[bytes], error: type[InputError] = PosesInputError):
+    def __init__(self, doc: dict[str, Any], buffers: list[bytes], error: type[InputError] = PosesInputError,
+                 limits: GltfLimits | None = None):
         self.doc, self.buffers, self.error = doc, buffers, error
+        self.limits = limits or GltfLimits()
+        self.decoded_bytes = 0  # what decoding this document has allocated so far (capped by limits)
         self._decoded: dict[int, bytes] = {}
         version = str(doc.get("asset", {}).get("version", ""))
         if not version.startswith("2."):
@@ -53,6 +109,14 @@ class GltfDocument:
                 f"the glTF file needs {', '.join(blocked)} to decode its geometry, which pdeanim does "
                 f"not read; export it without mesh compression"
             )
+
+    def spend(self, nbytes: int, what: str) -> None:
+        """Count ``nbytes`` about to be decoded for ``what``; LimitError before allocating past the cap."""
+        if self.decoded_bytes + nbytes > self.limits.max_decoded_bytes:
+            raise LimitError(f"decoded size of the glTF data in bytes (with {what} of {nbytes})",
+                             self.decoded_bytes + nbytes, self.limits.max_decoded_bytes,
+                             "PDEANIM_MAX_DECODED_BYTES")
+        self.decoded_bytes += nbytes
 
     def list(self, key: str) -> list[dict[str, Any]]:
         """A top-level array of the document (``nodes``, ``meshes``...), empty when absent."""
@@ -74,8 +138,9 @@ class GltfDocument:
             dtype = COMPONENT_DTYPES[ctype]
         except (KeyError, TypeError, ValueError) as exc:
             raise self.error(f"accessor {index} is malformed: {exc}") from exc
-        if count < 0 or count * width > MAX_ACCESSOR_VALUES:
+        if count < 0 or count > MAX_COUNT or count * width > MAX_ACCESSOR_VALUES:
             raise self.error(f"accessor {index} has an implausible count {count}")
+        self.spend(count * width * 8, f"accessor {index}")  # the float64/int64 result
         if "bufferView" in acc:
             data = self._strided(acc.get("bufferView"), int(acc.get("byteOffset", 0)), count, width, dtype)
         else:
@@ -136,6 +201,7 @@ class GltfDocument:
 
             if not 0 <= int(ext.get("buffer", 0)) < len(self.buffers):
                 raise self.error(f"compressed bufferView {index} refers to a missing buffer")
+            self.spend(meshopt_size(ext, index, self.error), f"compressed bufferView {index}")
             try:
                 data = decode_view(ext, self.buffers)
             except (RuntimeError, ValueError, KeyError) as exc:
@@ -159,6 +225,22 @@ class GltfDocument:
         out = data.copy()
         out[idx] = values
         return out
+
+
+def meshopt_size(ext: dict, index: int, error: type[InputError]) -> int:
+    """Bytes an EXT_meshopt_compression view declares it decodes to (count x byteStride), after checking
+    that count and stride are ones the spec allows."""
+    try:
+        count, stride, mode = int(ext["count"]), int(ext["byteStride"]), ext.get("mode")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise error(f"compressed bufferView {index} is malformed: {exc}") from exc
+    if not 0 <= count <= MAX_COUNT:
+        raise error(f"compressed bufferView {index} declares count {count}, outside [0, {MAX_COUNT}]")
+    strides = range(4, 257, 4) if mode == "ATTRIBUTES" else (2, 4)
+    if stride not in strides:
+        raise error(f"compressed bufferView {index} ({mode}) has byteStride {stride}, which the "
+                    "EXT_meshopt_compression spec does not allow")
+    return count * stride
 
 
 def _buffer_bytes(
@@ -190,8 +272,11 @@ def _buffer_bytes(
         raise error(f"cannot read buffer {index} from {uri!r}: {exc}") from exc
 
 
-def load_document(source: str | Path | bytes, error: type[InputError] = PosesInputError) -> GltfDocument:
-    """Parse GLB or .gltf (path or bytes); external buffers are read only next to a file given by path."""
+def load_document(source: str | Path | bytes, error: type[InputError] = PosesInputError,
+                  limits: GltfLimits | None = None) -> GltfDocument:
+    """Parse GLB or .gltf (path or bytes); external buffers are read only next to a file given by path.
+    The JSON's size and depth are checked against ``limits`` before it is parsed."""
+    limits = limits or GltfLimits()
     base = None
     if isinstance(source, bytes | bytearray | memoryview):
         data = bytes(source)
@@ -201,17 +286,16 @@ def load_document(source: str | Path | bytes, error: type[InputError] = PosesInp
         except OSError as exc:
             raise error(f"cannot read glTF file {source}: {exc}") from exc
         base = Path(source).parent
-    try:
-        if data[:4] == GLB_MAGIC:
-            doc, glb_bin = unpack_glb(data)
-        else:
-            doc, glb_bin = json.loads(data.decode("utf-8")), None
-    except InputError as exc:
-        raise error(str(exc)) from exc
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise error(f"not a glTF file (neither GLB nor glTF JSON): {exc}") from exc
-    if not isinstance(doc, dict):
-        raise error("glTF JSON must be an object")
+    if data[:4] == GLB_MAGIC:
+        try:
+            raw, glb_bin = split_glb(data)
+        except LimitError:
+            raise
+        except InputError as exc:
+            raise error(str(exc)) from exc
+    else:
+        raw, glb_bin = data, None
+    doc = parse_json(raw, limits, error)
     with malformed_as(error):
         buffers = [_buffer_bytes(b, i, glb_bin, base, error) for i, b in enumerate(doc.get("buffers", []))]
-        return GltfDocument(doc, buffers, error)
+        return GltfDocument(doc, buffers, error, limits)

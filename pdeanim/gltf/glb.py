@@ -126,6 +126,19 @@ def _pack(doc: dict[str, Any], parts: list[bytes], length: int) -> bytes:
 
 def unpack_glb(data: bytes) -> tuple[dict[str, Any], bytes | None]:
     """Split GLB bytes into the parsed JSON document and the BIN chunk (None when absent)."""
+    raw, binary = split_glb(data)
+    try:
+        doc = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise InputError(f"GLB JSON chunk is not valid JSON: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise InputError("GLB has no JSON chunk")
+    return doc, binary
+
+
+def split_glb(data: bytes) -> tuple[bytes, bytes | None]:
+    """Split GLB bytes into the raw JSON chunk (not parsed: the caller checks its size and depth first) and
+    the BIN chunk (None when absent)."""
     if len(data) < 20 or data[:4] != GLB_MAGIC:
         raise InputError("not a GLB file (missing 'glTF' magic)")
     _, version, length = struct.unpack_from("<4sII", data, 0)
@@ -140,13 +153,10 @@ def unpack_glb(data: bytes) -> tuple[dict[str, Any], bytes | None]:
         if len(chunk) != size:
             raise InputError("GLB chunk runs past the end of the file")
         if kind == CHUNK_JSON and doc is None:
-            try:
-                doc = json.loads(chunk.decode("utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise InputError(f"GLB JSON chunk is not valid JSON: {exc}") from exc
+            doc = bytes(chunk)
         elif kind == CHUNK_BIN and binary is None:
             binary = bytes(chunk)
         pos += 8 + _pad4(size)
-    if not isinstance(doc, dict):
+    if doc is None:
         raise InputError("GLB has no JSON chunk")
     return doc, binary

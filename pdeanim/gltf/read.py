@@ -11,7 +11,8 @@ import numpy as np
 
 from ..errors import LimitError, MeshInputError, ParameterError, PosesInputError
 from ..poses import DEFAULT_FPS, PoseLimits, Poses, make_poses
-from .document import GltfDocument, load_document, malformed_as
+from .declared import check_declared
+from .document import GltfDocument, GltfLimits, load_document, malformed_as
 from .primitives import Primitive, read_primitive
 from .scene import animation_tracks, morph_weights, pick_animation, scene_order, time_range, world_matrices
 from .skin import blend, inverse_binds, normalise_weights
@@ -102,26 +103,29 @@ def read_animated_poses(
     limits: PoseLimits | None = None,
     *,
     animation: int | str | None = None,
+    gltf_limits: GltfLimits | None = None,
 ) -> Poses:
     """Poses (F, V, 3) of a glTF/GLB animation sampled at ``fps`` from its first to its last key time.
 
-    Raises PosesInputError when the file has no animation, no mesh, or is malformed; skin weights that do
+    Raises PosesInputError when the file has no animation, no mesh, or is malformed, LimitError when it
+    declares more than ``limits`` or ``gltf_limits`` allow (checked before the work); skin weights that do
     not sum to 1 are renormalised and counted in ``meta["skin_weights"]``.
     """
     limits = limits or PoseLimits()
-    gd = load_document(source, PosesInputError)
+    gd = load_document(source, PosesInputError, gltf_limits)
     with malformed_as(PosesInputError):
+        check_declared(gd, limits.max_vertices)
         index, anim = pick_animation(gd, animation)
         tracks = animation_tracks(gd, anim)
         start, end = time_range(tracks)
         times = sample_times(start, end, float(fps), limits.max_frames)
-        instances = mesh_instances(gd)
-        n_vertices = sum(len(i.primitive.positions) for i in instances)
-        _check_limits(len(times), n_vertices, limits)
         if len(times) * len(gd.list("nodes")) * 16 > limits.max_values:  # node matrices held per frame
             raise LimitError(
                 "frames x nodes x 16", len(times) * len(gd.list("nodes")) * 16, limits.max_values
             )
+        instances = mesh_instances(gd)
+        n_vertices = sum(len(i.primitive.positions) for i in instances)
+        _check_limits(len(times), n_vertices, limits)
         world = world_matrices(gd, tracks, times)
         reports: list[dict] = []
         frames = np.concatenate(
@@ -136,10 +140,13 @@ def read_animated_poses(
     return make_poses(frames, faces, times, meta, limits)
 
 
-def read_static_mesh(source: str | Path | bytes) -> tuple[np.ndarray, np.ndarray]:
-    """The scene at rest (no animation applied): vertices (V, 3) f64 and faces (T, 3) i32 in file order."""
-    gd = load_document(source, MeshInputError)
+def read_static_mesh(source: str | Path | bytes, gltf_limits: GltfLimits | None = None,
+                     max_vertices: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The scene at rest (no animation applied): vertices (V, 3) f64 and faces (T, 3) i32 in file order;
+    LimitError when the JSON declares more than the limits allow (checked before the scene is read)."""
+    gd = load_document(source, MeshInputError, gltf_limits)
     with malformed_as(MeshInputError):
+        check_declared(gd, max_vertices)
         instances = mesh_instances(gd)
         times = np.zeros(1)
         world = world_matrices(gd, {}, times)

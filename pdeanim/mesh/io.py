@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LimitError, MeshInputError
+from ..gltf.document import GltfLimits
 
 FORMATS = {".obj": "obj", ".ply": "ply", ".stl": "stl", ".off": "off", ".glb": "glb", ".gltf": "gltf"}
 """Known file extensions and the trimesh file type each is parsed as."""
@@ -24,11 +25,13 @@ FORMATS = {".obj": "obj", ".ply": "ply", ".stl": "stl", ".off": "off", ".glb": "
 
 @dataclass(frozen=True)
 class MeshLimits:
-    """Explicit limits on what an uploaded mesh may hold (checked before and after parsing)."""
+    """Explicit limits on what an uploaded mesh may hold (checked before and after parsing); ``gltf`` holds
+    the limits on what a glTF file may declare (None: the library's defaults)."""
 
     max_file_bytes: int = 100 * 1024 * 1024
     max_vertices: int = 2_000_000
     max_faces: int = 4_000_000
+    gltf: GltfLimits | None = None
 
 
 @dataclass
@@ -130,7 +133,7 @@ def load_mesh(source: str | Path | bytes, *, filename: str | None = None, limits
     file_type = file_type_of(name)
     if len(data) == 0:
         raise MeshInputError(f"mesh file {name!r} is empty")
-    vertices, faces = parse_mesh(data, file_type, name, folder)
+    vertices, faces = parse_mesh(data, file_type, name, folder, limits)
     validate_arrays(vertices, faces, name, limits)
     mesh = SurfaceMesh(vertices, faces, source=name)
     return merge_duplicate_vertices(mesh) if merge_seams else mesh
@@ -147,14 +150,15 @@ def file_type_of(name: str) -> str:
 
 
 def parse_mesh(
-    data: bytes, file_type: str, name: str, folder: Path | None = None
+    data: bytes, file_type: str, name: str, folder: Path | None = None, limits: MeshLimits | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Parse bytes with trimesh into raw (V, 3) float64 vertices and (T, 3) int64 faces (not yet validated).
 
-    ``folder`` lets a .gltf on disk load its external buffers; bytes from an upload get no resolver.
+    ``folder`` lets a .gltf on disk load its external buffers; bytes from an upload get no resolver. glTF
+    files are checked against ``limits`` from their declared counts before their scene is read.
     """
     if file_type in ("glb", "gltf"):
-        return gltf_arrays(data, name, folder)
+        return gltf_arrays(data, name, folder, limits)
     import trimesh
 
     kwargs: dict = {"process": False}
@@ -184,7 +188,8 @@ def parse_mesh(
     return geometry_arrays(loaded, name)
 
 
-def gltf_arrays(data: bytes, name: str, folder: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+def gltf_arrays(data: bytes, name: str, folder: Path | None = None,
+                limits: MeshLimits | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of a glTF/GLB scene at rest, in file order (scene nodes depth-first, each mesh's
     primitives in order, every vertex of every primitive kept) with node transforms and skins applied: the
     order the animated-poses reader and the look-keeping GLB writer (``pdeanim.gltf.layout``) use."""
@@ -193,7 +198,10 @@ def gltf_arrays(data: bytes, name: str, folder: Path | None = None) -> tuple[np.
     path = folder / Path(name).name if folder is not None else None
     source: Path | bytes = path if path is not None and path.is_file() else data
     try:
-        vertices, faces = read_static_mesh(source)
+        vertices, faces = read_static_mesh(source, limits.gltf if limits else None,
+                                           limits.max_vertices if limits else None)
+    except LimitError:
+        raise
     except MeshInputError as exc:
         kind = Path(name).suffix[1:].upper() or "glTF"
         raise MeshInputError(f"cannot parse {name!r} as {kind}: {exc}") from exc

@@ -26,6 +26,12 @@ MAX_INDICES = 2_000_000
 MAX_TET_SWEEPS = 5e9
 """Refuse a simulation needing more than this many tet updates (frames x substeps x iterations x tets): about
 a quarter of an hour single-threaded at the measured ~0.17 us per tet and sweep."""
+MAX_GRAVITY = 1e6
+"""Largest gravity magnitude (mesh units per s^2): 100 g for a mesh in millimetres. Past it the automatic
+stiffness and substeps overflow (gravity [1e308, 1e308, 1e308] failed with ZeroDivisionError)."""
+MAX_YOUNG = 1e15  # Pa: a thousand times diamond's
+MAX_DENSITY = 1e9  # mass per unit volume of the mesh's units: far past any material's 2.3e4 kg/m^3
+MAX_DAMPING = 1e6  # 1/s
 IGNORED_KEYS = ("seed",)
 """Keys older clients sent that no longer mean anything; accepted (if well-typed) and dropped."""
 
@@ -108,6 +114,9 @@ class SceneParams:
     def validate(self) -> None:
         """Raise ParameterError for the first out-of-range or inconsistent value."""
         self.gravity = vector(self.gravity, 3, "gravity")
+        if math.hypot(*self.gravity) > MAX_GRAVITY:
+            raise ParameterError(f"gravity must have a magnitude of at most {MAX_GRAVITY:g} (mesh units per "
+                                 f"s^2), got {math.hypot(*self.gravity):g}")
         checks = [
             (
                 isinstance(self.frames, int) and 1 <= self.frames <= 10_000,
@@ -115,11 +124,14 @@ class SceneParams:
             ),
             (number(self.fps) and 0 < self.fps <= 10_000, "fps must be in (0, 10000]"),
             (self.duration is None or (number(self.duration) and self.duration > 0), "duration must be > 0"),
-            (number(self.damping) and self.damping >= 0, "damping must be >= 0 (1/s)"),
-            (self.young is None or (number(self.young) and self.young > 0),
-             "young (Young's modulus, Pa) must be > 0, or null to choose it from the mesh's size"),
+            (number(self.damping) and 0 <= self.damping <= MAX_DAMPING,
+             f"damping must be in [0, {MAX_DAMPING:g}] (1/s)"),
+            (self.young is None or (number(self.young) and 0 < self.young <= MAX_YOUNG),
+             f"young (Young's modulus, Pa) must be in (0, {MAX_YOUNG:g}], or null to choose it from the "
+             "mesh's size"),
             (number(self.poisson) and 0 <= self.poisson < 0.5, "poisson must be in [0, 0.5)"),
-            (number(self.density) and self.density > 0, "density must be > 0"),
+            (number(self.density) and 0 < self.density <= MAX_DENSITY,
+             f"density must be in (0, {MAX_DENSITY:g}]"),
             (
                 isinstance(self.target_tets, int) and 50 <= self.target_tets <= 2_000_000,
                 "target_tets must be an integer in [50, 2000000]",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -10,6 +11,7 @@ from fastapi import FastAPI
 from ..settings import Settings
 from ..store.context import Store
 from ..store.scratch import clean_stale
+from . import validator
 from .cache import BodyCache, ClipCache
 from .deps import KeyCache
 from .errors import install_error_handlers
@@ -19,6 +21,7 @@ from .middleware import install_http_middleware
 from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 from .threads import single_threaded_blas
+from .validator import UploadSlots
 
 API_VERSION = "1.0.0"
 DESCRIPTION = (
@@ -40,6 +43,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         clean_stale(settings.tmp_dir())  # uploads cut short by a killed API process
         if own:
             app.state.store = Store.open(settings)
+        threading.Thread(target=validator.warm, name="validator-warm", daemon=True).start()
         yield
         if own:
             app.state.store.close()
@@ -50,6 +54,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.clip_cache = ClipCache(settings.max_clip_cache, settings.clip_cache_bytes)
     app.state.frame_cache = BodyCache(settings.frame_cache_bytes)
     app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
+    app.state.upload_slots = UploadSlots(settings.max_concurrent_uploads)
     install_error_handlers(app)
     app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,
                        max_json_bytes=settings.max_json_bytes, log_access=settings.access_log)

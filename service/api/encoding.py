@@ -11,7 +11,7 @@ from collections.abc import Callable, Hashable
 from fastapi import Request, Response
 
 from .cache import BodyCache
-from .httpcache import etag_matches, immutable_response
+from .httpcache import IMMUTABLE, etag_matches, immutable_response
 
 # Measured on a 4.8 MB meshopt animation GLB (2026-11-27): zstd level 3 leaves 0.83 of it in 18 ms; gzip
 # level 6 0.87 in 138 ms, level 1 0.88 in 92 ms. Level 3's window (2 MiB) stays within the 8 MiB that HTTP
@@ -63,8 +63,10 @@ def negotiated_response(request: Request, tag: str, body: Callable[[], bytes], m
     re-encoded by the gzip middleware)."""
     vary = {"Vary": "Accept-Encoding"}
     coding = accepted_coding(request.headers.get("accept-encoding", ""))
-    if coding is None or etag_matches(request, f'"{tag}"'):
+    if coding is None:
         return immutable_response(request, tag, body, media_type, vary, compress=False)
+    if etag_matches(request, f'"{tag}"'):  # the 304 names the ETag the encoded 200 had: the weak one
+        return Response(status_code=304, headers={"ETag": f'W/"{tag}"', "Cache-Control": IMMUTABLE, **vary})
 
     def encoded() -> bytes:
         data = cache.get((*key, coding))

@@ -64,6 +64,12 @@ def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
 
 def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
     parts, errors = [], exc.errors()
+    broken = [e for e in errors if e.get("type") == "json_invalid"]
+    if broken:  # not JSON at all: a malformed request (400), not a well-formed one with invalid values (422)
+        where = tuple(broken[0].get("loc", ()))[1:2]
+        at = f" at character {where[0]}" if where else ""
+        return JSONResponse(error_body("bad_request", f"malformed JSON body{at}: "
+                                       f"{broken[0].get('ctx', {}).get('error', 'JSON decode error')}"), 400)
     for err in errors[:5]:
         loc = ".".join(str(p) for p in err.get("loc", ()))
         parts.append(f"{loc}: {err.get('msg', 'invalid')}")
@@ -94,6 +100,17 @@ def _unavailable(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
+def _out_of_memory(_: Request, exc: Exception) -> JSONResponse:
+    """An allocation failed while answering: 503 with Retry-After, naming the allocation and the limit (the
+    same request may fit once concurrent ones are done), not a 500."""
+    from pdeanim.outofmemory import out_of_memory
+
+    message = str(out_of_memory(exc, "retry later, or ask for less at once (a lower fps, fewer frames)"))
+    log.warning("%s", message)
+    return JSONResponse(error_body("out_of_memory", message), 503,
+                        headers={"Retry-After": str(RETRY_AFTER_SECONDS)})
+
+
 def _unexpected(_: Request, exc: Exception) -> JSONResponse:
     log.exception("unhandled error", exc_info=exc)
     return JSONResponse(error_body("internal", f"internal error ({type(exc).__name__})"), 500)
@@ -108,4 +125,5 @@ def install_error_handlers(app: FastAPI) -> None:
 
     app.add_exception_handler(OperationalError, _unavailable)
     app.add_exception_handler(InterfaceError, _unavailable)
+    app.add_exception_handler(MemoryError, _out_of_memory)
     app.add_exception_handler(Exception, _unexpected)

@@ -15,7 +15,7 @@ from .errors import error_body
 
 GZIP_MINIMUM_BYTES = 1024  # below about a kilobyte the gzip header and the CPU cost outweigh the saving
 GZIP_LEVEL = 6  # zlib's default: most of level 9's ratio on float data at a fraction of its time
-CORS_METHODS = ["GET", "POST", "DELETE", "OPTIONS"]
+CORS_METHODS = ["GET", "HEAD", "POST", "DELETE", "OPTIONS"]
 CORS_REQUEST_HEADERS = ["Authorization", "Content-Type", "Accept", "If-None-Match"]
 CORS_EXPOSED_HEADERS = ["ETag", "Content-Length", "Content-Encoding", "Location"]
 
@@ -59,8 +59,31 @@ class WeakEtagWhenEncoded:
         await self.app(scope, receive, send_weak)
 
 
+class HeadAsGet:
+    """Answer ``HEAD`` on every ``GET`` route (RFC 9110 9.3.2): the request runs as a ``GET`` (same status and
+    headers, Content-Length and ETag included) and the body is dropped on the way out."""
+
+    def __init__(self, app: ASGIApp):
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] != "HEAD":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_headers_only(message: Message) -> None:
+            if message["type"] == "http.response.body":
+                if message.get("more_body", False):
+                    return
+                message = {"type": "http.response.body", "body": b"", "more_body": False}
+            await send(message)
+
+        await self.app({**scope, "method": "GET"}, receive, send_headers_only)
+
+
 def install_http_middleware(app: FastAPI, settings: Settings) -> None:
-    """Gzip (innermost), the weak-ETag rewrite, then CORS (outermost) when origins are configured."""
+    """Gzip (innermost), the weak-ETag rewrite, then CORS when origins are configured, and HEAD as GET
+    (outermost, so a HEAD's headers are those of the GET)."""
     app.add_middleware(GZipMiddleware, minimum_size=GZIP_MINIMUM_BYTES, compresslevel=GZIP_LEVEL,
                        exclude_content_types=DEFAULT_EXCLUDED_CONTENT_TYPES)
     app.add_middleware(WeakEtagWhenEncoded)
@@ -69,3 +92,4 @@ def install_http_middleware(app: FastAPI, settings: Settings) -> None:
         app.add_middleware(JsonErrorCORSMiddleware, allow_origins=origins, allow_methods=CORS_METHODS,
                            allow_headers=CORS_REQUEST_HEADERS, expose_headers=CORS_EXPOSED_HEADERS,
                            allow_credentials=False, max_age=600)
+    app.add_middleware(HeadAsGet)

@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 from service.cli import CONSOLE
+from service.store.scratch import die_with_parent
 
 WORKER_CMD = [*CONSOLE, "worker"]
 
@@ -40,6 +41,28 @@ def default_http_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def http_app():  # noqa: ANN201 - a FastAPI app
+    """The app of one HTTP process (uvicorn ``factory=True``). Under a supervisor (``--workers`` > 1, each
+    process started by uvicorn's multiprocessing supervisor), the process first arranges to die with it, so
+    a SIGKILLed ``pdeanim serve`` leaves no HTTP process holding its port."""
+    import multiprocessing
+
+    from service.api.app import app_from_environment
+
+    supervisor = multiprocessing.parent_process()
+    if supervisor is not None and supervisor.pid is not None:
+        die_with_parent(supervisor.pid)
+    return app_from_environment()
+
+
+def _die_with_serve(pid: int):  # noqa: ANN202 - a preexec function
+    """preexec_fn of the job workers started by ``--with-workers``: they die with this process."""
+    def arm() -> None:  # runs between fork and exec: nothing to import here
+        die_with_parent(pid)
+
+    return arm
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
@@ -84,14 +107,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"pdeanim serve: listening on http://{args.host}:{args.port} (data {settings.resolved_data_dir()}, "
           f"{args.workers} HTTP worker(s), {max(args.with_workers, 0)} job worker(s))", file=sys.stderr,
           flush=True)
-    workers = [subprocess.Popen(WORKER_CMD) for _ in range(max(args.with_workers, 0))]
+    workers = [subprocess.Popen(WORKER_CMD, preexec_fn=_die_with_serve(os.getpid()))
+               for _ in range(max(args.with_workers, 0))]
     # uvicorn re-raises SIGTERM/SIGINT after its graceful shutdown; with these handlers in place the
     # re-raised signal lands here instead of killing the process, so the workers are stopped and we exit 0.
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: None)
     try:
         uvicorn.run(
-            "service.api.app:app_from_environment",
+            "service.cli.serve:http_app",
             factory=True,
             host=args.host,
             port=args.port,

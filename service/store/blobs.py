@@ -195,9 +195,13 @@ class S3BlobStore:
         return key
 
     def put_file(self, path: Path, key: str | None = None) -> str:
-        """Upload a file (multipart for large files) under its content hash unless a key is given."""
+        """Upload a file (multipart for large files) under its content hash unless a key is given, with at
+        most two 8 MiB parts in flight (boto3's default, ten, holds 80 MiB per upload in the API)."""
+        from boto3.s3.transfer import TransferConfig
+
         key = key or file_key(path)
-        self.client.upload_file(str(path), self.bucket, self._name(key))
+        config = TransferConfig(multipart_chunksize=8 * _CHUNK, max_concurrency=2)
+        self.client.upload_file(str(path), self.bucket, self._name(key), Config=config)
         return key
 
     def put_if_absent(self, data: bytes, key: str) -> bool:

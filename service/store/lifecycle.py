@@ -1,4 +1,5 @@
-"""Deleting a mesh (with its poses, clips and jobs) or a clip, and then the blobs nothing references any more.
+"""Deleting a mesh (with its poses, clips and jobs) or a clip (with its export jobs), and then the blobs
+nothing references any more (an export job's GLB goes with its clip or mesh, row and blob).
 
 Blobs are content-addressed and shared between rows and tenants (the same file uploaded twice is one blob;
 tets are shared by mesh hash), so a blob is removed only when no row of any tenant still names it. Rows go
@@ -59,6 +60,21 @@ def _tet_keys(jobs: list[Job]) -> set[str]:
     return keys
 
 
+def _export_keys(jobs: list[Job]) -> set[str]:
+    """Blob keys of the GLBs that export jobs of ``jobs`` stored."""
+    keys = set()
+    for job in jobs:
+        key = (job.result or {}).get("export_key")
+        if isinstance(key, str) and key:
+            keys.add(key)
+    return keys
+
+
+def _of_clip(clip_id: str):  # noqa: ANN202 - a SQL expression
+    """The export jobs of clip ``clip_id`` (an export job's params name its clip)."""
+    return (Job.kind == "export") & (Job.params["clip_id"].as_string() == clip_id)
+
+
 def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
     """Delete a tenant's mesh with its poses, clips and jobs (running jobs cancelled first, so their workers
     stop at the next heartbeat), then the blobs left unreferenced. None if the mesh is not the tenant's."""
@@ -79,7 +95,7 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
         poses = session.scalars(select(PosesRecord).where(PosesRecord.mesh_id == mesh_id)).all()
         of_mesh = or_(Job.mesh_id == mesh_id, Job.poses_id.in_(poses_ids))
         jobs = session.scalars(select(Job).where(of_mesh)).all()
-        keys = {mesh.blob_key} | {p.blob_key for p in poses} | _tet_keys(jobs)
+        keys = {mesh.blob_key} | {p.blob_key for p in poses} | _tet_keys(jobs) | _export_keys(jobs)
         keys |= {c.topology_key for c in clips} | {c.coefficients_key for c in clips}
         out.clip_ids = [c.id for c in clips]
         out.clips = _delete(session, ClipRecord, ClipRecord.mesh_id == mesh_id)
@@ -95,13 +111,22 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
 
 
 def delete_clip(store: Store, clip_id: str, tenant_id: str) -> Deleted | None:
-    """Delete a tenant's clip, then its blobs if no other clip uses them. None if not the tenant's."""
+    """Delete a tenant's clip with its export jobs (active ones cancelled first), then its blobs and their
+    GLBs if nothing else uses them. None if not the tenant's."""
     out = Deleted(clip_ids=[clip_id])
-    with _write_session(store) as session, session.begin():
+    with store.sessions() as session:
         clip = session.get(ClipRecord, clip_id)
         if clip is None or clip.tenant_id != tenant_id:
             return None
-        keys = {clip.topology_key, clip.coefficients_key}
+        active = session.scalars(select(Job.id).where(_of_clip(clip_id), Job.state.in_(ACTIVE))).all()
+    out.cancelled_jobs = store.queue.cancel(list(active))
+    with _write_session(store) as session, session.begin():
+        clip = session.get(ClipRecord, clip_id)
+        if clip is None or clip.tenant_id != tenant_id:
+            return None  # deleted meanwhile by a concurrent request
+        jobs = session.scalars(select(Job).where(_of_clip(clip_id))).all()
+        keys = {clip.topology_key, clip.coefficients_key} | _export_keys(jobs)
+        out.jobs = _delete(session, Job, _of_clip(clip_id))
         out.clips = _delete(session, ClipRecord, ClipRecord.id == clip_id)
     out.blobs_removed = release_blobs(store, keys)
     return out
@@ -125,7 +150,8 @@ def referenced(session: Session, key: str) -> bool:
                                ).scalar()
     checks = [exists().where(Mesh.blob_key == key), exists().where(PosesRecord.blob_key == key),
               exists().where(ClipRecord.topology_key == key),
-              exists().where(ClipRecord.coefficients_key == key)]
+              exists().where(ClipRecord.coefficients_key == key),
+              exists().where(Job.kind == "export", Job.result["export_key"].as_string() == key)]
     return any(session.execute(select(check)).scalar() for check in checks)
 
 

@@ -1,15 +1,19 @@
 """Scratch files and directories in DATA_DIR/tmp are named after the process that owns them
 (``upload-HOST-PID-*``, ``work-HOST-PID-*``), so a process starting later can remove what dead processes on
 this host left behind (a SIGKILLed upload, a killed worker) without touching the scratch of live ones, even
-when several API and worker processes, or containers with their own host names, share the directory."""
+when several API and worker processes, or containers with their own host names, share the directory. Also
+the process liveness checks this needs, and :func:`die_with_parent` for child processes that must not
+outlive the process that started them (job processes, HTTP processes, workers started by ``serve``)."""
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import logging
 import os
 import re
 import shutil
+import signal
 import socket
 from pathlib import Path
 
@@ -24,14 +28,43 @@ def prefix(kind: str) -> str:
 
 
 def alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (one owned by another user counts as alive)."""
+    """Whether process ``pid`` exists and has not exited (one owned by another user counts as alive; a zombie,
+    killed but not yet reaped by its parent, does not)."""
     try:
         os.kill(pid, 0)
-        return True
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
+    return not zombie(pid)
+
+
+def zombie(pid: int) -> bool:
+    """Whether process ``pid`` has exited and waits to be reaped (state Z in /proc; False if unreadable)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[-1].split()[:1] == ["Z"]
+
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def die_with_parent(parent_pid: int | None = None, sig: int = signal.SIGKILL) -> bool:
+    """Have Linux send ``sig`` to this process when its parent exits, however it ends (prctl
+    PR_SET_PDEATHSIG; SIGKILL included), so a killed supervisor or worker leaves no child running. With
+    ``parent_pid``, the process that should be the parent: if it is already gone (it died before the call),
+    this process exits at once. Returns False where prctl is unavailable (not Linux)."""
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        return False
+    if prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:  # pragma: no cover - refused by a sandbox
+        return False
+    if parent_pid is not None and (os.getppid() != parent_pid or not alive(parent_pid)):
+        os._exit(3)  # orphaned before the signal was armed: nobody is left to take our work
+    return True
 
 
 def remove(path: Path) -> None:

@@ -161,3 +161,64 @@ def test_smallest_compresses_only_the_chosen_encoding_at_the_writers_level(monke
     final = {e: len(real(a[:1000], e, 19)) for e in container.ENCODINGS}
     assert len(small) - len(container.pack({"part": "x"}, {"a": a[:1000]},
                                            {"a": min(final, key=final.get)}, level=19)) == 0
+
+
+def forged_part(declared: int) -> bytes:
+    """A container whose one array is a genuine zstd frame of ``declared`` zero bytes (a tiny file that
+    decodes to gigabytes), the array's shape and the frame's content size both saying so."""
+    import io
+    import struct
+
+    import zstandard
+
+    buf = io.BytesIO()
+    with zstandard.ZstdCompressor(level=1).stream_writer(buf, size=declared, closefd=False) as writer:
+        chunk = bytes(1 << 24)
+        for _ in range(declared // len(chunk)):
+            writer.write(chunk)
+    frame = buf.getvalue()
+    table = {"zeros": {"dtype": "<u1", "shape": [declared], "offset": 0, "nbytes": len(frame),
+                       "encoding": "zstd"}}
+    meta = json.dumps({"part": "coefficients", "arrays": table}).encode()
+    meta += b" " * (-len(meta) % 8)
+    return struct.pack("<8sII", container.MAGIC, container.VERSION, len(meta)) + meta + frame
+
+
+def test_declared_sizes_past_the_expansion_limit_are_refused_before_decoding():
+    blob = forged_part(1 << 30)
+    assert len(blob) < 64 << 10  # 1 GiB of zeros in a few tens of KB
+    with pytest.raises(ClipFormatError, match="declare 1073741824 bytes once decoded"):
+        container.unpack(blob)
+    assert container.decoded_limit(1 << 20) == container.MAX_EXPANSION * (1 << 20)
+    assert container.decoded_limit(100 << 20) == container.MAX_DECODED_BYTES  # 8 GiB at most
+    with pytest.raises(ClipFormatError, match="never over 1000"):
+        container.unpack(container.pack({"part": "x"}, {"z": np.zeros(2000, np.uint8)}),
+                         max_decoded_bytes=1000)
+    big = np.zeros(2 << 20, np.uint8)  # 2 MiB of zeros packs into ~100 bytes: under the 64 MiB floor
+    _, arrays = container.unpack(container.pack({"part": "x"}, {"z": big}, {"z": "zstd"}))
+    assert arrays["z"].nbytes == big.nbytes
+
+
+def test_forged_shapes_cannot_wrap_around():
+    blob = container.pack({"part": "x"}, {"a": np.zeros(0, np.uint8)})
+    forged = _table_edit(blob, "a", shape=[2**32, 2**32])  # 2^64 elements: 0 in int64 arithmetic
+    with pytest.raises(ClipFormatError):
+        container.unpack(forged)
+
+
+def test_cli_frame_of_a_forged_clip_exits_2_without_a_traceback(tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    real = read_clip_file(root / "clients" / "js" / "test" / "fixtures" / "fit-displacement-chord.clip")
+    path = tmp_path / "forged.clip"
+    write_clip_file(path, ClipParts(real.topology, forged_part(4 << 30), {}))
+    assert path.stat().st_size < 200 << 10  # the issue's file: 131 KB declaring 4 GiB
+    run = subprocess.run([sys.executable, "-m", "service.cli", "frame", str(path), "--t", "0.5", "--out",
+                          str(tmp_path / "f.npz")], capture_output=True, text=True, cwd=root, timeout=300,
+                         env={**os.environ, "PYTHONPATH": str(root)})
+    assert run.returncode == 2, run.stderr
+    assert "Traceback" not in run.stderr and "declare 4294967296 bytes" in run.stderr, run.stderr

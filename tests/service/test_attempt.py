@@ -77,3 +77,24 @@ def test_lease_is_renewed_while_the_child_starts(backend):
         )
     finally:
         store.close()
+
+
+def test_a_deterministic_error_fails_the_attempt_without_retry(backend):
+    """A stage raising a computation error (here KeyError: a fit payload without poses) in a real child
+    process ends the attempt as ``computation_error``, not retried, naming the error and where it arose."""
+    settings = backend.settings(lease_seconds=LEASE, backoff_seconds=0.0)
+    store = Store.open(settings, run_migrations=True)
+    try:
+        with store.sessions() as s:
+            _, tenant = create_key(s, "attempt-error")
+            job = store.queue.enqueue(s, tenant_id=tenant.id, kind="fit", params={})
+            s.commit()
+        claimed = store.queue.claim("w1")
+        payload = {"id": job.id, "kind": "fit", "params": {}}
+        outcome = run_attempt(multiprocessing.get_context("fork"), store.queue, claimed, payload,
+                              settings.model_dump_json(), lambda: False, timeout=600)
+        assert (outcome.status, outcome.code, outcome.retry) == ("error", "computation_error", False), outcome
+        assert outcome.message.startswith("the fit job failed with KeyError: 'poses' at worker/stages.py:")
+        assert "not retried" in outcome.message
+    finally:
+        store.close()

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from pdeanim.fit.budget import fit_memory_bytes
+
 from .conftest import Backend
 from .harness import Services, client, make_key, wait_job
 
@@ -20,8 +22,9 @@ pytestmark = pytest.mark.slow
 def svc(tmp_path):
     s = Services(Backend("sqlite", {"PDEANIM_DATA_DIR": str(tmp_path / "data")}), tmp_path)
     s.start_server()  # default limit: half this machine's memory, enough for the fit below
-    s.env_extra["PDEANIM_JOB_MEMORY_BYTES"] = str(2 * 1024**3)
-    s.start_worker()  # a worker with 2 GiB per job
+    # a worker whose per-job limit is half the estimate of the fit below (whatever the estimate's model)
+    s.env_extra["PDEANIM_JOB_MEMORY_BYTES"] = str(fit_memory_bytes(1000, 10242) // 2)
+    s.start_worker()
     yield s
     s.stop()
 
@@ -46,7 +49,7 @@ def test_fit_over_the_memory_limit_is_refused_at_once(svc):
         assert "1000 frames x 10242 vertices" in message and "PDEANIM_JOB_MEMORY_BYTES" in message, message
         svc.server.terminate()
         svc.server.wait(30)
-        svc.start_server()  # now the API has the 2 GiB limit too: refused at submission
+        svc.start_server()  # now the API has the same limit too: refused at submission
     with client(svc, key) as api:
         r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses_id})
         assert r.status_code == 413 and r.json()["error"]["code"] == "limit_exceeded", r.text

@@ -14,6 +14,8 @@ import pytest
 from pdeanim.gltf.glb import unpack_glb
 from pdeanim.gltf.read import read_animated_poses, read_static_mesh
 from pdeanim.gltf.validate import assert_clean, validate_many
+from service.store.context import Store
+from service.store.models import Job
 
 from ..gltf.builders import textured_scene_glb
 from .conftest import running_services
@@ -145,3 +147,77 @@ def test_export_job_requests_are_checked(api, scene):
     assert r.status_code in (200, 409)  # 409 not_ready until the worker is done
     assert wait_job(api, queued["id"])["state"] == "succeeded"
     assert api.get(f"/v1/exports/{queued['id']}").status_code == 200
+
+
+@pytest.fixture(scope="module")
+def store(services):
+    st = Store.open(services.backend.settings())
+    yield st
+    st.close()
+
+
+def fitted_clip(api, services, mesh: dict, frames: np.ndarray) -> str:
+    """Upload ``frames`` as poses of ``mesh``, fit them with one segment; the clip id."""
+    buf = io.BytesIO()
+    np.savez(buf, vertices=frames.astype(np.float32))
+    poses = upload(api, "wave.npz", buf.getvalue(), f"/v1/meshes/{mesh['id']}/poses")
+    assert poses.status_code == 201, poses.text
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses.json()["id"], "params": {"segments": 1}})
+    job = wait_job(api, r.json()["id"], timeout=240)
+    assert job["state"] == "succeeded", (job, services.logs())
+    return job["result"]["clip_id"]
+
+
+def exported(api, services, store: Store, clip_id: str, fps: int) -> tuple[dict, str]:
+    """A succeeded export job of ``clip_id`` at ``fps`` and the blob key of its GLB (present)."""
+    r = api.post("/v1/jobs", json={"kind": "export", "clip_id": clip_id, "fps": fps})
+    assert r.status_code == 202, r.text
+    job = wait_job(api, r.json()["id"])
+    assert job["state"] == "succeeded", (job, services.logs())
+    assert api.get(f"/v1/exports/{job['id']}").status_code == 200
+    with store.sessions() as session:
+        key = session.get(Job, job["id"]).result["export_key"]
+    assert store.blobs.exists(key)
+    return job, key
+
+
+def test_exports_go_with_their_clip_and_their_mesh(api, scene, services, store):
+    # poses and fps no other test uses: blobs are content-addressed, so a shared GLB would rightly be kept
+    clip_id = fitted_clip(api, services, scene["mesh"], scene["frames"] * 1.01)
+    job, key = exported(api, services, store, clip_id, 7)
+    listed = api.get("/v1/jobs", params={"kind": "export", "mesh_id": scene["mesh"]["id"]})
+    assert listed.status_code == 200 and job["id"] in {j["id"] for j in listed.json()["items"]}, listed.text
+    r = api.delete(f"/v1/clips/{clip_id}")
+    assert r.status_code == 200 and r.json()["clips"] == 1 and r.json()["jobs"] == 1, r.text
+    assert_error(api.get(f"/v1/exports/{job['id']}"), 404, "not_found")
+    assert api.get(f"/v1/jobs/{job['id']}").status_code == 404
+    assert not store.blobs.exists(key)
+    assert api.get(f"/v1/clips/{scene['clip_id']}").status_code == 200  # the other clip stays
+
+    mesh = upload(api, "scene.glb", scene["src"]).json()  # the same file: one shared mesh blob
+    clip_id = fitted_clip(api, services, mesh, scene["frames"] * 0.99)
+    job, key = exported(api, services, store, clip_id, 11)
+    r = api.delete(f"/v1/meshes/{mesh['id']}")
+    assert r.status_code == 200 and r.json()["jobs"] == 2, r.text  # the fit and the export
+    assert_error(api.get(f"/v1/exports/{job['id']}"), 404, "not_found")
+    assert not store.blobs.exists(key)
+    assert api.get(f"/v1/meshes/{scene['mesh']['id']}").status_code == 200
+
+
+def test_encoded_download_304_carries_the_weak_etag_of_its_200(api, scene, services):
+    r = api.post("/v1/jobs", json={"kind": "export", "clip_id": scene["clip_id"], "fps": 5})
+    url = f"/v1/exports/{wait_job(api, r.json()['id'])['id']}"
+    for coding in ("zstd", "gzip"):
+        first = api.get(url, headers={"Accept-Encoding": coding})
+        assert first.status_code == 200 and first.headers["content-encoding"] == coding
+        etag = first.headers["etag"]
+        assert etag.startswith('W/"')
+        again = api.get(url, headers={"Accept-Encoding": coding, "If-None-Match": etag})
+        assert again.status_code == 304 and again.headers["etag"] == etag, again.headers
+        assert again.headers["vary"] == "Accept-Encoding"
+    plain = api.get(url, headers={"Accept-Encoding": "identity"})
+    assert not plain.headers["etag"].startswith("W/")
+    strong = api.get(url, headers={"Accept-Encoding": "identity", "If-None-Match": plain.headers["etag"]})
+    assert strong.status_code == 304 and strong.headers["etag"] == plain.headers["etag"]
+    head = api.head(url, headers={"Accept-Encoding": "zstd"})
+    assert head.status_code == 200 and head.content == b"" and head.headers["etag"] == etag

@@ -97,8 +97,14 @@ def test_jobs_and_poses_lists_filter(api, services, data_dir):
     assert [c["id"] for c in clips] == [job["result"]["clip_id"]]
     same_kind = every_page(api, "/v1/clips", kind=clips[0]["kind"], mesh_id=fish["id"])
     assert [c["id"] for c in same_kind] == [clips[0]["id"]]
-    assert every_page(api, "/v1/clips", kind="nope", mesh_id=fish["id"]) == []
-    assert api.get("/v1/jobs", params={"state": "bogus"}).status_code == 422
+    assert clips[0]["kind"] == "cyclic-spine"
+    other_kind = every_page(api, "/v1/clips", kind="dynamic-pde", mesh_id=fish["id"])
+    assert other_kind == []
+    for path, params in (("/v1/clips", {"kind": "bogus"}), ("/v1/jobs", {"kind": "bogus"}),
+                         ("/v1/jobs", {"state": "bogus"})):  # an unknown filter value is a 422 on every list
+        r = api.get(path, params=params)
+        assert r.status_code == 422 and r.json()["error"]["code"] == "validation_error", (path, r.text)
+    assert api.get("/v1/jobs", params={"kind": "export"}).status_code == 200
     assert every_page(api, "/v1/poses", mesh_id=fish["id"]) == []
 
 
@@ -351,3 +357,26 @@ def test_database_outage_answers_503_with_retry_after(tmp_path, request):
                 assert httpx.get(svc.url + "/healthz", timeout=30).status_code == 503
         finally:
             svc.stop()
+
+
+def test_malformed_json_is_400_and_head_answers_like_get(api, services):
+    for body in (b"{bad", b'{"kind": "fit"', b"[1, 2"):
+        r = api.post("/v1/jobs", content=body, headers={"Content-Type": "application/json"})
+        assert r.status_code == 400, r.text
+        assert r.json()["error"]["code"] == "bad_request" and "malformed JSON" in r.json()["error"]["message"]
+    not_an_object = api.post("/v1/jobs", json=[1, 2])  # well-formed JSON of the wrong shape: 422
+    assert not_an_object.status_code == 422, not_an_object.text
+    for path in ("/healthz", "/v1/meshes", "/v1/jobs?kind=export", "/viewer"):
+        get, head = api.get(path), api.head(path)
+        assert head.status_code == get.status_code == 200, (path, head.text)
+        assert head.content == b""
+        assert head.headers["content-type"] == get.headers["content-type"]
+        assert head.headers.get("etag") == get.headers.get("etag")
+    assert api.head("/v1/meshes/mesh_nope").status_code == 404
+    mesh = upload(api, "tet.obj", OBJ + b"# gravity test\n").json()
+    heavy = api.post("/v1/jobs", json={"kind": "simulate", "mesh_id": mesh["id"],
+                                       "params": {"gravity": [1e308] * 3}})  # was a ZeroDivisionError x3
+    assert heavy.status_code == 422 and heavy.json()["error"]["code"] == "invalid_parameter", heavy.text
+    assert "gravity" in heavy.json()["error"]["message"] and "1e+06" in heavy.json()["error"]["message"]
+    cancel = api.head("/v1/jobs/job_nope/cancel")  # a POST-only path: 405 naming the methods it has
+    assert cancel.status_code == 405 and "POST" in cancel.headers["allow"]

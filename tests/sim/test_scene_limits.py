@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from pdeanim.errors import LimitError, ParameterError
@@ -33,3 +35,16 @@ def test_seed_is_accepted_and_dropped():
     assert "seed" not in SceneParams.from_dict({"seed": 12}).to_dict()
     with pytest.raises(ParameterError, match="seed"):
         SceneParams.from_dict({"seed": "x"})
+
+
+@pytest.mark.parametrize("params, field, bound", [
+    ({"gravity": [1e308] * 3}, "gravity", "1e+06"), ({"gravity": [0, -2e6, 0]}, "gravity", "1e+06"),
+    ({"young": 1e300}, "young", "1e+15"), ({"density": 1e300}, "density", "1e+09"),
+    ({"damping": 1e300}, "damping", "1e+06")])
+def test_forces_and_materials_are_bounded_naming_the_field_and_the_bound(params, field, bound):
+    """Values past these bounds made the automatic stiffness and substeps overflow (ZeroDivisionError after
+    three attempts of a job); they are refused when the scene is built, as at submission (422)."""
+    with pytest.raises(ParameterError, match=rf"^{field} .*{re.escape(bound)}"):
+        SceneParams.from_dict(params)
+    ok = SceneParams.from_dict({"gravity": [0, -9810, 0], "young": 2e11, "density": 19_300, "damping": 50})
+    assert ok.gravity == (0.0, -9810.0, 0.0)

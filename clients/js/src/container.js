@@ -150,12 +150,25 @@ function decodeArrayBytes(stored, encoding, itemsize, count, label) {
     // byte j of element i sits at j * count + i
     const planes = raw;
     raw = new Uint8Array(size);
-    for (let j = 0; j < itemsize; j++) {
-      const plane = planes.subarray(j * count, (j + 1) * count);
-      for (let i = 0, o = j; i < count; i++, o += itemsize) raw[o] = plane[i];
+    if (itemsize === 4 && LITTLE_ENDIAN) unshuffle4(planes, count, new Uint32Array(raw.buffer));
+    else {
+      for (let j = 0; j < itemsize; j++) {
+        const plane = planes.subarray(j * count, (j + 1) * count);
+        for (let i = 0, o = j; i < count; i++, o += itemsize) raw[o] = plane[i];
+      }
     }
   }
   return raw;
+}
+
+/** Shuffled 4-byte elements (byte j of element i at j * count + i) into out (little-endian words). */
+function unshuffle4(planes, count, out) {
+  const b1 = count;
+  const b2 = 2 * count;
+  const b3 = 3 * count;
+  for (let i = 0; i < count; i++) {
+    out[i] = (planes[i] | (planes[b1 + i] << 8) | (planes[b2 + i] << 16) | (planes[b3 + i] << 24)) >>> 0;
+  }
 }
 
 /**

@@ -5,7 +5,7 @@
 
 import { BufferAttribute, Matrix3, Matrix4 } from 'three';
 import { computeNormals } from './geometry.js';
-import { frameNormals, meshAttributes } from './gpu.js';
+import { frameNormals, gpuAttributes, meshAttributes } from './gpu.js';
 import { ClipResources } from './resources.js';
 import { webglBackend } from './webgl.js';
 
@@ -171,8 +171,10 @@ export class ClipPlayer {
     }
     this._restNormalsClip = normalsClip;
     const attrs = meshAttributes({ vertexMap: this.vertexMap, positions: restClip, normals: normalsClip, index });
-    geometry.setAttribute('pdeVertex', new BufferAttribute(attrs.pdeVertex, 3));
-    geometry.setAttribute('pdeNormalFrame', new BufferAttribute(attrs.pdeNormalFrame, 3));
+    // the shader's copy: the GPU's vertex numbers, the frame normals as normalised int16
+    const gpu = gpuAttributes(attrs, this.layout.gpuIndex ?? null);
+    geometry.setAttribute('pdeVertex', new BufferAttribute(gpu.pdeVertex, 3));
+    geometry.setAttribute('pdeNormalFrame', new BufferAttribute(gpu.pdeNormalFrame, 3, true));
     return attrs;
   }
 
@@ -269,6 +271,14 @@ export class ClipPlayer {
   get attributeBytes() {
     const names = ['pdeVertex', 'pdeNormalFrame', 'pdeCpuPosition', 'pdeCpuNormal'];
     return names.reduce((n, k) => n + (this.mesh.geometry.getAttribute(k)?.array.byteLength ?? 0), 0);
+  }
+
+  /**
+   * Bytes on the GPU for the clip on this mesh: the shared data textures, the evaluation pass's texture
+   * (when the pass runs) and this mesh's attributes.
+   */
+  get gpuBytes() {
+    return this.resources.textureBytes + (this.resources.extras.pass?.bytes ?? 0) + this.attributeBytes;
   }
 
   /** Restore the mesh's materials and geometry; the textures are freed with their last player. */

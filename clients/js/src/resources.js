@@ -27,7 +27,7 @@ export class ClipResources {
     let made = tables ?? clip.gpuTables ?? null;
     if (made && made.width > width) made = null; // made for wider textures than this renderer takes
     this.clip = clip;
-    this.evaluator = createEvaluator(clip);
+    this.evaluator = createEvaluator(clip, made?.timeIndex ?? null); // the worker's index of time constants
     this.layout = gpuLayout(clip, { width, tables: made, evaluator: this.evaluator });
     /** Why the GPU cannot evaluate this clip (null when it can). */
     this.gpuReason =
@@ -43,12 +43,10 @@ export class ClipResources {
       pdeSeg: { value: 0 },
       pdeSinWt: { value: 0 },
       pdeCosWt: { value: 1 },
-      pdeCurves: { value: L.nCurves ?? 0 },
       pdeVertices: { value: L.nVertices },
       pdeVertexTex: { value: this.textures.vertex },
-      pdeKnotTex: { value: this.textures.knot ?? null },
-      pdeTangentTex: { value: this.textures.tangent ?? null },
-      pdeCurveTex: { value: this.textures.curve ?? null },
+      pdeFrameTex: { value: this.textures.frame ?? null },
+      pdeDirect: { value: L.nDirect ?? 0 },
       pdeAxis: { value: L.axis ? [...L.axis] : [1, 0, 0] },
       pdeBend: { value: L.bend ? [...L.bend] : [0, 1, 0] },
       pdeRotate: { value: Boolean(L.rotate) },
@@ -79,7 +77,7 @@ export class ClipResources {
     this.uniforms.pdeCosWt.value = u.cw;
     if (u.changed) {
       this.version++;
-      if (this.textures.curve) this.textures.curve.needsUpdate = true;
+      if (this.textures.frame) this.textures.frame.needsUpdate = true;
     }
   }
 

@@ -10,14 +10,13 @@ import { join } from 'node:path';
 import * as THREE from 'three';
 import {
   TIME_PDE,
-  TIME_SPLINE,
   computeNormals,
   createEvaluator,
   decodeClip,
   decodeClipFile,
 } from '../src/index.js';
-import { naturalSplineTangents, splineWeights, vertexBasis } from '../src/dynamic.js';
-import { frameNormals, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
+import { naturalSplineTangents, vertexBasis } from '../src/dynamic.js';
+import { fittedWidth, frameNormals, gpuBytes, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
 import { glslHeader, patchVertexShader } from '../src/glsl.js';
 import { orthonormalBases } from '../src/orthobasis.js';
 import { WEBGPU_REFUSAL, ClipPlayer, attachClip, attachClipToScene } from '../src/three.js';
@@ -73,39 +72,17 @@ function emulate(layout, u, v) {
     }
     return [0, 1, 2].map((k) => f(f(a[k] + f(ca * f(layout.axis[k]))) + f(cl * f(layout.bend[k]))));
   }
-  const C = layout.nCurves;
-  const K = layout.curveTexels;
-  const head = fetch(T.vertex, v * 4);
-  const c = Math.round(head[0]);
-  const seg = u.seg;
-  let terms;
-  if (layout.spline) {
-    // four weights per item on T_s, P_s, P_s+1, T_s+1
-    terms = [
-      [0, seg, T.tangent],
-      [1, seg, T.knot],
-      [2, seg + 1, T.knot],
-      [3, seg + 1, T.tangent],
-    ];
-  } else {
-    terms = [
-      [0, seg, T.knot],
-      [1, seg + 1, T.knot],
-    ];
-  }
-  let p = [0, 1, 2].map((w) => {
-    // sum of weight * knot coefficients (a vec4), dotted with the vertex's basis row
-    const acc = [0, 0, 0, 0];
-    for (const [slot, j, tex] of terms) {
-      const weight = fetch(T.curve, c * K + slot)[w];
-      const kn = fetch(tex, (j * C + c) * 3 + w);
-      for (let k = 0; k < 4; k++) acc[k] = f(acc[k] + f(weight * kn[k]));
-    }
-    return f(head[1 + w] + dot4(acc, fetch(T.vertex, v * 4 + 1 + w)));
-  });
+  // the GPU numbers the clip vertices: direct ones first (their positions in the per-frame table)
+  const g = layout.gpuIndex[v];
+  if (g < layout.nDirect) return fetch(T.frame, g).slice(0, 3);
+  const r = (g - layout.nDirect) * 4;
+  const head = fetch(T.vertex, r);
+  const c = layout.nDirect + Math.round(head[0]) * layout.curveTexels;
+  // the frame's coefficients of the curve (per coordinate a vec4) dotted with the vertex's basis row
+  let p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(fetch(T.frame, c + w), fetch(T.vertex, r + 1 + w))));
   if (layout.rigid) {
-    const r = [0, 1, 2].map((i) => fetch(T.curve, c * K + layout.weightTexels + i));
-    p = r.map((row) => f(dot4([row[0], row[1], row[2], 0], [...p, 0]) + row[3]));
+    const rows = [0, 1, 2].map((i) => fetch(T.frame, c + layout.coefficientTexels + i));
+    p = rows.map((row) => f(dot4([row[0], row[1], row[2], 0], [...p, 0]) + row[3]));
   }
   return p;
 }
@@ -124,8 +101,6 @@ function agreesWithCpu(player, clip, t, diagonal) {
 for (const c of man.cases) {
   test(`emulated float32 shader matches the CPU evaluator to 1e-6 of the diagonal: ${c.name}`, () => {
     const clip = loadCase(c);
-    // clips with spline items: the table carries four weights per item, on T_s, P_s, P_s+1, T_s+1, with a
-    // tangent texture
     const layout = gpuLayout(clip, { width: 64 }); // a narrow texture exercises the 2D texel addressing
     assert.equal(layout.spline, c.spline_items > 0, c.name);
     const ev = createEvaluator(clip);
@@ -176,9 +151,19 @@ test('GPU tables are plain typed arrays (a worker can transfer them) and gpuLayo
   const clip = loadCase(man.cases.find((x) => x.motion === 'rigid'));
   const tables = gpuTables(clip, { width: 128 });
   for (const t of Object.values(tables.textures)) assert.ok(t.data instanceof Float32Array);
+  assert.ok(tables.r instanceof Float64Array);
   const layout = gpuLayout(clip, { tables });
   assert.equal(layout.textures, tables.textures);
-  assert.equal(structuredClone(tables).width, 128);
+  // rows as long as the clip needs (a power of two), at most the width asked for
+  assert.ok(tables.width <= 128 && Number.isInteger(Math.log2(tables.width)));
+  const gpuCurves = tables.gpuCurve.filter((c) => c >= 0).length;
+  const needed = {
+    vertex: (clip.nVertices - tables.nDirect) * 4,
+    frame: tables.nDirect + gpuCurves * tables.curveTexels,
+  };
+  assert.equal(tables.width, fittedWidth(Math.max(needed.vertex, needed.frame), 128));
+  for (const [k, t] of Object.entries(tables.textures)) assert.ok(t.width * t.height - Math.max(1, needed[k]) < t.width, k);
+  assert.deepEqual(structuredClone(tables), tables);
 });
 
 test('frame-rotated normals follow the deformed surface', () => {
@@ -263,8 +248,7 @@ test('attachClip patches every built-in material (and the shadow materials) and 
       assert.match(shader.vertexShader, /if \(pdeEnabled\) pdeCompute\(\);/);
       // after morphing and skinning: the clip's vertex, mixed by the influence
       assert.match(shader.vertexShader, /skinning_vertex>\n\tif \(pdeEnabled\) transformed = mix\(transformed, pdePosition, pdeInfluence\);/);
-      assert.ok(shader.uniforms.pdeKnotTex.value instanceof THREE.DataTexture);
-      assert.ok(shader.uniforms.pdeCurveTex.value instanceof THREE.DataTexture);
+      assert.ok(shader.uniforms.pdeFrameTex.value instanceof THREE.DataTexture);
       assert.match(m.customProgramCacheKey(), /pdeanim:dynamic-pde:true:/);
     }
     assert.equal(player.gpu, true);
@@ -303,17 +287,17 @@ test('setTime drives the uniforms; the CPU fallback fills its own attributes, th
     const rest = Float32Array.from(mesh.geometry.getAttribute('position').array);
     const player = attachClip(mesh, clip);
     player.setTime(0.4);
-    const table = player.textures.curve ? Float32Array.from(player.textures.curve.image.data) : null;
-    const version = player.textures.curve?.version;
+    const table = player.textures.frame ? Float32Array.from(player.textures.frame.image.data) : null;
+    const version = player.textures.frame?.version;
     const u = timeUniforms(player.layout, 0.4);
     assert.equal(player.uniforms.pdeSeg.value, u.seg);
     assert.equal(player.uniforms.pdeSinWt.value, u.sw);
     if (table) {
-      assert.deepEqual(Float32Array.from(player.textures.curve.image.data), table);
+      assert.deepEqual(Float32Array.from(player.textures.frame.image.data), table);
       player.setTime(0.4); // the same t: no new upload
-      assert.equal(player.textures.curve.version, version);
+      assert.equal(player.textures.frame.version, version);
       player.setTime(0.45);
-      assert.ok(player.textures.curve.version > version);
+      assert.ok(player.textures.frame.version > version);
     }
     const key = mesh.material.customProgramCacheKey();
     assert.equal(player.useGPU(false), false);
@@ -588,35 +572,100 @@ test('with a renderer the clip is evaluated in a pass before drawing, once per t
   );
 });
 
-test('the per-curve table equals every item time pair and is rewritten only when the state moves', () => {
-  // clips with spline items carry four weights per item (tested in its own test below)
-  const plainCases = man.cases.filter((x) => x.kind === 'dynamic-pde' && x.spline_items === 0);
-  assert.ok(plainCases.length >= 5);
-  for (const c of plainCases) {
+/**
+ * The frame's coefficients of item i of curve c (4 numbers in its orthonormal basis), computed here
+ * independently in float64: the CPU evaluator's weights (ref.prepare(t) made them) on the knots (and the
+ * spline's tangents of the knots), then R.
+ */
+function referenceCoefficients(clip, ref, r, tangents, seg, i) {
+  const C = clip.nCurves;
+  const rk = (j) => {
+    const k = clip.knots.subarray((j * C * 3 + i) * 4, (j * C * 3 + i) * 4 + 4);
+    return [0, 1, 2, 3].map((row) => k.reduce((sum, x, col) => sum + r[i * 16 + row * 4 + col] * x, 0));
+  };
+  const at = (arr, j, k) => arr[(j * C * 3 + i) * 4 + k];
+  const [p0, p1] = [rk(seg), rk(seg + 1)];
+  return [0, 1, 2, 3].map((k) => {
+    if (ref.spline !== null) {
+      const [wl, w0, w1, wh] = ref.weights.subarray(i * 4, i * 4 + 4);
+      const tl = tangents ? at(tangents, seg, k) : 0;
+      const th = tangents ? at(tangents, seg + 1, k) : 0;
+      return wl * tl + w0 * p0[k] + w1 * p1[k] + wh * th;
+    }
+    return ref.phi0[i] * p0[k] + ref.phi1[i] * p1[k];
+  });
+}
+
+/** The natural-spline tangents of every knot's coefficients in the orthonormal bases (float64). */
+function referenceTangents(clip, r) {
+  const n = clip.knots.length;
+  const rk = new Float64Array(n);
+  for (let o = 0; o < n; o += 4) {
+    const R = ((o / 4) % (clip.nCurves * 3)) * 16;
+    for (let i = 0; i < 4; i++) for (let j = i; j < 4; j++) rk[o + i] += r[R + i * 4 + j] * clip.knots[o + j];
+  }
+  return naturalSplineTangents(clip.segmentT, rk, clip.nCurves * 12, new Float64Array(n));
+}
+
+test('the per-frame table: direct vertices their positions, then per GPU curve its coefficients (R times the weighted knots) and rigid rows', () => {
+  const cases = man.cases.filter((x) => x.kind === 'dynamic-pde');
+  assert.ok(cases.length >= 5 && cases.some((x) => x.spline_items > 0) && cases.some((x) => x.motion === 'rigid'));
+  let directSeen = 0;
+  let gpuSeen = 0;
+  for (const c of cases) {
     const clip = loadCase(c);
     const ev = createEvaluator(clip);
     const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
-    const ref = createEvaluator(clip);
+    assert.equal(layout.coefficientTexels, 3);
+    assert.equal(layout.curveTexels, layout.rigid ? 6 : 3);
+    assert.equal(layout.spline, c.spline_items > 0);
+    // the knots stay on the CPU: the GPU holds the vertex records and one frame
+    assert.deepEqual(Object.keys(layout.textures).sort(), ['frame', 'vertex']);
+    // direct vertices: those of curves with at most curveTexels vertices, numbered first
     const C = clip.nCurves;
+    const length = (k) => clip.offsets[k + 1] - clip.offsets[k];
+    let nDirect = 0;
+    for (let k = 0; k < C; k++) if (length(k) <= layout.curveTexels) nDirect += length(k);
+    assert.equal(layout.nDirect, nDirect, c.name);
+    assert.deepEqual([...layout.gpuIndex].sort((a, b) => a - b), [...Array(clip.nVertices).keys()]);
+    for (let v = 0; v < clip.nVertices; v++) {
+      assert.equal(layout.gpuIndex[v] < nDirect, length(clip.curveOf[v]) <= layout.curveTexels);
+    }
+    directSeen += nDirect;
+    gpuSeen += clip.nVertices - nDirect;
+    const { r } = orthonormalBases(clip);
+    const tangents = layout.spline ? referenceTangents(clip, r) : null;
+    const ref = createEvaluator(clip);
     const K = layout.curveTexels * 4;
-    const d = layout.textures.curve.data;
+    const d = layout.textures.frame.data;
     let prev = null;
     for (const t of inRange(c, [...c.t, ...c.t.map((x) => x + 1)])) {
       const u = timeUniforms(layout, t);
       ev.evaluate(c.looping ? t + 0.3 : Math.min(t + 0.3, 1)); // the CPU path moving the shared evaluator must not disturb the table
-      const s = ref.prepare(t); // the per-item evaluation (float64), rounded to float32 like the texture
+      const cpu = ref.evaluate(t);
+      const s = ref.prepare(t);
       assert.equal(u.seg, s);
-      for (let cw = 0; cw < C * 3; cw++) {
-        const o = Math.floor(cw / 3) * K + (cw % 3);
-        assert.equal(d[o], Math.fround(ref.phi0[cw]), `${c.name} t = ${t}`);
-        assert.equal(d[o + 4], Math.fround(ref.phi1[cw]), `${c.name} t = ${t}`);
+      for (let v = 0; v < clip.nVertices; v++) {
+        const g = layout.gpuIndex[v];
+        if (g >= nDirect) continue;
+        // placed on the CPU in float64: the CPU evaluator's positions, float32 rounding apart
+        for (let w = 0; w < 3; w++) assert.ok(Math.abs(d[g * 4 + w] - cpu[v * 3 + w]) <= 1e-7 * c.diagonal, c.name);
       }
-      if (layout.rigid) {
-        for (let k = 0; k < C; k++) {
-          for (let i = 0; i < 3; i++) {
-            assert.equal(d[k * K + 8 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
-            assert.equal(d[k * K + 11 + i * 4], Math.fround(ref.trans[k * 3 + i]));
-          }
+      for (let k = 0; k < C; k++) {
+        const cg = layout.gpuCurve[k];
+        assert.equal(cg < 0, length(k) <= layout.curveTexels);
+        if (cg < 0) continue;
+        const o = nDirect * 4 + cg * K;
+        for (let w = 0; w < 3; w++) {
+          const want = referenceCoefficients(clip, ref, r, tangents, s, k * 3 + w);
+          const scale = Math.hypot(...want) + 1e-30;
+          // float32 rounding (and the float32 tangents) apart
+          for (let j = 0; j < 4; j++) assert.ok(Math.abs(d[o + w * 4 + j] - want[j]) <= 1e-6 * scale, `${c.name} t = ${t}`);
+        }
+        if (!layout.rigid) continue;
+        for (let i = 0; i < 3; i++) {
+          assert.equal(d[o + 12 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
+          assert.equal(d[o + 15 + i * 4], Math.fround(ref.trans[k * 3 + i]));
         }
       }
       const loc = ref.locate(t);
@@ -625,6 +674,7 @@ test('the per-curve table equals every item time pair and is rewritten only when
       prev = key;
     }
   }
+  assert.ok(directSeen > 0 && gpuSeen > 0, 'the fixtures have both kinds of vertices');
 });
 
 test('a t with the same segment and local time uploads nothing', () => {
@@ -632,129 +682,55 @@ test('a t with the same segment and local time uploads nothing', () => {
   const clip = loadCase(c);
   const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
   player.setTime(1);
-  const version = player.textures.curve.version;
+  const version = player.textures.frame.version;
   player.setTime(1); // the same state
-  assert.equal(player.textures.curve.version, version);
+  assert.equal(player.textures.frame.version, version);
   player.setTime(0.5);
-  assert.ok(player.textures.curve.version > version);
+  assert.ok(player.textures.frame.version > version);
   player.detach();
 });
 
-/**
- * The per-curve table of clips with spline items holds each item the CPU evaluator's four weights: the
- * segment's spline weights on T_s, P_s, P_s+1, T_s+1 for items on the spline, 0, phi0, phi1, 0 for the
- * others, then the rigid rows; it is rewritten only when the state moves.
- */
-test('spline clips: the table holds each item its four weights (the CPU ones), then the rigid rows', () => {
-  assert.ok(splineCases.some((c) => c.motion === 'rigid') && splineCases.some((c) => c.motion !== 'rigid'));
+test('spline clips: the tangents of the knots (in the orthonormal bases) are solved once per clip, on the CPU', () => {
   for (const c of splineCases) {
     const clip = loadCase(c);
-    const ev = createEvaluator(clip);
-    const layout = gpuLayout(clip, { evaluator: ev }); // shared with the CPU path, as attachClip does
-    assert.equal(layout.spline, true);
-    assert.equal('tangents' in layout, false);
-    assert.equal(layout.weightTexels, 4);
-    assert.equal(layout.curveTexels, layout.rigid ? 7 : 4);
-    assert.equal(layout.nSegments, clip.nSegments);
-    const ref = createEvaluator(clip);
-    const C = clip.nCurves;
-    const K = layout.curveTexels * 4;
-    const d = layout.textures.curve.data;
-    let splineItems = 0;
-    let prev = null;
-    for (const t of inRange(c, [...c.t, ...c.t.map((x) => x + 1)])) {
-      const u = timeUniforms(layout, t);
-      ev.evaluate(c.looping ? t + 0.3 : Math.min(t + 0.3, 1)); // the CPU path moving the shared evaluator must not disturb the table
-      const s = ref.prepare(t);
-      assert.equal(u.seg, s);
-      const cubic = splineWeights(clip.segmentT, s, ref.loc[1], new Float64Array(4)).map(Math.fround);
-      for (let cw = 0; cw < C * 3; cw++) {
-        const o = Math.floor(cw / 3) * K + (cw % 3);
-        const table = [0, 1, 2, 3].map((j) => d[o + j * 4]);
-        assert.deepEqual(table, Array.from(ref.weights.subarray(cw * 4, cw * 4 + 4), Math.fround));
-        if (clip.timeModel[cw] === TIME_SPLINE) {
-          splineItems++;
-          assert.deepEqual(table, Array.from(cubic), `${c.name} t = ${t}`);
-        } else {
-          assert.deepEqual(table, [0, Math.fround(ref.phi0[cw]), Math.fround(ref.phi1[cw]), 0]);
-        }
-      }
-      if (layout.rigid) {
-        for (let k = 0; k < C; k++) {
-          for (let i = 0; i < 3; i++) {
-            assert.equal(d[k * K + 16 + i * 4], Math.fround(ref.rot[k * 9 + i * 3]));
-            assert.equal(d[k * K + 19 + i * 4], Math.fround(ref.trans[k * 3 + i]));
-          }
-        }
-      }
-      const loc = ref.locate(t);
-      const key = `${loc[0]} ${loc[1]} ${layout.rigid ? loc[2] : ''}`;
-      assert.equal(u.changed, key !== prev, `${c.name} t = ${t}`);
-      prev = key;
-    }
-    assert.ok(splineItems > 0, c.name);
-  }
-});
-
-test('spline clips: a tangent texture in the layout of the knot texture, the spline of its coefficients', () => {
-  for (const c of splineCases) {
-    const clip = loadCase(c);
-    const { nCurves: C } = clip;
-    // per (knot, curve, coordinate) the spline's tangents of the 4 coefficients in the orthonormal basis
     const layout = gpuLayout(clip, { width: 64 });
-    const coefficients = layout.textures.knot.data.subarray(0, clip.knots.length);
-    const want = naturalSplineTangents(clip.segmentT, coefficients, C * 12, new Float64Array(clip.knots.length));
-    assert.equal(layout.textures.tangent.height, layout.textures.knot.height);
-    const got = layout.textures.tangent.data;
-    // solved from the float64 coefficients (here from their float32 copy): float32 rounding apart
-    want.forEach((x, i) => assert.ok(Math.abs(got[i] - x) <= 1e-5 * (1 + Math.abs(x)), c.name));
-    assert.ok(layout.maxHeight >= layout.textures.tangent.height);
-    // the same clip without spline items has none
-    assert.equal(gpuLayout(withoutSpline(c)).textures.tangent, undefined);
+    const want = referenceTangents(clip, orthonormalBases(clip).r);
+    assert.ok(layout.tangents instanceof Float32Array);
+    // in the orthonormal bases (on the scale of the values), rounded to float32
+    want.forEach((x, i) => assert.ok(Math.abs(layout.tangents[i] - x) <= 1e-6 * (1e-3 + Math.abs(x)), c.name));
+    assert.equal(gpuLayout(withoutSpline(c)).tangents, null);
   }
-  for (const c of man.cases.filter((x) => !(x.spline_items > 0))) {
-    assert.equal(gpuLayout(loadCase(c)).textures.tangent, undefined, c.name);
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde' && !(x.spline_items > 0))) {
+    assert.equal(gpuLayout(loadCase(c)).tangents, null, c.name);
   }
 });
 
-test('spline clips: GLSL and three.js materials get the spline layout; other clips keep theirs', () => {
+test('spline clips: one shader for every time model (the CPU forms the coefficients); cache keys differ', () => {
   for (const motion of ['rigid', 'displacement']) {
     const c = splineCases.find((x) => x.motion === motion);
     const clip = loadCase(c);
     const plainClip = withoutSpline(c);
     const rigid = motion === 'rigid';
     const header = glslHeader(gpuLayout(clip));
-    assert.match(header, /#define PDEANIM_SPLINE\n/);
-    assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 7 : 4}\\n`));
-    assert.match(header, /#define PDEANIM_WEIGHT_TEXELS 4\n/);
-    assert.match(header, /#ifdef PDEANIM_SPLINE\nuniform highp sampler2D pdeTangentTex;\n#endif/);
-    // the Catmull-Rom branch of earlier drafts is gone: no segment count, no define of its own
-    assert.doesNotMatch(header, /PDEANIM_TANGENTS|pdeSegments|PDEANIM_OUTER_TEX/);
-    // without spline items: 2 texels (5 rigid), no spline define, no tangent texture
     const plainLayout = gpuLayout(plainClip);
     const plain = glslHeader(plainLayout);
-    assert.doesNotMatch(plain, /#define PDEANIM_SPLINE/);
-    assert.match(plain, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 5 : 2}\\n`));
-    assert.match(plain, /#define PDEANIM_WEIGHT_TEXELS 2\n/);
+    assert.equal(header, plain);
+    assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 6 : 3}\\n`));
+    assert.match(header, /#define PDEANIM_COEFFICIENT_TEXELS 3\n/);
+    // no knot or tangent textures, no define of the time model
+    assert.doesNotMatch(header, /pdeKnotTex|pdeTangentTex|PDEANIM_SPLINE|PDEANIM_TANGENTS|pdeSegments/);
     assert.equal(plainLayout.spline, false);
-    assert.equal(plainLayout.textures.tangent, undefined);
-    // three.js: the tangent texture as a uniform, a program cache key of its own
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
     const player = attachClip(mesh, clip);
-    assert.equal(player.uniforms.pdeTangentTex.value, player.textures.tangent);
-    assert.ok(player.textures.tangent.isDataTexture);
     const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
     mesh.material.onBeforeCompile(shader, null);
-    assert.match(shader.vertexShader, /#define PDEANIM_SPLINE/);
-    assert.equal(shader.uniforms.pdeTangentTex.value, player.textures.tangent);
+    assert.equal(shader.uniforms.pdeFrameTex.value, player.textures.frame);
+    assert.equal(shader.uniforms.pdeKnotTex, undefined);
     const key = mesh.material.customProgramCacheKey();
     assert.match(key, /pdeanim:dynamic-pde:\w+:true:frame:\d+:gpu$/);
     const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
     const plainKey = other.mesh.material.customProgramCacheKey();
     assert.match(plainKey, /pdeanim:dynamic-pde:\w+:false:frame:\d+:gpu$/);
-    assert.notEqual(key, plainKey);
-    assert.equal(other.uniforms.pdeTangentTex.value, null);
-    // the evaluation pass gets the tangent texture too
     let scene = null;
     const renderer = {
       extensions: { has: (name) => name === 'EXT_color_buffer_float' },
@@ -771,14 +747,50 @@ test('spline clips: GLSL and three.js materials get the spline layout; other cli
     passed.setTime(0.2);
     passMesh.onBeforeRender(renderer, null, null, passMesh.geometry, passMesh.material, null);
     const quad = scene.children[0].material;
-    assert.equal(quad.uniforms.pdeTangentTex.value, passed.textures.tangent);
-    assert.ok(quad.uniforms.pdeTangentTex.value.isDataTexture);
-    assert.match(quad.fragmentShader, /#define PDEANIM_SPLINE/);
+    assert.equal(quad.uniforms.pdeFrameTex.value, passed.textures.frame);
+    assert.match(quad.fragmentShader, /#define PDEANIM_CURVE_TEXELS/);
     // the GPU path and the CPU fallback agree on the positions it shows, with and without spline items
     agreesWithCpu(player, clip, 0.43, c.diagonal);
     agreesWithCpu(other, plainClip, 0.43, c.diagonal);
     player.detach();
     other.detach();
     passed.detach();
+  }
+});
+
+/**
+ * GPU memory against the download (docs/performance.md, JavaScript client): every fixture's textures,
+ * evaluation pass and attributes on a mesh of its own topology stay under 8x the bytes of its two parts (the
+ * service's download), as ClipPlayer.gpuBytes reports them.
+ */
+test('GPU bytes of every fixture stay under 8x its download (textures, pass, attributes)', () => {
+  const renderer = {
+    extensions: { has: (name) => name === 'EXT_color_buffer_float' },
+    capabilities: { maxTextureSize: 4096 },
+  };
+  for (const c of man.cases) {
+    const { topology, coefficients } = fixtureParts(c);
+    const download = topology.byteLength + coefficients.byteLength;
+    const clip = loadCase(c);
+    const layout = gpuLayout(clip);
+    const bytes = gpuBytes(layout);
+    assert.ok(bytes <= 8 * download, `${c.name}: ${bytes} GPU bytes, ${(bytes / download).toFixed(1)}x its ${download}`);
+    // the player reports the same figure once its pass exists
+    const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip, { renderer });
+    assert.equal(player.pass, true);
+    assert.equal(player.gpuBytes, bytes, c.name);
+    player.detach();
+  }
+});
+
+test('the CPU evaluator takes the time index made with the GPU tables (in a worker) and evaluates the same', () => {
+  for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde').slice(0, 6)) {
+    const clip = loadCase(c);
+    clip.gpuTables = structuredClone(gpuTables(clip)); // as a worker transfers them
+    const player = attachClip(meshOf(clip, THREE.MeshStandardMaterial), clip);
+    assert.equal(player.evaluator.muIndex, clip.gpuTables.timeIndex.muIndex, c.name);
+    const t = inRange(c, [0.37, 0.9])[0];
+    assert.deepEqual(player.evaluator.evaluate(t), createEvaluator(clip).evaluate(t), c.name);
+    player.detach();
   }
 });

@@ -15,37 +15,46 @@ export interface GpuLayout {
   kind: Clip['kind'];
   rigid: boolean;
   /**
-   * Whether some item is on the natural spline (docs/format.md §3.5): the curve table then holds four weight
-   * texels per curve instead of the pair, on T_s, P_s, P_s+1, T_s+1, and textures.tangent holds the tangents
-   * T (the pdeTangentTex uniform).
+   * Whether some item is on the natural spline (docs/format.md §3.5): tangents then holds the spline's
+   * tangents of every knot in the orthonormal bases (the CPU applies them; the shader is the same).
    */
   spline: boolean;
   nCurves: number;
   nVertices: number;
   /** Segments S of a dynamic clip (0 for cyclic ones). */
   nSegments: number;
-  /** Texture row length in texels (a power of two). */
+  /** Texture row length in texels (a power of two near the square root of the largest texture). */
   width: number;
-  /**
-   * Texels per curve in the per-frame curve table: the weights (2: phi0, phi1; 4 with spline items), then 3
-   * rows of the rigid motion (so 2, 5, 4 or 7).
-   */
+  /** Vertices whose positions the CPU writes into the frame table (curves of at most curveTexels vertices). */
+  nDirect?: number;
+  /** Texels per GPU curve in the frame table: 3 coefficient texels, then 3 rows of the rigid motion. */
   curveTexels?: number;
-  /** Weight texels per curve at the start of its table entry (2, or 4 with spline items). */
-  weightTexels?: number;
+  /** Coefficient texels per GPU curve (3) before its rigid rows. */
+  coefficientTexels?: number;
+  /** The GPU's number of each clip vertex (direct ones first): the pdeVertex attribute and the pass use it. */
+  gpuIndex?: Int32Array;
+  /** The GPU curve of each curve (-1 for direct ones). */
+  gpuCurve?: Int32Array;
   textures: {
-    /** Per vertex (curve, base xyz) and its orthonormal basis row per coordinate (dynamic clips). */
+    /** Per GPU vertex (curve, base xyz) and its orthonormal basis row per coordinate (dynamic clips). */
     vertex: FloatTexture;
-    /** Per (knot, curve, coordinate) the knots in the curve's orthonormal basis. */
-    knot?: FloatTexture;
-    /** Natural-spline tangents of every knot's coefficients (clips with spline items), in the layout of knot. */
-    tangent?: FloatTexture;
-    /** Per-frame table rewritten by timeUniforms(). */
-    curve?: FloatTexture;
+    /**
+     * Per-frame table rewritten by timeUniforms(): the direct vertices' positions, then per GPU curve its
+     * coefficients of the frame (and rigid rows).
+     */
+    frame?: FloatTexture;
   };
+  /** Per item its R (C * 3 * 16, row-major upper triangular): knots to orthonormal-basis coefficients. */
+  r?: Float64Array;
+  /** Natural-spline tangents of every knot in the orthonormal bases (layout of clip.knots), or null. */
+  tangents?: Float32Array | null;
+  /** The direct vertices' basis rows, bases and curves, in GPU order (the CPU places them). */
+  direct?: { q: Float32Array; base: Float32Array; curve: Int32Array };
+  /** The CPU evaluator's index of time constants (dynamic clips; made with the tables, in a worker). */
+  timeIndex?: object;
   /** The clip (gpuLayout; absent in gpuTables). */
   clip?: Clip;
-  /** The CPU evaluator whose per-curve state fills the curve table (dynamic clips; gpuLayout). */
+  /** The CPU evaluator whose per-curve state fills the frame table (dynamic clips; gpuLayout). */
   evaluator?: Evaluator;
   /** Largest texture height (compare with the renderer's MAX_TEXTURE_SIZE). */
   maxHeight: number;
@@ -81,7 +90,7 @@ export declare function gpuLayout(
 ): GpuLayout;
 /** Bytes of the data textures. */
 export declare function textureBytes(tables: GpuLayout): number;
-/** The uniforms at t; also rewrites layout.textures.curve.data when it changes (upload it then). */
+/** The uniforms at t; also rewrites layout.textures.frame.data when it changes (upload it then). */
 export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
 export declare function meshAttributes(mesh: {
   vertexMap: ArrayLike<number>;
@@ -89,6 +98,19 @@ export declare function meshAttributes(mesh: {
   normals?: ArrayLike<number> | null;
   index?: ArrayLike<number> | null;
 }): MeshAttributes;
+/** The attributes the shader reads: pdeVertex in the GPU's numbering, pdeNormalFrame as normalised int16. */
+export declare function gpuAttributes(
+  attributes: MeshAttributes,
+  gpuIndex?: Int32Array | null,
+): { pdeVertex: Float32Array; pdeNormalFrame: Int16Array };
+/** The row length for a clip's largest texture of nTexels: a power of two near its square root, at most width. */
+export declare function fittedWidth(nTexels: number, width?: number): number;
+/** Bytes of the evaluation pass's position texture. */
+export declare function passBytes(layout: GpuLayout): number;
+/** Bytes per mesh vertex of the shader's attributes (18). */
+export declare const ATTRIBUTE_BYTES_PER_VERTEX: number;
+/** GPU bytes of the clip on a mesh: data textures, evaluation pass (default on) and attributes. */
+export declare function gpuBytes(layout: GpuLayout, options?: { meshVertices?: number; pass?: boolean }): number;
 export declare function frameNormals(
   clipPositions: ArrayLike<number>,
   attributes: MeshAttributes,

@@ -185,9 +185,9 @@ export declare function fetchServiceClip(
 export declare function fetchClipFile(url: string, options?: FetchOptions): Promise<Clip>;
 
 /** The CPU evaluator of a decoded clip (precomputes everything independent of t). */
-export declare function createEvaluator(clip: DynamicClip): DynamicEvaluator;
+export declare function createEvaluator(clip: DynamicClip, prepared?: object | null): DynamicEvaluator;
 export declare function createEvaluator(clip: CyclicClip): CyclicEvaluator;
-export declare function createEvaluator(clip: Clip): Evaluator;
+export declare function createEvaluator(clip: Clip, prepared?: object | null): Evaluator;
 
 /** Per-vertex space basis (V * 12: vertex, coordinate, function) of a dynamic clip. */
 export declare function vertexBasis(clip: DynamicClip): Float64Array;

@@ -77,6 +77,8 @@ export declare class ClipPlayer {
   readonly resources: ClipResources;
   /** Bytes of the per-vertex attributes this player adds. */
   readonly attributeBytes: number;
+  /** Bytes on the GPU for the clip on this mesh: data textures, evaluation pass (when it runs), attributes. */
+  readonly gpuBytes: number;
   influence: number;
   /** Show the clip at normalised time t: [0, 1] unless the clip loops (else RangeError). */
   setTime(t: number, evaluated?: Float32Array | null): this;

@@ -64,7 +64,9 @@ def list_poses(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, curso
             responses=responses(401, 422))
 def list_clips(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, cursor: str | None = CURSOR,
                mesh_id: str | None = Query(None, **ID), poses_id: str | None = Query(None, **ID),
-               kind: str | None = Query(None, max_length=40, description='producer, e.g. "fit" or "cyclic"'),
+               kind: Literal["dynamic-pde", "cyclic-spine"] | None = Query(
+                   None, description='the clip\'s model: "dynamic-pde" (fit jobs, gait cycles) or '
+                   '"cyclic-spine" (cyclic jobs in spine mode)'),
                ) -> ClipPage:
     """The tenant's clips, newest first; filter by mesh, poses and kind."""
     query = select(ClipRecord).where(ClipRecord.tenant_id == tenant)
@@ -80,7 +82,7 @@ def list_clips(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, curso
             responses=responses(401, 422))
 def list_jobs(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, cursor: str | None = CURSOR,
               state: Literal["queued", "running", "succeeded", "failed", "cancelled"] | None = Query(None),
-              kind: Literal["simulate", "fit", "cyclic"] | None = Query(None),
+              kind: Literal["simulate", "fit", "cyclic", "export"] | None = Query(None),
               mesh_id: str | None = Query(None, **ID)) -> JobPage:
     """The tenant's jobs, newest first; filter by state, kind and mesh. The window tasks of a fit in windows
     are not listed (their fit job is, with its progress counting windows)."""

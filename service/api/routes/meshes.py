@@ -13,6 +13,7 @@ from ..errors import ApiError
 from ..httpcache import immutable_response
 from ..schemas import MeshOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
+from ..validator import run_checked
 
 router = APIRouter(tags=["meshes"])
 
@@ -34,26 +35,26 @@ def mesh_out(row: Mesh) -> MeshOut:
 
 
 def _ingest(upload: Upload, settings: Settings) -> dict:
-    from pdeanim.mesh.io import MeshLimits, load_mesh
-
-    limits = MeshLimits(settings.max_upload_bytes, settings.max_vertices, settings.max_faces)
-    return load_mesh(upload.path, filename=upload.filename, limits=limits).stats()
+    """The mesh file's stats, read in a validator child (bounded API memory whatever the file)."""
+    args = (str(upload.path), upload.filename, settings.model_dump_json())
+    return run_checked("mesh_stats", args, settings)
 
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
-             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422),
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422, 503),
                                                   **created(201, "mesh", {
                  "GetMesh": ("getMesh", "mesh_id"), "UploadPoses": ("uploadPoses", "mesh_id"),
                  "GetTopology": ("getMeshTopology", "mesh_id"), "DeleteMesh": ("deleteMesh", "mesh_id")})})
 async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:
     """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
     settings = store.settings
-    upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
-    try:
-        stats = await run_in_threadpool(_ingest, upload, settings)
-        key = await run_in_threadpool(store.blobs.put_file, upload.path)
-    finally:
-        upload.path.unlink(missing_ok=True)
+    with request.app.state.upload_slots.hold():
+        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+        try:
+            stats = await run_in_threadpool(_ingest, upload, settings)
+            key = await run_in_threadpool(store.blobs.put_file, upload.path)
+        finally:
+            upload.path.unlink(missing_ok=True)
     row = Mesh(tenant_id=tenant, filename=upload.filename[:255], blob_key=key, n_vertices=stats["vertices"],
                n_faces=stats["faces"], stats=stats)
     await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop

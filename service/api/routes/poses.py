@@ -7,16 +7,16 @@ from pathlib import Path
 from fastapi import APIRouter, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from pdeanim.errors import PosesInputError
-
 from ...settings import Settings
 from ...store.context import Store
 from ...store.models import Mesh, PosesRecord
+from ...store.scratch import prefix
 from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
 from ..httpcache import immutable_response
 from ..schemas import PosesOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
+from ..validator import run_checked
 
 router = APIRouter(tags=["poses"])
 
@@ -28,36 +28,6 @@ def poses_out(row: PosesRecord) -> PosesOut:
                     animation=(row.meta or {}).get("animation"))
 
 
-def _read_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,  # noqa: ANN202 - pdeanim Poses
-                animation: str | None = None):
-    from pdeanim.poses import PoseLimits, load_poses_npz, make_poses
-
-    settings: Settings = store.settings
-    limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
-                        max_bytes=settings.max_pose_bytes)
-    suffix = Path(upload.filename).suffix.lower()
-    if suffix == ".npz":
-        if animation is not None:
-            raise PosesInputError("animation applies to glTF uploads only; this is a .npz")
-        poses = load_poses_npz(upload.path, limits)
-    elif suffix in (".glb", ".gltf"):
-        from pdeanim.gltf.read import read_animated_poses
-
-        poses = read_animated_poses(upload.path, fps=fps, limits=limits, animation=animation)
-    else:
-        raise PosesInputError(f"unsupported poses file type {suffix or upload.filename!r}: use .npz or .glb")
-    if poses.n_vertices != mesh.n_vertices:
-        raise PosesInputError(
-            f"poses have {poses.n_vertices} vertices but mesh {mesh.id} has {mesh.n_vertices}"
-        )
-    if poses.faces.size == 0:
-        from pdeanim.mesh.io import load_mesh
-
-        faces = load_mesh(store.blobs.get(mesh.blob_key), filename=mesh.filename).faces
-        poses = make_poses(poses.vertices, faces, poses.times, poses.meta, limits)
-    return poses
-
-
 def _owned_mesh(store: Store, mesh_id: str, tenant: str) -> Mesh:
     with store.sessions() as session:
         return owned(session, Mesh, mesh_id, tenant, "mesh")
@@ -65,20 +35,23 @@ def _owned_mesh(store: Store, mesh_id: str, tenant: str) -> Mesh:
 
 def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,
                  animation: str | None) -> tuple[str, int, dict]:
-    """The poses' blob key, frame count and the row's meta (with the glTF animation used, if any)."""
-    from pdeanim.poses import poses_to_bytes
-
-    poses = _read_poses(upload, mesh, store, fps, animation)
-    meta: dict = {"filename": upload.filename[:255]}
-    used = (poses.meta or {}).get("animation")
-    if isinstance(used, dict):
-        meta["animation"] = {"index": used.get("index"), "name": used.get("name")}
-    return store.blobs.put(poses_to_bytes(poses)), poses.n_frames, meta
+    """The poses' blob key, frame count and the row's meta (with the glTF animation used, if any): validated
+    and written as a canonical POSES.npz by a validator child, then streamed to the blob store."""
+    settings: Settings = store.settings
+    about = {"id": mesh.id, "n_vertices": mesh.n_vertices, "blob_key": mesh.blob_key,
+             "filename": mesh.filename}
+    out, frames, meta = run_checked("poses_file", (str(upload.path), upload.filename, about,
+                                                   settings.model_dump_json(), fps, animation,
+                                                   prefix("upload")), settings)
+    try:
+        return store.blobs.put_file(Path(out)), frames, meta
+    finally:
+        Path(out).unlink(missing_ok=True)
 
 
 @router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses",
              response_model=PosesOut, openapi_extra=UPLOAD_BODY,
-             responses={**responses(400, 401, 404, 413, 415, 422),
+             responses={**responses(400, 401, 404, 413, 415, 422, 503),
                         **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
 async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
                        store: StoreDep,
@@ -90,11 +63,12 @@ async def upload_poses(mesh_id: str, request: Request, response: Response, tenan
     animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
     mesh = await run_in_threadpool(_owned_mesh, store, mesh_id, tenant)
     settings = store.settings
-    upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
-    try:
-        key, frames, meta = await run_in_threadpool(_store_poses, upload, mesh, store, fps, animation)
-    finally:
-        upload.path.unlink(missing_ok=True)
+    with request.app.state.upload_slots.hold():
+        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+        try:
+            key, frames, meta = await run_in_threadpool(_store_poses, upload, mesh, store, fps, animation)
+        finally:
+            upload.path.unlink(missing_ok=True)
     row = PosesRecord(tenant_id=tenant, mesh_id=mesh_id, source="upload", blob_key=key, n_frames=frames,
                       n_vertices=mesh.n_vertices, meta=meta)
     await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop

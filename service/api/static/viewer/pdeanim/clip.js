@@ -152,10 +152,11 @@ export async function fetchClipFile(url, { key, headers = {}, fetch: fetchFn, si
 
 /**
  * The CPU evaluator of a decoded clip: evaluator.evaluate(t, out) writes (V, 3) float32 positions in the
- * original vertex order at normalised clip time t (looping clips wrap, others clamp to [0, 1]).
+ * original vertex order at normalised clip time t (looping clips wrap, others clamp to [0, 1]). prepared: a
+ * dynamic clip's timeIndex() made elsewhere (in a Web Worker, with the GPU tables).
  */
-export function createEvaluator(clip) {
+export function createEvaluator(clip, prepared = null) {
   const entry = KINDS[clip?.kind];
   if (!entry) throw new ClipFormatError(`unknown clip kind ${JSON.stringify(clip?.kind)}`);
-  return new entry[1](clip);
+  return new entry[1](clip, prepared);
 }

@@ -175,10 +175,12 @@ function familyOf(ca, S, C) {
   return { family, m };
 }
 
+/** Tracks decoded together (their integers, weights and sums stay in cache: a block, not every track). */
+const KNOT_BLOCK = 1024;
+
 /**
- * knot_step (C, 3), or (W, C, 3) with knot_windows, and the integer codes (S+1, C, 3, 4) as float64 (exact
- * integers) of the `knots` time tracks: tracks (C, 3, 4, S+1) of zigzag differences of order
- * knot_differences (1 or 2) along time (docs/format.md §3.3).
+ * knot_step (C, 3), or (W, C, 3) with knot_windows, and the zigzag codes z (C, 3, 4, S+1) of the `knots` time
+ * tracks with their difference order (1 or 2, docs/format.md §3.3), checked.
  */
 function knotTracks(ch, ca, S, C) {
   const windows = knotWindows(ca, S);
@@ -190,22 +192,26 @@ function knotTracks(ch, ca, S, C) {
     throw new ClipFormatError(`coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`);
   }
   const z = need(ca, 'knots', [C, 3, 4, S + 1], 'coefficients', U4).data;
-  const codes = new Float64Array(z.length);
-  const n = S + 1;
-  const T = C * 12;
-  for (let track = 0; track < T; track++) {
-    // one time track per curve, coordinate and coefficient: running sums (one or two) of zigzag differences
+  return { steps, z, order, windows };
+}
+
+/**
+ * The integers of tracks t0 .. t0+nb-1 (running sums, one or two, of the zigzag differences z along time)
+ * into q (float64, exact integers), knot-major: q[s * nb + k] for track t0 + k.
+ */
+function trackIntegers(z, order, n, t0, nb, q) {
+  for (let k = 0; k < nb; k++) {
     let first = 0;
-    let q = 0;
-    for (let s = 0; s < n; s++) {
-      const code = z[track * n + s];
+    let sum = 0;
+    for (let s = 0, i = (t0 + k) * n; s < n; s++, i++) {
+      const code = z[i];
       const d = (code >>> 1) ^ -(code & 1);
-      if (order === 1) q += d;
-      else q += first += d;
-      codes[s * T + track] = q;
+      if (order === 1) sum += d;
+      else sum += first += d;
+      q[s * nb + k] = sum;
     }
   }
-  return { steps, codes, windows };
+  return q;
 }
 
 /**
@@ -235,39 +241,54 @@ function decodeKnots(ch, ca, S, C) {
   if (!Number.isInteger(r) || r < 0 || r > S + 1) {
     throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${S + 1}, got ${JSON.stringify(r)}`);
   }
-  const { steps, codes: residual, windows } = knotTracks(ch, ca, S, C);
+  const { steps, z, order, windows } = knotTracks(ch, ca, S, C);
   const n = S + 1;
   const T = C * 12; // one track per curve, coordinate and coefficient
   const knots = new Float32Array(n * T);
+  let weightCodes = null;
+  let basis = null;
   if (r === 0) {
     for (const name of ['knot_weights', 'knot_basis']) {
       if (ca[name] !== undefined) {
         throw new ClipFormatError(`coefficients with knot_rank 0 must not hold '${name}'`);
       }
     }
-    for (let s = 0, win = 0; s < n; s++) {
-      if (windows !== null && s === windows[win + 1]) win++;
-      const h = win * (T >> 2); // this knot's window of steps (one window without knot_windows)
-      for (let track = 0, o = s * T; track < T; track++, o++) {
-        knots[o] = Math.fround(residual[o] * steps[h + (track >> 2)]);
-      }
-    }
   } else {
     if (windows !== null) throw new ClipFormatError('knot steps per window (knot_windows) need knot_rank 0');
-    const z = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
-    const basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
-    const weights = new Float64Array(r * T); // q * h
-    for (let i = 0; i < weights.length; i++) weights[i] = ((z[i] >>> 1) ^ -(z[i] & 1)) * steps[(i % T) >> 2];
-    const acc = new Float64Array(T);
+    weightCodes = need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', U4).data;
+    basis = need(ca, 'knot_basis', [r, S + 1], 'coefficients', ['<f4']).data;
+  }
+  // a block of tracks at a time: its integers, weights and sums stay in cache (the same operations, in the
+  // same order, per knot as a pass over every track)
+  const B = Math.min(KNOT_BLOCK, T);
+  const q = new Float64Array(n * B);
+  const weights = r ? new Float64Array(r * B) : null; // q * h of the block
+  const acc = r ? new Float64Array(B) : null;
+  for (let t0 = 0; t0 < T; t0 += B) {
+    const nb = Math.min(B, T - t0);
+    trackIntegers(z, order, n, t0, nb, q);
+    if (r === 0) {
+      for (let s = 0, win = 0; s < n; s++) {
+        if (windows !== null && s === windows[win + 1]) win++;
+        const h = win * (T >> 2); // this knot's window of steps (one window without knot_windows)
+        for (let k = 0, o = s * T + t0; k < nb; k++, o++) knots[o] = Math.fround(q[s * nb + k] * steps[h + ((t0 + k) >> 2)]);
+      }
+      continue;
+    }
+    for (let j = 0; j < r; j++) {
+      for (let k = 0; k < nb; k++) {
+        const c = weightCodes[j * T + t0 + k];
+        weights[j * nb + k] = ((c >>> 1) ^ -(c & 1)) * steps[(t0 + k) >> 2];
+      }
+    }
     for (let s = 0; s < n; s++) {
-      // per track the same order of operations as a loop over j per track, with contiguous reads
-      acc.fill(0);
+      acc.fill(0, 0, nb);
       for (let j = 0; j < r; j++) {
         const b = basis[j * n + s];
-        for (let track = 0, o = j * T; track < T; track++, o++) acc[track] += weights[o] * b;
+        for (let k = 0, o = j * nb; k < nb; k++, o++) acc[k] += weights[o] * b;
       }
-      for (let track = 0, o = s * T; track < T; track++, o++) {
-        knots[o] = Math.fround(acc[track] + residual[o] * steps[track >> 2]);
+      for (let k = 0, o = s * T + t0; k < nb; k++, o++) {
+        knots[o] = Math.fround(acc[k] + q[s * nb + k] * steps[(t0 + k) >> 2]);
       }
     }
   }
@@ -621,47 +642,58 @@ function knotFields(clip) {
 }
 
 /**
+ * The per-segment time constants of a dynamic clip, indexed so that a frame evaluates each distinct one once:
+ * {mu (S * C * 3 signed constants), muUnique, muStart (S+1: segment s has muUnique[muStart[s]..muStart[s+1])),
+ * muIndex (per segment and item, the index into them), widest (most distinct constants in a segment)}. Plain
+ * typed arrays: a Web Worker can make them and transfer them.
+ */
+export function timeIndex(clip) {
+  const { nCurves: C, nSegments: S, family, m } = clip;
+  const mu = new Float64Array(S * C * 3); // signed time constants
+  for (let i = 0; i < mu.length; i++) mu[i] = (family[i] >= 2 ? -1 : 1) * m[i];
+  // per segment its distinct time constants (fitted clips have a few hundred at most, most items linear)
+  const muIndex = new Int32Array(S * C * 3);
+  const unique = [];
+  const muStart = new Int32Array(S + 1);
+  let widest = 1;
+  for (let s = 0; s < S; s++) {
+    const seen = new Map();
+    let last = NaN;
+    let lastK = -1;
+    for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
+      const x = mu[i];
+      let k = x === last ? lastK : seen.get(x); // runs of one constant (most items are linear) skip the map
+      if (k === undefined) {
+        k = seen.size;
+        seen.set(x, k);
+        unique.push(x);
+      }
+      muIndex[i] = k;
+      last = x;
+      lastK = k;
+    }
+    muStart[s + 1] = unique.length;
+    widest = Math.max(widest, seen.size);
+  }
+  return { mu, muIndex, muUnique: Float64Array.from(unique), muStart, widest };
+}
+
+/**
  * CPU evaluator of a decoded dynamic-PDE clip. The per-segment time state (what the GPU path needs each
  * frame) is set up here; the per-vertex knot fields of the CPU evaluation on first use.
  */
 export class DynamicEvaluator {
-  constructor(clip) {
+  /** prepared: timeIndex(clip) made elsewhere (a Web Worker builds it with the GPU tables), else made here. */
+  constructor(clip, prepared = null) {
     this.clip = clip;
-    const { nVertices: V, nCurves: C, nSegments: S, curveOf, family, m } = clip;
+    const { nVertices: V, nCurves: C } = clip;
     this.nVertices = V;
     this._fields = null;
     this._tangentFields = null;
     this.item = new Int32Array(V * 3); // (curve, coordinate) item of each value
-    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = curveOf[v] * 3 + w;
-    this.mu = new Float64Array(S * C * 3); // signed time constants
-    for (let i = 0; i < this.mu.length; i++) this.mu[i] = (family[i] >= 2 ? -1 : 1) * m[i];
-    // per segment its distinct time constants (fitted clips have a few hundred at most, most items linear):
-    // muUnique[muStart[s]..muStart[s+1]) and per item the index muIndex into them, so a frame evaluates
-    // each distinct time pair once and gathers the C * 3 pairs from them
-    this.muIndex = new Int32Array(S * C * 3);
-    const unique = [];
-    this.muStart = new Int32Array(S + 1);
-    let widest = 1;
-    for (let s = 0; s < S; s++) {
-      const seen = new Map();
-      let last = NaN;
-      let lastK = -1;
-      for (let i = s * C * 3; i < (s + 1) * C * 3; i++) {
-        const mu = this.mu[i];
-        let k = mu === last ? lastK : seen.get(mu); // runs of one constant (most items are linear) skip the map
-        if (k === undefined) {
-          k = seen.size;
-          seen.set(mu, k);
-          unique.push(mu);
-        }
-        this.muIndex[i] = k;
-        last = mu;
-        lastK = k;
-      }
-      this.muStart[s + 1] = unique.length;
-      widest = Math.max(widest, seen.size);
-    }
-    this.muUnique = Float64Array.from(unique);
+    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = clip.curveOf[v] * 3 + w;
+    const { mu, muIndex, muUnique, muStart, widest } = prepared ?? timeIndex(clip);
+    Object.assign(this, { mu, muIndex, muUnique, muStart });
     this.uPhi0 = new Float64Array(widest); // the distinct pairs of the current segment
     this.uPhi1 = new Float64Array(widest);
     this.loc = [0, 0, 0]; // segment, tau, wrapped t of the last locate()

@@ -10,9 +10,8 @@ function defines(layout, { normals, stage, pass, cpu }) {
   if (cpu) defs.push('#define PDEANIM_CPU');
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
-  if (layout.spline) defs.push('#define PDEANIM_SPLINE');
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
-  defs.push(`#define PDEANIM_WEIGHT_TEXELS ${layout.weightTexels ?? 0}`);
+  defs.push(`#define PDEANIM_COEFFICIENT_TEXELS ${layout.coefficientTexels ?? 0}`);
   defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
   defs.push(`#define PDEANIM_WIDTH_MASK ${layout.width - 1}`);
   return defs.join('\n');
@@ -35,15 +34,10 @@ in vec3 pdeCpuNormal;
 uniform highp sampler2D pdePosTex;
 #endif
 uniform highp sampler2D pdeVertexTex;
-uniform int pdeSeg;
-uniform int pdeCurves;
 uniform int pdeVertices;
 #ifdef PDEANIM_DYNAMIC
-uniform highp sampler2D pdeCurveTex;
-uniform highp sampler2D pdeKnotTex;
-#ifdef PDEANIM_SPLINE
-uniform highp sampler2D pdeTangentTex;
-#endif
+uniform highp sampler2D pdeFrameTex;
+uniform int pdeDirect;
 #endif
 #ifdef PDEANIM_CYCLIC
 uniform float pdeSinWt;
@@ -59,42 +53,22 @@ vec4 pdeFetch(highp sampler2D tex, int i) {
 }
 `;
 
-// one clip vertex: base + per coordinate the weighted knot coefficients dotted with the vertex's basis row
-// (two terms, or four in clips with items on the natural spline), then the curve's rigid motion
+// one clip vertex v (the GPU's numbering, gpu.js): a direct vertex's position from the per-frame table,
+// else base + per coordinate the frame's coefficients of its curve (from the per-frame table, after the
+// direct positions) dotted with the vertex's basis row, then the curve's rigid motion
 const DYNAMIC_EVAL = `
 #ifdef PDEANIM_DYNAMIC
 vec3 pdeEval(int v) {
-  vec4 head = pdeFetch(pdeVertexTex, v * 4);
-  int c = int(head.x + 0.5);
+  if (v < pdeDirect) return pdeFetch(pdeFrameTex, v).xyz;
+  int r = (v - pdeDirect) * 4;
+  vec4 head = pdeFetch(pdeVertexTex, r);
+  int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   vec3 p = head.yzw;
-#ifdef PDEANIM_SPLINE
-  // natural spline: weights of T_s, P_s, P_s+1, T_s+1 (0, phi0, phi1, 0 for items off the spline)
-  int sl = pdeSeg;
-  int sh = pdeSeg + 1;
-  vec3 fl = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
-  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
-  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 2).xyz;
-  vec3 fh = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 3).xyz;
-  for (int w = 0; w < 3; w++) {
-    vec4 kl = pdeFetch(pdeTangentTex, (sl * pdeCurves + c) * 3 + w);
-    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
-    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-    vec4 kh = pdeFetch(pdeTangentTex, (sh * pdeCurves + c) * 3 + w);
-    p[w] += dot(fl[w] * kl + f0[w] * k0 + f1[w] * k1 + fh[w] * kh, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
-  }
-#else
-  vec3 f0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS).xyz;
-  vec3 f1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + 1).xyz;
-  for (int w = 0; w < 3; w++) {
-    vec4 k0 = pdeFetch(pdeKnotTex, (pdeSeg * pdeCurves + c) * 3 + w);
-    vec4 k1 = pdeFetch(pdeKnotTex, ((pdeSeg + 1) * pdeCurves + c) * 3 + w);
-    p[w] += dot(f0[w] * k0 + f1[w] * k1, pdeFetch(pdeVertexTex, v * 4 + 1 + w));
-  }
-#endif
+  for (int w = 0; w < 3; w++) p[w] += dot(pdeFetch(pdeFrameTex, c + w), pdeFetch(pdeVertexTex, r + 1 + w));
 #ifdef PDEANIM_RIGID
-  vec4 r0 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS);
-  vec4 r1 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 1);
-  vec4 r2 = pdeFetch(pdeCurveTex, c * PDEANIM_CURVE_TEXELS + PDEANIM_WEIGHT_TEXELS + 2);
+  vec4 r0 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS);
+  vec4 r1 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 1);
+  vec4 r2 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 2);
   p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
 #endif
   return p;

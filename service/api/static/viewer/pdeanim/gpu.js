@@ -1,10 +1,10 @@
 // GPU evaluation data (no three.js import): float textures, per-vertex attributes and per-frame uniforms of a
-// clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js, the TSL in webgpu.js.
+// clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js.
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, naturalSplineTangents } from './dynamic.js';
+import { DynamicEvaluator, naturalSplineTangents, timeIndex, vertexBase } from './dynamic.js';
 import { triangleFrame, triangleQuality } from './geometry.js';
-import { orthonormalBases, orthonormalCoefficients } from './orthobasis.js';
+import { orthonormalBases } from './orthobasis.js';
 
 export const TEXTURE_WIDTH = 4096;
 
@@ -12,6 +12,15 @@ export const TEXTURE_WIDTH = 4096;
 function pow2Width(width) {
   if (!(width >= 1)) throw new RangeError(`texture width must be >= 1, got ${width}`);
   return 2 ** Math.floor(Math.log2(width));
+}
+
+/**
+ * The row length of a clip's textures: the smallest power of two at least the square root of the largest
+ * texture's texels (so that a row of padding is small against the texture), at most width.
+ */
+export function fittedWidth(nTexels, width = TEXTURE_WIDTH) {
+  const most = pow2Width(width);
+  return Math.min(most, 2 ** Math.ceil(Math.log2(Math.max(1, Math.sqrt(nTexels)))));
 }
 
 /** A float RGBA texture of n texels, rows of w (a power of two): {data (padded), width, height}. */
@@ -23,46 +32,55 @@ function texture(nTexels, width) {
 /**
  * The data textures and constants of a decoded clip (independent of the mesh and of three.js; plain typed
  * arrays, so that a Web Worker can build them and transfer them): {kind, rigid, spline, nCurves, nVertices,
- * nSegments, width, weightTexels, curveTexels, textures: {vertex, knot, tangent?, curve}, maxHeight} (cyclic
- * clips: {kind, nVertices, width, textures: {vertex}, axis, bend, rotate, maxHeight}).
+ * nSegments, width, nDirect, coefficientTexels, curveTexels, gpuIndex, gpuCurve, textures: {vertex, frame},
+ * r, tangents, direct: {q, base, curve}, maxHeight} (cyclic clips: {kind, nVertices, width, textures:
+ * {vertex}, axis, bend, rotate, maxHeight}). width is at most the option's (fittedWidth).
  *
- * Dynamic clips: per vertex 4 texels (curve, base xyz) and the row of each coordinate's orthonormal space
- * basis (orthobasis.js); per (knot, curve, coordinate) the knots in that basis; for clips with items on the
- * natural spline (docs/format.md §3.5: `spline` true) the tangents T_j of every knot's coefficients likewise
- * (the spline's tridiagonal solve once per clip); the `curve` texture is the per-frame table that
- * timeUniforms() rewrites: per curve the time pairs (phi0 xyz, phi1 xyz) of the current segment and, for
- * rigid clips, the rows of R with the centroid (R row i, c_i), all computed in float64 by the CPU evaluator's
- * own code. Clips with spline items carry four weights per item instead of the pair (texels w_0 xyz, w_1 xyz,
- * w_2 xyz, w_3 xyz: the weights of T_s, P_s, P_s+1, T_s+1, or 0, phi0, phi1, 0 for an item off the spline),
- * then the rigid rows.
+ * Dynamic clips. The GPU numbers the clip vertices gpuIndex[v] (the pdeVertex attribute and the evaluation
+ * pass use these numbers): first the nDirect vertices of short curves (at most curveTexels vertices: their
+ * positions take no more texels than the curve's coefficients would), whose positions the CPU writes into
+ * the per-frame table each frame; then the others, with 4 texels each in the `vertex` texture: (GPU curve
+ * gpuCurve[c], base xyz) and the row of each coordinate's orthonormal space basis (orthobasis.js). The
+ * `frame` texture is the per-frame table that timeUniforms() rewrites: a position per direct vertex, then per
+ * GPU curve and coordinate the four coefficients of the current frame in that basis (the time weights
+ * applied to the segment's knots, and R, in float64 on the CPU), then for rigid clips the rows of R with the
+ * centroid (R row i, c_i). The knots stay on the CPU (the clip's own array): the GPU holds one frame, not
+ * every knot. r (Float64Array, C * 3 * 16) is each item's R; tangents (or null) the natural-spline tangents of
+ * every knot's coefficients in the orthonormal bases (orthonormalTangents) for clips with items on the spline
+ * (docs/format.md §3.5); direct the basis rows (q, nDirect * 12), bases (nDirect * 3) and curves of the
+ * direct vertices in GPU order; timeIndex the CPU evaluator's index of time constants (dynamic.js).
  */
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
-  width = pow2Width(width);
-  if (clip.kind === 'cyclic-spine') return cyclicTables(clip, width);
-  const { nVertices: V, nCurves: C, nSegments: S, curveOf, knots, rigid } = clip;
+  if (clip.kind === 'cyclic-spine') return cyclicTables(clip, fittedWidth(clip.nVertices * 3, width));
+  const { nVertices: V, nCurves: C, nSegments: S, curveOf, offsets, rigid } = clip;
   const spline = (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
-  const base = new DynamicEvaluator(clip).base;
+  const coefficientTexels = 3;
+  const curveTexels = coefficientTexels + (rigid ? 3 : 0);
+  const { gpuIndex, gpuCurve, nDirect, nGpuCurves } = gpuNumbering(curveOf, offsets, curveTexels);
+  const frameTexels = nDirect + nGpuCurves * curveTexels;
+  width = fittedWidth(Math.max((V - nDirect) * 4, frameTexels), width);
+  const base = vertexBase(clip);
   const { q, r } = orthonormalBases(clip);
-  const vertex = texture(V * 4, width); // per vertex: (curve, base xyz), basis x, basis y, basis z
+  const vertex = texture((V - nDirect) * 4, width); // per GPU vertex: (curve, base xyz), basis x, y, z
+  const d = vertex.data;
+  const direct = { q: new Float32Array(nDirect * 12), base: new Float32Array(nDirect * 3), curve: new Int32Array(nDirect) };
   for (let v = 0; v < V; v++) {
-    const o = v * 16;
-    vertex.data[o] = curveOf[v];
-    vertex.data.set(base.subarray(v * 3, v * 3 + 3), o + 1);
-    vertex.data.set(q.subarray(v * 12, v * 12 + 12), o + 4);
+    const g = gpuIndex[v];
+    if (g < nDirect) {
+      direct.curve[g] = curveOf[v];
+      direct.base.set(base.subarray(v * 3, v * 3 + 3), g * 3);
+      direct.q.set(q.subarray(v * 12, v * 12 + 12), g * 12);
+      continue;
+    }
+    const o = (g - nDirect) * 16;
+    d[o] = gpuCurve[curveOf[v]];
+    d[o + 1] = base[v * 3];
+    d[o + 2] = base[v * 3 + 1];
+    d[o + 3] = base[v * 3 + 2];
+    for (let k = 0; k < 12; k++) d[o + 4 + k] = q[v * 12 + k];
   }
-  const coefficients = orthonormalCoefficients(r, knots);
-  const knot = texture((S + 1) * C * 3, width); // per (knot, curve, coordinate): 4 basis coefficients
-  knot.data.set(coefficients);
-  const textures = { vertex, knot };
-  if (spline) {
-    // natural-spline tangents of every knot's coefficients (linear: the same in either basis)
-    const tangent = texture((S + 1) * C * 3, width);
-    naturalSplineTangents(clip.segmentT, coefficients, C * 12, tangent.data);
-    textures.tangent = tangent;
-  }
-  const weightTexels = spline ? 4 : 2;
-  const curveTexels = weightTexels + (rigid ? 3 : 0);
-  textures.curve = texture(C * curveTexels, width);
+  const tangents = spline ? orthonormalTangents(clip, r) : null;
+  const textures = { vertex, frame: texture(frameTexels, width) };
   return {
     kind: clip.kind,
     rigid: Boolean(rigid),
@@ -70,12 +88,81 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
     nCurves: C,
     nVertices: V,
     nSegments: S,
-    weightTexels,
+    nDirect,
+    coefficientTexels,
     width,
     curveTexels,
+    gpuIndex,
+    gpuCurve,
     textures,
+    r,
+    tangents,
+    direct,
+    timeIndex: timeIndex(clip), // for the CPU evaluator (a worker makes it off the main thread)
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
+}
+
+/**
+ * The GPU's numbering of a clip's vertices and curves: curves of at most `short` vertices are direct (the
+ * CPU places their vertices), numbered first in clip order; the others follow in clip order, and their
+ * curves get GPU curve numbers 0.. (gpuCurve, -1 for direct curves).
+ */
+function gpuNumbering(curveOf, offsets, short) {
+  const V = curveOf.length;
+  const C = offsets.length - 1;
+  const gpuCurve = new Int32Array(C);
+  let nGpuCurves = 0;
+  let nDirect = 0;
+  for (let c = 0; c < C; c++) {
+    const n = offsets[c + 1] - offsets[c];
+    if (n <= short) {
+      gpuCurve[c] = -1;
+      nDirect += n;
+    } else gpuCurve[c] = nGpuCurves++;
+  }
+  const gpuIndex = new Int32Array(V);
+  for (let v = 0, nextDirect = 0, nextGpu = nDirect; v < V; v++) {
+    gpuIndex[v] = gpuCurve[curveOf[v]] < 0 ? nextDirect++ : nextGpu++;
+  }
+  return { gpuIndex, gpuCurve, nDirect, nGpuCurves };
+}
+
+/**
+ * The natural-spline tangents (docs/format.md §3.5) of every knot's coefficients in the items' orthonormal
+ * bases, R k (Float32Array in the layout of clip.knots; one tridiagonal solve per clip, in float64). In that
+ * basis they are on the scale of the values: the raw knots of ill-conditioned items can be 1e3 times larger
+ * than R k, and float32 tangents of those would lose that factor when R is applied.
+ */
+function orthonormalTangents(clip, r) {
+  const { knots, segmentT } = clip;
+  const cols = r.length / 4; // C * 3 items (R: 16 numbers each) of 4 coefficients: one track per coefficient
+  const n = knots.length / cols;
+  const out = new Float32Array(knots.length);
+  // a block of tracks at a time (a float64 copy of every knot would be 8 bytes per knot coefficient)
+  const B = Math.min(cols, 1024);
+  const rk = new Float64Array(n * B);
+  const tb = new Float64Array(n * B);
+  for (let t0 = 0; t0 < cols; t0 += B) {
+    const nb = Math.min(B, cols - t0);
+    const values = nb === B ? rk : rk.subarray(0, n * nb);
+    for (let s = 0; s < n; s++) {
+      for (let k = 0; k < nb; k += 4) {
+        const o = s * cols + t0 + k; // 4 coefficients of one item at knot s
+        const R = ((t0 + k) / 4) * 16;
+        for (let i = 0; i < 4; i++) {
+          let acc = 0;
+          for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * knots[o + j];
+          values[s * nb + k + i] = acc;
+        }
+      }
+    }
+    const tangents = naturalSplineTangents(segmentT, values, nb, nb === B ? tb : tb.subarray(0, n * nb));
+    for (let s = 0; s < n; s++) {
+      for (let k = 0; k < nb; k++) out[s * cols + t0 + k] = tangents[s * nb + k];
+    }
+  }
+  return out;
 }
 
 /**
@@ -86,12 +173,29 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
 export function gpuLayout(clip, { width = TEXTURE_WIDTH, tables = null, evaluator = null } = {}) {
   const t = tables ?? gpuTables(clip, { width });
   if (clip.kind === 'cyclic-spine') return { ...t, clip };
-  return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip), tableAt: [-1, NaN, NaN] };
+  return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip, t.timeIndex), tableAt: [-1, NaN, NaN] };
 }
 
 /** Bytes of the data textures of gpuTables() (what the GPU holds for the clip, whatever the mesh). */
 export function textureBytes(tables) {
   return Object.values(tables.textures).reduce((n, t) => n + t.data.byteLength, 0);
+}
+
+/** Bytes of the evaluation pass's position texture (RGBA float32, a texel per clip vertex, rows of width). */
+export function passBytes(layout) {
+  return layout.width * Math.max(1, Math.ceil(layout.nVertices / layout.width)) * 16;
+}
+
+/** Bytes of the shader's per-vertex attributes (gpuAttributes: pdeVertex 3 float32, pdeNormalFrame 3 int16). */
+export const ATTRIBUTE_BYTES_PER_VERTEX = 3 * 4 + 3 * 2;
+
+/**
+ * GPU bytes of a clip played on meshVertices mesh vertices (default: the clip's): its data textures, the
+ * evaluation pass's texture (pass: default true) and the shader's attributes; what ClipPlayer.gpuBytes
+ * reports for one mesh.
+ */
+export function gpuBytes(layout, { meshVertices = layout.nVertices, pass = true } = {}) {
+  return textureBytes(layout) + (pass ? passBytes(layout) : 0) + meshVertices * ATTRIBUTE_BYTES_PER_VERTEX;
 }
 
 function cyclicTables(clip, width) {
@@ -126,10 +230,11 @@ function cyclicTables(clip, width) {
 
 /**
  * The state at t: returns the uniforms {seg, sw, cw} (segment of the dynamic clip; sin and cos of the swim
- * phase of a cyclic one) and `changed`: whether the per-curve table layout.textures.curve.data was rewritten
+ * phase of a cyclic one) and `changed`: whether the per-frame table layout.textures.frame.data was rewritten
  * (dynamic clips; upload it only then). The table is left as it is when t maps to the same segment, local
  * time (and rigid time) as at the previous call; otherwise each distinct time constant of the segment is
- * evaluated once (fitted clips have a few hundred, most items are linear) and the C x 3 pairs are gathered.
+ * evaluated once (fitted clips have a few hundred, most items are linear) and the table written (writeFrame:
+ * weighted sums of the segment's knots in the orthonormal bases, segmentRows, made once per segment).
  */
 export function timeUniforms(layout, t) {
   if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
@@ -149,56 +254,139 @@ export function timeUniforms(layout, t) {
   last[1] = loc[1];
   last[2] = loc[2];
   ev.segmentState();
-  const { uPhi0, uPhi1, muIndex } = ev;
-  const d = layout.textures.curve.data;
-  const K = layout.curveTexels * 4;
-  const C = layout.nCurves;
-  if (!layout.spline) {
-    for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K, j += 3) {
-      const kx = muIndex[j];
-      const ky = muIndex[j + 1];
-      const kz = muIndex[j + 2];
-      d[o] = uPhi0[kx];
-      d[o + 1] = uPhi0[ky];
-      d[o + 2] = uPhi0[kz];
-      d[o + 4] = uPhi1[kx];
-      d[o + 5] = uPhi1[ky];
-      d[o + 6] = uPhi1[kz];
-    }
-  } else {
-    // four weights per item: the segment's spline weights (docs/format.md §3.5) or (0, phi0, phi1, 0)
-    const { spline, cubicWeights: cw } = ev;
-    for (let c = 0, o = 0, j = seg * C * 3; c < C; c++, o += K) {
-      for (let w = 0; w < 3; w++, j++) {
-        if (spline[c * 3 + w] === 1) {
-          d[o + w] = cw[0];
-          d[o + 4 + w] = cw[1];
-          d[o + 8 + w] = cw[2];
-          d[o + 12 + w] = cw[3];
-        } else {
-          const k = muIndex[j];
-          d[o + w] = 0;
-          d[o + 4 + w] = uPhi0[k];
-          d[o + 8 + w] = uPhi1[k];
-          d[o + 12 + w] = 0;
-        }
-      }
-    }
-  }
-  if (layout.rigid) rigidRows(layout, ev, d);
+  writeFrame(layout, ev, seg, layout.textures.frame.data);
   return { seg, sw: 0, cw: 0, changed: true };
 }
 
-/** The rigid rows of the per-curve table d (after the weights): (R row i, c_i) of each curve, from ev. */
-function rigidRows(layout, ev, d) {
-  const { rot, trans } = ev;
+/** R k of every item's 4 knot coefficients at one knot (knots from offset o, C * 12 of them) into out (float64). */
+function orthonormalRow(r, knots, o, out) {
+  for (let i = 0; i < out.length; i += 4) {
+    const R = i * 4; // item i / 4, 16 numbers of R each
+    const k0 = knots[o + i];
+    const k1 = knots[o + i + 1];
+    const k2 = knots[o + i + 2];
+    const k3 = knots[o + i + 3];
+    out[i] = r[R] * k0 + r[R + 1] * k1 + r[R + 2] * k2 + r[R + 3] * k3;
+    out[i + 1] = r[R + 5] * k1 + r[R + 6] * k2 + r[R + 7] * k3;
+    out[i + 2] = r[R + 10] * k2 + r[R + 11] * k3;
+    out[i + 3] = r[R + 15] * k3;
+  }
+  return out;
+}
+
+/**
+ * What a segment's frames share, made when t enters another segment: the knots at both ends in the items'
+ * orthonormal bases (a, b: C * 12 float64) and, for clips with spline items, the spline tangents there (tl,
+ * th, already in that basis), so that a frame's coefficients are a weighted sum of rows per item.
+ */
+function segmentRows(layout, seg) {
+  const C = layout.nCurves;
+  const spline = layout.tangents !== null;
+  const rows = (layout.rows ??= {
+    seg: -1,
+    a: new Float64Array(C * 12),
+    b: new Float64Array(C * 12),
+    tl: spline ? new Float64Array(C * 12) : null,
+    th: spline ? new Float64Array(C * 12) : null,
+    y: new Float64Array(C * 12), // the frame's coefficients
+  });
+  if (rows.seg === seg) return rows;
+  const { knots } = layout.clip;
+  const row = (j, out, tangentsOut) => {
+    orthonormalRow(layout.r, knots, j * C * 12, out);
+    // a float64 copy: every row the frame loop reads is then of one type
+    if (spline) tangentsOut.set(layout.tangents.subarray(j * C * 12, (j + 1) * C * 12));
+  };
+  if (rows.seg >= 0 && seg === rows.seg + 1) {
+    // playing forward: the knot at the segment's start is the previous segment's end
+    [rows.a, rows.b, rows.tl, rows.th] = [rows.b, rows.a, rows.th, rows.tl];
+    row(seg + 1, rows.b, rows.th);
+  } else {
+    row(seg, rows.a, rows.tl);
+    row(seg + 1, rows.b, rows.th);
+  }
+  rows.seg = seg;
+  return rows;
+}
+
+/**
+ * Every item's coefficients of the frame in its orthonormal basis into rows.y (float64): phi0, phi1 on the
+ * segment's knots; spline items w_0..w_3 on T_s, P_s, P_s+1, T_s+1.
+ */
+function frameCoefficients(layout, ev, seg, rows) {
+  const n = layout.nCurves * 3;
+  const { uPhi0, uPhi1, muIndex } = ev;
+  const spline = layout.spline ? ev.spline : null;
+  const cw = ev.cubicWeights;
+  // the segment's spline weights (the same for every spline item), read once: not destructured per item
+  const wl = spline !== null ? cw[0] : 0;
+  const w0 = spline !== null ? cw[1] : 0;
+  const w1 = spline !== null ? cw[2] : 0;
+  const wh = spline !== null ? cw[3] : 0;
+  const { a, b, tl, th, y } = rows;
+  for (let i = 0, mu = seg * n; i < n; i++) {
+    const j = i * 4;
+    if (spline !== null && spline[i] === 1) {
+      y[j] = wl * tl[j] + w0 * a[j] + w1 * b[j] + wh * th[j];
+      y[j + 1] = wl * tl[j + 1] + w0 * a[j + 1] + w1 * b[j + 1] + wh * th[j + 1];
+      y[j + 2] = wl * tl[j + 2] + w0 * a[j + 2] + w1 * b[j + 2] + wh * th[j + 2];
+      y[j + 3] = wl * tl[j + 3] + w0 * a[j + 3] + w1 * b[j + 3] + wh * th[j + 3];
+    } else {
+      const m = muIndex[mu + i];
+      const p0 = uPhi0[m];
+      const p1 = uPhi1[m];
+      y[j] = p0 * a[j] + p1 * b[j];
+      y[j + 1] = p0 * a[j + 1] + p1 * b[j + 1];
+      y[j + 2] = p0 * a[j + 2] + p1 * b[j + 2];
+      y[j + 3] = p0 * a[j + 3] + p1 * b[j + 3];
+    }
+  }
+  return y;
+}
+
+/**
+ * The per-frame table d of segment seg at the evaluator's time state: each direct vertex its position (basis
+ * row . the frame's coefficients + base, then its curve's rigid motion, in float64), then per GPU curve its
+ * three coefficient texels and, for rigid clips, its rigid rows.
+ */
+function writeFrame(layout, ev, seg, d) {
+  const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg));
+  const { nDirect, gpuCurve, direct } = layout;
+  const { q, base, curve } = direct;
+  const rot = layout.rigid ? ev.rot : null;
+  const trans = layout.rigid ? ev.trans : null;
+  for (let g = 0; g < nDirect; g++) {
+    const c = curve[g];
+    const Q = g * 12;
+    const Y = c * 12;
+    const o = g * 4;
+    for (let w = 0; w < 3; w++) {
+      const k = Q + w * 4;
+      const j = Y + w * 4;
+      d[o + w] = base[g * 3 + w] + (q[k] * y[j] + q[k + 1] * y[j + 1] + q[k + 2] * y[j + 2] + q[k + 3] * y[j + 3]);
+    }
+    if (rot !== null) {
+      const x = d[o];
+      const yy = d[o + 1];
+      const z = d[o + 2];
+      const R = c * 9;
+      for (let i = 0; i < 3; i++) {
+        d[o + i] = rot[R + i * 3] * x + rot[R + i * 3 + 1] * yy + rot[R + i * 3 + 2] * z + trans[c * 3 + i];
+      }
+    }
+  }
   const K = layout.curveTexels * 4;
-  for (let c = 0, o = layout.weightTexels * 4; c < layout.nCurves; c++, o += K) {
+  for (let c = 0; c < layout.nCurves; c++) {
+    const cg = gpuCurve[c];
+    if (cg < 0) continue;
+    const o = nDirect * 4 + cg * K;
+    for (let k = 0; k < 12; k++) d[o + k] = y[c * 12 + k];
+    if (rot === null) continue;
     for (let i = 0; i < 3; i++) {
-      d[o + i * 4] = rot[c * 9 + i * 3];
-      d[o + 1 + i * 4] = rot[c * 9 + i * 3 + 1];
-      d[o + 2 + i * 4] = rot[c * 9 + i * 3 + 2];
-      d[o + 3 + i * 4] = trans[c * 3 + i];
+      d[o + 12 + i * 4] = rot[c * 9 + i * 3];
+      d[o + 13 + i * 4] = rot[c * 9 + i * 3 + 1];
+      d[o + 14 + i * 4] = rot[c * 9 + i * 3 + 2];
+      d[o + 15 + i * 4] = trans[c * 3 + i];
     }
   }
 }
@@ -255,6 +443,20 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
     for (let k = 0; k < 3; k++) frame[i * 3 + k] = fr[k * 3] * nx + fr[k * 3 + 1] * ny + fr[k * 3 + 2] * nz;
   }
   return { pdeVertex, pdeNormalFrame: frame };
+}
+
+/**
+ * The attributes the shader reads, from meshAttributes(): pdeVertex with the GPU's vertex numbers (gpuIndex
+ * of gpuTables(); null: the clip's), and pdeNormalFrame as normalised int16 (a unit vector: 3e-5 is plenty
+ * for shading, at half the bytes). {pdeVertex: Float32Array, pdeNormalFrame: Int16Array}.
+ */
+export function gpuAttributes(attrs, gpuIndex = null) {
+  const pdeVertex = gpuIndex ? attrs.pdeVertex.map((v) => gpuIndex[v]) : Float32Array.from(attrs.pdeVertex);
+  const pdeNormalFrame = new Int16Array(attrs.pdeNormalFrame.length);
+  for (let i = 0; i < pdeNormalFrame.length; i++) {
+    pdeNormalFrame[i] = Math.round(Math.max(-1, Math.min(1, attrs.pdeNormalFrame[i])) * 32767);
+  }
+  return { pdeVertex, pdeNormalFrame };
 }
 
 /**

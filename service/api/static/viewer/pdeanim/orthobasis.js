@@ -27,30 +27,31 @@ export function orthonormalBases(clip) {
   let widest = 0;
   for (let c = 0; c < C; c++) widest = Math.max(widest, offsets[c + 1] - offsets[c]);
   const cols = new Float64Array(widest * 4); // Q's columns of one (curve, coordinate), column-major
+  // offsets into one buffer, no subarray per column: fitted clips have 1e4 curves of a few vertices
   for (let c = 0; c < C; c++) {
     const first = offsets[c];
     const n = offsets[c + 1] - first;
     for (let w = 0; w < 3; w++) {
-      const R = r.subarray((c * 3 + w) * 16, (c * 3 + w + 1) * 16);
+      const R = (c * 3 + w) * 16;
       for (let j = 0; j < 4; j++) {
-        const col = cols.subarray(j * n, (j + 1) * n);
-        for (let i = 0; i < n; i++) col[i] = B[order[first + i] * 12 + w * 4 + j];
-        const norm0 = norm(col);
+        const col = j * n;
+        for (let i = 0; i < n; i++) cols[col + i] = B[order[first + i] * 12 + w * 4 + j];
+        const norm0 = Math.sqrt(dotAt(cols, col, col, n));
         for (let pass = 0; pass < 2; pass++) {
           // classical Gram-Schmidt, twice: orthogonal to working precision
           for (let i = 0; i < j; i++) {
-            const qi = cols.subarray(i * n, (i + 1) * n);
-            const d = dot(qi, col);
-            R[i * 4 + j] += d;
-            for (let k = 0; k < n; k++) col[k] -= d * qi[k];
+            const qi = i * n;
+            const d = dotAt(cols, qi, col, n);
+            r[R + i * 4 + j] += d;
+            for (let k = 0; k < n; k++) cols[col + k] -= d * cols[qi + k];
           }
         }
-        const rest = norm(col);
+        const rest = Math.sqrt(dotAt(cols, col, col, n));
         if (rest > DEPENDENT * norm0 && rest > 0) {
-          R[j * 4 + j] = rest;
-          for (let k = 0; k < n; k++) col[k] /= rest;
+          r[R + j * 4 + j] = rest;
+          for (let k = 0; k < n; k++) cols[col + k] /= rest;
         } else {
-          col.fill(0);
+          cols.fill(0, col, col + n);
         }
       }
       for (let i = 0; i < n; i++) {
@@ -62,29 +63,9 @@ export function orthonormalBases(clip) {
   return { q, r };
 }
 
-/**
- * Per-knot coefficients (S+1, C, 3, 4) (knots, or their time tangents) turned into the orthonormal bases'
- * coefficients R k, in float64, into out (a Float32Array rounds them); returns out.
- */
-export function orthonormalCoefficients(r, coefficients, out = new Float64Array(coefficients.length)) {
-  const items = r.length / 16; // C * 3
-  for (let o = 0; o < coefficients.length; o += 4) {
-    const R = ((o / 4) % items) * 16;
-    for (let i = 0; i < 4; i++) {
-      let acc = 0;
-      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * coefficients[o + j];
-      out[o + i] = acc;
-    }
-  }
-  return out;
-}
-
-function dot(a, b) {
+/** The dot product of a[i..i+n) and a[j..j+n), summed in index order. */
+function dotAt(a, i, j, n) {
   let s = 0;
-  for (let i = 0; i < a.length; i++) s += a[i] * b[i];
+  for (let k = 0; k < n; k++) s += a[i + k] * a[j + k];
   return s;
-}
-
-function norm(a) {
-  return Math.sqrt(dot(a, a));
 }

@@ -101,9 +101,10 @@ export class ScenePlayer {
     return this.resources.evaluator.evaluate(t, out);
   }
 
-  /** Bytes on the GPU for the clip: shared data textures plus every mesh's attributes. */
+  /** Bytes on the GPU for the clip: shared data textures and evaluation pass plus every mesh's attributes. */
   get gpuBytes() {
-    return this.resources.textureBytes + this.players.reduce((n, p) => n + p.attributeBytes, 0);
+    const pass = this.resources.extras.pass?.bytes ?? 0;
+    return this.resources.textureBytes + pass + this.players.reduce((n, p) => n + p.attributeBytes, 0);
   }
 
   detach() {
