@@ -173,11 +173,12 @@ def test_cancel_and_progress_of_a_windowed_job(backend, tmp_path, spot_poses):
             assert r.status_code == 200 and r.json()["state"] == "cancelled", r.text
             wait_for(lambda: all(t.state in ("succeeded", "cancelled") for t in tasks(store, job_id)),
                      "every window task ended", svc)
-            (hold / "hold-encode-2").unlink()
             states = {(t.phase, t.window_index): t.state for t in tasks(store, job_id)}
             assert all(states[("encode", i)] == "cancelled" for i in range(2, N_WINDOWS)), states
             log = svc.log_dir / "worker0.log"
+            # the held window is still running: its worker stops it at the next heartbeat
             wait_for(lambda: "cancelled or deleted" in log.read_text(), "the worker stopped the window", svc)
+            (hold / "hold-encode-2").unlink()
         with store.sessions() as session:
             assert session.scalar(select(func.count()).select_from(ClipRecord)) == 0
         assert not store.blobs.exists(f"windowed/{job_id}/frames.f32")
