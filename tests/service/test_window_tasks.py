@@ -69,9 +69,13 @@ def services_with(backend, tmp_path: Path, workers: int, **env: str) -> Services
              "PDEANIM_TEST_HOLD_DIR": str(hold), "PDEANIM_JOB_SCHED_IDLE": "false", **env}
     svc = Services(backend, tmp_path / "logs", env_extra=extra)
     svc.log_dir.mkdir(parents=True, exist_ok=True)
-    svc.start_server("--workers", "1")  # one HTTP process: starts within the deadline on a loaded machine
-    for _ in range(workers):
-        svc.start_worker()
+    try:
+        svc.start_server("--workers", "1")  # one HTTP process: starts within the deadline on a loaded machine
+        for _ in range(workers):
+            svc.start_worker()
+    except BaseException:
+        svc.stop()  # a server that did not answer in time is not left behind
+        raise
     return svc
 
 
