@@ -25,11 +25,15 @@ a job crawl on a host whose cores other processes keep busy, as on this shared m
 
 def raised_settings(poses: Path, frames: int, vertices: int) -> dict[str, str]:
     """The documented settings (environment) that this input needs above their defaults: the upload size, the
-    frame and vertex counts, and the job memory limit that the fit's estimate is checked against."""
-    from pdeanim.fit.budget import fit_memory_bytes
+    frame and vertex counts, and the job memory limit that the fit's estimate is checked against (its largest
+    window task's when the fit runs as window tasks)."""
+    from pdeanim.fit import FitOptions
+    from pdeanim.fit.budget import fit_memory_bytes, window_task_memory_bytes
+    from pdeanim.fit.windowed import windowed_applies
     from service.settings import Settings
 
     defaults = Settings(data_dir=Path(tempfile.gettempdir()))
+    tol = defaults.fit_tolerances()
     env: dict[str, str] = {}
     size = poses.stat().st_size
     if size > defaults.max_upload_bytes:
@@ -38,7 +42,9 @@ def raised_settings(poses: Path, frames: int, vertices: int) -> dict[str, str]:
         env["PDEANIM_MAX_FRAMES"] = str(frames)
     if vertices > defaults.max_vertices:
         env["PDEANIM_MAX_VERTICES"] = str(vertices)
-    need, limit = fit_memory_bytes(frames, vertices), defaults.job_memory_limit()
+    tasks = defaults.fit_window_tasks and windowed_applies(frames, vertices, FitOptions(), tol)
+    need = (window_task_memory_bytes if tasks else fit_memory_bytes)(frames, vertices, tol)
+    limit = defaults.job_memory_limit()
     if limit and need > limit:
         env["PDEANIM_JOB_MEMORY_BYTES"] = str(need + 2**30)
     return env
@@ -137,7 +143,9 @@ def start(data_dir: Path, env: dict[str, str], workers: int) -> tuple[Launcher, 
 
     key = issue_key(Settings(data_dir=data_dir), "bench")
     launcher = Launcher(data_dir / "logs", {**os.environ, "PDEANIM_DATA_DIR": str(data_dir), **env})
-    launcher.start_server("--with-workers", str(workers), "--log-level", "warning")
+    # one HTTP process: the job does not use more, and on a loaded host the supervisor of several restarted
+    # them while they started (the first request after /healthz was then cut off)
+    launcher.start_server("--with-workers", str(workers), "--workers", "1", "--log-level", "warning")
     return launcher, key
 
 

@@ -8,6 +8,7 @@ Embedded default: SQLite and a blob directory under ``./pdeanim-data``. Scale-ou
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 from pydantic import Field
@@ -108,6 +109,13 @@ class Settings(BaseSettings):
                                  "false = nice only")
     job_cpu_shares: int = Field(0, ge=0, description="cgroup v1 cpu.shares of the group `pdeanim-jobs` that "
                                 "job processes join where /sys/fs/cgroup/cpu is writable; 0 = no cgroup")
+    fit_window_tasks: bool = Field(True, description="a fit job whose input is fitted in windows of frames "
+                                   "runs as window tasks of the job queue (any worker takes a window); "
+                                   "false = the whole windowed fit in one job process")
+    fit_window_fit_values: int = Field(0, ge=0, description="frame-vertex values above which a fit runs in "
+                                       "windows of frames; 0 = the library's (4,000,000)")
+    fit_window_values: int = Field(0, ge=0, description="frame-vertex values per window of frames (the "
+                                   "unit of a window task); 0 = the library's (4,194,304)")
 
     def cors_origin_list(self) -> list[str]:
         """The allowed CORS origins (scheme://host[:port], no trailing slash); empty when CORS is off."""
@@ -120,6 +128,14 @@ class Settings(BaseSettings):
             return self.job_memory_bytes
         physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
         return max(int(self.job_memory_fraction * physical), MIN_JOB_MEMORY)
+
+    def fit_tolerances(self):  # noqa: ANN201 - pdeanim.fit.FitTolerances (imported lazily)
+        """The fit tolerances of jobs: the library's, with the window sizes of these settings."""
+        from pdeanim.fit.options import FitTolerances
+
+        tol = FitTolerances()
+        changes = {"window_fit_values": self.fit_window_fit_values, "window_values": self.fit_window_values}
+        return replace(tol, **{k: v for k, v in changes.items() if v})
 
     def gltf_limits(self):  # noqa: ANN201 - pdeanim.gltf.document.GltfLimits (imported when needed)
         """The glTF declared-size limits of uploads, from these settings."""

@@ -15,6 +15,7 @@ import time
 
 from pdeanim.records import library_versions
 from service.settings import Settings
+from service.store import windows
 from service.store.context import Store
 from service.store.models import ClipRecord, Mesh, PosesRecord
 from service.store.queue import Claimed
@@ -128,9 +129,15 @@ class Worker:
 
     def _record(self, job: Claimed, outcome: Outcome) -> None:
         queue = self.store.queue
-        if outcome.status == "done":
+        if outcome.status == "done" and (job.parent_id or "windowed" in (outcome.result or {})):
+            self._record_window(job, outcome.result or {})
+        elif outcome.status == "done":
             if not queue.finish(job.id, job.attempt, result_writer(job, outcome.result or {})):
                 log.warning("job %s attempt %d was fenced out; its result is discarded", job.id, job.attempt)
+        elif outcome.status == "error" and job.parent_id:
+            state = queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
+            if state == "failed":
+                windows.release_blobs(self.store.blobs, job.parent_id, int(job.params["windows"]))
         elif outcome.status == "error" and outcome.partial:
             kept = {k: v for k, v in outcome.partial.items() if k != "next_stage"}
             step = outcome.partial.get("next_stage", "next stage")
@@ -144,6 +151,23 @@ class Worker:
             queue.release(job.id, job.attempt)
         elif outcome.status == "lost" and self._state(job.id) in ("cancelled", None):
             log.info("job %s was cancelled or deleted; attempt %d stopped", job.id, job.attempt)
+
+    def _record_window(self, job: Claimed, result: dict) -> None:
+        """A fit planned in windows enqueues its window tasks; a window task's success advances its fit job
+        (the join's writes the clip), and the intermediates go once the fit job succeeded."""
+        if job.parent_id is None:
+            n_windows = int(result["windowed"]["windows"])
+            if not windows.split(self.store.queue, job, n_windows):
+                log.warning("job %s attempt %d was fenced out; its plan is discarded", job.id, job.attempt)
+                if self._state(job.id) in ("cancelled", None):  # no newer attempt will use the plan
+                    windows.release_blobs(self.store.blobs, job.id, n_windows)
+            return
+        state = windows.task_done(self.store.queue, job, result)
+        if state is None:
+            log.warning("window task %s attempt %d was fenced out (or its fit job ended); its result is "
+                        "discarded", job.id, job.attempt)
+        elif state == "succeeded":
+            windows.release_blobs(self.store.blobs, job.parent_id, int(job.params["windows"]))
 
     def _state(self, job_id: str) -> str | None:
         """The job's state now (None once its row is deleted)."""

@@ -35,20 +35,24 @@ def _store_clip(parts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict
             "report": report}
 
 
-def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int) -> dict:  # noqa: ANN001
+def _labelled(progress: Progress) -> Progress:
+    """Progress whose stage names the fit."""
+    def labelled(fraction: float, stage: str) -> None:
+        progress(fraction, stage if stage.startswith("fit") else f"fit: {stage}")
+    return labelled
+
+
+def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int,  # noqa: ANN001
+         tol=None) -> dict:  # noqa: ANN001
     """Fit and store the clip; a missed target fails the job (TargetNotMetError, not retried) unless the
     options ask for ``best_effort``."""
     from pdeanim.errors import TargetNotMetError
     from pdeanim.fit import FitOptions, fit_poses, target_shortfall
     from pdeanim.fit.budget import check_fit_memory
 
-    check_fit_memory(poses.n_frames, poses.n_vertices, memory)  # refused now, not after minutes of work
-
-    def labelled(fraction: float, stage: str) -> None:
-        progress(fraction, stage if stage.startswith("fit") else f"fit: {stage}")
-
+    check_fit_memory(poses.n_frames, poses.n_vertices, memory, tol)  # refused now, not after minutes of work
     fit_options = FitOptions.from_dict(options)
-    parts = fit_poses(poses, fit_options, progress=labelled)
+    parts = fit_poses(poses, fit_options, progress=_labelled(progress), tolerances=tol)
     shortfall = target_shortfall(parts.report)
     if shortfall and not fit_options.best_effort:
         raise TargetNotMetError(
@@ -74,7 +78,8 @@ def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Prog
     if spec.get("then_fit"):
         from pdeanim.fit.budget import check_fit_memory
 
-        check_fit_memory(scene.frames, len(mesh.vertices), settings.job_memory_limit())  # before simulating
+        check_fit_memory(scene.frames, len(mesh.vertices), settings.job_memory_limit(),  # before simulating
+                         settings.fit_tolerances())
     progress(0.0, "tetrahedralize")
     tet_dir = workdir / "tets"
     tet_key = shared_tets(mesh, scene.target_tets, blobs, tet_dir, workdir)
@@ -88,7 +93,7 @@ def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Prog
         if partial is not None:
             partial({**out, "next_stage": "fit"})
         out["clip"] = _fit(poses, spec["fit"], blobs, sub_progress(progress, share, 1.0),
-                           settings.job_memory_limit())
+                           settings.job_memory_limit(), settings.fit_tolerances())
     return out
 
 
@@ -100,7 +105,19 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
     limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
                         max_bytes=settings.max_pose_bytes)
     poses = load_poses_npz(blobs.get(job["poses"]["blob_key"]), limits)
-    return {"clip": _fit(poses, job["params"]["params"], blobs, progress, settings.job_memory_limit())}
+    tol, options = settings.fit_tolerances(), job["params"]["params"]
+    if settings.fit_window_tasks:
+        from pdeanim.fit import FitOptions
+        from pdeanim.fit.budget import check_fit_memory
+        from pdeanim.fit.windowed import windowed_applies
+
+        from .windowtasks import plan_fit
+
+        fit_options = FitOptions.from_dict(options).validate()
+        if windowed_applies(poses.n_frames, poses.n_vertices, fit_options, tol):
+            check_fit_memory(poses.n_frames, poses.n_vertices, settings.job_memory_limit(), tol, tasks=True)
+            return plan_fit(job["id"], poses, fit_options, tol, blobs, _labelled(progress), workdir)
+    return {"clip": _fit(poses, options, blobs, progress, settings.job_memory_limit(), tol)}
 
 
 def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
@@ -138,4 +155,13 @@ def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
                        **estimate.to_dict()}}
 
 
-STAGES = {"simulate": run_simulate, "fit": run_fit, "cyclic": run_cyclic, "export": run_export}
+def run_window(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
+               partial: Partial | None = None) -> dict:
+    """One window task of a fit in window tasks (worker.windowtasks)."""
+    from .windowtasks import run_window as run
+
+    return run(job, blobs, settings, progress, workdir, partial)
+
+
+STAGES = {"simulate": run_simulate, "fit": run_fit, "cyclic": run_cyclic, "export": run_export,
+          "window": run_window}

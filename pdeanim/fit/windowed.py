@@ -71,6 +71,11 @@ def windowed_applies(n_frames: int, n_vertices: int, options: FitOptions, tol: F
             and options.param_mode == "chord")
 
 
+def curve_frames(n_frames: int, n_vertices: int) -> int:
+    """Frames on which a windowed fit of (n_frames, n_vertices) poses chooses its curves."""
+    return min(n_frames, CURVE_FRAMES, max(MIN_WINDOW_FRAMES, CURVE_VALUES // max(n_vertices, 1)))
+
+
 def window_bounds(n_frames: int, n_vertices: int, tol: FitTolerances) -> np.ndarray:
     """(W+1,) first frame of every window, then n_frames: as few windows of at most tol.window_values
     frame-vertex values (and at least MIN_WINDOW_FRAMES frames) as cover the frames, of balanced sizes."""
@@ -194,7 +199,7 @@ def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress
     """Step 1: the curves (chosen on evenly spaced frames, CURVE_FRAMES and CURVE_VALUES at most, as an
     in-memory fit chooses them, unless given), the rest pose's rounding and the windows of ``poses``."""
     F, V = poses.n_frames, poses.n_vertices
-    n_picked = min(F, CURVE_FRAMES, max(MIN_WINDOW_FRAMES, CURVE_VALUES // max(V, 1)))
+    n_picked = curve_frames(F, V)
     picked = np.unique(np.round(np.linspace(0, F - 1, n_picked)).astype(np.int64))
     sub = make_poses(np.asarray(poses.vertices[picked]), poses.faces, poses.times[picked])
     sf = space_fit(sub, options, curves, progress or (lambda *_: None), tol)

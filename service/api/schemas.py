@@ -69,6 +69,9 @@ class JobResult(BaseModel):
         None, description="export: where to download the GLB (GET /v1/exports/{job_id})"
     )
     export_bytes: int | None = Field(None, description="export: size of the GLB in bytes")
+    windows: int | None = Field(None, description="fit: windows of frames the fit runs in as window tasks "
+                                "(any worker takes one); progress counts them")
+    windows_done: int | None = Field(None, description="fit: windows encoded so far")
 
 
 class JobOut(BaseModel):

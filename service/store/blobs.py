@@ -42,6 +42,10 @@ class BlobStore(Protocol):
         """The bytes under ``key``; BlobNotFound if absent."""
         ...
 
+    def get_range(self, key: str, start: int, length: int) -> bytes:
+        """``length`` bytes of the blob under ``key`` from byte ``start`` (a window's frames of raw poses)."""
+        ...
+
     def exists(self, key: str) -> bool:
         """Whether ``key`` is stored."""
         ...
@@ -146,6 +150,15 @@ class LocalBlobStore:
         except FileNotFoundError as exc:
             raise BlobNotFound(key) from exc
 
+    def get_range(self, key: str, start: int, length: int) -> bytes:
+        """``length`` bytes from byte ``start`` (fewer at the end of the blob); BlobNotFound if absent."""
+        try:
+            with open(self._path(key), "rb") as fh:
+                fh.seek(start)
+                return fh.read(length)
+        except FileNotFoundError as exc:
+            raise BlobNotFound(key) from exc
+
     def exists(self, key: str) -> bool:
         """Whether a blob is stored under ``key``."""
         return self._path(key).is_file()
@@ -214,6 +227,20 @@ class S3BlobStore:
 
         try:
             return self.client.get_object(Bucket=self.bucket, Key=self._name(key))["Body"].read()
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("NoSuchKey", "404"):
+                raise BlobNotFound(key) from exc
+            raise
+
+    def get_range(self, key: str, start: int, length: int) -> bytes:
+        """``length`` bytes from byte ``start`` (a ranged GET); BlobNotFound if absent."""
+        from botocore.exceptions import ClientError
+
+        if length <= 0:
+            return b""
+        try:
+            return self.client.get_object(Bucket=self.bucket, Key=self._name(key),
+                                          Range=f"bytes={start}-{start + length - 1}")["Body"].read()
         except ClientError as exc:
             if exc.response.get("Error", {}).get("Code") in ("NoSuchKey", "404"):
                 raise BlobNotFound(key) from exc

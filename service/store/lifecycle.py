@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session
 from .context import Store
 from .models import ClipRecord, Job, Mesh, PosesRecord
 from .queue import ACTIVE
+from .windows import release_blobs as release_intermediates
 
 log = logging.getLogger("pdeanim.api")
 TETS_PREFIX = "tets-"  # blob key prefix of shared tets (worker.tetcache.BLOB_PREFIX)
@@ -82,8 +83,9 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
         mesh = session.get(Mesh, mesh_id)
         if mesh is None or mesh.tenant_id != tenant_id:
             return None
-        active = session.scalars(select(Job.id).where(Job.mesh_id == mesh_id, Job.state.in_(ACTIVE))).all()
-    out.cancelled_jobs = store.queue.cancel(list(active))
+        active = session.scalars(select(Job.id).where(Job.mesh_id == mesh_id, Job.state.in_(ACTIVE),
+                                                      Job.parent_id.is_(None))).all()
+    out.cancelled_jobs = store.queue.cancel(list(active))  # with their window tasks
     with _write_session(store) as session, session.begin():
         mesh = session.get(Mesh, mesh_id)
         if mesh is None:
@@ -100,6 +102,10 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
         out.jobs = _delete(session, Job, of_mesh)
         out.poses = _delete(session, PosesRecord, PosesRecord.mesh_id == mesh_id)
         out.meshes = _delete(session, Mesh, Mesh.id == mesh_id)
+        windowed = {j.id: int(j.result["windows"]) for j in jobs
+                    if j.parent_id is None and isinstance((j.result or {}).get("windows"), int)}
+    for job_id, n_windows in windowed.items():  # a windowed fit's intermediates (no row names them)
+        release_intermediates(store.blobs, job_id, n_windows)
     out.blobs_removed = release_blobs(store, keys)
     return out
 
@@ -124,6 +130,16 @@ def delete_clip(store: Store, clip_id: str, tenant_id: str) -> Deleted | None:
         out.clips = _delete(session, ClipRecord, ClipRecord.id == clip_id)
     out.blobs_removed = release_blobs(store, keys)
     return out
+
+
+def release_window_blobs(store: Store, job_ids: list[str]) -> None:
+    """Remove the intermediates of the windowed fits among ``job_ids`` that ended (e.g. just cancelled)."""
+    with store.sessions() as session:
+        rows = session.execute(select(Job.id, Job.result).where(Job.id.in_(job_ids), Job.state.not_in(ACTIVE),
+                                                                Job.parent_id.is_(None))).all()
+    for job_id, result in rows:
+        if isinstance((result or {}).get("windows"), int):
+            release_intermediates(store.blobs, job_id, int(result["windows"]))
 
 
 def referenced(session: Session, key: str) -> bool:

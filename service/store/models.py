@@ -116,7 +116,7 @@ class Job(Base):
     kind: Mapped[str] = mapped_column(String(20))
     state: Mapped[str] = mapped_column(
         String(20), default="queued"
-    )  # queued|running|succeeded|failed|cancelled
+    )  # queued|running|waiting|succeeded|failed|cancelled (waiting: a fit whose window tasks run)
     mesh_id: Mapped[str | None] = mapped_column(ForeignKey("meshes.id"), nullable=True)
     poses_id: Mapped[str | None] = mapped_column(ForeignKey("poses.id"), nullable=True)
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)  # the whole validated request
@@ -135,9 +135,14 @@ class Job(Base):
     created_at: Mapped[float] = mapped_column(Float, default=time.time)
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # a window task of a fit in windows (service.store.windows): its fit job, window and phase
+    parent_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
+    window_index: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    phase: Mapped[str | None] = mapped_column(String(20), nullable=True)  # gram|space|encode|join
 
     __table_args__ = (
         Index("ix_jobs_claim", "state", "run_after"),
+        Index("ix_jobs_parent", "parent_id", "phase"),
         Index("ix_jobs_lease", "state", "lease_expires"),
         Index("ix_jobs_list", "tenant_id", "created_at", "id"),
         Index("ix_jobs_mesh_id", "mesh_id"),

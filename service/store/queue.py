@@ -18,8 +18,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from .models import Job
 
-STATES = ("queued", "running", "succeeded", "failed", "cancelled")
-ACTIVE = ("queued", "running")
+STATES = ("queued", "running", "waiting", "succeeded", "failed", "cancelled")
+ACTIVE = ("queued", "running", "waiting")  # waiting: a fit whose window tasks run (service.store.windows)
 FINAL = ("succeeded", "failed", "cancelled")
 
 
@@ -48,6 +48,9 @@ class Claimed:
     mesh_id: str | None
     poses_id: str | None
     params: dict[str, Any]
+    parent_id: str | None = None  # a window task's fit job (service.store.windows)
+    phase: str | None = None
+    window_index: int | None = None
 
 
 class JobQueue:
@@ -88,7 +91,8 @@ class JobQueue:
                 error=None,
                 error_code=None,
             )
-            .returning(Job.id, Job.kind, Job.attempt, Job.tenant_id, Job.mesh_id, Job.poses_id, Job.params)
+            .returning(Job.id, Job.kind, Job.attempt, Job.tenant_id, Job.mesh_id, Job.poses_id, Job.params,
+                       Job.parent_id, Job.phase, Job.window_index)
         )
         with self._write() as session, session.begin():
             row = session.execute(stmt, execution_options={"synchronize_session": False}).first()
@@ -156,14 +160,21 @@ class JobQueue:
 
     def cancel(self, job_ids: list[str]) -> int:
         """Cancel queued or running jobs at once: a queued one is never claimed; a running attempt's next
-        fenced write (heartbeat or progress) fails, so its worker stops it. Returns how many changed."""
+        fenced write (heartbeat or progress) fails, so its worker stops it. The window tasks of a cancelled
+        fit are cancelled with it. Returns how many of ``job_ids`` changed."""
         if not job_ids:
             return 0
+        tasks = (update(Job).where(Job.parent_id.in_(job_ids), Job.state.in_(ACTIVE))
+                 .values(state="cancelled", stage="cancelled with its fit job", lease_expires=None,
+                         finished_at=time.time())
+                 .execution_options(synchronize_session=False))
         stmt = (update(Job).where(Job.id.in_(job_ids), Job.state.in_(ACTIVE))
                 .values(state="cancelled", stage="cancelled", lease_expires=None, finished_at=time.time())
                 .execution_options(synchronize_session=False))
         with self._write() as session, session.begin():
-            return session.execute(stmt).rowcount
+            changed = session.execute(stmt).rowcount  # fit jobs before their tasks: the order of every writer
+            session.execute(tasks)
+            return changed
 
     def reap(self, limit: int = 100) -> int:
         """Return running jobs whose lease expired to the queue (or fail them past max attempts)."""
@@ -184,6 +195,9 @@ class JobQueue:
 
     def _fail_locked(self, session: Session, job_id: str, attempt: int, message: str, code: str,
                      retry: bool, expired_only: bool, result: dict[str, Any] | None = None) -> str | None:
+        from .windows import lock_parent_first
+
+        lock_parent_first(session, job_id)
         query = select(Job).where(Job.id == job_id, Job.attempt == attempt, Job.state == "running")
         if expired_only:
             query = query.where(Job.lease_expires < time.time())
@@ -202,4 +216,8 @@ class JobQueue:
             job.stage = "failed"
             if retry:
                 job.error = f"gave up after {job.failures} attempts; last: {message}"[:4000]
+            if job.parent_id:
+                from .windows import fail_parent
+
+                fail_parent(session, job)
         return job.state

@@ -152,7 +152,7 @@ def test_vm_hwm_and_descendants_read_proc():
 
 
 def test_raised_settings_name_only_what_the_input_needs(tmp_path, monkeypatch):
-    from pdeanim.fit.budget import fit_memory_bytes
+    from pdeanim.fit.budget import window_task_memory_bytes
 
     for name in ("MAX_UPLOAD_BYTES", "MAX_FRAMES", "MAX_VERTICES", "JOB_MEMORY_BYTES", "JOB_MEMORY_FRACTION"):
         monkeypatch.delenv(f"PDEANIM_{name}", raising=False)
@@ -161,10 +161,11 @@ def test_raised_settings_name_only_what_the_input_needs(tmp_path, monkeypatch):
     assert raised_settings(small, 100, 2000) == {}
     raised = raised_settings(small, 3000, 34_000)
     assert raised["PDEANIM_MAX_FRAMES"] == "3000"
-    # the job memory limit is raised exactly when the fit's estimate is over the default limit
+    # the job memory limit is raised exactly when the fit's estimate (its largest window task's) is over the
+    # default limit
     monkeypatch.setenv("PDEANIM_JOB_MEMORY_BYTES", str(2**30))
     tight = raised_settings(small, 3000, 34_000)
-    assert int(tight["PDEANIM_JOB_MEMORY_BYTES"]) > fit_memory_bytes(3000, 34_000)
+    assert int(tight["PDEANIM_JOB_MEMORY_BYTES"]) > window_task_memory_bytes(3000, 34_000)
 
 
 def test_a_fit_child_reports_its_exit_code_and_peak_memory(tmp_path):

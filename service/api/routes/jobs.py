@@ -11,7 +11,9 @@ from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
 from ...jobspec import StageUnavailable, normalize_request
+from ...settings import Settings
 from ...store.context import Store
+from ...store.lifecycle import release_window_blobs
 from ...store.models import ClipRecord, Job, Mesh, PosesRecord
 from ...store.queue import FINAL
 from ..access import created, owned, responses
@@ -29,7 +31,7 @@ def job_out(job: Job) -> JobOut:
     return JobOut(
         id=job.id,
         kind=job.kind,
-        state=job.state,
+        state="running" if job.state == "waiting" else job.state,  # a fit whose window tasks run
         progress=job.progress,
         stage=job.stage,
         error=error,
@@ -75,15 +77,21 @@ def _inputs(req: SimulateJob | FitJob | CyclicJob | ExportJob, tenant: str,
 
 
 def _check_fit_memory(session, spec: dict, mesh_id: str, poses_id: str | None,  # noqa: ANN001
-                      limit: int) -> None:
-    """413 now when the fit this job will run cannot fit the job memory limit (the worker checks it again)."""
+                      settings: Settings) -> None:
+    """413 now when the fit this job will run cannot fit the job memory limit (the worker checks it again):
+    a fit that runs as window tasks is checked against its largest task's estimate."""
+    from pdeanim.fit import FitOptions
     from pdeanim.fit.budget import check_fit_memory
+    from pdeanim.fit.windowed import windowed_applies
 
+    limit, tol = settings.job_memory_limit(), settings.fit_tolerances()
     if poses_id is not None:
         poses = session.get(PosesRecord, poses_id)
-        check_fit_memory(poses.n_frames, poses.n_vertices, limit)
+        tasks = settings.fit_window_tasks and windowed_applies(
+            poses.n_frames, poses.n_vertices, FitOptions.from_dict(spec["params"]), tol)
+        check_fit_memory(poses.n_frames, poses.n_vertices, limit, tol, tasks=tasks)
     elif spec.get("then_fit"):
-        check_fit_memory(int(spec["params"]["frames"]), session.get(Mesh, mesh_id).n_vertices, limit)
+        check_fit_memory(int(spec["params"]["frames"]), session.get(Mesh, mesh_id).n_vertices, limit, tol)
 
 
 def _latest_poses(session, mesh: Mesh, tenant: str) -> PosesRecord:  # noqa: ANN001
@@ -122,7 +130,7 @@ def create_job(req: JobBody, tenant: TenantDep, session: SessionDep, store: Stor
         from pdeanim.errors import LimitError
 
         raise LimitError("frames", frames, store.settings.max_frames, "PDEANIM_MAX_FRAMES")
-    _check_fit_memory(session, spec, mesh_id, poses_id, store.settings.job_memory_limit())
+    _check_fit_memory(session, spec, mesh_id, poses_id, store.settings)
     # end the read transaction first: on SQLite (WAL) a read transaction that later writes fails at once with
     # "database is locked" when a worker committed in between; a transaction that starts by writing waits
     session.commit()
@@ -168,6 +176,7 @@ def cancel_job(job_id: str, tenant: TenantDep, store: StoreDep) -> JobOut:
     if job.state in ("succeeded", "failed"):
         raise ApiError(409, "conflict", f"job {job_id} already {job.state}")
     store.queue.cancel([job_id])
+    release_window_blobs(store, [job_id])
     job = _load(store, job_id, tenant)
     if job.state in ("succeeded", "failed"):  # it finished between the check and the cancel
         raise ApiError(409, "conflict", f"job {job_id} already {job.state}")

@@ -85,9 +85,13 @@ def list_jobs(tenant: TenantDep, session: SessionDep, limit: int = LIMIT, cursor
               state: Literal["queued", "running", "succeeded", "failed", "cancelled"] | None = Query(None),
               kind: Literal["simulate", "fit", "cyclic", "export"] | None = Query(None),
               mesh_id: str | None = Query(None, **ID)) -> JobPage:
-    """The tenant's jobs, newest first; filter by state, kind and mesh."""
-    query = select(Job).where(Job.tenant_id == tenant)
-    for column, value in ((Job.state, state), (Job.kind, kind), (Job.mesh_id, mesh_id)):
+    """The tenant's jobs, newest first; filter by state, kind and mesh. The window tasks of a fit in windows
+    are not listed (their fit job is, with its progress counting windows)."""
+    query = select(Job).where(Job.tenant_id == tenant, Job.parent_id.is_(None))
+    if state is not None:
+        states = ("running", "waiting") if state == "running" else (state,)  # waiting: shown as running
+        query = query.where(Job.state.in_(states))
+    for column, value in ((Job.kind, kind), (Job.mesh_id, mesh_id)):
         if value is not None:
             query = query.where(column == value)
     items, nxt = page(session, query, Job, limit, cursor, job_out)

@@ -1,0 +1,177 @@
+"""A fit in windows of frames as tasks of the job queue, so that any worker on any machine takes a window.
+
+A fit job whose input is fitted in windows (``pdeanim.fit.windowed.windowed_applies``) is claimed as usual;
+its attempt plans the fit (curves, rounding, window bounds) and stores the poses once as raw float32 frames,
+then :func:`split` moves the job to the state ``waiting`` and enqueues one ``gram`` task per window. Each
+task is a row of ``jobs`` (kind ``window``, ``parent_id`` the fit job, ``window_index``, ``phase``) with the
+same claim, lease, fencing and retries as any job, so a killed worker's window is retried alone. The finish
+of the last task of a phase enqueues the next phase (:func:`task_done`, under a lock of the fit job's row):
+all ``gram`` -> one ``space`` (joins the space model) -> one ``encode`` per window -> one ``join``, whose
+finish writes the clip row and marks the fit job succeeded. The intermediates live in the blob store under
+``windowed/<fit job>/``. A task that fails for good fails its fit job and cancels the other tasks
+(:func:`fail_parent`); cancelling the fit job cancels every task (``JobQueue.cancel``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
+
+from .models import ClipRecord, Job
+from .queue import ACTIVE, Claimed, JobQueue
+
+log = logging.getLogger("pdeanim.worker")
+TASK_KIND = "window"
+PLAN_SHARE = 0.05  # of the fit job's progress: planning; as much for the join, the rest counts windows
+
+
+def blob_prefix(job_id: str) -> str:
+    """Where the intermediates of fit job ``job_id`` live in the blob store."""
+    return f"windowed/{job_id}/"
+
+
+def frames_key(job_id: str) -> str:
+    """The poses of the fit as raw float32 (F, V, 3), read by range per window."""
+    return blob_prefix(job_id) + "frames.f32"
+
+
+def plan_key(job_id: str) -> str:
+    """The fit's WindowPlan bytes."""
+    return blob_prefix(job_id) + "plan"
+
+
+def space_key(job_id: str) -> str:
+    """The joined SpaceModel bytes."""
+    return blob_prefix(job_id) + "space"
+
+
+def gram_key(job_id: str, index: int) -> str:
+    """Window ``index``'s GramPart bytes."""
+    return blob_prefix(job_id) + f"gram-{index}"
+
+
+def codes_key(job_id: str, index: int) -> str:
+    """Window ``index``'s WindowCodes bytes."""
+    return blob_prefix(job_id) + f"codes-{index}"
+
+
+def blob_keys(job_id: str, n_windows: int) -> list[str]:
+    """Every intermediate blob a fit in ``n_windows`` window tasks may have written."""
+    per_window = [k(job_id, i) for i in range(n_windows) for k in (gram_key, codes_key)]
+    return [frames_key(job_id), plan_key(job_id), space_key(job_id), *per_window]
+
+
+def release_blobs(blobs, job_id: str, n_windows: int) -> None:  # noqa: ANN001 - a BlobStore
+    """Remove the intermediates of a windowed fit that ended (succeeded, failed, cancelled or deleted)."""
+    for key in blob_keys(job_id, n_windows):
+        try:
+            blobs.delete(key)
+        except Exception:  # noqa: BLE001 - an orphan intermediate wastes space but breaks nothing
+            log.warning("could not remove intermediate blob %s", key, exc_info=True)
+
+
+def _task(parent: Job, phase: str, index: int, n_windows: int, max_attempts: int) -> Job:
+    """A queued window task of ``parent`` (mesh and poses named too, so deleting them reaches it)."""
+    return Job(tenant_id=parent.tenant_id, kind=TASK_KIND, mesh_id=parent.mesh_id, poses_id=parent.poses_id,
+               params={"fit_job": parent.id, "phase": phase, "window": index, "windows": n_windows},
+               state="queued", max_attempts=max_attempts, run_after=time.time(), progress=0.0,
+               stage="queued", result={}, versions={}, attempt=0, failures=0, parent_id=parent.id,
+               window_index=index, phase=phase)
+
+
+def _locked(session: Session, job_id: str) -> Job | None:
+    return session.execute(select(Job).where(Job.id == job_id).with_for_update()).scalar_one_or_none()
+
+
+def split(queue: JobQueue, job: Claimed, n_windows: int) -> bool:
+    """Fenced: the planning attempt of fit ``job`` hands the fit to ``n_windows`` gram tasks and the job
+    waits for them (no lease: its tasks hold theirs). False if the attempt no longer owns the job."""
+    with queue._write() as session, session.begin():
+        parent = session.execute(select(Job).where(Job.id == job.id, Job.attempt == job.attempt,
+                                                   Job.state == "running").with_for_update()
+                                 ).scalar_one_or_none()
+        if parent is None:
+            return False
+        parent.state, parent.lease_expires, parent.worker_id = "waiting", None, None
+        parent.progress, parent.result = PLAN_SHARE, {"windows": n_windows, "windows_done": 0}
+        parent.stage = f"fit in {n_windows} windows: 0 of {n_windows} summed, 0 encoded"
+        for i in range(n_windows):
+            session.add(_task(parent, "gram", i, n_windows, queue.policy.max_attempts))
+    return True
+
+
+def _count(session: Session, parent_id: str, phase: str) -> int:
+    return session.execute(select(func.count()).select_from(Job).where(
+        Job.parent_id == parent_id, Job.phase == phase, Job.state == "succeeded")).scalar_one()
+
+
+def _advance(session: Session, parent: Job, task: Job, result: dict[str, Any], max_attempts: int) -> None:
+    """After ``task`` succeeded: the fit job's progress (windows summed and encoded) and the next phase."""
+    W = int(parent.result.get("windows", 0))
+    grams, encoded = _count(session, parent.id, "gram"), _count(session, parent.id, "encode")
+    parent.progress = PLAN_SHARE + (1 - 2 * PLAN_SHARE) * (grams + encoded) / max(2 * W, 1)
+    parent.stage = f"fit in {W} windows: {grams} of {W} summed, {encoded} encoded"
+    parent.result = {**parent.result, "windows_done": encoded}
+    if task.phase == "gram" and grams == W:
+        session.add(_task(parent, "space", 0, W, max_attempts))
+    elif task.phase == "space":
+        session.add_all([_task(parent, "encode", i, W, max_attempts) for i in range(W)])
+    elif task.phase == "encode" and encoded == W:
+        session.add(_task(parent, "join", 0, W, max_attempts))
+        parent.stage = f"fit in {W} windows: joining the clip"
+    elif task.phase == "join":
+        c = result["clip"]
+        clip = ClipRecord(tenant_id=parent.tenant_id, mesh_id=parent.mesh_id, poses_id=parent.poses_id,
+                          job_id=parent.id, kind=c["kind"], topology_key=c["topology_key"],
+                          coefficients_key=c["coefficients_key"], topology_id=c["topology_id"],
+                          report=c.get("report", {}))
+        session.add(clip)
+        session.flush()
+        parent.state, parent.progress, parent.stage = "succeeded", 1.0, "done"
+        parent.finished_at = time.time()
+        parent.result = {"clip_id": clip.id, "windows": W, "windows_done": W}
+
+
+def task_done(queue: JobQueue, job: Claimed, result: dict[str, Any]) -> str | None:
+    """Fenced success of a window task: the task succeeds, its fit job advances (next phase enqueued once
+    the phase is complete; the join writes the clip). Returns the fit job's state, or None if the attempt
+    no longer owns the task or the fit job no longer waits for it (cancelled, failed, deleted)."""
+    with queue._write() as session, session.begin():
+        parent = _locked(session, job.parent_id or "")  # the fit job first: every writer locks it first
+        task = session.execute(select(Job).where(Job.id == job.id, Job.attempt == job.attempt,
+                                                 Job.state == "running").with_for_update()
+                               ).scalar_one_or_none()
+        if task is None or parent is None or parent.state != "waiting":
+            return None
+        task.state, task.progress, task.stage, task.finished_at = "succeeded", 1.0, "done", time.time()
+        task.lease_expires, task.result = None, {k: v for k, v in result.items() if k != "clip"}
+        session.flush()
+        _advance(session, parent, task, result, queue.policy.max_attempts)
+        return parent.state
+
+
+def lock_parent_first(session: Session, job_id: str) -> None:
+    """Lock the fit job of a window task before the task itself (the order every writer keeps, so that
+    concurrent finishes, failures and cancels of a fit's tasks never deadlock on PostgreSQL)."""
+    parent_id = session.execute(select(Job.parent_id).where(Job.id == job_id)).scalar_one_or_none()
+    if parent_id:
+        _locked(session, parent_id)
+
+
+def fail_parent(session: Session, task: Job) -> None:
+    """A window task failed for good: its fit job fails with the task's reason and the other tasks are
+    cancelled (their workers stop at the next heartbeat)."""
+    parent = session.get(Job, task.parent_id)
+    if parent is None or parent.state not in ACTIVE:
+        return
+    where = "the join" if task.phase in ("space", "join") else f"window {task.window_index} ({task.phase})"
+    parent.state, parent.stage, parent.finished_at = "failed", "failed", time.time()
+    parent.error, parent.error_code = f"{where} of the fit failed: {task.error}"[:4000], task.error_code
+    session.execute(update(Job).where(Job.parent_id == parent.id, Job.id != task.id, Job.state.in_(ACTIVE))
+                    .values(state="cancelled", stage="cancelled: another window task failed",
+                            lease_expires=None, finished_at=time.time())
+                    .execution_options(synchronize_session=False))

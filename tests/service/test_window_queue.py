@@ -1,0 +1,129 @@
+"""Store-level tests of window tasks (service.store.windows): the phases in order, concurrent finishes that
+enqueue the next phase exactly once, a task failing for good failing its fit job, cancel reaching every
+task, and ranged blob reads."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+from sqlalchemy import select
+
+from service.store import windows
+from service.store.context import Store
+from service.store.models import ClipRecord, Job, Mesh
+from service.store.tenants import create_key
+
+W = 3
+CLIP = {"kind": "dynamic-pde", "topology_key": "t", "coefficients_key": "c", "topology_id": "x", "report": {}}
+
+
+@pytest.fixture
+def store(backend):
+    st = Store.open(backend.settings(lease_seconds=30, backoff_seconds=0.0, max_attempts=2),
+                    run_migrations=True)
+    yield st
+    st.close()
+
+
+@pytest.fixture
+def fit_job(store) -> str:
+    """A fit job claimed and split into W gram tasks."""
+    with store.sessions() as s:
+        _, t = create_key(s, "acme")
+        s.add(Mesh(id="mesh_1", tenant_id=t.id, filename="a.obj", blob_key="k", n_vertices=3, n_faces=1,
+                   stats={}))
+        s.commit()
+        job = store.queue.enqueue(s, tenant_id=t.id, kind="fit", params={}, mesh_id="mesh_1")
+        s.commit()
+        job_id = job.id
+    claimed = store.queue.claim("w0")
+    assert claimed.id == job_id and windows.split(store.queue, claimed, W)
+    assert not windows.split(store.queue, claimed, W)  # fenced: the job waits already
+    return job_id
+
+
+def _row(store, job_id) -> Job:
+    with store.sessions() as s:
+        return s.get(Job, job_id)
+
+
+def _run_phase(store, phase: str, n: int, result: dict | None = None) -> list[str | None]:
+    """Claim and finish ``n`` tasks, all of ``phase``; the fit job's state after each."""
+    out = []
+    for _ in range(n):
+        task = store.queue.claim("w1")
+        assert task is not None and task.phase == phase and task.kind == windows.TASK_KIND
+        out.append(windows.task_done(store.queue, task, result or {"phase": phase}))
+    return out
+
+
+def test_phases_in_order_and_progress_counts_windows(store, fit_job):
+    assert _row(store, fit_job).state == "waiting"
+    _run_phase(store, "gram", W)
+    job = _row(store, fit_job)
+    assert job.progress == pytest.approx(0.05 + 0.9 * W / (2 * W)) and f"{W} of {W} summed" in job.stage
+    _run_phase(store, "space", 1)
+    _run_phase(store, "encode", W - 1)
+    assert _row(store, fit_job).result == {"windows": W, "windows_done": W - 1}
+    _run_phase(store, "encode", 1)
+    assert _run_phase(store, "join", 1, {"clip": CLIP}) == ["succeeded"]
+    assert store.queue.claim("w1") is None
+    job = _row(store, fit_job)
+    assert job.state == "succeeded" and job.progress == 1.0 and job.result["windows_done"] == W
+    with store.sessions() as s:
+        clips = s.scalars(select(ClipRecord).where(ClipRecord.job_id == fit_job)).all()
+        assert [c.id for c in clips] == [job.result["clip_id"]]
+
+
+def test_concurrent_finishes_enqueue_the_next_phase_once(store, fit_job):
+    claimed = [store.queue.claim(f"w{i}") for i in range(W)]
+    barrier = threading.Barrier(W)
+
+    def finish(task) -> None:
+        barrier.wait()
+        windows.task_done(store.queue, task, {})
+
+    threads = [threading.Thread(target=finish, args=(t,)) for t in claimed]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    with store.sessions() as s:
+        phases = s.scalars(select(Job.phase).where(Job.parent_id == fit_job, Job.state == "queued")).all()
+    assert phases == ["space"]
+
+
+def test_a_task_failing_for_good_fails_the_fit_and_cancels_the_others(store, fit_job):
+    task = store.queue.claim("w1")
+    assert store.queue.fail(task.id, task.attempt, "boom", "RuntimeError", True) == "queued"
+    claimed = [store.queue.claim("w2") for _ in range(W)]
+    (first,) = [t for t in claimed if t.id == task.id]  # the retry of the failed window
+    assert first.attempt == 2
+    assert store.queue.fail(first.id, first.attempt, "boom again", "RuntimeError", True) == "failed"
+    job = _row(store, fit_job)
+    assert job.state == "failed" and "boom again" in job.error and job.error_code == "RuntimeError"
+    with store.sessions() as s:
+        states = {t.id: t.state for t in s.scalars(select(Job).where(Job.parent_id == fit_job))}
+    assert states.pop(first.id) == "failed" and set(states.values()) == {"cancelled"}
+    second = next(t for t in claimed if t.id != task.id)
+    assert windows.task_done(store.queue, second, {}) is None  # fenced out: cancelled
+
+
+def test_cancel_reaches_every_task(store, fit_job):
+    running = store.queue.claim("w1")
+    assert store.queue.cancel([fit_job]) == 1
+    with store.sessions() as s:
+        states = {t.state for t in s.scalars(select(Job).where(Job.parent_id == fit_job))}
+    assert states == {"cancelled"} and _row(store, fit_job).state == "cancelled"
+    assert not store.queue.heartbeat(running.id, running.attempt)  # its worker stops it
+    assert windows.task_done(store.queue, running, {}) is None
+
+
+def test_ranged_blob_reads(store):
+    key = windows.frames_key("job_x")
+    store.blobs.put(bytes(range(256)) * 4, key=key)
+    assert store.blobs.get_range(key, 250, 10) == bytes([250, 251, 252, 253, 254, 255, 0, 1, 2, 3])
+    assert store.blobs.get_range(key, 1020, 10) == bytes([252, 253, 254, 255])  # the end of the blob
+    windows.release_blobs(store.blobs, "job_x", 2)
+    assert not store.blobs.exists(key)
