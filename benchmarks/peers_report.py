@@ -27,10 +27,10 @@ def clip_at(rows: list[dict], target: float) -> dict | None:
     return next((r for r in rows if r.get("method") == "clip" and r.get("target") == target), None)
 
 
-def peer_cell(r: dict | None, target: float) -> str:
+def peer_cell(r: dict | None, target: float, ran: bool = True) -> str:
     """file / wire (setting; rel-RMS, rel-max as a multiple of the target) of a peer's best row."""
     if r is None:
-        return "- (none meets it)"
+        return "- (none meets it)" if ran else "not run (--methods)"
     return (f"{nbytes(r['file_bytes'])} / {nbytes(r['wire_bytes'])} ({r['setting']}; RMS "
             f"{r['rel_rms']:.2g}, max {r['rel_max'] / target:.2g}x)")
 
@@ -67,7 +67,8 @@ def summary_table(results: dict[str, list[dict]], targets: tuple[float, ...]) ->
                 clip = ["yes" if c["target_met"] else f"NO (exit {c['exit_code']})", f"{c['rel_rms']:.3g}",
                         f"{c['rel_max']:.3g} ({c['rel_max'] / t:.1f}x)",
                         f"{nbytes(c['file_bytes'])} / {nbytes(c['wire_bytes'])}"]
-            peers = [peer_cell(best(rows, m, t), t) for m in (*PEERS, *REFERENCES)]
+            peers = [peer_cell(best(rows, m, t), t, any(r.get("method") == m for r in rows))
+                     for m in (*PEERS, *REFERENCES)]
             lines.append("| " + " | ".join([name, f"{t:g}", *clip, *peers, *ratios(rows, t)]) + " |")
     return "\n".join(lines)
 
