@@ -15,8 +15,18 @@ from benchmarks.fit_scale_report import goal_lines, markdown_table, service_tabl
 from benchmarks.fit_scale_service import descendants, raised_settings, vm_hwm_bytes
 
 
-def test_quick_arguments_choose_a_small_subset():
-    args = fit_scale.parse_args(["--quick"])
+@pytest.fixture
+def data(tmp_path):
+    """A sequence folder with stand-ins for the shared sequences the arguments name (a clean clone has no
+    ../shared)."""
+    for name in ("AnimatedMorphSphere", "horse-collapse", "pcow"):
+        np.savez(tmp_path / f"{name}.npz", vertices=np.zeros((2, 3, 3), np.float32),
+                 faces=np.zeros((1, 3), np.int32))
+    return str(tmp_path)
+
+
+def test_quick_arguments_choose_a_small_subset(data):
+    args = fit_scale.parse_args(["--quick", "--data", data])
     assert args.parts == ["a", "b", "c"]
     assert args.sequences == ["AnimatedMorphSphere", "horse-collapse"] and args.targets == [3e-3]
     assert args.long_inputs == [LongInput("tile", 100, source="elephant-gallop")]
@@ -24,12 +34,12 @@ def test_quick_arguments_choose_a_small_subset():
     assert (args.seq_repeats, args.long_repeats, args.service_workers) == (1, 1, [1, 2])
 
 
-def test_full_arguments_and_repeats():
+def test_full_arguments_and_repeats(data):
     args = fit_scale.parse_args(["--parts", "a,c", "--repeats", "2", "--targets", "3e-3,1e-3",
-                                 "--sequences", "pcow", "--json", "out.json"])
+                                 "--sequences", "pcow", "--json", "out.json", "--data", data])
     assert args.parts == ["a", "c"] and args.sequences == ["pcow"] and args.targets == [3e-3, 1e-3]
     assert (args.seq_repeats, args.long_repeats) == (2, 2) and str(args.json) == "out.json"
-    default = fit_scale.parse_args([])
+    default = fit_scale.parse_args(["--data", data])
     assert (default.seq_repeats, default.long_repeats) == (3, 1) and default.targets == [3e-3, 1e-3]
     assert default.service_input == LongInput("spot-sim", 1000, vertices=34_000)
     assert [i.frames for i in default.long_inputs] == [1000, 250, 500, 1000, 1000]
