@@ -76,7 +76,17 @@ def test_regenerated_positions_match_committed(fresh, name):
     # fits are deterministic on one machine, but on another CPU OpenBLAS's rounding can flip a near-tie in a
     # curve coordinate's choice of space (seen on 2026-11-27: 2 of 36 coordinates of fit-displacement-chord,
     # positions 3.1e-5 of the diagonal apart, 0.13% of the fit's own RMS error); 1e-4 leaves room for that
-    assert np.abs(_expected(FIXTURES, old) - _expected(fresh, new)).max() <= 1e-4 * old["diagonal"], \
+    diff = _expected(FIXTURES, old) - _expected(fresh, new)
+    if name.endswith("-windows"):
+        # a windowed fit's rate control rounds each window to a power-of-two knot step: a near-tie there
+        # flips a step by 2x on another CPU (seen on 2026-12-07, AMD EPYC: RMS 9.3e-4, max 8.8e-3 of the
+        # diagonal), and both clips still meet the fit's target (rel-RMS 3e-3, max 3x): they may differ by
+        # that target in RMS and by twice the max bound
+        target = 3e-3 * old["diagonal"]
+        assert np.sqrt(np.mean(diff**2)) <= target and np.abs(diff).max() <= 6 * target, \
+            f"the fit or cyclic pipeline changed its output: run {REGEN}"
+        return
+    assert np.abs(diff).max() <= 1e-4 * old["diagonal"], \
         f"the fit or cyclic pipeline changed its output: run {REGEN}"
 
 
