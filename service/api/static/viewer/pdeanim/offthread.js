@@ -1,49 +1,87 @@
 // Decode clips in a Web Worker (worker.js): the zstd decoding, the format decoding and the GPU tables run
 // off the main thread, and the results come back as transferred buffers (no copy). Where workers cannot run
-// (node, a bundler that cannot resolve 'fzstd' for the worker), the same work runs here instead.
+// (node) or the worker does not start (its file not served or bundled), the same work runs here instead, with a
+// console warning in the second case.
 
 import { ClipFormatError } from './container.js';
 import { loadClip, splitClipFile } from './clip.js';
 import { gpuTables } from './gpu.js';
 import './zstd.js';
 
-let worker = null;
+let workerStart = null; // Promise of the started decoder worker, or of null when none could start
 let nextId = 0;
 const pending = new Map();
+let warned = false;
+
+/** Say once, on the console, why clips are decoded on the main thread although Web Workers exist. */
+function warnMainThread(reason) {
+  if (warned) return;
+  warned = true;
+  console.warn(`pdeanim: decoding clips on the main thread: ${reason}`);
+}
 
 /** Why clips cannot be decoded in a Web Worker here (null when they can). */
 export function workerUnavailableReason() {
   if (typeof Worker === 'undefined') return 'no Web Workers here';
-  try {
-    fzstdUrl();
-  } catch (err) {
-    return `the worker cannot load fzstd (${err.message})`;
-  }
   return null;
 }
 
+/**
+ * fzstd's URL as this page resolves it (an import map, no bundler), or null. A bundled worker imports fzstd
+ * itself; an unbundled one cannot resolve the bare specifier, and imports it from this URL instead.
+ */
 function fzstdUrl() {
-  if (typeof import.meta.resolve !== 'function') throw new Error('import.meta.resolve is unavailable');
-  return import.meta.resolve('fzstd');
+  try {
+    return typeof import.meta.resolve === 'function' ? import.meta.resolve('fzstd') : null;
+  } catch {
+    return null;
+  }
 }
 
+function settle({ data }) {
+  const job = pending.get(data.id);
+  if (!job) return;
+  pending.delete(data.id);
+  if (data.error) {
+    const Err = data.error.name === 'ClipFormatError' ? ClipFormatError : Error;
+    job.reject(new Err(data.error.message));
+  } else job.resolve(data.clip);
+}
+
+/**
+ * Start the decoder worker (the pattern bundlers recognise: new Worker(new URL('./worker.js',
+ * import.meta.url), {type: 'module'})) and wait for its first message, which says its modules loaded.
+ * Resolves to null, with a console warning saying why, when it cannot start: nothing is handed to a worker
+ * that may not exist.
+ */
 function startWorker() {
-  const w = new Worker(new URL('./worker.js', import.meta.url), { type: 'module', name: 'pdeanim-decoder' });
-  w.onmessage = ({ data }) => {
-    const job = pending.get(data.id);
-    if (!job) return;
-    pending.delete(data.id);
-    if (data.error) {
-      const Err = data.error.name === 'ClipFormatError' ? ClipFormatError : Error;
-      job.reject(new Err(data.error.message));
-    } else job.resolve(data.clip);
-  };
-  w.onerror = (e) => {
-    for (const job of pending.values()) job.reject(new Error(`the pdeanim decoder worker failed: ${e.message}`));
-    pending.clear();
-    worker = null;
-  };
-  return w;
+  return new Promise((resolve) => {
+    let w;
+    try {
+      w = new Worker(new URL('./worker.js', import.meta.url), { type: 'module', name: 'pdeanim-decoder' });
+    } catch (err) {
+      warnMainThread(`the decoder worker could not be created (${err.message})`);
+      resolve(null);
+      return;
+    }
+    w.onmessage = ({ data }) => {
+      if (!data?.ready) return;
+      w.onmessage = settle;
+      w.onerror = (e) => {
+        for (const job of pending.values()) job.reject(new Error(`the pdeanim decoder worker failed: ${e.message}`));
+        pending.clear();
+        workerStart = null;
+      };
+      resolve(w);
+    };
+    w.onerror = (e) => {
+      e.preventDefault?.();
+      const detail = e.message || 'its module did not load: is src/worker.js served or bundled beside the page?';
+      warnMainThread(`the decoder worker did not start (${detail})`);
+      w.terminate();
+      resolve(null);
+    };
+  });
 }
 
 function copyOf(data) {
@@ -59,13 +97,13 @@ function copyOf(data) {
  * (topology_id checked where WebCrypto is available).
  */
 export async function decodeClipOffThread(parts, { tables = true, width = 4096, useWorker = true } = {}) {
-  if (!useWorker || workerUnavailableReason() !== null) {
+  const worker = useWorker && workerUnavailableReason() === null ? await (workerStart ??= startWorker()) : null;
+  if (worker === null) {
     const p = parts.file ? splitClipFile(parts.file) : parts;
     const clip = await loadClip(p.topology, p.coefficients);
     if (tables) clip.gpuTables = gpuTables(clip, { width });
     return clip;
   }
-  worker ??= startWorker();
   const id = nextId++;
   const message = { id, fzstd: fzstdUrl(), tables, width };
   for (const k of ['topology', 'coefficients', 'file']) if (parts[k]) message[k] = copyOf(parts[k]);
