@@ -407,6 +407,12 @@ window.pdeanimViewer = {
   get gpuUnavailableReason() { return viewer.gpuReason; },
   /** What the clip plays on: 'gltf' (the mesh's own glTF) or 'clip' (the clip's topology). */
   get model() { return viewer.sourceKind; },
+  /** Whether a mesh of the model shows a texture (its image loaded). */
+  get textured() {
+    let on = false;
+    viewer.model?.traverse((o) => { if (o.isMesh && o.material?.map?.image) on = true; });
+    return on;
+  },
   /** ms: start, downloaded (both parts in), decoded (worker done), firstFrame (drawn, gl.finish). */
   get timings() { return { ...viewer.timings }; },
   get gpuBytes() { return gpuBytes(viewer.player); },
@@ -425,6 +431,28 @@ window.pdeanimViewer = {
     viewer.model.visible = !other;
     if (other) viewer.scene.add(other);
     await nextFrame();
+  },
+  /**
+   * The view in plain numbers (world space): canvas size, background, camera and lights, so that another
+   * page can draw the same view with three.js alone.
+   */
+  stage() {
+    const { camera, renderer, scene } = viewer;
+    scene.updateMatrixWorld(true);
+    const lights = [];
+    scene.traverse((o) => {
+      if (!o.isLight) return;
+      const light = { type: o.type, color: o.color.getHex(), intensity: o.intensity,
+        position: o.getWorldPosition(new THREE.Vector3()).toArray() };
+      if (o.groundColor) light.groundColor = o.groundColor.getHex();
+      if (o.target) light.target = o.target.getWorldPosition(new THREE.Vector3()).toArray();
+      lights.push(light);
+    });
+    const size = renderer.getSize(new THREE.Vector2());
+    return { width: size.x, height: size.y, pixelRatio: renderer.getPixelRatio(),
+      background: scene.background.getHex(), lights,
+      camera: { fov: camera.fov, aspect: camera.aspect, near: camera.near, far: camera.far,
+        matrixWorld: camera.matrixWorld.toArray() } };
   },
   measureGlb: () => viewer.measureGlb(),
   frameStats: () => viewer.frameStats(),
