@@ -207,7 +207,7 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
                        f"({estimate.raw_frame_bytes} bytes as raw float32), more than a request builds "
                        f"(PDEANIM_MAX_SYNC_EXPORT_BYTES = {settings.max_sync_export_bytes}); "
                        + export_job_hint(clip_id, fps))
-    tag = hashlib.sha256(f"{item.coefficients_key}:animation:meshopt-v2:{fps!r}".encode()).hexdigest()
+    tag = hashlib.sha256(f"{item.coefficients_key}:animation:meshopt-v3:{fps!r}".encode()).hexdigest()
 
     def body() -> bytes:  # kept in the encoded-body LRU with the frames (a repeat is a copy-free answer)
         from pdeanim.gltf.clipexport import clip_animation_glb
