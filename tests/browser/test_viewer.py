@@ -152,6 +152,8 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
     assert sizes["raw"] > 0 and "raw float32 frames" in info["stats"]
     if kind == "dynamic-pde":
         assert result["glb"] and result["glb"] > 0 and "animation GLB" in info["statsAfter"]
+        # the size comes from the service (HEAD): the GLB is never downloaded to count it
+        assert set(result["animationRequests"]) == {"HEAD"}, result["animationRequests"]
 
     gpu_a, gpu_b, cpu_b = (canvas_part(load_png(s["path"])) for s in shots)
     background = gpu_a[2, 2]

@@ -14,6 +14,8 @@ try {
   page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
   page.on('requestfailed', (r) => logs.push(`requestfailed: ${r.url()} ${r.failure()?.errorText}`));
+  const animationRequests = [];
+  page.on('request', (r) => { if (r.url().includes('/animation')) animationRequests.push(r.method()); });
   await page.setViewport({ width: job.width ?? 800, height: job.height ?? 600 });
   await page.goto(job.url, { waitUntil: 'load', timeout: 120_000 });
   await page.waitForFunction('window.pdeanimViewer !== undefined', { timeout: 120_000 });
@@ -30,6 +32,7 @@ try {
     result.positions.push(await page.evaluate((tt) => Array.from(window.pdeanimViewer.positions(tt)), t));
   }
   if (job.measureGlb) result.glb = await page.evaluate(() => window.pdeanimViewer.measureGlb());
+  result.animationRequests = animationRequests;
   result.shots = [];
   for (const shot of job.shots ?? []) {
     const mode = await page.evaluate((m) => window.pdeanimViewer.setMode(m), shot.mode);

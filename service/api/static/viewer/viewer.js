@@ -2,7 +2,7 @@
 // fragment; decoded in a Web Worker), plays it with the JS package (GPU vertex shader or CPU) on the mesh's
 // original glTF when the clip came from one (its materials, textures and hierarchy), else on a mesh of the
 // clip's own topology, and compares the bytes it downloaded against raw float32 frames and the animation
-// GLB. window.pdeanimViewer is the handle automated checks use.
+// GLB (its size as the service reports it: a HEAD request). window.pdeanimViewer is the handle automated checks use.
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -11,7 +11,7 @@ import { createEvaluator } from 'pdeanim';
 import { PDEClipLoader, attachClip, attachClipToScene } from 'pdeanim/three.js';
 
 const ROOT = document.querySelector('meta[name="pdeanim-root"]')?.content ?? '';
-const GLB_AUTO_LIMIT = 64 * 1024 * 1024; // measure the animation GLB at once only below this raw size
+const GLB_AUTO_LIMIT = 64 * 1024 * 1024; // ask for the animation GLB's size at once only below this raw size
 const FRAME_WINDOW = 1200; // frames kept for the per-frame JavaScript time statistics
 
 const $ = (id) => document.getElementById(id);
@@ -297,24 +297,22 @@ class Viewer {
 
   resetFrameStats() { this.frameJs = []; this.frameTimes = []; }
 
-  /** Download the animation GLB of the same frames (as served) to show its size next to the clip's. */
+  /** Ask the service for the size of the animation GLB of the same frames, as served (HEAD: no download). */
   async measureGlb() {
     const fps = Math.round(sourceFps(this.clip) * 1000) / 1000;
     const url = `${ROOT}/v1/clips/${encodeURIComponent(this.clipId)}/animation?fps=${fps}`;
     this.sizes.glbNote = 'measuring…';
     this.renderStats();
     try {
-      const res = await fetch(url, { headers: { Authorization: `Bearer ${this.key}` } });
-      if (!res.ok) {
-        const body = await res.json().catch(() => null);
-        this.sizes.glbNote = body?.error?.code === 'export_too_large'
-          ? 'larger than a request builds (an export job makes it)'
-          : `not available (${res.status}${body?.error ? `: ${body.error.message}` : ''})`;
-      } else {
-        const decoded = (await res.arrayBuffer()).byteLength;
-        this.sizes.glbDecoded = decoded;
-        this.sizes.glb = wireBytes(url, decoded);
-        this.sizes.glbNote = `fps ${fps}`;
+      const res = await fetch(url, { method: 'HEAD', headers: { Authorization: `Bearer ${this.key}` } });
+      const length = Number(res.headers.get('content-length'));
+      if (res.status === 413) this.sizes.glbNote = 'larger than a request builds (an export job makes it)';
+      else if (!res.ok) this.sizes.glbNote = `not available (HTTP ${res.status})`;
+      else if (!(length > 0)) this.sizes.glbNote = 'not available (no Content-Length)';
+      else {
+        this.sizes.glb = length;
+        const coding = res.headers.get('content-encoding');
+        this.sizes.glbNote = coding ? `fps ${fps}, ${coding}` : `fps ${fps}`;
       }
     } catch (err) {
       this.sizes.glbNote = `not available (${err.message})`;
