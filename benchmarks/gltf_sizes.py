@@ -204,7 +204,8 @@ def rows(case: Case, args: argparse.Namespace) -> None:
                 print(f"{case.label:<21} {'look' if look else 'plain':<5} {kind:<7} {shape:>11} "
                       f"{ours_v:>6}/{gp_v:<6} {bits:>4} {raw:>10,} {len(gp_pos):>10,} {len(gp):>10,} "
                       f"{grid_step(gp) / extent:>7.1e} {len(glb):>10,} {grid_step(glb) / extent:>7.1e} "
-                      f"{len(glb) / len(gp):>6.2f} {len(glb) / raw:>6.3f} {build:>6.2f}", flush=True)
+                      f"{len(glb) / len(gp):>6.2f} {len(glb) / len(gp_pos):>6.2f} {len(glb) / raw:>6.3f} "
+                      f"{build:>6.2f}{'  default' if bits == args.bits and not normals else ''}", flush=True)
                 if args.validate:
                     from pdeanim.gltf.validate import assert_glb_clean
 
@@ -234,10 +235,11 @@ def main() -> int:
     loaders += [lambda n=name: sequence_case(n, args.fps) for name in args.sequences]
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print("plain = `pdeanim export CLIP`, look = with --mesh SOURCE; normals: none (flat), base, targets; "
-          "step = position grid step / largest extent of the frames; verts = written by ours/gltfpack")
+          "step = position grid step / largest extent of the frames; verts = written by ours/gltfpack; "
+          "/gppos = ours / gltfpack of positions only; default = what an export writes unless told otherwise")
     print(f"{'case':<21} {'kind':<5} {'normals':<7} {'frames x V':>11} {'verts':>13} {'bits':>4} "
           f"{'raw f32':>10} {'gp pos-only':>10} {'gltfpack':>10} {'gp step':>7} {'ours':>10} {'step':>7} "
-          f"{'ours/gp':>6} {'/raw':>6} {'build':>6}")
+          f"{'ours/gp':>6} {'/gppos':>6} {'/raw':>6} {'build':>6}")
     for load in loaders:
         rows(load(), args)
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")

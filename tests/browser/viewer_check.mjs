@@ -4,6 +4,7 @@
 // "measureGlb", "out"}
 import { writeFileSync } from 'node:fs';
 import { launchChromium } from './chromium.mjs';
+import { drawReference, writeDataUrl } from './look_reference.mjs';
 
 const job = JSON.parse(process.argv[2]);
 const browser = await launchChromium();
@@ -13,6 +14,8 @@ try {
   page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
   page.on('requestfailed', (r) => logs.push(`requestfailed: ${r.url()} ${r.failure()?.errorText}`));
+  const animationRequests = [];
+  page.on('request', (r) => { if (r.url().includes('/animation')) animationRequests.push(r.method()); });
   await page.setViewport({ width: job.width ?? 800, height: job.height ?? 600 });
   await page.goto(job.url, { waitUntil: 'load', timeout: 120_000 });
   await page.waitForFunction('window.pdeanimViewer !== undefined', { timeout: 120_000 });
@@ -29,6 +32,7 @@ try {
     result.positions.push(await page.evaluate((tt) => Array.from(window.pdeanimViewer.positions(tt)), t));
   }
   if (job.measureGlb) result.glb = await page.evaluate(() => window.pdeanimViewer.measureGlb());
+  result.animationRequests = animationRequests;
   result.shots = [];
   for (const shot of job.shots ?? []) {
     const mode = await page.evaluate((m) => window.pdeanimViewer.setMode(m), shot.mode);
@@ -37,27 +41,28 @@ try {
     result.shots.push({ ...shot, mode });
   }
   if (job.reference) {
-    // the source glTF drawn by three.js alone (GLTFLoader, its own animation at time t * duration) with the
-    // viewer's camera and lights, next to the clip's frame at t on it
+    // the clip's frames at the given times on the viewer's canvas, against the source glTF drawn by three.js
+    // alone (its own skinning at the same times) in another page, without the viewer's CSP or code
     const r = job.reference;
-    await page.evaluate((t) => window.pdeanimViewer.show(t), r.t);
-    await page.screenshot({ path: r.clipPath });
-    result.reference = await page.evaluate(async ({ url, key, t }) => {
-      const { GLTFLoader } = await import('three/addons/loaders/GLTFLoader.js');
-      const THREE = await import('three');
-      const res = await fetch(url, { headers: { Authorization: `Bearer ${key}` } });
-      const gltf = await new GLTFLoader().parseAsync(await res.arrayBuffer(), '');
-      const mixer = new THREE.AnimationMixer(gltf.scene);
-      const anim = gltf.animations[0];
-      mixer.clipAction(anim).play();
-      mixer.setTime(t * anim.duration);
-      await window.pdeanimViewer.swapModel(gltf.scene);
-      let flat = false;
-      gltf.scene.traverse((o) => { if (o.isMesh) flat = flat || Boolean(o.material.flatShading); });
-      return { flat, model: window.pdeanimViewer.model };
-    }, { url: r.fileUrl, key: r.key, t: r.t });
-    await page.screenshot({ path: r.referencePath });
-    await page.evaluate(() => window.pdeanimViewer.swapModel(null));
+    const stage = await page.evaluate(() => window.pdeanimViewer.stage());
+    result.reference = { clipPaths: [], referencePaths: [] };
+    for (const [i, t] of r.times.entries()) {
+      await page.evaluate((tt) => window.pdeanimViewer.show(tt), t);
+      const png = await page.evaluate(() => document.querySelector('#canvas').toDataURL('image/png'));
+      const path = `${r.dir}/clip-${i}.png`;
+      writeDataUrl(writeFileSync, path, png);
+      result.reference.clipPaths.push(path);
+    }
+    const drawn = await drawReference(browser, new URL(job.url).origin,
+      { fileUrl: r.fileUrl, key: r.key, times: r.times, stage }, logs);
+    for (const [i, png] of drawn.images.entries()) {
+      const path = `${r.dir}/reference-${i}.png`;
+      writeDataUrl(writeFileSync, path, png);
+      result.reference.referencePaths.push(path);
+    }
+    result.reference.textured = drawn.textured;
+    result.reference.flat = drawn.flat;
+    result.reference.viewerTextured = await page.evaluate(() => window.pdeanimViewer.textured);
   }
   result.info.statsAfter = await page.evaluate(() => document.querySelector('#stats').innerText);
   writeFileSync(job.out, JSON.stringify(result));

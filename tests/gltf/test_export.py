@@ -152,3 +152,33 @@ def test_cli_export_keeps_the_look_of_a_gltf_source(tmp_path, capsys):
     assert main(["export", str(clip_path), "--mesh", str(tmp_path / "missing.glb"), "--out", str(out)]) == 2
     assert main(["export", str(clip_path), "--position-bits", "20", "--out", str(out)]) == 2
     assert "position_bits" in capsys.readouterr().err
+
+
+def test_exports_leave_normal_targets_out_unless_asked(wave, tmp_path):
+    """The default export carries the base normals only (no per-frame normal targets, 35-40% of a smooth
+    mesh's GLB); ``normals=True``, the export job's ``normals`` and ``--normal-targets`` keep them."""
+    from pdeanim.gltf.clipexport import ExportOptions
+    from pdeanim.gltf.glb import unpack_glb
+
+    def normal_targets(glb: bytes) -> tuple[bool, bool]:
+        doc, _ = unpack_glb(glb)
+        prims = [p for m in doc["meshes"] for p in m["primitives"]]
+        return (all("NORMAL" in p["attributes"] for p in prims),
+                any("NORMAL" in t for p in prims for t in p.get("targets", [])))
+
+    default = clip_animation_glb(wave, fps=10)
+    kept = clip_animation_glb(wave, fps=10, options=PackOptions(normals=True))
+    assert normal_targets(default) == (True, False) and normal_targets(kept) == (True, True)
+    assert len(default) < 0.8 * len(kept)
+    assert ExportOptions.from_dict({}).normals is False and ExportOptions.from_dict({"normals": True}).normals
+    clip_path = tmp_path / "wave.clip"
+    from pdeanim.poses import make_poses
+
+    frames = wave.evaluate(np.linspace(0, 1, 12))
+    parts = fitclip.fit_poses(make_poses(frames, wave.faces, np.arange(12) / 10.0, {}),
+                              fitclip.FitOptions.from_dict({"segments": 1}))
+    write_clip_file(clip_path, parts)
+    for flags, want in (([], False), (["--normal-targets"], True), (["--no-normal-targets"], False)):
+        out = tmp_path / f"wave{len(flags)}{want}.glb"
+        assert main(["export", str(clip_path), "--out", str(out), "--fps", "10", "-q", *flags]) == 0
+        assert normal_targets(out.read_bytes()) == (True, want), flags

@@ -274,3 +274,20 @@ def test_mesh_file_is_served_as_uploaded_with_its_media_type(api, services, sphe
     with client(services[0], make_key(services[0].backend, "mallory")) as mallory:
         assert_error(mallory.get(f"/v1/meshes/{mid}/file"), 404, "not_found")
     assert_error(client(services[0], None).get(f"/v1/meshes/{mid}/file"), 401, "unauthorized")
+
+
+@pytest.mark.parametrize("accept", ["gzip, deflate, br, zstd", "identity"])
+def test_animation_head_gives_the_size_get_sends(services, key, sphere, accept):
+    """HEAD of the animation: the headers GET sends (its Content-Length in the same coding), no body; the
+    viewer shows the size without downloading the GLB."""
+    svc, _ = services
+    path = f"/v1/clips/{sphere['fit']['id']}/animation?fps=12"
+    headers = {"Authorization": f"Bearer {key}", "Accept-Encoding": accept}
+    got, wire = raw_get(svc.url, path, headers)
+    with httpx.Client(base_url=svc.url, timeout=60) as c:
+        head = c.head(path, headers=headers)
+        missing = c.head(path.replace(sphere["fit"]["id"], "clip_none"), headers=headers)
+    assert head.status_code == 200 and head.content == b""
+    assert int(head.headers["content-length"]) == len(wire) == int(got.headers["content-length"])
+    assert head.headers.get("content-encoding") == got.headers.get("content-encoding")
+    assert missing.status_code == 404

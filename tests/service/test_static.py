@@ -44,6 +44,7 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
         "getClipTopology",
         "getClipFrame",
         "getClipAnimation",
+        "headClipAnimation",
         "getExport",
         "listMeshes",
         "listPoses",

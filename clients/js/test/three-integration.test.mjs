@@ -178,3 +178,129 @@ test('crossFadeTo between a skinned animation and the clip on one model: weights
   const vs = shader.vertexShader;
   assert.ok(vs.indexOf('#include <skinning_vertex>') < vs.indexOf('mix(transformed, pdePosition, pdeInfluence)'));
 });
+
+// Blends of the clip action with skeletal actions, against a reference computed here: the bones are three.js's
+// blend of the skeletal actions and the pose the clip was fitted on (weights normalised, the bind pose filling
+// a total weight under 1), the skinned side is linear blend skinning of those bones, and the drawn vertex is
+// (1 - w) skinned + w clip at the clip action's effective weight w and time.
+
+const WALK = [0, 0, 0, 1, 0, 0, Math.sin(0.5), Math.cos(0.5)]; // leg: 0 -> 1 rad about z over 1 s
+const RUN = [0, 0, Math.sin(-0.3), Math.cos(-0.3), 0, 0, Math.sin(-0.9), Math.cos(-0.9)]; // -0.6 -> -1.8 rad
+
+function legTrack(values, duration = 1) {
+  return new THREE.QuaternionKeyframeTrack('leg.quaternion', [0, duration], values);
+}
+
+function legAt(values, u) {
+  const q = new THREE.Quaternion().fromArray(values, 0);
+  return q.slerp(new THREE.Quaternion().fromArray(values, 4), u);
+}
+
+/** The leg's reference rotation: skeletal weights [[w, quaternion], ...] blended as three's mixer does. */
+function referenceLeg(parts) {
+  const total = parts.reduce((n, [w]) => n + w, 0);
+  const q = new THREE.Quaternion();
+  let acc = 0;
+  for (const [w, p] of parts) {
+    if (w <= 0) continue;
+    acc += w;
+    if (acc === w) q.copy(p);
+    else q.slerp(p, w / acc);
+  }
+  if (total < 1) q.slerp(new THREE.Quaternion(), 1 - total); // the bind pose fills the rest
+  return q;
+}
+
+/** The drawn vertices (V * 3): linear blend skinning with mesh's current bones, mixed with the clip. */
+function drawn(mesh, player) {
+  mesh.updateMatrixWorld(true);
+  mesh.skeleton.update();
+  const n = player.clip.nVertices;
+  const clipPos = player.positions(player.time);
+  const out = new Float64Array(n * 3);
+  const v = new THREE.Vector3();
+  const w = player.influence;
+  for (let i = 0; i < n; i++) {
+    mesh.getVertexPosition(i, v);
+    out[i * 3] = (1 - w) * v.x + w * clipPos[i * 3];
+    out[i * 3 + 1] = (1 - w) * v.y + w * clipPos[i * 3 + 1];
+    out[i * 3 + 2] = (1 - w) * v.z + w * clipPos[i * 3 + 2];
+  }
+  return out;
+}
+
+/** The reference's vertices: the leg set to q, then as drawn() at weight w and clip time t. */
+function reference(mesh, player, q, w, t) {
+  const leg = mesh.skeleton.bones[1];
+  const saved = leg.quaternion.clone();
+  const state = { influence: player.influence, time: player.time };
+  leg.quaternion.copy(q);
+  const out = drawn(mesh, { clip: player.clip, influence: w, time: t, positions: (tt) => player.positions(tt) });
+  leg.quaternion.copy(saved);
+  assert.deepEqual({ influence: player.influence, time: player.time }, state);
+  return out;
+}
+
+function maxDiff(a, b) {
+  let m = 0;
+  for (let i = 0; i < a.length; i++) m = Math.max(m, Math.abs(a[i] - b[i]));
+  return m;
+}
+
+function blendSetup(withPose = true) {
+  const clip = new PDEClipLoader().parse(file);
+  const { mesh } = skinnedOf(clip);
+  const player = attachClip(mesh, clip);
+  const mixer = new THREE.AnimationMixer(mesh);
+  const walk = mixer.clipAction(new THREE.AnimationClip('walk', 1, [legTrack(WALK)]));
+  // the clip was fitted on 'run' (2 s): its pose at the clip's t is run's at 2 t
+  const pose = new THREE.AnimationClip('run', 2, [legTrack(RUN, 2)]);
+  const pde = mixer.clipAction(clipAnimation(player, { duration: 1, ...(withPose ? { pose } : {}) }));
+  const diag = Math.hypot(...[0, 1, 2].map((k) => {
+    const xs = clip.rest.filter((_, i) => i % 3 === k);
+    return Math.max(...xs) - Math.min(...xs);
+  }));
+  return { clip, mesh, player, mixer, walk, pde, diag };
+}
+
+test('blends: crossFadeTo, crossFadeFrom, fadeIn/fadeOut and weights match the reference blend', () => {
+  const scenarios = {
+    crossFadeTo: ({ walk, pde }) => { walk.play(); pde.play(); walk.crossFadeTo(pde, 1, false); },
+    crossFadeFrom: ({ walk, pde }) => { walk.play(); pde.play(); pde.crossFadeFrom(walk, 1, false); },
+    fades: ({ walk, pde }) => { walk.play().fadeOut(1); pde.play().fadeIn(2); },
+    weights: ({ walk, pde }) => { walk.play().setEffectiveWeight(0.3); pde.play().setEffectiveWeight(0.45); },
+    warped: ({ walk, pde }) => { walk.play(); pde.play(); walk.crossFadeTo(pde, 1, true); },
+  };
+  for (const [name, start] of Object.entries(scenarios)) {
+    const s = blendSetup();
+    start(s);
+    for (const dt of [0.1, 0.25, 0.3]) {
+      s.mixer.update(dt);
+      const w = s.pde.getEffectiveWeight();
+      const ws = s.walk.getEffectiveWeight();
+      assert.ok(Math.abs(s.player.influence - Math.min(w, 1)) < 1e-12, name);
+      const tWalk = s.walk.time;
+      const tClip = s.pde.time / 1;
+      assert.ok(Math.abs(s.player.time - tClip) < 1e-9, `${name}: ${s.player.time} ${tClip}`);
+      const q = referenceLeg([[ws, legAt(WALK, tWalk)], [w, legAt(RUN, tClip)]]);
+      const err = maxDiff(drawn(s.mesh, s.player), reference(s.mesh, s.player, q, Math.min(w, 1), tClip));
+      assert.ok(err < 1e-7 * s.diag, `${name} at weights ${ws.toFixed(3)}/${w.toFixed(3)}: ${err / s.diag}`);
+    }
+  }
+});
+
+test('blends: without the pose the skinned side passes through the bind pose (why pose exists)', () => {
+  const s = blendSetup(false);
+  s.walk.play();
+  s.pde.play();
+  s.walk.crossFadeTo(s.pde, 1, false);
+  s.mixer.update(0.5);
+  const w = s.pde.getEffectiveWeight();
+  const leg = s.mesh.skeleton.bones[1].quaternion;
+  // the mixer filled the clip's half of the leg's weight with the bind pose (the identity rotation)
+  const bindBlend = referenceLeg([[1 - w, legAt(WALK, s.walk.time)]]);
+  assert.ok(maxDiff(leg.toArray(), bindBlend.toArray()) < 1e-8, `${leg.toArray()} ${bindBlend.toArray()}`);
+  const withPose = referenceLeg([[1 - w, legAt(WALK, s.walk.time)], [w, legAt(RUN, s.pde.time)]]);
+  assert.ok(leg.angleTo(withPose) > 0.3, 'the fixture would catch a bind-pose blend');
+  assert.throws(() => clipAnimation(s.player, { pose: {} }), /AnimationClip/);
+});

@@ -1,6 +1,8 @@
 // Type declarations of pdeanim/three: play a clip on three.js meshes (WebGLRenderer), keeping their materials.
 
-import type { AnimationClip, DataTexture, Loader, LoadingManager, Matrix4, Mesh, Object3D } from 'three';
+import type {
+  AnimationClip, DataTexture, Loader, LoadingManager, Matrix4, Mesh, Object3D, WebGLRenderer,
+} from 'three';
 import type { Clip, Evaluator } from './index.js';
 import type { GpuLayout, MeshAttributes } from './gpu.js';
 
@@ -22,7 +24,7 @@ export interface AttachOptions {
    * float render targets (EXT_color_buffer_float) the clip is evaluated in a pass before drawing. A
    * WebGPURenderer is refused (use pdeanim/webgpu's refusal message: WEBGPU_REFUSAL).
    */
-  renderer?: unknown;
+  renderer?: WebGLRenderer;
   /** Evaluate in a pass (one evaluation per clip vertex); default: when the renderer is given and supports
    * float render targets, with normals 'frame'. */
   pass?: boolean;
@@ -135,11 +137,13 @@ export declare class PDEClipLoader extends Loader<Clip> {
 export declare function clipDuration(clip: Clip): number;
 /**
  * An AnimationClip for an AnimationMixer rooted at the player's mesh/root or an ancestor: action time
- * 0 .. duration maps to t = 0 .. 1, its effective weight to the player's influence.
+ * 0 .. duration maps to t = 0 .. 1, its effective weight to the player's influence. pose: the skeletal
+ * animation the clip was fitted on (its time 0 .. its duration is t = 0 .. 1): the action also drives those
+ * bones, so that crossfades with skeletal actions blend bones between poses, not with the bind pose.
  */
 export declare function clipAnimation(
   player: ClipPlayer | ScenePlayer,
-  options?: { name?: string; duration?: number },
+  options?: { name?: string; duration?: number; pose?: AnimationClip | null },
 ): AnimationClip;
 
 /** Decode a clip (and its GPU tables) in a Web Worker where one can run, else here. */

@@ -207,7 +207,7 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
                        f"({estimate.raw_frame_bytes} bytes as raw float32), more than a request builds "
                        f"(PDEANIM_MAX_SYNC_EXPORT_BYTES = {settings.max_sync_export_bytes}); "
                        + export_job_hint(clip_id, fps))
-    tag = hashlib.sha256(f"{item.coefficients_key}:animation:meshopt-v2:{fps!r}".encode()).hexdigest()
+    tag = hashlib.sha256(f"{item.coefficients_key}:animation:meshopt-v3:{fps!r}".encode()).hexdigest()
 
     def body() -> bytes:  # kept in the encoded-body LRU with the frames (a repeat is a copy-free answer)
         from pdeanim.gltf.clipexport import clip_animation_glb
@@ -222,3 +222,14 @@ def get_animation(clip_id: str, request: Request, tenant: TenantDep, store: Stor
 
     return negotiated_response(request, tag, body, GLB, request.app.state.frame_cache,
                                ("animation", clip_id, fps))
+
+
+@router.head("/v1/clips/{clip_id}/animation", operation_id="headClipAnimation", response_class=Response,
+             responses={**GLB_RESPONSE, **responses(304, 401, 404, 413, 422)})
+def head_animation(clip_id: str, request: Request, tenant: TenantDep, store: StoreDep, cache: ClipCacheDep,
+                   fps: float = Query(30.0, gt=0,
+                                      description="frames per second (at most PDEANIM_MAX_EXPORT_FPS)")
+                   ) -> Response:
+    """The headers ``GET`` of the animation answers, without its body: ``Content-Length`` is its size in the
+    coding the request accepts (the viewer shows it next to the clip's bytes without downloading it)."""
+    return get_animation(clip_id, request, tenant, store, cache, fps)

@@ -20,6 +20,13 @@ CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 
        "frame-ancestors 'none'; base-uri 'self'")
 PAGE_HEADERS = {"Cache-Control": STATIC_CACHE, "Content-Security-Policy": CSP,
                 "Referrer-Policy": "no-referrer"}
+# The viewer: its own modules and this service, plus what GLTFLoader needs to read the source model's
+# embedded resources: it fetches a GLB's images through blob: URLs (ImageBitmapLoader) or shows them in
+# <img> (TextureLoader), and a .gltf's data: URIs the same ways. Its one worker is a module of 'self'.
+VIEWER_CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self'; "
+              "img-src 'self' blob: data:; connect-src 'self' blob: data:; worker-src 'self'; "
+              "frame-ancestors 'none'; base-uri 'self'")
+VIEWER_HEADERS = {**PAGE_HEADERS, "Content-Security-Policy": VIEWER_CSP}
 
 router = APIRouter(include_in_schema=False)
 
@@ -65,7 +72,7 @@ def redoc(request: Request) -> HTMLResponse:
 def viewer(request: Request) -> HTMLResponse:
     """The clip viewer page; it reads ``#clip=ID&key=KEY`` (the fragment never reaches the server)."""
     html = (STATIC_DIR / "viewer" / "index.html").read_text().replace("{{ROOT}}", _root(request))
-    return HTMLResponse(html, headers=PAGE_HEADERS)
+    return HTMLResponse(html, headers=VIEWER_HEADERS)
 
 
 def install_pages(app: FastAPI) -> None:

@@ -2,7 +2,7 @@
 // fragment; decoded in a Web Worker), plays it with the JS package (GPU vertex shader or CPU) on the mesh's
 // original glTF when the clip came from one (its materials, textures and hierarchy), else on a mesh of the
 // clip's own topology, and compares the bytes it downloaded against raw float32 frames and the animation
-// GLB. window.pdeanimViewer is the handle automated checks use.
+// GLB (its size as the service reports it: a HEAD request). window.pdeanimViewer is the handle automated checks use.
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -11,7 +11,7 @@ import { createEvaluator } from 'pdeanim';
 import { PDEClipLoader, attachClip, attachClipToScene } from 'pdeanim/three.js';
 
 const ROOT = document.querySelector('meta[name="pdeanim-root"]')?.content ?? '';
-const GLB_AUTO_LIMIT = 64 * 1024 * 1024; // measure the animation GLB at once only below this raw size
+const GLB_AUTO_LIMIT = 64 * 1024 * 1024; // ask for the animation GLB's size at once only below this raw size
 const FRAME_WINDOW = 1200; // frames kept for the per-frame JavaScript time statistics
 
 const $ = (id) => document.getElementById(id);
@@ -297,24 +297,22 @@ class Viewer {
 
   resetFrameStats() { this.frameJs = []; this.frameTimes = []; }
 
-  /** Download the animation GLB of the same frames (as served) to show its size next to the clip's. */
+  /** Ask the service for the size of the animation GLB of the same frames, as served (HEAD: no download). */
   async measureGlb() {
     const fps = Math.round(sourceFps(this.clip) * 1000) / 1000;
     const url = `${ROOT}/v1/clips/${encodeURIComponent(this.clipId)}/animation?fps=${fps}`;
     this.sizes.glbNote = 'measuring…';
     this.renderStats();
     try {
-      const res = await fetch(url, { headers: { Authorization: `Bearer ${this.key}` } });
-      if (!res.ok) {
-        const body = await res.json().catch(() => null);
-        this.sizes.glbNote = body?.error?.code === 'export_too_large'
-          ? 'larger than a request builds (an export job makes it)'
-          : `not available (${res.status}${body?.error ? `: ${body.error.message}` : ''})`;
-      } else {
-        const decoded = (await res.arrayBuffer()).byteLength;
-        this.sizes.glbDecoded = decoded;
-        this.sizes.glb = wireBytes(url, decoded);
-        this.sizes.glbNote = `fps ${fps}`;
+      const res = await fetch(url, { method: 'HEAD', headers: { Authorization: `Bearer ${this.key}` } });
+      const length = Number(res.headers.get('content-length'));
+      if (res.status === 413) this.sizes.glbNote = 'larger than a request builds (an export job makes it)';
+      else if (!res.ok) this.sizes.glbNote = `not available (HTTP ${res.status})`;
+      else if (!(length > 0)) this.sizes.glbNote = 'not available (no Content-Length)';
+      else {
+        this.sizes.glb = length;
+        const coding = res.headers.get('content-encoding');
+        this.sizes.glbNote = coding ? `fps ${fps}, ${coding}` : `fps ${fps}`;
       }
     } catch (err) {
       this.sizes.glbNote = `not available (${err.message})`;
@@ -407,6 +405,12 @@ window.pdeanimViewer = {
   get gpuUnavailableReason() { return viewer.gpuReason; },
   /** What the clip plays on: 'gltf' (the mesh's own glTF) or 'clip' (the clip's topology). */
   get model() { return viewer.sourceKind; },
+  /** Whether a mesh of the model shows a texture (its image loaded). */
+  get textured() {
+    let on = false;
+    viewer.model?.traverse((o) => { if (o.isMesh && o.material?.map?.image) on = true; });
+    return on;
+  },
   /** ms: start, downloaded (both parts in), decoded (worker done), firstFrame (drawn, gl.finish). */
   get timings() { return { ...viewer.timings }; },
   get gpuBytes() { return gpuBytes(viewer.player); },
@@ -425,6 +429,28 @@ window.pdeanimViewer = {
     viewer.model.visible = !other;
     if (other) viewer.scene.add(other);
     await nextFrame();
+  },
+  /**
+   * The view in plain numbers (world space): canvas size, background, camera and lights, so that another
+   * page can draw the same view with three.js alone.
+   */
+  stage() {
+    const { camera, renderer, scene } = viewer;
+    scene.updateMatrixWorld(true);
+    const lights = [];
+    scene.traverse((o) => {
+      if (!o.isLight) return;
+      const light = { type: o.type, color: o.color.getHex(), intensity: o.intensity,
+        position: o.getWorldPosition(new THREE.Vector3()).toArray() };
+      if (o.groundColor) light.groundColor = o.groundColor.getHex();
+      if (o.target) light.target = o.target.getWorldPosition(new THREE.Vector3()).toArray();
+      lights.push(light);
+    });
+    const size = renderer.getSize(new THREE.Vector2());
+    return { width: size.x, height: size.y, pixelRatio: renderer.getPixelRatio(),
+      background: scene.background.getHex(), lights,
+      camera: { fov: camera.fov, aspect: camera.aspect, near: camera.near, far: camera.far,
+        matrixWorld: camera.matrixWorld.toArray() } };
   },
   measureGlb: () => viewer.measureGlb(),
   frameStats: () => viewer.frameStats(),
