@@ -1,0 +1,144 @@
+"""Where legs meet the ground, found from the skinned mesh: the vertices touching the ground at rest and the
+joints that move them (:attr:`Skeleton.contact`). A foot is the joint where a leg meets its ground contact
+(the ankle, the start of a paw): the joint carrying every joint that moves a good share of one foot's
+contact vertices (heel and toes, the digits of a paw) and stands low in its leg, whatever the slope of
+the bones below it.
+
+Bones that carry foot vertices but hang outside the legs (an IK target or control bone parented to the
+armature root; glTF keeps no IK constraint) are hung under the leg joint they sit at, so the leg solver
+drives them with the leg.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .skeleton import Skeleton
+
+LEG_DROP = 0.25
+"""A joint is on a leg when one of its ancestors stands this share of the mesh's height above it."""
+FOLLOW = 0.35
+"""A control bone follows the nearest leg joint within this share of the mesh's height of it."""
+FOOT_SHARE = 0.2
+"""A joint counts for a foot when it moves at least this share of the foot's contact vertices."""
+FOOT_LOW = 0.2
+"""... and stands at most this share of its highest ancestor's height above the ground (the far end of a
+steep shank touching the ground does not make the shank part of the foot)."""
+TOE_LOW = 0.3
+"""Contact joints whose common ancestor on a leg is under this share of the mesh's height are one foot."""
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A ground contact seen at rest: its foot joint (or -1), the contact joints it groups, its vertex
+    count, and why it is no foot ("" when it is one)."""
+
+    foot: int
+    joints: tuple[int, ...]
+    vertices: int
+    reason: str = ""
+
+
+def _tall(sk: Skeleton) -> float:
+    """The height the thresholds scale with: the mesh's, else the skeleton's."""
+    return sk.tall if sk.tall > 0 else max(float(np.ptp(sk.positions[:, 1])), 1e-300)
+
+
+def on_leg(sk: Skeleton) -> np.ndarray:
+    """(J,) bool: joints with an ancestor at least LEG_DROP of the mesh's height above them."""
+    h = sk.positions[:, 1]
+    return np.array([bool(anc) and h[anc].max() - h[j] >= LEG_DROP * _tall(sk)
+                     for j, anc in ((j, sk.ancestors(j)) for j in range(sk.n))])
+
+
+def control_moves(sk: Skeleton) -> dict[int, int]:
+    """Joints carrying ground contact outside every leg (control bones), each mapped to the leg joint it is
+    to hang under: the nearest joint on a leg (or control bone already hung) within FOLLOW of the mesh's
+    height, nearest controls first."""
+    if sk.contact is None:
+        return {}
+    leg = on_leg(sk)
+    contact = np.asarray(sk.contact) > 0
+    sub = sk.subtrees
+    tops = []
+    for c in np.flatnonzero(contact & ~leg):
+        top = int(c)
+        while sk.parents[top] >= 0:
+            p = int(sk.parents[top])
+            others = sub[p] & ~sub[top]
+            if (others & (leg | contact)).any():
+                break
+            top = p
+        if sk.parents[top] >= 0 and top not in tops:
+            tops.append(top)
+    moves: dict[int, int] = {}
+    pos, reach = sk.positions, FOLLOW * _tall(sk)
+    while tops:
+        hosts = leg.copy()
+        for m in moves:
+            hosts |= sub[m]
+        best = None
+        for top in tops:
+            free = hosts & ~sub[top]
+            free[sk.ancestors(top)] = False
+            if not free.any():
+                continue
+            cand = np.flatnonzero(free)
+            d = np.linalg.norm(pos[cand] - pos[top], axis=1)
+            i = int(np.argmin(d))
+            if d[i] <= reach and (best is None or d[i] < best[0]):
+                best = (float(d[i]), top, int(cand[i]))
+        if best is None:
+            break
+        moves[best[1]] = best[2]
+        tops.remove(best[1])
+    return moves
+
+
+def ground_contacts(sk: Skeleton) -> list[Contact]:
+    """The ground contacts at rest (after control bones were hung under their legs): contact joints grouped
+    by foot, each with its foot joint or the reason it is none."""
+    if sk.contact is None or not np.any(sk.contact):
+        return []
+    count = np.asarray(sk.contact)
+    joints = [int(j) for j in np.flatnonzero(count > 0)]
+    leg = on_leg(sk)
+    low = TOE_LOW * _tall(sk)
+    group = {j: j for j in joints}
+
+    def find(j: int) -> int:
+        while group[j] != j:
+            j = group[j]
+        return j
+
+    for i, a in enumerate(joints):
+        for b in joints[i + 1:]:
+            lca = sk.common_ancestor([a, b]) if _same_tree(sk, a, b) else -1
+            if lca >= 0 and leg[lca] and sk.height(lca) < low:
+                group[find(b)] = find(a)
+    out = []
+    for root in sorted({find(j) for j in joints}):
+        members = tuple(j for j in joints if find(j) == root)
+        total = int(count[list(members)].sum())
+        strong = [j for j in members if count[j] >= FOOT_SHARE * total and _low(sk, j)]
+        foot = sk.common_ancestor(strong) if strong else min(members, key=sk.height)
+        reason = "" if leg[foot] else (
+            f"no joint above it stands {LEG_DROP:.0%} of the mesh's height higher (a body, tail or control "
+            "bone lying on the ground, not a leg)")
+        if not strong and not reason:
+            reason = (f"the joints moving it stand above {FOOT_LOW:.0%} of their leg's height (the far end "
+                      "of a shank, not a foot)")
+        out.append(Contact(foot, members, total, reason))
+    return out
+
+
+def _low(sk: Skeleton, j: int) -> bool:
+    """Whether joint j stands low in its leg (at most FOOT_LOW of its highest ancestor's height)."""
+    anc = sk.ancestors(j)
+    return not anc or sk.height(j) <= FOOT_LOW * max(sk.height(a) for a in anc)
+
+
+def _same_tree(sk: Skeleton, a: int, b: int) -> bool:
+    return bool(set([a, *sk.ancestors(a)]) & set([b, *sk.ancestors(b)]))
