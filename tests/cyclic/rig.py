@@ -125,8 +125,9 @@ def rig_geometry(rig: Rig = BIPED) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     feet = {rig.index(f) for f in rig.feet}
     boxes = []
     for j, (_, parent, _) in enumerate(rig.joints):
-        if parent >= 0:
-            boxes.append((parent, pos[parent], pos[j], 0.03))
+        if parent >= 0:  # a bone into a foot stops short of it: the foot's pad alone touches the ground
+            end = pos[parent] + 0.8 * (pos[j] - pos[parent]) if j in feet else pos[j]
+            boxes.append((parent, pos[parent], end, 0.03))
     for name, half in rig.body:
         j = rig.index(name)
         boxes.append((j, pos[j] + [0, 0, -half], pos[j] + [0, 0, half], half))
