@@ -19,7 +19,7 @@ from .skeleton import Skeleton
 
 LEG_DROP = 0.25
 """A joint is on a leg when one of its ancestors stands this share of the mesh's height above it."""
-FOLLOW = 0.35
+FOLLOW = 0.5
 """A control bone follows the nearest leg joint within this share of the mesh's height of it."""
 FOOT_SHARE = 0.2
 """A joint counts for a foot when it moves at least this share of the foot's contact vertices."""
@@ -55,8 +55,8 @@ def on_leg(sk: Skeleton) -> np.ndarray:
 
 def control_moves(sk: Skeleton) -> dict[int, int]:
     """Joints carrying ground contact outside every leg (control bones), each mapped to the leg joint it is
-    to hang under: the nearest joint on a leg (or control bone already hung) within FOLLOW of the mesh's
-    height, nearest controls first."""
+    to hang under: the nearest joint on a leg within FOLLOW of the mesh's height, or a control bone nearer
+    that already hangs under the same leg joint (a toe control under its foot control)."""
     if sk.contact is None:
         return {}
     leg = on_leg(sk)
@@ -73,27 +73,24 @@ def control_moves(sk: Skeleton) -> dict[int, int]:
             top = p
         if sk.parents[top] >= 0 and top not in tops:
             tops.append(top)
-    moves: dict[int, int] = {}
     pos, reach = sk.positions, FOLLOW * _tall(sk)
-    while tops:
-        hosts = leg.copy()
-        for m in moves:
-            hosts |= sub[m]
-        best = None
-        for top in tops:
-            free = hosts & ~sub[top]
-            free[sk.ancestors(top)] = False
-            if not free.any():
-                continue
-            cand = np.flatnonzero(free)
-            d = np.linalg.norm(pos[cand] - pos[top], axis=1)
-            i = int(np.argmin(d))
-            if d[i] <= reach and (best is None or d[i] < best[0]):
-                best = (float(d[i]), top, int(cand[i]))
-        if best is None:
-            break
-        moves[best[1]] = best[2]
-        tops.remove(best[1])
+    by_leg: dict[int, list[tuple[float, int]]] = {}
+    for top in tops:
+        free = leg & ~sub[top]
+        free[sk.ancestors(top)] = False
+        cand = np.flatnonzero(free)
+        if not len(cand):
+            continue
+        d = np.linalg.norm(pos[cand] - pos[top], axis=1)
+        i = int(np.argmin(d))
+        if d[i] <= reach:
+            by_leg.setdefault(int(cand[i]), []).append((float(d[i]), top))
+    moves: dict[int, int] = {}
+    for host, controls in by_leg.items():  # nearest first; later ones may hang under earlier ones
+        hung = [host]
+        for _, top in sorted(controls):
+            moves[top] = min(hung, key=lambda h: float(np.linalg.norm(pos[h] - pos[top])))
+            hung.append(top)
     return moves
 
 
