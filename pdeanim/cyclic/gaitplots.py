@@ -87,7 +87,8 @@ def _local(points: np.ndarray, axes: Any) -> np.ndarray:
     return np.stack([points @ axes.forward, points @ axes.up, points @ axes.left], axis=-1)
 
 
-def _sole_dots(local: np.ndarray, soles: list[Any], leg_length: float) -> tuple[np.ndarray, np.ndarray]:
+def _sole_dots(local: np.ndarray, soles: list[Any], leg_length: float, up: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Where each sole really is, per frame and leg: (K + 1, n, 2) forward and height of its lowest down
     vertices' mean, and (K + 1, n) whether any of its vertices is down (within DOWN of the leg of its rest
     height)."""
@@ -97,7 +98,7 @@ def _sole_dots(local: np.ndarray, soles: list[Any], leg_length: float) -> tuple[
     down = np.zeros((len(local), len(soles)), bool)
     for i, sole in enumerate(soles):
         pts = local[:, sole.vertices]  # (K + 1, m, 3) forward, up, left
-        on = pts[..., 1] - local[0, sole.vertices, 1][None] <= DOWN * leg_length
+        on = pts[..., 1] - (sole.rest @ up)[None] <= DOWN * leg_length
         down[:, i] = on.any(axis=1)
         weight = np.where(on, 1.0, 0.0)
         count = np.maximum(weight.sum(axis=1), 1.0)
@@ -129,7 +130,7 @@ def gait_strip_png(path: str | Path, frames: np.ndarray, faces: np.ndarray, colo
     feet = [leg.foot for leg in plan.legs]
     spacing = 0.25 * plan.leg_length
     if soles is not None:
-        sole_at, sole_down = _sole_dots(local, soles, plan.leg_length)
+        sole_at, sole_down = _sole_dots(local, soles, plan.leg_length, plan.axes.up)
     for col, f in enumerate(picks):
         ax = fig.add_subplot(grid[0, col])
         _draw_frame(ax, local[f], faces, colours)
