@@ -33,12 +33,14 @@ TOE_LOW = 0.3
 @dataclass(frozen=True)
 class Contact:
     """A ground contact seen at rest: its foot joint (or -1), the contact joints it groups, its vertex
-    count, and why it is no foot ("" when it is one)."""
+    count, why it is no foot ("" when it is one) and its toe: the highest joint below the foot that also
+    carries a good share of the contact (the ball of a plantigrade foot; -1 when there is none)."""
 
     foot: int
     joints: tuple[int, ...]
     vertices: int
     reason: str = ""
+    toe: int = -1
 
 
 def _tall(sk: Skeleton) -> float:
@@ -127,7 +129,9 @@ def ground_contacts(sk: Skeleton) -> list[Contact]:
         if not strong and not reason:
             reason = (f"the joints moving it stand above {FOOT_LOW:.0%} of their leg's height (the far end "
                       "of a shank, not a foot)")
-        out.append(Contact(foot, members, total, reason))
+        toes = [j for j in strong if j != foot]
+        toe = min(toes, key=lambda j: len(sk.ancestors(j))) if toes else -1
+        out.append(Contact(foot, members, total, reason, toe))
     return out
 
 

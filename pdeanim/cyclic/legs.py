@@ -11,7 +11,7 @@ it, or the last three when they descend in a zigzag (a digitigrade hind leg).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,7 +42,8 @@ class Axes:
 class Leg:
     """One leg: chain (top .. foot joints), ik (the joints the IK moves, from its first bone's start to the
     foot), girdle (the joint the leg hangs from), side (+1 left, -1 right, 0 on the mirror plane), row (0 =
-    front), length (summed IK bone lengths at rest) and a name such as "hind-left"."""
+    front), length (summed IK bone lengths at rest), a name such as "hind-left", and toe: the ball joint
+    of a plantigrade foot (heel and toes on the ground at rest; -1 otherwise), which rolls."""
 
     chain: tuple[int, ...]
     ik: tuple[int, ...]
@@ -51,6 +52,7 @@ class Leg:
     row: int
     length: float
     name: str
+    toe: int = -1
 
     @property
     def foot(self) -> int:
@@ -196,7 +198,7 @@ def _rows(legs: list[tuple[Leg, float]]) -> list[Leg]:
         for leg in row:
             side = {1: "left", -1: "right", 0: "middle"}[leg.side]
             name = f"{labels[k]}-{side}" if labels[k] else side
-            out.append(Leg(leg.chain, leg.ik, leg.girdle, leg.side, k, leg.length, name))
+            out.append(Leg(leg.chain, leg.ik, leg.girdle, leg.side, k, leg.length, name, leg.toe))
     return out
 
 
@@ -278,6 +280,9 @@ def find_legs(sk: Skeleton, legs: list[str] | None = None, forward: object = Non
             kept = [m[0].foot for m in made]
             made = [_make_leg(sk, g, sk.path_down(g, f)[1:], axes)
                     for g, f in ((_girdle(sk, f, kept), f) for f in kept)]
+    if not legs:
+        toe_of = {c.foot: c.toe for c in contacts if not c.reason}
+        made = [(replace(m[0], toe=toe_of.get(m[0].foot, -1)), m[1]) for m in made]
     if not made:
         raise InputError(
             f"no legs found (ground at y = {sk.ground:.4g}); candidate chains seen and why each is no leg: "

@@ -5,8 +5,10 @@ IK control bones at the armature root (legs of two deform bones, no ankle joint,
 biped with Mixamo-style names (colons), foot and toe bones and a heel pad.
 
 Feet are measured honestly (:mod:`pdeanim.cyclic.contact`): every vertex near the ground at rest, in every
-frame it is down. The pads are rigid, so the generator's own error is float32 rounding (measured slide and
-sink below 1e-7 of the leg); the issue's goals are slide <= 1% and sink <= 0.5%: asserted at 1e-6.
+frame it is down. The quadrupeds' pads are rigid and level, so the generator's own error is float32 rounding
+(measured slide and sink below 1e-7 of the leg): asserted at 1e-6. The biped's feet roll (heel strike, flat,
+push-off about the ball): the foot's box under the ball turns about the toe joint above it (measured slide
+0.68% of the leg on the walk, 0.45% on the run, no sink): asserted at the issue's goal, 1%.
 """
 
 from __future__ import annotations
@@ -67,7 +69,8 @@ def test_feet_are_where_the_legs_meet_the_ground(glbs, rig):
 def test_every_gait_runs_with_soles_planted(results, rig, gait):
     result = results[rig, gait]
     contact, cycle = result.report["contact"], result.cycle
-    assert contact["slide_max_rel"] < PLANTED and contact["sink_max_rel"] < PLANTED
+    assert contact["slide_max_rel"] < (0.01 if rig == "plantigrade" else PLANTED)
+    assert contact["sink_max_rel"] < PLANTED
     assert all(leg["vertices"] >= 4 for leg in contact["legs"])
     assert np.array_equal(result.poses.vertices[-1], result.poses.vertices[0])  # the loop closes
     later = solve_cycle(cycle.plan, cycle.params, cycle.times + cycle.params.period)
@@ -85,6 +88,25 @@ def test_soles_touch_down_at_the_gait_tables_phase(results, rig, gait):
         assert len(landing) == 1
         gap = abs(landing[0] / FRAMES - cycle.phases[i])
         assert min(gap, 1 - gap) <= 0.02 + 1e-9  # 2% of the cycle: one frame of 50
+
+
+@pytest.mark.parametrize("gait", ["walk", "run"])
+def test_plantigrade_feet_roll_heel_flat_toe(results, gait):
+    cycle = results["plantigrade", gait].cycle
+    plan, params = cycle.plan, cycle.params
+    sk, up, forward = plan.skeleton, plan.axes.up, plan.axes.forward
+    for i, leg in enumerate(plan.legs):
+        assert leg.toe >= 0 and sk.names[leg.toe].endswith("ToeBase")
+        toes = cycle.world[:-1, leg.foot, :3, :3] @ (sk.rest[leg.foot, :3, :3].T @ forward)  # (K, 3)
+        pitch = np.degrees(np.arcsin(np.clip(toes @ up, -1, 1)))  # toes up > 0
+        s = np.mod(cycle.params.frequency * cycle.times[:-1] - cycle.phases[i], 1.0) / cycle.duty
+        assert pitch[np.argmin(s)] == pytest.approx(np.degrees(params.heel_strike), abs=1.0)  # heel strike
+        flat = (s >= 0.15) & (s < 0.7)
+        assert flat.any() and np.abs(pitch[flat]).max() < 5.0  # the sole flat through mid-stance
+        push = (s < 1) & (s > 0.9)
+        assert push.any() and pitch[push].min() < -0.5 * np.degrees(params.toe_off)  # the heel up at push-off
+        toe_axis = cycle.world[:-1, leg.toe, :3, :3] @ (sk.rest[leg.toe, :3, :3].T @ forward)
+        assert np.abs(toe_axis[push] @ up).max() < 1e-9  # the toes flat on the ground meanwhile
 
 
 def test_legs_named_in_the_forms_the_docs_show(glbs):
