@@ -10,6 +10,7 @@ kept in the clip.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from typing import Any
 
 from ..errors import ParameterError
@@ -204,16 +205,21 @@ def run_gait(args: argparse.Namespace) -> int:
         parts = fit_gait_clip(result, options.target_rel_rms)
         write_clip_file(args.out, parts)
         c = parts.report["contact_clip"]
-        print(f"clip: rel RMS {parts.report['rel_rms']:.3g}, planted feet slide at most {c['slide_max']:.4g} "
-              f"({c['slide_max_rel']:.2%} of the leg) in the clip")
+        print(f"clip: rel RMS {parts.report['rel_rms']:.3g}, " + _feet(c) + " in the clip")
     c, travel = r["contact"], r["travel"]
     print(f"{args.mode} cycle: {result.poses.n_frames} frames over {result.cycle.params.period:.4g} s, "
           f"travel {travel['speed']:.4g} units/s along {_fmt(travel['direction'])}, "
-          f"planted feet slide at most {c['slide_max']:.4g} ({c['slide_max_rel']:.2%} of the leg) "
-          f"-> {args.out}")
+          + _feet(c) + f" -> {args.out}")
     if args.plot:
         _gait_plot(args.plot, args.mesh, result)
     return 0
+
+
+def _feet(c: dict[str, Any]) -> str:
+    """The honest foot figures: every sole vertex in every frame it is down."""
+    return (f"soles slide at most {c['slide_max']:.4g} ({c['slide_max_rel']:.2%} of the leg) and sink "
+            f"{c['sink_max_rel']:.2%} of the leg (all {sum(x['vertices'] for x in c['legs'])} vertices near "
+            f"the ground, every frame they are down)")
 
 
 def _fmt(v: list[float]) -> str:
@@ -231,6 +237,7 @@ def _gait_plot(path: str, mesh: str, result: Any) -> None:
     skinned = load_skinned(mesh)
     start = skinned_offset(mesh)
     frames = result.poses.vertices[:, start:start + len(skinned.rest_vertices)]
+    soles = [replace(s, vertices=s.vertices - start) for s in result.soles]
     gait_strip_png(path, frames, skinned.faces, face_colours(mesh, len(skinned.faces)), result.cycle,
-                   title=f"{result.cycle.params.gait}")
+                   title=f"{result.cycle.params.gait}", soles=soles)
     print(f"plot: {path}")

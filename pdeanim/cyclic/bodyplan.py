@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .feet import control_moves
 from .legs import Axes, Leg, find_legs
 from .skeleton import Skeleton
 
@@ -29,6 +30,7 @@ class BodyPlan:
     spine: tuple[int, ...]
     neck: tuple[int, ...]
     tail: tuple[int, ...]
+    followers: tuple[tuple[int, int], ...] = ()
 
     @property
     def rows(self) -> int:
@@ -49,6 +51,7 @@ class BodyPlan:
             "root": n[self.root], "spine": [n[j] for j in self.spine], "neck": [n[j] for j in self.neck],
             "tail": [n[j] for j in self.tail], "forward": self.axes.forward.tolist(),
             "leg_length": self.leg_length,
+            "followers": [{"joint": n[c], "follows": n[p]} for c, p in self.followers],
         }
 
 
@@ -79,7 +82,11 @@ def _torso(sk: Skeleton, girdle: int, leg_mask: np.ndarray) -> tuple[tuple[int, 
 def body_plan(sk: Skeleton, legs: list[str] | None = None, forward: object = None,
               root: int | str | None = None) -> BodyPlan:
     """Find legs and axial chains; ``root`` overrides the joint the body motion moves (it must carry every
-    leg). Raises InputError when no leg is found or the root does not carry them."""
+    leg). Control bones carrying foot vertices outside the legs are hung under the leg joint they sit at
+    first (:func:`.feet.control_moves`). Raises InputError when no leg is found or the root does not carry
+    them."""
+    moves = control_moves(sk)
+    sk = sk.reparented(moves)
     found, axes = find_legs(sk, legs, forward)
     rows = max(leg.row for leg in found) + 1
     girdles = tuple(_row_girdle(sk, found, r) for r in range(rows))
@@ -106,7 +113,8 @@ def body_plan(sk: Skeleton, legs: list[str] | None = None, forward: object = Non
     else:
         spine, neck = _torso(sk, pivot, leg_mask)
         tail = ()
-    return BodyPlan(sk, axes, tuple(found), carrier, pivot, girdles, spine, neck, tail)
+    return BodyPlan(sk, axes, tuple(found), carrier, pivot, girdles, spine, neck, tail,
+                    tuple(sorted(moves.items())))
 
 
 def _under(sk: Skeleton, joints: tuple[int, ...]) -> np.ndarray:

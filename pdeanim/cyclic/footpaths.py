@@ -7,7 +7,10 @@ with u = frac(f t - phi_i), the swing (u >= beta) runs theta linearly over [2 pi
 the foot lifts and swings forward), and the stance (u < beta) warps theta over [pi, 2 pi] as
 theta = 2 pi - arccos(2 u / beta - 1), so that z falls linearly from +L to -L: the stance foot moves back
 under the body at the constant speed v = 2 L f / beta, and a root moved forward at v keeps it still on the
-ground. ``literal`` uses theta = 2 pi (f t - phi_i) + pi and y = H sin(2 pi f t), Eq. 10 as printed.
+ground. The swing's forward path holds the foot still on the ground (moving back under the body at v)
+until it is LIFT of the leg up and lands the same way, so a lifting or landing sole never scuffs the
+ground; between those points it follows Eq. 9's -cos. ``literal`` uses theta = 2 pi (f t - phi_i) + pi and
+y = H sin(2 pi f t), Eq. 10 as printed.
 """
 
 from __future__ import annotations
@@ -17,6 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .gaits import GaitParams
+
+LIFT = 0.02
+"""A swinging foot leaves (and reaches) its ground spot straight up (down) over this share of the leg."""
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,20 @@ def eq9_angle(u: np.ndarray, duty: float) -> np.ndarray:
     return np.where(stance, 2 * np.pi - np.arccos(np.clip(2 * s - 1, -1.0, 1.0)), 2 * np.pi + np.pi * w)
 
 
+def swing_forward(u: np.ndarray, duty: float, height: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """Forward offsets (K, n) of swinging feet (as fractions of the leg; u >= duty): still in the ground's
+    frame while within LIFT of the ground after lift-off and before touch-down, Eq. 9's -cos from just
+    behind -L to just ahead of +L between (height, length (n,): H + H_side and L + L_side)."""
+    w = np.clip((u - duty) / (1.0 - duty), 0.0, 1.0)
+    back = 2.0 * length * (1.0 - duty) / duty  # how far the body moves over the swing
+    ratio = np.clip(LIFT / np.maximum(height, 1e-300), 0.0, 1.0)
+    w0 = np.minimum(np.arcsin(ratio) / np.pi, 0.2)
+    start, end = -length - back * w0, length + back * w0
+    m = np.clip((w - w0) / (1.0 - 2.0 * w0), 0.0, 1.0)
+    middle = start + (end - start) * 0.5 * (1.0 - np.cos(np.pi * m))
+    return np.where(w < w0, -length - back * w, np.where(w > 1.0 - w0, length + back * (1.0 - w), middle))
+
+
 def side_terms(params: GaitParams, sides: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-foot H + H_side, H_side_F and L + L_side (n,) as fractions of the leg length (right: side < 0)."""
     right = np.asarray(sides) < 0
@@ -69,6 +89,8 @@ def foot_paths(params: GaitParams, times: np.ndarray, phases: np.ndarray, duty: 
         y = h * np.maximum(np.sin(theta), 0.0) + lift
         stance = u < duty
     z = -length * np.cos(theta)
+    if not params.literal:
+        z = np.where(u < duty, z, swing_forward(u, duty, h + 0.0 * u, length + 0.0 * u))
     offset = (y[..., None] * up + z[..., None] * forward) * leg
     bump = np.where(u < duty, np.sin(np.pi * np.minimum(u / duty, 1.0)) ** 2, 0.0)
     return FootPaths(offset, stance, bump, z * leg)

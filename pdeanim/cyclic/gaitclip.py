@@ -69,8 +69,7 @@ def solve_gait(source: str | Path | bytes, params: GaitParams, frames: int = 24,
     verts[:, start:start + n] = own.vertices
     poses = make_poses(verts, faces, own.times, meta=own.meta)
     rest = skin_vertices(skinned, plan.skeleton.rest)
-    feet = soles(skinned, plan.skeleton.subtrees, [leg.foot for leg in plan.legs], plan.leg_length, rest)
-    feet = [Sole(s.vertices + start, s.rest) for s in feet]
+    feet = [Sole(s.vertices + start, s.rest, s.above) for s in soles(skinned, plan, rest)]
     report = {"plan": plan.describe(), **cycle.metadata(),
               "ik_miss_max": float(cycle.miss.max()), "contact": contact_report(poses.vertices, cycle, feet)}
     return GaitResult(cycle, poses, feet, report)

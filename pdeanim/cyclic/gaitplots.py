@@ -87,10 +87,32 @@ def _local(points: np.ndarray, axes: Any) -> np.ndarray:
     return np.stack([points @ axes.forward, points @ axes.up, points @ axes.left], axis=-1)
 
 
+def _sole_dots(local: np.ndarray, soles: list[Any], leg_length: float, up: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Where each sole really is, per frame and leg: (K + 1, n, 2) forward and height of its lowest down
+    vertices' mean, and (K + 1, n) whether any of its vertices is down (within DOWN of the leg of its rest
+    height)."""
+    from .contact import DOWN
+
+    at = np.zeros((len(local), len(soles), 2))
+    down = np.zeros((len(local), len(soles)), bool)
+    for i, sole in enumerate(soles):
+        pts = local[:, sole.vertices]  # (K + 1, m, 3) forward, up, left
+        on = pts[..., 1] - (sole.rest @ up)[None] <= DOWN * leg_length
+        down[:, i] = on.any(axis=1)
+        weight = np.where(on, 1.0, 0.0)
+        count = np.maximum(weight.sum(axis=1), 1.0)
+        at[:, i, 0] = (pts[..., 0] * weight).sum(axis=1) / count
+        at[:, i, 1] = np.where(on, pts[..., 1], np.inf).min(axis=1)
+    return at, down
+
+
 def gait_strip_png(path: str | Path, frames: np.ndarray, faces: np.ndarray, colours: np.ndarray, cycle: Any,
-                   panels: int = 6, title: str | None = None) -> Path:
+                   panels: int = 6, title: str | None = None, soles: list[Any] | None = None) -> Path:
     """Write the strip of ``panels`` frames over one cycle and the footfall diagram of a
-    :class:`pdeanim.cyclic.locomotion.GaitCycle` whose skinned frames (K + 1, V, 3) are given."""
+    :class:`pdeanim.cyclic.locomotion.GaitCycle` whose skinned frames (K + 1, V, 3) are given. With the
+    legs' ``soles`` (vertex indices into frames, :func:`.contact.soles`), a dot marks where each sole really
+    is in every frame it is down; else under each foot joint in its planned stance."""
     plan, k = cycle.plan, len(frames) - 1
     picks = np.round(np.arange(panels) * k / panels).astype(int)
     local = _local(np.asarray(frames, np.float64), plan.axes)
@@ -107,6 +129,8 @@ def gait_strip_png(path: str | Path, frames: np.ndarray, faces: np.ndarray, colo
                             left=0.1, right=0.98, top=1 - 0.35 / height, bottom=0.5 / height, wspace=0.05)
     feet = [leg.foot for leg in plan.legs]
     spacing = 0.25 * plan.leg_length
+    if soles is not None:
+        sole_at, sole_down = _sole_dots(local, soles, plan.leg_length, plan.axes.up)
     for col, f in enumerate(picks):
         ax = fig.add_subplot(grid[0, col])
         _draw_frame(ax, local[f], faces, colours)
@@ -116,11 +140,14 @@ def gait_strip_png(path: str | Path, frames: np.ndarray, faces: np.ndarray, colo
         ax.plot([lo[0] - pad, hi[0] + pad], [ground, ground], color="#555", lw=0.8)
         for x in marks * spacing + shift:
             ax.plot([x, x], [ground, ground - 0.6 * pad], color="#555", lw=0.6)
-        foot = _local(cycle.world[f, feet, :3, 3], plan.axes)
-        down = cycle.paths.stance[f]
+        if soles is None:
+            foot = _local(cycle.world[f, feet, :3, 3], plan.axes)
+            dots, down = np.stack([foot[:, 0], np.full(len(feet), ground)], axis=1), cycle.paths.stance[f]
+        else:
+            dots, down = sole_at[f], sole_down[f]
         near = np.array([leg.side >= 0 for leg in plan.legs])
         for mask, colour in ((down & near, "#d62728"), (down & ~near, "#1f77b4")):
-            ax.scatter(foot[mask, 0], np.full(mask.sum(), ground), s=14, color=colour, zorder=5)
+            ax.scatter(dots[mask, 0], dots[mask, 1], s=14, color=colour, zorder=5)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(ground - pad, hi[1] + pad)
         ax.set_aspect("equal")

@@ -56,7 +56,9 @@ class GaitParams:
     the body follows the height of each row of legs), spine_yaw (radians a girdle turns at full stride),
     spine_flex (radians the back arches when the hind feet reach forward and the fore feet back),
     head_level (share of the body's turn and pitch the neck undoes), tail_sway (the tail turns against the
-    hips by this multiple of their turn: 1 keeps it straight behind, 2 swings it the other way), literal
+    hips by this multiple of their turn: 1 keeps it straight behind, 2 swings it the other way),
+    heel_strike and toe_off (radians a plantigrade foot is pitched toes up as its heel lands and heel up as
+    it pushes off about the ball), literal
     (Eq. 10 as printed: sinusoidal paths, both feet lifted by sin(2 pi f t))."""
 
     gait: str = "walk"
@@ -77,6 +79,8 @@ class GaitParams:
     spine_flex: float = 0.0
     head_level: float = 1.0
     tail_sway: float = 2.0
+    heel_strike: float = 0.25
+    toe_off: float = 0.25
     literal: bool = False
 
     @staticmethod

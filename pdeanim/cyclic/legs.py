@@ -1,28 +1,26 @@
-"""Find the legs of a skeleton from its shape alone: chains that end in a low leaf near the ground plane,
+"""Find the legs of a skeleton: feet where the skinned mesh touches the ground at rest (:mod:`.feet`), each
+leg the chain from below its girdle (the lowest joint that also carries another foot) down to its foot,
 sorted into left and right by the skeleton's mirror symmetry and into rows from front to back along the
-facing direction. ``--legs`` names the feet instead; with no leg found the error names the joints seen.
+facing direction. ``--legs`` names the feet instead; with no leg found the error lists the candidate chains
+seen and why each was rejected.
 
-A leg is the chain from the first joint below its girdle (the joint it branches from) down to its foot (the
-effector the IK places: the leaf, or the ankle when the chain ends in a horizontal toe bone). The IK bends the
-last two bones above the foot, or the last three when they descend in a zigzag (a digitigrade hind leg).
+The foot is the effector the IK places (the ankle, the start of a paw); the IK bends the last two bones above
+it, or the last three when they descend in a zigzag (a digitigrade hind leg).
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import InputError, ParameterError
+from .feet import Contact, ground_contacts
 from .skeleton import UP, Skeleton
 
-LOW_LEAF = 0.3
-"""A foot's leaf lies at most this share of its leg's top height above the ground."""
 DESCENT = 0.5
 """A leg drops at least this share of its top height from its top joint to its leaf."""
-FLAT_BONE = 0.5
-"""A toe bone at the end of a chain is horizontal when its rise is under this share of its run."""
 MID_PLANE = 0.05
 """Feet closer to the mirror plane than this share of their leg length are on it (a tail, not a leg)."""
 ZIGZAG_DEGREES = 5.0
@@ -44,7 +42,8 @@ class Axes:
 class Leg:
     """One leg: chain (top .. foot joints), ik (the joints the IK moves, from its first bone's start to the
     foot), girdle (the joint the leg hangs from), side (+1 left, -1 right, 0 on the mirror plane), row (0 =
-    front), length (summed IK bone lengths at rest) and a name such as "hind-left"."""
+    front), length (summed IK bone lengths at rest), a name such as "hind-left", and toe: the ball joint
+    of a plantigrade foot (heel and toes on the ground at rest; -1 otherwise), which rolls."""
 
     chain: tuple[int, ...]
     ik: tuple[int, ...]
@@ -53,6 +52,7 @@ class Leg:
     row: int
     length: float
     name: str
+    toe: int = -1
 
     @property
     def foot(self) -> int:
@@ -131,19 +131,6 @@ def body_axes(sk: Skeleton, other_leaves: list[int], toes: list[tuple[int, int]]
     return Axes(UP, f, left, mid if left @ lat > 0 else -mid)
 
 
-def _foot_of(sk: Skeleton, chain: list[int]) -> list[int]:
-    """The chain without its trailing horizontal toe bones near the ground (the foot is the ankle then)."""
-    top_h = sk.height(chain[0])
-    while len(chain) > 2:
-        a, b = sk.positions[chain[-2]], sk.positions[chain[-1]]
-        rise, run = abs((b - a) @ UP), np.linalg.norm((b - a) - ((b - a) @ UP) * UP)
-        if rise < FLAT_BONE * run and sk.height(chain[-2]) < LOW_LEAF * top_h:
-            chain = chain[:-1]
-        else:
-            break
-    return chain
-
-
 def _bend(a: np.ndarray, b: np.ndarray) -> float:
     """Angle in degrees between two bone vectors."""
     c = a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300)
@@ -163,22 +150,25 @@ def ik_joints(sk: Skeleton, chain: list[int]) -> tuple[int, ...]:
     return tuple(chain[-3:]) if len(chain) >= 3 else tuple(chain[-2:])
 
 
-def _leg_candidates(sk: Skeleton) -> tuple[list[list[int]], list[int]]:
-    """Chains (girdle first) that end in a low leaf and drop most of their height; and the other leaves."""
-    legs, others = [], []
-    for leaf in sk.leaves():
-        chain = [leaf]
-        for p in sk.ancestors(leaf):
-            chain.append(p)
-            if len(sk.children[p]) > 1:
-                break
-        chain = chain[::-1]  # girdle (or root) first
-        top = chain[1] if len(chain) > 1 else leaf
-        top_h, leaf_h = sk.height(top), sk.height(leaf)
-        is_leg = (len(chain) >= 3 and top_h > 0 and leaf_h <= LOW_LEAF * top_h
-                  and top_h - leaf_h >= DESCENT * top_h)
-        (legs if is_leg else others).append(chain if is_leg else leaf)
-    return legs, others
+def _girdle(sk: Skeleton, foot: int, feet: list[int]) -> int:
+    """The joint a leg hangs from: the lowest ancestor of its foot that also carries another foot (with one
+    foot: the first ancestor with several children), or the root."""
+    others = [f for f in feet if f != foot]
+    line = sk.ancestors(foot)
+    for p in line:
+        if any(sk.subtrees[p, f] for f in others) if others else len(sk.children[p]) > 1:
+            return p
+    return line[-1] if line else foot
+
+
+def _toe(sk: Skeleton, foot: int) -> tuple[int, int]:
+    """The bone that shows which way a foot points: from the foot to its farthest joint below, or the bone
+    ending at the foot."""
+    below = [j for j in np.flatnonzero(sk.subtrees[foot]) if j != foot]
+    if below:
+        p = sk.positions
+        return foot, int(max(below, key=lambda j: float(np.linalg.norm(p[j] - p[foot]))))
+    return int(sk.parents[foot]), foot
 
 
 def _make_leg(sk: Skeleton, girdle: int, chain: list[int], axes: Axes) -> tuple[Leg, float]:
@@ -208,52 +198,118 @@ def _rows(legs: list[tuple[Leg, float]]) -> list[Leg]:
         for leg in row:
             side = {1: "left", -1: "right", 0: "middle"}[leg.side]
             name = f"{labels[k]}-{side}" if labels[k] else side
-            out.append(Leg(leg.chain, leg.ik, leg.girdle, leg.side, k, leg.length, name))
+            out.append(Leg(leg.chain, leg.ik, leg.girdle, leg.side, k, leg.length, name, leg.toe))
     return out
 
 
-def _override_chain(sk: Skeleton, spec: str) -> list[int]:
-    """The chain (girdle first) of a leg named "foot" or "top:foot" by its joints."""
+def _joint_spec(sk: Skeleton, spec: str) -> tuple[int | None, int]:
+    """(top or None, foot) of a leg named "FOOT" or "TOP:FOOT" (joint names may hold colons themselves,
+    like "mixamorig:LeftFoot": a whole name wins over a split)."""
+    spec = spec.strip()
+    if spec in sk.names:
+        return None, sk.names.index(spec)
+    for i in [i for i, ch in enumerate(spec) if ch == ":"]:
+        top, foot = spec[:i].strip(), spec[i + 1:].strip()
+        if top in sk.names and foot in sk.names:
+            return sk.names.index(top), sk.names.index(foot)
     top_name, _, foot_name = spec.rpartition(":")
     foot = sk.index(foot_name.strip())
-    if top_name.strip():
-        top = sk.index(top_name.strip())
-        if sk.parents[top] < 0:
-            raise InputError(f"leg top {top_name!r} is a root joint: name the joint below the body")
-        return [int(sk.parents[top]), *sk.path_down(top, foot)]
-    chain = [foot]
-    for p in sk.ancestors(foot):
-        chain.append(p)
-        if len(sk.children[p]) > 1:
-            break
-    if len(chain) < 2:
-        raise InputError(f"foot {foot_name!r} has no parent joint to bend")
-    return chain[::-1]
+    return (sk.index(top_name.strip()) if top_name.strip() else None), foot
+
+
+def _named_chains(sk: Skeleton, specs: list[str]) -> list[list[int]]:
+    """The chains (girdle first) of legs named "FOOT" or "TOP:FOOT"."""
+    named = [_joint_spec(sk, s) for s in specs]
+    feet = [f for _, f in named]
+    chains = []
+    for (top, foot), spec in zip(named, specs, strict=True):
+        if top is not None:
+            if sk.parents[top] < 0:
+                raise InputError(f"leg top {sk.names[top]!r} is a root joint: name the joint below the body")
+            chains.append([int(sk.parents[top]), *sk.path_down(top, foot)])
+            continue
+        if sk.parents[foot] < 0:
+            raise InputError(f"foot {spec.strip()!r} has no parent joint to bend")
+        chains.append(sk.path_down(_girdle(sk, foot, feet), foot))
+    return chains
+
+
+def _reasons(sk: Skeleton, rejected: list[tuple[str, str]]) -> str:
+    if not rejected:
+        return f"no mesh vertex on the ground (y = {sk.ground:.4g}) at rest has a skin weight on a joint"
+    return "; ".join(f"{what}: {why}" for what, why in rejected)
 
 
 def find_legs(sk: Skeleton, legs: list[str] | None = None, forward: object = None) -> tuple[list[Leg], Axes]:
-    """The legs (front row first, left before right) and the body axes. ``legs`` names the feet ("foot" or
-    "top:foot" joint names) instead of finding them. Raises InputError naming the joints when none is
-    found."""
+    """The legs (front row first, left before right) and the body axes. A foot is the joint where a leg
+    meets its ground contact at rest (:mod:`.feet`); ``legs`` names the feet ("FOOT" or "TOP:FOOT") instead.
+    Raises InputError listing the candidate chains seen and why each was rejected when none is a leg."""
+    rejected: list[tuple[str, str]] = []
     if legs:
-        chains = [_override_chain(sk, s) for s in legs]
-        others = [j for j in sk.leaves() if j not in {c[-1] for c in chains}]
+        chains = _named_chains(sk, legs)
     else:
-        chains, others = _leg_candidates(sk)
-    toes = [(c[-2], c[-1]) for c in chains]
-    if not legs:
-        chains = [[c[0], *_foot_of(sk, c[1:])] for c in chains]
+        contacts = ground_contacts(sk)
+        for c in contacts:
+            if c.reason:
+                rejected.append((_contact_name(sk, c), c.reason))
+        feet = [c.foot for c in contacts if not c.reason]
+        chains = []
+        for foot in feet:
+            chain = sk.path_down(_girdle(sk, foot, feet), foot)
+            why = _chain_problem(sk, chain)
+            if why:
+                rejected.append((_chain_name(sk, chain), why))
+            else:
+                chains.append(chain)
+        kept = [c[-1] for c in chains]
+        chains = [sk.path_down(_girdle(sk, c[-1], kept), c[-1]) for c in chains]
+    toes = [_toe(sk, c[-1]) for c in chains]
+    in_feet = np.zeros(sk.n, bool)
+    for c in chains:
+        in_feet |= sk.subtrees[c[-1]]
+    others = [j for j in sk.leaves() if not in_feet[j]]
     axes = body_axes(sk, others, toes, forward)
     made = [_make_leg(sk, c[0], c[1:], axes) for c in chains]
     if not legs:
+        for m, c in zip(made, chains, strict=True):
+            if m[0].side == 0:
+                rejected.append((_chain_name(sk, c), f"its foot lies within {MID_PLANE:.0%} of its leg's "
+                                 "length of the body's mirror plane (a tail or a body part, not a leg)"))
         made = [m for m in made if m[0].side != 0]
+        if len(made) != len(chains):  # girdles again without the legs dropped
+            kept = [m[0].foot for m in made]
+            made = [_make_leg(sk, g, sk.path_down(g, f)[1:], axes)
+                    for g, f in ((_girdle(sk, f, kept), f) for f in kept)]
+    if not legs:
+        toe_of = {c.foot: c.toe for c in contacts if not c.reason}
+        made = [(replace(m[0], toe=toe_of.get(m[0].foot, -1)), m[1]) for m in made]
     if not made:
         raise InputError(
-            "no legs found: no chain of joints ends in a leaf near the ground on either side of the body "
-            f"(ground at y = {sk.ground:.4g}; joints seen, with their height: "
+            f"no legs found (ground at y = {sk.ground:.4g}); candidate chains seen and why each is no leg: "
+            + _reasons(sk, rejected) + "; joints seen, with their height: "
             + ", ".join(f"{n} {sk.height(j):.3g}" for j, n in enumerate(sk.names))
-            + "); name the feet with --legs")
+            + "; name the feet with --legs FOOT,FOOT,... (or TOP:FOOT)")
     dup = {m[0].foot for m in made}
     if len(dup) != len(made):
         raise InputError("a foot joint is named twice in legs")
     return _rows(made), axes
+
+
+def _contact_name(sk: Skeleton, c: Contact) -> str:
+    joints = ", ".join(sk.names[j] for j in c.joints[:4]) + (" ..." if len(c.joints) > 4 else "")
+    return f"ground contact of {joints} ({c.vertices} vertices)"
+
+
+def _chain_name(sk: Skeleton, chain: list[int]) -> str:
+    return " > ".join(sk.names[j] for j in chain)
+
+
+def _chain_problem(sk: Skeleton, chain: list[int]) -> str:
+    """Why a chain (girdle first) is no leg, or "" when it is one."""
+    if len(chain) < 3:
+        return "no bone between its foot and the joint it hangs from to bend"
+    top_h, foot_h = sk.height(chain[1]), sk.height(chain[-1])
+    if top_h <= 0 or top_h - foot_h < DESCENT * top_h:
+        return (f"it drops {top_h - foot_h:.3g} from its top joint at height {top_h:.3g}, under "
+                f"{DESCENT:.0%} of that height")
+    return ""

@@ -17,6 +17,7 @@ from .bodyplan import BodyPlan
 from .footpaths import FootPaths, foot_paths, travel_speed
 from .gaits import GaitParams, leg_phases
 from .legik import rest_bends, solve_leg
+from .roll import roll_of, rolled_targets
 from .rotations import turn_subtree
 
 CROUCH_STEPS = 6
@@ -95,12 +96,26 @@ def solve_cycle(plan: BodyPlan, params: GaitParams, times: np.ndarray) -> GaitCy
     paths = foot_paths(params, times, phases, duty, sides, plan.axes.up, plan.axes.forward, unit_len)
     feet = [leg.foot for leg in legs]
     targets = sk.positions[feet][None] + paths.offset
+    turns = {}
+    for i, leg in enumerate(legs):  # plantigrade feet roll: heel strike, flat, push-off about the ball
+        if leg.toe >= 0:
+            pitch_i, blend = roll_of(params, times, float(phases[i]), duty)
+            targets[:, i], turns[i] = rolled_targets(sk, leg.foot, leg.toe, targets[:, i], pitch_i, blend,
+                                                     plan.axes.left, plan.axes.forward)
     world, pitch = _settle(plan, params, paths, targets)
-    for leg, target, fallback in zip(legs, np.moveaxis(targets, 1, 0), _fallback_bends(plan), strict=True):
+    for i, (leg, target, fallback) in enumerate(zip(legs, np.moveaxis(targets, 1, 0), _fallback_bends(plan),
+                                                    strict=True)):
         bends = rest_bends(sk.positions[list(leg.ik)]) if len(leg.ik) == 4 else None
         solve_leg(world, sk.subtrees, leg.ik, target, bends, fallback)
         level = sk.rest[leg.foot, :3, :3] @ np.linalg.inv(world[:, leg.foot, :3, :3])
+        if i in turns:
+            level = turns[i] @ level
         turn_subtree(world, sk.subtrees[leg.foot], level, world[:, leg.foot, :3, 3].copy())
+        if i in turns:  # toes stay flat while the heel is up
+            flat = np.linalg.inv(turns[i]) @ np.eye(3)
+            heel_up = (turns[i] @ plan.axes.forward) @ plan.axes.up < 0
+            back = np.where(heel_up[:, None, None], flat, np.eye(3))
+            turn_subtree(world, sk.subtrees[leg.toe], back, world[:, leg.toe, :3, 3].copy())
     miss = np.linalg.norm(world[:, feet][..., :3, 3] - targets, axis=2)
     worst = miss.max(axis=0) / np.array([leg.length for leg in legs])
     if worst.max() > MAX_MISS:

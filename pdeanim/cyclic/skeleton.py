@@ -13,17 +13,25 @@ from ..errors import InputError, MeshInputError
 
 UP = np.array([0.0, 1.0, 0.0])
 """glTF's up axis: the ground plane is y = ground."""
+CONTACT = 0.02
+"""Mesh vertices within this share of the mesh's height of the ground at rest touch the ground."""
 
 
 @dataclass(frozen=True)
 class Skeleton:
     """names (J,), parents (J,) int (-1 for roots), rest (J, 4, 4) world matrices at rest, ground: the height
-    of the lowest point of the skinned mesh at rest (or of the lowest joint)."""
+    of the lowest point of the skinned mesh at rest (or of the lowest joint); contact (J,): how many mesh
+    vertices touching the ground at rest each joint moves most (its largest skin weight); tall: the mesh's
+    height above the ground at rest (0 without a mesh); contact_at (J,): those vertices' rest positions
+    (m_j, 3) per joint."""
 
     names: tuple[str, ...]
     parents: np.ndarray
     rest: np.ndarray
     ground: float
+    contact: np.ndarray | None = None
+    tall: float = 0.0
+    contact_at: tuple[np.ndarray, ...] | None = None
 
     @staticmethod
     def of(skinned: Any) -> Skeleton:
@@ -34,7 +42,27 @@ class Skeleton:
         verts = skin_vertices(skinned, rest)
         lowest = float(rest[:, 1, 3].min())
         ground = min(float(verts[:, 1].min()), lowest) if len(verts) else lowest
-        return Skeleton(tuple(skinned.joint_names), np.asarray(skinned.joint_parents, np.int64), rest, ground)
+        tall = float(verts[:, 1].max() - ground) if len(verts) else 0.0
+        contact = np.zeros(len(rest), np.int64)
+        at = tuple(np.zeros((0, 3)) for _ in range(len(rest)))
+        if len(verts) and skinned.vertex_joints.shape[1]:
+            down = (verts[:, 1] <= ground + CONTACT * tall) & (skinned.vertex_weights.sum(axis=1) > 0)
+            rows = np.flatnonzero(down)
+            owner = skinned.vertex_joints[rows, np.argmax(skinned.vertex_weights[rows], axis=1)]
+            contact = np.bincount(owner, minlength=len(rest))[: len(rest)]
+            at = tuple(verts[rows[owner == j]] for j in range(len(rest)))
+        return Skeleton(tuple(skinned.joint_names), np.asarray(skinned.joint_parents, np.int64), rest, ground,
+                        contact, tall, at)
+
+    def reparented(self, moves: dict[int, int]) -> Skeleton:
+        """The same skeleton with joint j hung under joint moves[j] (world matrices unchanged): a control
+        bone then follows the leg joint it belongs to."""
+        if not moves:
+            return self
+        parents = self.parents.copy()
+        for j, p in moves.items():
+            parents[j] = p
+        return Skeleton(self.names, parents, self.rest, self.ground, self.contact, self.tall, self.contact_at)
 
     @property
     def n(self) -> int:

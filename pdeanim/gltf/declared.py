@@ -1,7 +1,8 @@
 """What a glTF document declares it will take to read, checked from its JSON alone before any scene walk or
 decoding: node, accessor and primitive counts, counts past 2^31, the vertices the scene's primitives declare,
-and the bytes its EXT_meshopt_compression views decode to (each view no more than its accessors read, all of
-them within the decode budget). A small file that declares a lot is refused in milliseconds with the figures,
+and the bytes its EXT_meshopt_compression views and KHR_draco_mesh_compression streams decode to (each
+meshopt view no more than its accessors read, each Draco stream what its accessors declare, all of them
+within the decode budget). A small file that declares a lot is refused in milliseconds with the figures,
 instead of after seconds of work and gigabytes of memory."""
 
 from __future__ import annotations
@@ -24,11 +25,12 @@ def check_declared(gd: GltfDocument, max_vertices: int | None = None) -> None:
             raise LimitError(f"glTF {key} count", len(gd.list(key)), limit, setting)
     counts = [_count(gd, i, acc) for i, acc in enumerate(gd.list("accessors"))]
     compressed = _compressed_bytes(gd)
+    draco = sum(counts[a] * _width(gd.list("accessors")[a]) * 4 for a in gd.draco if 0 <= a < len(counts))
     outputs = sum(c * _width(acc) * 8 for c, acc in zip(counts, gd.list("accessors"), strict=True))
-    if compressed + outputs > limits.max_decoded_bytes:
+    if compressed + draco + outputs > limits.max_decoded_bytes:
         raise LimitError(f"decoded size the glTF declares in bytes ({compressed} in EXT_meshopt_compression "
-                         f"views, {outputs} in accessors)", compressed + outputs, limits.max_decoded_bytes,
-                         "PDEANIM_MAX_DECODED_BYTES")
+                         f"views, {draco} in KHR_draco_mesh_compression streams, {outputs} in accessors)",
+                         compressed + draco + outputs, limits.max_decoded_bytes, "PDEANIM_MAX_DECODED_BYTES")
     nodes = gd.list("nodes")
     primitives = [prim for n in scene_order(gd) if "mesh" in nodes[n]
                   for prim in gd.item("meshes", nodes[n]["mesh"]).get("primitives", [])]

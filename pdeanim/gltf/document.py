@@ -23,7 +23,7 @@ MAX_ACCESSOR_VALUES = 60_000_000  # cap on components of one accessor not backed
 MALFORMED = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError, ZeroDivisionError,
              RecursionError, np.linalg.LinAlgError)
 # required extensions that change how geometry is stored and that this reader cannot decode
-UNSUPPORTED_GEOMETRY = ("KHR_draco_mesh_compression", "KHR_meshopt_compression", "EXT_mesh_gpu_instancing")
+UNSUPPORTED_GEOMETRY = ("KHR_meshopt_compression", "EXT_mesh_gpu_instancing")  # Draco: pdeanim.gltf.draco
 MESHOPT = "EXT_meshopt_compression"  # decoded here (pdeanim.gltf.meshopt)
 MAX_COUNT = 2**31 - 1  # glTF counts are 32-bit; a larger one is refused before anything is allocated
 
@@ -100,6 +100,10 @@ class GltfDocument:
         self.limits = limits or GltfLimits()
         self.decoded_bytes = 0  # what decoding this document has allocated so far (capped by limits)
         self._decoded: dict[int, bytes] = {}
+        self._draco_streams: dict[int, Any] = {}
+        from .draco import draco_accessors
+
+        self.draco = draco_accessors(doc)  # accessor -> (Draco stream's bufferView, attribute id)
         version = str(doc.get("asset", {}).get("version", ""))
         if not version.startswith("2."):
             raise error(f"unsupported glTF version {version!r} (need 2.x)")
@@ -141,7 +145,9 @@ class GltfDocument:
         if count < 0 or count > MAX_COUNT or count * width > MAX_ACCESSOR_VALUES:
             raise self.error(f"accessor {index} has an implausible count {count}")
         self.spend(count * width * 8, f"accessor {index}")  # the float64/int64 result
-        if "bufferView" in acc:
+        if index in self.draco:
+            data = self.draco_values(index)
+        elif "bufferView" in acc:
             data = self._strided(acc.get("bufferView"), int(acc.get("byteOffset", 0)), count, width, dtype)
         else:
             data = np.zeros((count, width), dtype)
@@ -210,6 +216,31 @@ class GltfDocument:
                 raise self.error(f"compressed bufferView {index} decodes to fewer bytes than its byteLength")
             self._decoded[index] = data
         return self._decoded[index]
+
+    def draco_values(self, index: int) -> np.ndarray:
+        """The (count, components) values of accessor ``index`` from its KHR_draco_mesh_compression stream in
+        the accessor's component type (the stream is decoded once, after its declared size is counted)."""
+        from .draco import decode_stream, stream_values
+
+        acc = self.item("accessors", index)
+        view, uid = self.draco[index]
+        if view not in self._draco_streams:
+            parts = [self.item("accessors", a) for a, (v, _) in self.draco.items() if v == view]
+            declared = sum(int(p["count"]) * TYPE_SIZES[p["type"]] * 4 for p in parts)
+            self.spend(declared, f"Draco stream in bufferView {view}")
+            try:
+                self._draco_streams[view] = decode_stream(self.view_bytes(view))
+            except ValueError as exc:
+                raise self.error(f"cannot decode the Draco stream in bufferView {view}: {exc}") from exc
+        dtype = COMPONENT_DTYPES[int(acc["componentType"])]
+        try:
+            data = stream_values(self._draco_streams[view], uid, int(acc["count"]), TYPE_SIZES[acc["type"]])
+        except ValueError as exc:
+            raise self.error(f"accessor {index}: {exc}") from exc
+        if np.issubdtype(data.dtype, np.floating) and not np.issubdtype(dtype, np.floating):
+            scale = _NORM_DIVISOR.get(int(acc["componentType"]), 1.0) if acc.get("normalized") else 1.0
+            data = np.rint(data * scale)
+        return data.astype(dtype)
 
     def _sparse(self, sparse: dict, data: np.ndarray, width: int, dtype: np.dtype, index: int) -> np.ndarray:
         try:

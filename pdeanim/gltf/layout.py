@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import InputError, MeshInputError, ParameterError
 from .document import MESHOPT, GltfDocument, load_document, malformed_as
+from .draco import DRACO, INDICES
 from .glb import ARRAY_BUFFER, COMPONENT_DTYPES, COMPONENT_TYPES, ELEMENT_ARRAY_BUFFER, TYPE_SIZES
 from .read import mesh_instances, read_static_mesh
 from .scene import scene_order, world_matrices
@@ -229,6 +230,10 @@ def _strip_primitive(prim: dict) -> dict:
              if k not in DROPPED_ATTRIBUTES and not k.startswith(DROPPED_PREFIXES)}
     out["attributes"] = attrs
     out.pop("targets", None)
+    if isinstance(out.get("extensions"), dict):  # its Draco stream is written out plain
+        out["extensions"].pop(DRACO, None)
+        if not out["extensions"]:
+            del out["extensions"]
     return out
 
 
@@ -291,6 +296,12 @@ def _compact(doc: dict, gd: GltfDocument) -> list[bytes]:
         views.append(view)
         data.append(gd.view_bytes(i))
     doc["bufferViews"] = views
+    for new, old in enumerate(acc_keep):  # Draco-compressed accessors get plain views of their values
+        if old in gd.draco:
+            acc = accessors[new]
+            acc.pop("byteOffset", None)
+            target = ELEMENT_ARRAY_BUFFER if gd.draco[old][1] == INDICES else ARRAY_BUFFER
+            acc["bufferView"] = add_view(doc, data, gd.draco_values(old).tobytes(), target)
     return data
 
 
@@ -356,7 +367,7 @@ def gltf_layout(source: str | Path | bytes) -> Layout:
                 slot.mesh = part.mesh
         for key in ("extensionsUsed", "extensionsRequired"):
             if key in doc:
-                doc[key] = [e for e in doc[key] if e != MESHOPT]
+                doc[key] = [e for e in doc[key] if e not in (MESHOPT, DRACO)]
                 if not doc[key]:
                     del doc[key]
     return Layout(doc, views, parts, int(start), faces.astype(np.int64), _weld(verts, src_normals), "gltf")

@@ -49,7 +49,7 @@ def test_cli_gait_clip_of_every_rig(tmp_path, capsys, rig, gait):
     rc = main(["cyclic", str(_rig_file(tmp_path, rig)), "--mode", gait, "--frames", "12", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0, text
-    assert "legs: " in text and f"{gait} cycle: 13 frames" in text and "planted feet slide" in text
+    assert "legs: " in text and f"{gait} cycle: 13 frames" in text and "soles slide at most" in text
     clip = load_clip_file(out)
     assert clip.looping and np.array_equal(clip.evaluate(0.0), clip.evaluate(1.0))
     assert clip.info()["gait"]["name"] == gait and clip.info()["travel"]["speed"] > 0

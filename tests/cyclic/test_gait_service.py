@@ -11,9 +11,10 @@ import pytest
 
 from pdeanim.gltf.validate import assert_glb_clean
 
+from ..gltf.draco_builder import draco_glb
 from ..service.conftest import Backend, running_services
 from ..service.harness import client, make_key, wait_job
-from .rig import BIPED, HEXAPOD, QUADRUPED, rig_glb
+from .rig import BIPED, CONTROLLED, HEXAPOD, QUADRUPED, rig_glb
 from .test_cli import GAIT_CASES
 
 pytestmark = pytest.mark.slow
@@ -42,6 +43,7 @@ def _upload(api, name: str, data: bytes) -> str:
 def meshes(api, data_dir) -> dict[str, str]:
     out = {name: _upload(api, f"{name}.glb", rig_glb(rig)) for name, rig in RIGS.items()}
     out["fox"] = _upload(api, "Fox.glb", (data_dir / "Fox.glb").read_bytes())
+    out["controlled"] = _upload(api, "controlled.glb", draco_glb(rig_glb(CONTROLLED)))
     return out
 
 
@@ -78,6 +80,16 @@ def test_the_fox_trots_and_keeps_its_look(api, meshes, services):
     doc = json.loads(glb[20:20 + struct.unpack_from("<I", glb, 12)[0]])
     assert doc["materials"][0]["name"] == "fox_material" and doc["images"]
     assert doc["animations"][0]["extras"]["loop"] is True
+
+
+def test_a_draco_rig_with_ik_controls_gallops_without_naming_a_joint(api, meshes, services):
+    job = wait_job(api, _submit(api, meshes["controlled"], mode="gallop", frames=12))
+    assert job["state"] == "succeeded", (job, services.logs())
+    cid = job["result"]["clip_id"]
+    coef = api.get(f"/v1/clips/{cid}/coefficients", headers={"Accept": "application/json"}).json()
+    feet = [leg["foot"] for leg in coef["gait"]["legs"]]
+    assert feet == ["IK-hand.L", "IK-hand.R", "IK-foot.L", "IK-foot.R"]
+    assert_glb_clean(api.get(f"/v1/clips/{cid}/animation", params={"fps": 30}).content, "Draco rig gallop")
 
 
 def test_gait_errors_are_clear(api, meshes, services):

@@ -46,9 +46,9 @@ def test_clip_loops_and_carries_the_travel_speed(trot, trot_clip):
     assert [leg["phase"] for leg in header["gait"]["legs"]] == [0.0, 0.5, 0.5, 0.0]
     r = trot_clip.report
     assert r["rel_rms"] <= 1e-3 and r["travel"]["speed"] == pytest.approx(speed)
-    # the fit adds its error to the planted feet: measured 0.14% of the leg (slide) and 6e-10 (height) at
-    # rel RMS 1e-3 (achieved 5.1e-4); allowed about 3x
-    assert r["contact_clip"]["slide_max_rel"] < 4e-3 and r["contact_clip"]["stance_height_max_rel"] < 1e-3
+    # the fit adds its error to the planted feet: measured 0.32% of the leg (slide, every sole vertex in every
+    # frame it is down) and 6e-10 (height) at rel RMS 1e-3 (achieved 5.1e-4); allowed 2-3x
+    assert r["contact_clip"]["slide_max_rel"] < 8e-3 and r["contact_clip"]["stance_height_max_rel"] < 1e-3
     assert r["contact"]["slide_max_rel"] < 1e-6
 
 

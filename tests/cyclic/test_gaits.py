@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pdeanim.cyclic.bodyplan import plan_of
-from pdeanim.cyclic.footpaths import eq9_angle, foot_paths, travel_speed
+from pdeanim.cyclic.footpaths import LIFT, eq9_angle, foot_paths, swing_forward, travel_speed
 from pdeanim.cyclic.gaits import GaitParams, leg_phases
 from pdeanim.errors import ParameterError
 from pdeanim.gltf.skin import load_skinned
@@ -75,13 +75,22 @@ def test_bad_parameters():
     assert GaitParams.preset("walk", literal="true", duty="0.7").duty == 0.7
 
 
-@given(u=st.lists(st.floats(0, 0.999), min_size=1, max_size=20), duty=st.floats(0.1, 0.9))
-def test_stance_is_linear_and_swing_is_eq9(u, duty):
+@given(u=st.lists(st.floats(0, 0.999), min_size=1, max_size=20), duty=st.floats(0.1, 0.9),
+       height=st.floats(0.05, 0.4))
+def test_stance_is_linear_and_swing_leaves_the_ground_straight_up(u, duty, height):
     u = np.asarray(u)[None]
     z = -np.cos(eq9_angle(u, duty))
     stance = u < duty
     assert np.allclose(z[stance], (1 - 2 * u / duty)[stance], atol=1e-9)  # constant backward speed
-    assert np.allclose(z[~stance], -np.cos(np.pi * (u - duty) / (1 - duty))[~stance], atol=1e-12)
+    swing = swing_forward(u, duty, np.array([height]), np.array([1.0]))
+    w = (u - duty) / (1 - duty)
+    back = 2 * (1 - duty) / duty  # the body's travel over the swing, in step lengths
+    low = ~stance & (height * np.sin(np.pi * w) < LIFT)  # within LIFT of the ground: still in its frame
+    ground = swing + back * w
+    assert np.allclose(ground[low & (w < 0.5)], -1.0, atol=1e-12)
+    assert np.allclose(ground[low & (w > 0.5)], 1.0 + back, atol=1e-12)
+    ends = swing_forward(np.array([[duty, 1.0]]), duty, np.array([height]), np.array([1.0]))
+    assert np.allclose(ends, [[-1.0, 1.0]])  # it joins the stance at lift-off and touch-down
 
 
 def test_literal_paths_follow_equation_10():

@@ -65,8 +65,8 @@ def test_planted_feet_stay_on_the_ground(cycles, rig, gait):
     skinned, cycle, poses = cycles[rig, gait]
     plan = cycle.plan
     rest = skin_vertices(skinned, plan.skeleton.rest)
-    feet = soles(skinned, plan.skeleton.subtrees, [leg.foot for leg in plan.legs], plan.leg_length, rest)
-    assert all(len(s.vertices) == 4 for s in feet)  # the underside of each pad
+    feet = soles(skinned, plan, rest)
+    assert all(len(s.vertices) == 4 for s in feet)  # every vertex near the ground: the pads' undersides
     report = contact_report(poses.vertices, cycle, feet)
     assert report["slide_max_rel"] < PLANTED and report["stance_height_max_rel"] < PLANTED
     assert report["sink_max_rel"] < PLANTED

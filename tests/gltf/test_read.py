@@ -115,8 +115,8 @@ def test_compressed_geometry_is_refused_clearly():
     from pdeanim.gltf.glb import pack_glb, unpack_glb
 
     doc, binary = unpack_glb(sparse_morph_glb())
-    doc["extensionsUsed"] = doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
-    with pytest.raises(PosesInputError, match="KHR_draco_mesh_compression"):
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["KHR_meshopt_compression"]  # Draco: test_draco.py
+    with pytest.raises(PosesInputError, match="KHR_meshopt_compression"):
         read_animated_poses(pack_glb(doc, binary))
 
 
