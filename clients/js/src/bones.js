@@ -37,9 +37,9 @@ function boneCount(header, key, lo, hi) {
   return n;
 }
 
-/** Whether a coefficients header declares the bone layer (`required` names it, or it has n_bones). */
+/** Whether a coefficients header declares the bone layer: exactly when its `required` lists "bones". */
 export function hasBones(header) {
-  return (Array.isArray(header.required) && header.required.includes(BONES_FEATURE)) || header.n_bones !== undefined;
+  return Array.isArray(header.required) && header.required.includes(BONES_FEATURE);
 }
 
 /**
@@ -54,12 +54,9 @@ export function decodeBones(ch, ca, V, motion, knots) {
   if (motion !== 'displacement') {
     throw new ClipFormatError(`bones need motion "displacement", this clip's is ${JSON.stringify(motion)}`);
   }
-  const B = boneCount(ch, 'n_bones', 1, 65535);
+  const B = boneCount(ch, 'n_bones', 1, 65536); // bone_index is uint16
   const K = boneCount(ch, 'bone_influences', 1, MAX_INFLUENCES);
-  const order = ch.knot_differences;
-  if (order !== 1 && order !== 2) {
-    throw new ClipFormatError(`coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`);
-  }
+  const order = boneCount(ch, 'bone_knot_differences', 1, 2); // the bone tracks' own order of differences
   const segT = ca.bone_segment_t ? boneArray(ca, 'bone_segment_t', '<f8', [ca.bone_segment_t.shape[0]]) : null;
   if (segT === null) throw new ClipFormatError("coefficients with bones have no 'bone_segment_t' array");
   const Sb = segT.length - 1;

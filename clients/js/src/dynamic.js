@@ -473,8 +473,8 @@ export function vertexBase(clip) {
 
 /** Rodrigues rotation of vector r (3 values at r[ro]) into the 9 values of R at out[o] (row-major). */
 export function rodrigues(rx, ry, rz, out, o = 0) {
-  const th2 = rx * rx + ry * ry + rz * rz;
-  const th = Math.sqrt(th2);
+  const th = Math.sqrt(rx * rx + ry * ry + rz * rz);
+  const th2 = th * th; // the square of the rounded norm, as the reference evaluator (numpy th**2)
   let a;
   let b;
   if (th < 1e-4) {

@@ -65,7 +65,7 @@ export function boneLayer(rest, { B = 3, K = 2, Sb = 4, order = 1, seed = 7, ang
       m[s * B * 6 + i] = timeModel[i] === 1 || kind === 0 ? 0 : kind === 1 ? 1.7 : kind === 2 ? -2.1 : 0.3;
     }
   }
-  const header = { format_version: '1.1', required: ['bones'], n_bones: B, bone_influences: K };
+  const header = { format_version: '1.1', required: ['bones'], n_bones: B, bone_influences: K, bone_knot_differences: order };
   const arrays = {
     bone_segment_t: { dtype: '<f8', shape: [Sb + 1], data: segT },
     bone_pivot: { dtype: '<f4', shape: [B, 3], data: pivot },
@@ -82,7 +82,7 @@ export function boneLayer(rest, { B = 3, K = 2, Sb = 4, order = 1, seed = 7, ang
 /** A coefficients part (bytes) with a bone layer added (options of boneLayer; residual false zeroes the knots). */
 export function withBones(coefficients, rest, { residual = true, ...options } = {}) {
   return edited(coefficients, ({ header, arrays }) => {
-    const layer = boneLayer(rest, { order: header.knot_differences, ...options });
+    const layer = boneLayer(rest, { order: 3 - header.knot_differences, ...options }); // not the curves' order
     Object.assign(header, layer.header);
     Object.assign(arrays, layer.arrays);
     if (!residual) {
@@ -146,7 +146,7 @@ export function naiveBoneEvaluate(clip, coefficients, t) {
     let p = 0;
     const P = Array.from(z, (code) => {
       const d = code % 2 ? -(code + 1) / 2 : code / 2;
-      p += header.knot_differences === 1 ? d : (first += d);
+      p += header.bone_knot_differences === 1 ? d : (first += d);
       return Math.fround(p * a.bone_step.data[i]);
     });
     if (a.bone_time_model.data[i] === 1) {

@@ -143,7 +143,9 @@ test('bone arrays with bad counts, shapes, dtypes, indices, weights, steps, cons
     arrays[name] = { ...arrays[name], data };
   };
   const cases = [
-    [({ header }) => (header.n_bones = 0), /'n_bones' must be an integer in 1\.\.65535, got 0/],
+    [({ header }) => (header.n_bones = 0), /'n_bones' must be an integer in 1\.\.65536, got 0/],
+    [({ header }) => (header.bone_knot_differences = 3), /'bone_knot_differences' must be an integer in 1\.\.2, got 3/],
+    [({ header }) => delete header.bone_knot_differences, /'bone_knot_differences' must be an integer in 1\.\.2, got null/],
     [({ header }) => (header.n_bones = 2.5), /'n_bones' must be an integer/],
     [({ header }) => (header.bone_influences = 5), /'bone_influences' must be an integer in 1\.\.4, got 5/],
     [({ header }) => delete header.bone_influences, /'bone_influences' must be an integer in 1\.\.4, got null/],
