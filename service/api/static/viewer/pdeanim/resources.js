@@ -47,6 +47,7 @@ export class ClipResources {
       pdeVertexTex: { value: this.textures.vertex },
       pdeFrameTex: { value: this.textures.frame ?? null },
       pdeDirect: { value: L.nDirect ?? 0 },
+      pdeBones: { value: L.boneTexel ?? 0 }, // the per-frame table's first bone row (clips with bones)
       pdeAxis: { value: L.axis ? [...L.axis] : [1, 0, 0] },
       pdeBend: { value: L.bend ? [...L.bend] : [0, 1, 0] },
       pdeRotate: { value: Boolean(L.rotate) },
