@@ -141,3 +141,21 @@ test('ClipPlayer plays a bone clip: GPU uniforms and per-frame bone rows, CPU fa
     player.detach();
   }
 });
+
+test('a bone clip and its GPU tables survive a structured clone (what a Web Worker sends back)', () => {
+  const c = byName('fit-displacement-chord');
+  const { topology, coefficients } = boneClipParts(c, { K: 4, B: 5 });
+  const clip = decodeClip(topology, coefficients);
+  clip.gpuTables = gpuTables(clip, { width: 128 });
+  const copy = structuredClone(clip);
+  assert.deepEqual(copy.bones, clip.bones);
+  const layout = gpuLayout(copy, { tables: copy.gpuTables });
+  assert.equal(layout.textures, copy.gpuTables.textures);
+  assert.equal(layout.vertexTexels, 6);
+  const ev = createEvaluator(copy, copy.gpuTables.timeIndex);
+  assert.deepEqual(Array.from(ev.evaluate(0.6)), Array.from(createEvaluator(clip).evaluate(0.6)));
+  timeUniforms(layout, 0.6);
+  const rows = ev.bones.affine();
+  const frame = layout.textures.frame.data;
+  for (let i = 0; i < rows.length; i++) assert.equal(frame[layout.boneTexel * 4 + i], Math.fround(rows[i]));
+});
