@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import container
 from ..errors import ClipFormatError, ParameterError
 from . import quantise
 from .adaptive import Targets, _split_count, _splits
@@ -513,3 +514,14 @@ def add_bone_layer(header: dict[str, Any], arrays: dict[str, np.ndarray], enc: E
     required = sorted(set(header.get("required", [])) | set(keys.pop("required")))
     header.update(keys, required=required)
     arrays.update(bone_arrays)
+
+
+def with_bone_layer(coefficients: bytes, enc: EncodedBones, level: int = container.ZSTD_LEVEL) -> bytes:
+    """The coefficients part ``coefficients`` (kind "dynamic-pde", motion "displacement") with the bone layer
+    added: its curves become the residual on the skinned rest pose; their arrays are kept as they are."""
+    header, arrays = container.unpack(coefficients)
+    if header.get("kind") != "dynamic-pde" or header.get("motion") != "displacement":
+        raise ParameterError("a bone layer goes on a dynamic-PDE clip with motion 'displacement'")
+    arrays = dict(arrays)
+    add_bone_layer(header, arrays, enc)
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)
