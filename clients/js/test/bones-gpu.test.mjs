@@ -6,11 +6,12 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import * as THREE from 'three';
-import { createEvaluator, decodeClip } from '../src/index.js';
+import { join } from 'node:path';
+import { createEvaluator, decodeClip, decodeClipFile } from '../src/index.js';
 import { gpuLayout, gpuTables, textureBytes, timeUniforms } from '../src/gpu.js';
 import { glslHeader } from '../src/glsl.js';
 import { attachClip } from '../src/three.js';
-import { fixtureParts, manifest, sampleTimes, takenTimes } from './helpers.mjs';
+import { FIXTURES, fixtureParts, manifest, readBytes, sampleTimes, takenTimes } from './helpers.mjs';
 import { boneClipParts } from './bonehelpers.mjs';
 
 const man = manifest();
@@ -78,6 +79,26 @@ for (const [name, options] of CASES) {
       assert.ok(worst <= 1e-6 * c.diagonal, `${name}: ${worst / c.diagonal} of the diagonal`);
     });
   }
+}
+
+for (const c of man.cases.filter((x) => x.bones)) {
+  test(`bone fixture ${c.name}: the emulated float32 shader matches the CPU evaluator to 1e-6 of the diagonal`, () => {
+    const clip = decodeClipFile(readBytes(join(FIXTURES, c.clip)));
+    const layout = gpuLayout(clip, { width: 64 });
+    assert.equal(layout.residual, !c.bones.residual_zero);
+    assert.equal(layout.vertexTexels, c.bones.residual_zero ? 3 : 6);
+    const ev = createEvaluator(clip);
+    let worst = 0;
+    for (const t of takenTimes(c.t, c.looping)) {
+      const cpu = ev.evaluate(t);
+      timeUniforms(layout, t);
+      for (let v = 0; v < clip.nVertices; v++) {
+        const g = emulate(layout, v);
+        for (let w = 0; w < 3; w++) worst = Math.max(worst, Math.abs(g[w] - cpu[v * 3 + w]));
+      }
+    }
+    assert.ok(worst <= 1e-6 * c.diagonal, `${c.name}: ${worst / c.diagonal} of the diagonal`);
+  });
 }
 
 test('bones without a residual cost no residual tables: rest, indices and weights per vertex, B bone rows per frame', () => {

@@ -12,13 +12,14 @@ import {
   decodeClip,
   decodeClipFile,
 } from '../src/index.js';
-import { edited, fixtureParts, manifest, refused, sampleTimes, takenTimes } from './helpers.mjs';
+import { join } from 'node:path';
+import { FIXTURES, edited, expected, fixtureParts, manifest, readBytes, refused, sampleTimes, takenTimes } from './helpers.mjs';
 import { boneClipParts, naiveBoneEvaluate, restOf, withBones } from './bonehelpers.mjs';
 
 const man = manifest();
 const byName = (name) => man.cases.find((c) => c.name === name);
 // displacement fixtures: spline items, looping, knots on a shared basis, knot windows, order-2 differences
-const CASES = [
+const CASES = [ // (bone layers added here to 1.0 fixtures; the Python-written bone fixtures are at the end)
   ['fit-displacement-chord', { K: 2 }],
   ['fit-displacement-chord-loop', { K: 4, B: 5 }],
   ['synthetic-blend-displacement-paper-basis', { K: 3, Sb: 1 }],
@@ -192,4 +193,61 @@ test('bones need motion "displacement" and a dynamic-pde clip', () => {
   const tagged = edited(cp.coefficients, ({ header }) => Object.assign(header, { format_version: '1.1', required: ['bones'] }));
   refused(() => decodeClip(cp.topology, tagged), /only defined for dynamic-pde clips/);
   assert.ok(new ClipFormatError('x') instanceof Error);
+});
+
+// ---- the conformance fixtures with a bone layer (written by the Python library)
+
+const boneFixtures = man.cases.filter((x) => x.bones);
+
+test('the fixtures cover bone layers with K = 1..4, spline and pair channels, zero and fitted residuals, looping', () => {
+  assert.ok(boneFixtures.length >= 4);
+  assert.deepEqual([...new Set(boneFixtures.map((x) => x.bones.influences))].sort(), [1, 2, 3, 4]);
+  assert.ok(boneFixtures.some((x) => x.bones.residual_zero) && boneFixtures.some((x) => !x.bones.residual_zero));
+  assert.ok(boneFixtures.some((x) => x.looping));
+  assert.ok(boneFixtures.some((x) => x.bones.bone_knot_differences === 2));
+  assert.ok(boneFixtures.every((x) => x.bones.spline_channels > 0 && x.bones.pair_channels > 0));
+  assert.ok(man.refused?.length >= 1);
+});
+
+for (const c of boneFixtures) {
+  test(`bone fixture ${c.name}: decodes to its manifest features and evaluates as the Python evaluator`, () => {
+    const clip = decodeClipFile(readBytes(join(FIXTURES, c.clip)));
+    const b = clip.bones;
+    assert.equal(b.nBones, c.bones.n_bones);
+    assert.equal(b.influences, c.bones.influences);
+    assert.equal(b.segmentT.length - 1, c.bones.bone_segments);
+    assert.equal(b.timeModel.filter((x) => x === 1).length, c.bones.spline_channels);
+    assert.equal(b.timeModel.filter((x) => x === 0).length, c.bones.pair_channels);
+    assert.equal(clip.header.bone_knot_differences, c.bones.bone_knot_differences);
+    assert.equal(b.residual, !c.bones.residual_zero);
+    const ev = createEvaluator(clip);
+    const want = expected(c);
+    const N = c.n_vertices * 3;
+    const { coefficients } = fixtureParts(c);
+    let differ = 0;
+    takenTimes(c.t, c.looping).forEach((t) => {
+      const k = c.t.indexOf(t);
+      const got = ev.evaluate(t);
+      for (let i = 0; i < N; i++) differ += got[i] !== want[k * N + i];
+      // the spec read independently: float64 throughout, to the format's tolerance
+      const naive = naiveBoneEvaluate(clip, coefficients, t);
+      for (let i = 0; i < N; i++) assert.ok(Math.abs(naive[i] - want[k * N + i]) <= 1e-6 * c.diagonal, `${c.name} t = ${t}`);
+    });
+    // the skinned base is the Python evaluator's bit for bit; the residual's float32 sums may differ by an
+    // ulp as in the 1.0 fixtures (the conformance test holds them to 1e-6 of the diagonal)
+    if (c.bones.residual_zero) assert.equal(differ, 0, `${c.name}: ${differ} values differ from the Python evaluator`);
+  });
+}
+
+test('the refused fixtures: a clip requiring an unknown feature is refused with a message naming it', () => {
+  for (const r of man.refused) {
+    const names = [r.names].flat();
+    const bytes = readBytes(join(FIXTURES, r.clip));
+    assert.throws(() => decodeClipFile(bytes), (e) => {
+      assert.ok(e instanceof ClipFormatError);
+      for (const n of names) assert.match(e.message, new RegExp(`"${n}"`));
+      assert.match(e.message, /it supports: bones/);
+      return true;
+    });
+  }
 });
