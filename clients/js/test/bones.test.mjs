@@ -12,6 +12,9 @@ import {
   decodeClip,
   decodeClipFile,
 } from '../src/index.js';
+import { spawnSync } from 'node:child_process';
+import { mkdtempSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { FIXTURES, edited, expected, fixtureParts, manifest, readBytes, refused, sampleTimes, takenTimes } from './helpers.mjs';
 import { boneClipParts, naiveBoneEvaluate, restOf, withBones } from './bonehelpers.mjs';
@@ -249,5 +252,24 @@ test('the refused fixtures: a clip requiring an unknown feature is refused with 
       assert.match(e.message, /it supports: bones/);
       return true;
     });
+  }
+});
+
+test('pdeanim-eval plays a bone fixture and exits 2 naming the feature of a clip it cannot read', () => {
+  const bin = join(FIXTURES, '..', '..', 'bin', 'pdeanim-eval.mjs');
+  const tmp = mkdtempSync(join(tmpdir(), 'pdeanim-bones-'));
+  try {
+    const c = boneFixtures.find((x) => !x.bones.residual_zero);
+    const out = join(tmp, 'f.bin');
+    const ok = spawnSync(process.execPath, [bin, join(FIXTURES, c.clip), '--t', '0,0.5,1', '--out', out], { encoding: 'utf8' });
+    assert.equal(ok.status, 0, ok.stderr);
+    const got = new Float32Array(readBytes(out).buffer);
+    const ev = createEvaluator(decodeClipFile(readBytes(join(FIXTURES, c.clip))));
+    assert.deepEqual(Array.from(got), [0, 0.5, 1].flatMap((t) => Array.from(ev.evaluate(t))));
+    const bad = spawnSync(process.execPath, [bin, join(FIXTURES, man.refused[0].clip), '--t', '0', '--out', out], { encoding: 'utf8' });
+    assert.equal(bad.status, 2);
+    assert.match(bad.stderr, new RegExp(`requires format feature\\(s\\) "${man.refused[0].names}"`));
+  } finally {
+    rmSync(tmp, { recursive: true, force: true });
   }
 });
