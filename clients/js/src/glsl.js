@@ -11,7 +11,6 @@ function defines(layout, { normals, stage, pass, cpu }) {
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.bones) defs.push('#define PDEANIM_BONES');
-  if (layout.residual === false) defs.push('#define PDEANIM_NO_RESIDUAL');
   defs.push(`#define PDEANIM_VERTEX_TEXELS ${layout.vertexTexels ?? 4}`);
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
   defs.push(`#define PDEANIM_COEFFICIENT_TEXELS ${layout.coefficientTexels ?? 0}`);
@@ -44,6 +43,8 @@ uniform int pdeDirect;
 #endif
 #ifdef PDEANIM_BONES
 uniform int pdeBones;
+uniform int pdeSkinOnly;
+uniform int pdeSkinTexel;
 #endif
 #ifdef PDEANIM_CYCLIC
 uniform float pdeSinWt;
@@ -62,7 +63,8 @@ vec4 pdeFetch(highp sampler2D tex, int i) {
 // one clip vertex v (the GPU's numbering, gpu.js): a direct vertex's position from the per-frame table,
 // else base (with bones: the rest position skinned by the bone rows at the end of the per-frame table) + per
 // coordinate the frame's coefficients of its curve (from the per-frame table, after the direct positions)
-// dotted with the vertex's basis row, then the curve's rigid motion
+// dotted with the vertex's basis row, then the curve's rigid motion; with bones, the vertices from
+// pdeSkinOnly on (curves without residual) are their skinned rest position alone
 const DYNAMIC_EVAL = `
 #ifdef PDEANIM_DYNAMIC
 #ifdef PDEANIM_BONES
@@ -82,16 +84,20 @@ vec3 pdeSkin(int r, vec3 rest) {
 #endif
 vec3 pdeEval(int v) {
   if (v < pdeDirect) return pdeFetch(pdeFrameTex, v).xyz;
+#ifdef PDEANIM_BONES
+  if (v >= pdeSkinOnly) {
+    int s = pdeSkinTexel + (v - pdeSkinOnly) * 3;
+    return pdeSkin(s + 1, pdeFetch(pdeVertexTex, s).yzw);
+  }
+#endif
   int r = (v - pdeDirect) * PDEANIM_VERTEX_TEXELS;
   vec4 head = pdeFetch(pdeVertexTex, r);
   vec3 p = head.yzw;
 #ifdef PDEANIM_BONES
   p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p);
 #endif
-#ifndef PDEANIM_NO_RESIDUAL
   int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   for (int w = 0; w < 3; w++) p[w] += dot(pdeFetch(pdeFrameTex, c + w), pdeFetch(pdeVertexTex, r + 1 + w));
-#endif
 #ifdef PDEANIM_RIGID
   vec4 r0 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS);
   vec4 r1 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 1);

@@ -79,8 +79,11 @@ export function boneLayer(rest, { B = 3, K = 2, Sb = 4, order = 1, seed = 7, ang
   return { header, arrays };
 }
 
-/** A coefficients part (bytes) with a bone layer added (options of boneLayer; residual false zeroes the knots). */
-export function withBones(coefficients, rest, { residual = true, ...options } = {}) {
+/**
+ * A coefficients part (bytes) with a bone layer added (options of boneLayer; residual false zeroes every
+ * curve's knots, zeroCurve(c) true those of curve c).
+ */
+export function withBones(coefficients, rest, { residual = true, zeroCurve = null, ...options } = {}) {
   return edited(coefficients, ({ header, arrays }) => {
     const layer = boneLayer(rest, { order: 3 - header.knot_differences, ...options }); // not the curves' order
     Object.assign(header, layer.header);
@@ -88,6 +91,17 @@ export function withBones(coefficients, rest, { residual = true, ...options } = 
     if (!residual) {
       for (const name of ['knots', 'knot_weights']) {
         if (arrays[name]) arrays[name] = { ...arrays[name], data: new Uint32Array(arrays[name].data.length) };
+      }
+    }
+    if (zeroCurve) {
+      const C = header.n_curves;
+      for (const name of ['knots', 'knot_weights']) {
+        if (!arrays[name]) continue;
+        const data = Uint32Array.from(arrays[name].data);
+        // knots (C, 3, 4, S+1): a block per curve; knot_weights (r, C, 3, 4): 12 codes per rank and curve
+        const block = name === 'knots' ? data.length / C : 12;
+        for (let i = 0; i < data.length; i++) if (zeroCurve(Math.floor(i / block) % C)) data[i] = 0;
+        arrays[name] = { ...arrays[name], data };
       }
     }
   });

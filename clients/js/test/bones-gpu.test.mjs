@@ -28,15 +28,20 @@ function dot4(a, b) {
   return f(f(f(f(a[0] * b[0]) + f(a[1] * b[1])) + f(a[2] * b[2])) + f(a[3] * b[3]));
 }
 
-/** The shader's pdeEval(v) of a dynamic clip with bones, in float32 arithmetic (uniform pdeBones = boneTexel). */
+/**
+ * The shader's pdeEval(v) of a dynamic clip with bones, in float32 arithmetic (uniforms pdeBones = boneTexel,
+ * pdeSkinOnly = skinOnly, pdeSkinTexel = skinTexel).
+ */
 function emulate(layout, v) {
   const T = layout.textures;
   const g = layout.gpuIndex[v];
   if (g < layout.nDirect) return fetch(T.frame, g).slice(0, 3);
-  const r = (g - layout.nDirect) * layout.vertexTexels;
+  const skinOnly = g >= layout.skinOnly; // a curve without residual: 3 texels, skinning alone
+  const stride = skinOnly ? 3 : layout.vertexTexels;
+  const r = skinOnly ? layout.skinTexel + (g - layout.skinOnly) * 3 : (g - layout.nDirect) * stride;
   const head = fetch(T.vertex, r);
-  const index = fetch(T.vertex, r + layout.vertexTexels - 2);
-  const weight = fetch(T.vertex, r + layout.vertexTexels - 1);
+  const index = fetch(T.vertex, r + stride - 2);
+  const weight = fetch(T.vertex, r + stride - 1);
   const x = [head[1], head[2], head[3], 1];
   let p = [0, 0, 0];
   for (let k = 0; k < 4; k++) {
@@ -44,7 +49,7 @@ function emulate(layout, v) {
     const b = layout.boneTexel + Math.round(index[k]) * 3;
     p = p.map((acc, i) => f(acc + f(weight[k] * dot4(fetch(T.frame, b + i), x))));
   }
-  if (!layout.residual) return p;
+  if (skinOnly) return p;
   const c = layout.nDirect + Math.round(head[0]) * layout.curveTexels;
   return p.map((acc, w) => f(acc + dot4(fetch(T.frame, c + w), fetch(T.vertex, r + 1 + w))));
 }
@@ -53,17 +58,21 @@ const CASES = [
   ['fit-displacement-chord', { K: 2 }],
   ['fit-displacement-chord-loop', { K: 4, B: 5 }],
   ['synthetic-displacement-chord-spline', { K: 3, Sb: 6, angle: 3 }],
+  ['synthetic-blend-displacement-paper-basis', { K: 2, zeroCurve: (c) => c % 3 === 1 }], // knot basis, some curves 0
 ];
 
 for (const [name, options] of CASES) {
   for (const residual of [true, false]) {
-    test(`bones (residual ${residual}): the emulated float32 shader matches the CPU evaluator to 1e-6 of the diagonal: ${name}`, () => {
+    test(`bones ${JSON.stringify(options)} (residual ${residual}): the emulated float32 shader matches the CPU evaluator to 1e-6 of the diagonal: ${name}`, () => {
       const c = byName(name);
       const { topology, coefficients } = boneClipParts(c, { ...options, residual });
       const clip = decodeClip(topology, coefficients);
       const layout = gpuLayout(clip, { width: 64 }); // narrow: the 2D texel addressing is exercised
       assert.equal(layout.bones, true);
       assert.equal(layout.residual, residual);
+      if (!residual) assert.equal(layout.skinOnly, 0, 'every vertex is skin-only');
+      if (residual && options.zeroCurve) assert.ok(layout.skinOnly < clip.nVertices && layout.skinOnly > layout.nDirect);
+      if (residual && !options.zeroCurve) assert.equal(layout.skinOnly, clip.nVertices);
       // the fitted fixtures have short curves: direct vertices, skinned on the CPU, are covered
       if (residual && name.startsWith('fit-')) assert.ok(layout.nDirect > 0);
       const ev = createEvaluator(clip);
@@ -86,7 +95,8 @@ for (const c of man.cases.filter((x) => x.bones)) {
     const clip = decodeClipFile(readBytes(join(FIXTURES, c.clip)));
     const layout = gpuLayout(clip, { width: 64 });
     assert.equal(layout.residual, !c.bones.residual_zero);
-    assert.equal(layout.vertexTexels, c.bones.residual_zero ? 3 : 6);
+    assert.equal(layout.vertexTexels, 6);
+    if (c.bones.residual_zero) assert.equal(layout.skinOnly, 0);
     const ev = createEvaluator(clip);
     let worst = 0;
     for (const t of takenTimes(c.t, c.looping)) {
@@ -108,7 +118,8 @@ test('bones without a residual cost no residual tables: rest, indices and weight
   const a = gpuTables(decodeClip(withRes.topology, withRes.coefficients));
   const b = gpuTables(decodeClip(noRes.topology, noRes.coefficients));
   assert.equal(b.nDirect, 0);
-  assert.equal(b.vertexTexels, 3);
+  assert.equal(b.skinOnly, 0);
+  assert.equal(b.skinTexel, 0);
   assert.equal(b.boneTexel, 0);
   assert.equal(b.tangents, null);
   assert.equal(b.spline, false);
@@ -116,13 +127,28 @@ test('bones without a residual cost no residual tables: rest, indices and weight
   assert.ok(b.textures.vertex.width * b.textures.vertex.height < c.n_vertices * 3 * 2 + 64);
   assert.ok(b.textures.frame.width * b.textures.frame.height < 3 * 3 + 64);
   assert.equal(a.vertexTexels, 6);
+  assert.equal(a.skinOnly, c.n_vertices);
   assert.ok(textureBytes(b) < textureBytes(a), `${textureBytes(b)} vs ${textureBytes(a)} bytes`);
-  // the shader variants: no residual loop without residual; the same one for 1.0 clips as before
-  const hb = glslHeader(b);
-  assert.match(hb, /#define PDEANIM_BONES/);
-  assert.match(hb, /#define PDEANIM_NO_RESIDUAL/);
-  assert.match(hb, /#define PDEANIM_VERTEX_TEXELS 3/);
-  assert.doesNotMatch(glslHeader(a), /#define PDEANIM_NO_RESIDUAL/);
+  // one shader for bone clips with and without residual (the uniforms say where the skin-only vertices are)
+  assert.equal(glslHeader(a), glslHeader({ ...b, width: a.width }));
+  assert.match(glslHeader(b), /#define PDEANIM_BONES/);
+});
+
+test('curves without residual in a bone clip cost no residual tables: their vertices are skin-only', () => {
+  const c = byName('fit-displacement-chord-loop');
+  const parts = fixtureParts(c);
+  const half = boneClipParts(c, { B: 3, zeroCurve: (cv) => cv % 2 === 0 });
+  const clip = decodeClip(half.topology, half.coefficients);
+  const full = gpuTables(decodeClip(parts.topology, boneClipParts(c, { B: 3 }).coefficients));
+  const t = gpuTables(clip);
+  const zeroVertices = Array.from(clip.curveOf).filter((cv) => cv % 2 === 0).length;
+  assert.equal(clip.nVertices - t.skinOnly, zeroVertices);
+  // curves without residual have no GPU curve (no coefficients in the frame table) and no direct vertices
+  for (let cv = 0; cv < clip.nCurves; cv++) if (cv % 2 === 0) assert.equal(t.gpuCurve[cv], -1);
+  assert.ok(t.boneTexel < full.boneTexel);
+  const vertexTexels = (tab) => tab.skinTexel + (clip.nVertices - tab.skinOnly) * 3;
+  assert.equal(vertexTexels(t), (t.skinOnly - t.nDirect) * 6 + zeroVertices * 3);
+  assert.ok(vertexTexels(t) < vertexTexels(full));
 });
 
 test('1.0 clips keep their GPU layout: 4 texels per vertex, no bone defines', () => {
@@ -149,7 +175,9 @@ test('ClipPlayer plays a bone clip: GPU uniforms and per-frame bone rows, CPU fa
     const mesh = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial());
     const player = attachClip(mesh, clip);
     assert.equal(player.uniforms.pdeBones.value, player.layout.boneTexel);
-    assert.match(player.programKey, residual ? /:bones:/ : /:bones0:/);
+    assert.match(player.programKey, /:bones:/);
+    assert.equal(player.uniforms.pdeSkinOnly.value, player.layout.skinOnly);
+    assert.equal(player.uniforms.pdeSkinTexel.value, player.layout.skinTexel);
     player.setTime(0.3);
     const frame = player.layout.textures.frame.data;
     const rows = player.evaluator.bones.affine();

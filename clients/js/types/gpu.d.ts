@@ -23,9 +23,16 @@ export interface GpuLayout {
   bones?: boolean;
   /** false for a bone clip whose curves are all 0: no residual tables (no basis rows, curve texels, direct vertices). */
   residual?: boolean;
+  /**
+   * Bone clips: the GPU number of the first skin-only vertex (those of curves whose knots are all 0, numbered
+   * last: 3 texels each, no residual tables); the clip's vertex count when every curve has a residual.
+   */
+  skinOnly?: number;
+  /** Vertex-texture texel of the first skin-only vertex. */
+  skinTexel?: number;
   /** Bones B (0 without bones). */
   nBones?: number;
-  /** Texels per GPU vertex in the vertex texture: 4 (+ 2 bone texels with bones; 3 without residual). */
+  /** Texels per GPU vertex with a residual in the vertex texture: 4, + 2 bone texels with bones. */
   vertexTexels?: number;
   /** Frame-table texel of the first bone row (3 texels per bone: [R_b | c_b + T_b - R_b c_b]); uniform pdeBones. */
   boneTexel?: number;

@@ -203,7 +203,7 @@ export class ClipPlayer {
   get programKey() {
     const L = this.layout;
     const mode = this._onGPU ? (this.pass ? 'pass' : 'gpu') : 'cpu';
-    const bones = L.bones ? `:bones${L.residual ? '' : '0'}` : '';
+    const bones = L.bones ? ':bones' : '';
     return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}:${this.normals}:${L.width}:${mode}`;
   }
 
