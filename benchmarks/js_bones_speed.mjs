@@ -3,8 +3,8 @@
 // evaluated and written as rows of the per-frame table, plus the residual's table), against the same clip
 // without bones (1.0), and the GPU tables' bytes. The bone clips are made from a 1.0 CLIP file by adding a
 // bone layer of B bones with K influences per vertex (clients/js/test/bonehelpers.mjs: pivots spread over the
-// rest pose, mixed spline / pair channels on 4 bone segments), with the clip's curves as the residual or with
-// a zero residual. Median of 3 runs of 500 pseudo-random t each (the run's median per call), after a warm-up.
+// rest pose, mixed spline / pair channels on 4 bone segments), with the clip's curves as the residual, on every
+// other curve only, or with a zero residual. Median of 3 runs of 500 pseudo-random t each (the run's median per call), after a warm-up.
 // Run: node benchmarks/js_bones_speed.mjs CLIP [B] [K]   (e.g. the torus15k-displacement clip of
 // benchmarks/js_eval_clips.py)
 
@@ -51,6 +51,10 @@ const options = { B: Number(B), K: Number(K), Sb: 4 };
 const clips = {
   '1.0 (no bones)': plain,
   [`bones B=${B} K=${K} + residual`]: decodeClip(parts.topology, withBones(parts.coefficients, plain.rest, options)),
+  [`bones B=${B} K=${K} + residual on every other curve`]: decodeClip(
+    parts.topology,
+    withBones(parts.coefficients, plain.rest, { ...options, zeroCurve: (c) => c % 2 === 1 }),
+  ),
   [`bones B=${B} K=${K}, zero residual`]: decodeClip(
     parts.topology,
     withBones(parts.coefficients, plain.rest, { ...options, residual: false }),
