@@ -85,3 +85,14 @@ def test_a_source_look_keeps_the_morph_target_export(exports):
     doc, _ = unpack_glb(baked)
     assert "skins" not in doc and doc["meshes"][0]["primitives"][0]["targets"]
     assert_clean(validate_many([baked])[0], "baked bones export")
+
+
+def test_cli_export_of_a_clip_with_bones_says_it_is_skinned(tmp_path, capsys):
+    from service.cli import main
+
+    out = tmp_path / "bones.glb"
+    assert main(["export", str(FIXTURES / "bones-fit-k2-zero.clip"), "--out", str(out), "--fps", "24",
+                 "-q"]) == 0
+    assert "skinned, 3 joints, float32" in capsys.readouterr().out
+    doc, _ = unpack_glb(out.read_bytes())
+    assert len(doc["skins"][0]["joints"]) == 3 and "targets" not in doc["meshes"][0]["primitives"][0]
