@@ -300,7 +300,7 @@ def encode_bones(motion: BoneMotion, frame_times: np.ndarray, target_rms: float,
     moments = _Moments.of(rest32, pivot, index, weight)
     R, T = rodrigues(rotvec), values[..., 3:]
     segm, z, mu, spline, fit_rms = _fit_segments(values, frame_times, moments, R, T, FIT_SHARE * target_rms)
-    step, codes, rms = _quantise_knots(z, mu, spline, segm, values, moments, R, T, target_rms)
+    step, codes, rms = _quantise_knots(z, mu, spline, segm, moments, R, T, target_rms)
     B = motion.n_bones
     _, order = quantise.encode_knot_tracks(codes)
     report = {"segments": segm.n_segments, "spline_channels": int(spline.sum()), "fit_rms_bound": fit_rms,
@@ -350,9 +350,8 @@ def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments
     return segm, z[:, :, 0], mu, spline, rms
 
 
-def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Segmentation, values: np.ndarray,
-                    moments: _Moments, R: np.ndarray, T: np.ndarray, target: float
-                    ) -> tuple[np.ndarray, np.ndarray, float]:
+def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Segmentation, moments: _Moments,
+                    R: np.ndarray, T: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray, float]:
     """(steps (B*6,) float32, codes (Sb+1, B, 6) int64, RMS bound of the rounded tracks): power-of-two steps
     from the rounding's share of the budget (rotations through each bone's lever arm), halved while the
     decoded tracks miss the budget."""
@@ -377,7 +376,7 @@ def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Seg
         enc = EncodedBones(step=step.reshape(B, CHANNELS), codes=codes, **enc_base)
         v = BoneTracks(enc).channels(frames_t)
         rms = float(np.sqrt(moments.frame_error_sq(rodrigues(v[..., :3]), v[..., 3:], R, T).mean()))
-        if rms <= math.hypot(FIT_SHARE, KNOT_SHARE) * target or not np.all(np.isfinite(tol)):
+        if rms <= math.hypot(FIT_SHARE, KNOT_SHARE) * target:
             break
     return step, codes, rms
 
