@@ -23,7 +23,7 @@ from .families import time_pair
 from .rigid import rodrigues
 from .segments import Segmentation, normalised_times, uniform_segmentation
 from .spline import hermite_basis, natural_tangents, prefer_spline
-from .timefit import fit_tracks, fit_tracks_spline, predict
+from .timefit import fit_tracks_spline, predict
 
 BONES_FEATURE = "bones"
 """The feature name a part with a bone layer lists in its header's ``required``."""
@@ -41,6 +41,9 @@ WEIGHT_BITS = (8, 16)
 HALVINGS = 8
 """Most halvings of every knot step when the rounded tracks miss their budget (spline weights above 1)."""
 WEIGHT_SAMPLE_FRAMES = 8
+MAX_BONE_CODE = 2**23
+"""Largest magnitude of a bone knot code: p * h (h a power of two) then has at most 24 significant bits, so
+float32(p * h) is exact and a knot is off its value by the rounding to the step alone."""
 
 
 @dataclass(frozen=True)
@@ -279,7 +282,10 @@ def encode_bones(motion: BoneMotion, frame_times: np.ndarray, target_rms: float,
     distance, fit and rounding together) from skin(motion, rest) at the frames where the segments allow.
     Segments are added where frames miss the fit's share of the budget; each channel takes the natural
     spline or the paper's time pair (per segment constants) as the curves choose them (spline.prefer_spline,
-    timefit.fit_tracks_spline); looping clips use periodic knots and the time pair."""
+    timefit.fit_tracks_spline). ``looping`` clips are fitted the same way: t = 1 wraps to 0, so the last knot
+    is only approached, and a motion that loops meets its first pose there in rotation (a bone that turns a
+    full circle per cycle too, which periodic rotation-vector knots could not hold); it is recorded in the
+    report."""
     frame_times = np.asarray(frame_times, np.float64)
     _check_motion(motion, frame_times, rest)
     if not target_rms > 0:
@@ -293,14 +299,14 @@ def encode_bones(motion: BoneMotion, frame_times: np.ndarray, target_rms: float,
     weight = weight_q / weight_q.sum(axis=1, keepdims=True)
     moments = _Moments.of(rest32, pivot, index, weight)
     R, T = rodrigues(rotvec), values[..., 3:]
-    segm, z, mu, spline, fit_rms = _fit_segments(values, frame_times, moments, R, T, FIT_SHARE * target_rms,
-                                                 looping)
-    step, codes, rms = _quantise_knots(z, mu, spline, segm, values, moments, R, T, target_rms)
+    segm, z, mu, spline, fit_rms = _fit_segments(values, frame_times, moments, R, T, FIT_SHARE * target_rms)
+    step, codes, rms = _quantise_knots(z, mu, spline, segm, moments, R, T, target_rms)
     B = motion.n_bones
     _, order = quantise.encode_knot_tracks(codes)
     report = {"segments": segm.n_segments, "spline_channels": int(spline.sum()), "fit_rms_bound": fit_rms,
               "rms_bound": rms, "weight_bits": weight_bits, "weight_rms_estimate": weight_rms,
-              "target_rms": float(target_rms), "met": bool(math.hypot(rms, weight_rms) <= target_rms)}
+              "target_rms": float(target_rms), "met": bool(math.hypot(rms, weight_rms) <= target_rms),
+              "looping": bool(looping)}
     return EncodedBones(segment_t=_segment_times(segm), pivot=pivot.astype(np.float32),
                         index=index.astype(np.uint16), weight_q=weight_q.astype(np.uint16),
                         time_model=spline.reshape(B, CHANNELS).astype(np.uint8),
@@ -316,7 +322,7 @@ def _segment_times(segm: Segmentation) -> np.ndarray:
 
 
 def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments, R: np.ndarray,
-                  T: np.ndarray, goal: float, looping: bool
+                  T: np.ndarray, goal: float
                   ) -> tuple[Segmentation, np.ndarray, np.ndarray, np.ndarray, float]:
     """(segmentation, knots (B*6, Sb+1), constants (B*6, Sb), spline (B*6,) bool, RMS bound): segments split
     at the worst frames until the time fit's vertex error bound meets ``goal`` or every frame is a knot."""
@@ -327,14 +333,10 @@ def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments
         still = Segmentation(np.array([0, 0]), np.zeros(1))
         return still, z, np.zeros((len(b), 1)), np.zeros(len(b), bool), 0.0
     t = normalised_times(frame_times)
-    candidates = np.zeros(len(b), bool) if looping else prefer_spline(b, t)
+    candidates = prefer_spline(b, t)
     segm = uniform_segmentation(frame_times, 1)
     while True:
-        if looping:
-            z, mu = fit_tracks(b, segm, loop=True)
-            spline = np.zeros(len(b), bool)
-        else:
-            z, mu, spline = fit_tracks_spline(b, segm, candidates)
+        z, mu, spline = fit_tracks_spline(b, segm, candidates)
         fitted = np.moveaxis(predict(z, segm, mu, spline)[:, :, 0], 0, 1).reshape(F, B, CHANNELS)
         err = moments.frame_error_sq(rodrigues(fitted[..., :3]), fitted[..., 3:], R, T)
         rms = float(np.sqrt(err.mean()))
@@ -348,9 +350,8 @@ def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments
     return segm, z[:, :, 0], mu, spline, rms
 
 
-def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Segmentation, values: np.ndarray,
-                    moments: _Moments, R: np.ndarray, T: np.ndarray, target: float
-                    ) -> tuple[np.ndarray, np.ndarray, float]:
+def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Segmentation, moments: _Moments,
+                    R: np.ndarray, T: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray, float]:
     """(steps (B*6,) float32, codes (Sb+1, B, 6) int64, RMS bound of the rounded tracks): power-of-two steps
     from the rounding's share of the budget (rotations through each bone's lever arm), halved while the
     decoded tracks miss the budget."""
@@ -375,17 +376,17 @@ def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Seg
         enc = EncodedBones(step=step.reshape(B, CHANNELS), codes=codes, **enc_base)
         v = BoneTracks(enc).channels(frames_t)
         rms = float(np.sqrt(moments.frame_error_sq(rodrigues(v[..., :3]), v[..., 3:], R, T).mean()))
-        if rms <= math.hypot(FIT_SHARE, KNOT_SHARE) * target or not np.all(np.isfinite(tol)):
+        if rms <= math.hypot(FIT_SHARE, KNOT_SHARE) * target:
             break
     return step, codes, rms
 
 
 def _steps(tol: np.ndarray, biggest: np.ndarray) -> np.ndarray:
     """(n,) float32 power-of-two steps whose half is at most ``tol`` (inf: the coarsest useful step, a bone
-    that moves no vertex), coarse enough that every code stays within quantise.MAX_CODE."""
+    that moves no vertex), coarse enough that every code stays within MAX_BONE_CODE."""
     top = 2.0 ** np.ceil(np.log2(np.maximum(biggest, 2.0**-100)))
     step = np.minimum(2.0 * tol, top)
-    step = np.maximum(step, biggest / quantise.MAX_CODE)
+    step = np.maximum(step, biggest / MAX_BONE_CODE)
     step = np.clip(step, np.finfo(np.float32).tiny, 2.0**100)
     return (2.0 ** np.floor(np.log2(step))).astype(np.float32)
 
@@ -502,7 +503,9 @@ def decode_bones(header: dict[str, Any], arrays: dict[str, np.ndarray], n_vertic
     codes = quantise.decode_knot_tracks(tracks, order)
     enc = EncodedBones(np.array(seg_t), np.array(pivot), np.array(index), np.array(weight),
                        np.array(time_model), np.array(mu), np.array(step), codes, order)
-    if not np.all(np.isfinite(enc.knots())):
+    with np.errstate(over="ignore"):  # a float32 overflow is what this check reports
+        finite = np.all(np.isfinite(enc.knots()))
+    if not finite:
         raise ClipFormatError("bone knots decode to non-finite values")
     return enc
 
