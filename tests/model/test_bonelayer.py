@@ -16,6 +16,7 @@ from pdeanim.model.bonelayer import (
     BoneMotion,
     BoneTracks,
     bones_header_arrays,
+    coarse_mu,
     decode_bones,
     encode_bones,
     skin,
@@ -127,6 +128,7 @@ def test_encode_meets_its_target_on_a_bending_tube_and_chooses_time_models_per_c
         assert set(np.unique(enc.time_model)) <= {0, 1}
         assert np.all(enc.mu[:, enc.time_model == TIME_SPLINE] == 0)
         assert np.all(enc.mu > -np.pi)
+        np.testing.assert_array_equal(coarse_mu(enc.mu), enc.mu)  # few significant bits: cheap to store
         sizes.append(enc.n_segments)
     assert sizes[0] <= sizes[1]
 
@@ -139,6 +141,16 @@ def test_a_still_and_unused_bones_encode():
     np.testing.assert_array_equal(enc.segment_t, [0.0, 1.0])
     got = skinned_positions(enc, rest, np.array([0.0, 1.0]))
     assert np.abs(got - skin(m, rest)[0]).max() < 1e-3
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-3.0, 40.0), st.integers(1, 8))
+def test_coarse_time_constants_keep_a_few_bits_towards_zero(mu, bits):
+    got = float(coarse_mu(np.array([mu]), bits)[0])
+    assert abs(got) <= abs(mu) and np.sign(got) in (0.0, np.sign(mu))
+    assert abs(mu - got) <= abs(mu) * 2.0 ** (1 - bits)
+    mantissa, _ = np.frexp(abs(got))
+    assert float(mantissa * 2**bits) == int(mantissa * 2**bits)
 
 
 @settings(max_examples=40, deadline=None)
