@@ -15,6 +15,13 @@ from typing import Any
 
 import numpy as np
 
+try:
+    from numba import njit
+
+    COMPILED = True
+except ImportError:  # pragma: no cover - numba is a pinned dependency; the numpy path stays usable
+    COMPILED = False
+
 from .. import container
 from ..errors import ClipFormatError, ParameterError
 from . import quantise
@@ -163,7 +170,10 @@ class BonePlayer:
         R, T = self.tracks.transforms(t)
         out = np.empty((len(R), len(self.rest), 3), np.float32)
         for f in range(len(R)):
-            out[f] = blend(R[f], T[f], self.pivot, self.index, self.weight, self.rest)
+            if COMPILED:  # one pass over the vertices, no (V, 3, 3) gathers: the frame route's hot path
+                _blend_into(R[f], T[f], self.pivot, self.index, self.weight, self.rest, out[f])
+            else:
+                out[f] = blend(R[f], T[f], self.pivot, self.index, self.weight, self.rest)
         return out
 
 
@@ -179,6 +189,27 @@ def blend(R: np.ndarray, T: np.ndarray, pivot: np.ndarray, index: np.ndarray, we
         ry = (Rb[:, :, 0] * y[:, 0:1] + Rb[:, :, 1] * y[:, 1:2]) + Rb[:, :, 2] * y[:, 2:3]
         acc += weight[:, k:k + 1] * ((ry + pivot[b]) + T[b])
     return acc
+
+
+def _blend_into(R: np.ndarray, T: np.ndarray, pivot: np.ndarray, index: np.ndarray, weight: np.ndarray,
+                rest: np.ndarray, out: np.ndarray) -> None:
+    """Compiled :func:`blend` rounded to float32 into ``out`` (V, 3), in the same float64 order."""
+    for v in range(rest.shape[0]):
+        a0 = a1 = a2 = 0.0
+        for k in range(index.shape[1]):
+            b, w = index[v, k], weight[v, k]
+            y0, y1, y2 = rest[v, 0] - pivot[b, 0], rest[v, 1] - pivot[b, 1], rest[v, 2] - pivot[b, 2]
+            r0 = (R[b, 0, 0] * y0 + R[b, 0, 1] * y1) + R[b, 0, 2] * y2
+            r1 = (R[b, 1, 0] * y0 + R[b, 1, 1] * y1) + R[b, 1, 2] * y2
+            r2 = (R[b, 2, 0] * y0 + R[b, 2, 1] * y1) + R[b, 2, 2] * y2
+            a0 += w * ((r0 + pivot[b, 0]) + T[b, 0])
+            a1 += w * ((r1 + pivot[b, 1]) + T[b, 1])
+            a2 += w * ((r2 + pivot[b, 2]) + T[b, 2])
+        out[v, 0], out[v, 1], out[v, 2] = np.float32(a0), np.float32(a1), np.float32(a2)
+
+
+if COMPILED:
+    _blend_into = njit(cache=True, nogil=True, boundscheck=False)(_blend_into)
 
 
 def skinned_positions(enc: EncodedBones, rest: np.ndarray, t: np.ndarray, looping: bool = False

@@ -310,3 +310,15 @@ def test_cli_refuses_a_clip_that_requires_an_unknown_feature(tmp_path, capsys):
     assert main(["frame", str(tmp_path / "future.clip"), "--t", "0.5", "--out", str(tmp_path / "f.npz")]) == 2
     err = capsys.readouterr().err
     assert UNKNOWN_FEATURE in err and "supports: bones" in err
+
+
+def test_compiled_and_numpy_skinning_agree_bit_for_bit(monkeypatch):
+    from pdeanim.model import bonelayer
+
+    rng = np.random.default_rng(9)
+    enc = synthetic_bones(200, 5, 4, seed=7)
+    player = bonelayer.BonePlayer(enc, rng.normal(0.0, 1.0, (200, 3)))
+    t = np.linspace(-0.1, 1.1, 7)
+    compiled = player.positions(t)
+    monkeypatch.setattr(bonelayer, "COMPILED", False)
+    np.testing.assert_array_equal(player.positions(t), compiled)
