@@ -20,6 +20,7 @@ from pdeanim.model.bonelayer import (
     EncodedBones,
     encode_bones,
     skinned_positions,
+    weight_levels,
     with_bone_layer,
 )
 from pdeanim.model.clipformat import CoefficientData, decode_topology, encode_coefficients
@@ -85,12 +86,16 @@ def synthetic_bones(V: int, B: int, K: int, seed: int, differences: int = 1) -> 
     if B > 1:
         values[:, 1, :3] = np.array([0.0, 0.0, 3.0]) + 0.05 * rng.normal(size=(Sb + 1, 3))  # near pi
     codes = np.rint(values / step.astype(np.float64)[None]).astype(np.int64)
-    index = rng.integers(0, B, (V, K)).astype(np.uint16)
-    weight = rng.integers(1, 60000, (V, K)).astype(np.uint16)
+    index = rng.integers(0, B, (V, K)).astype(np.uint16)  # in no particular order, repeats allowed
+    raw = rng.uniform(0.05, 1.0, (V, K))
     if K > 1:
-        weight[::5, K - 1] = 0  # a zero weight (its row still sums above 0)
+        raw[::5, K - 1] = 0.0  # the implied last weight 0
+        raw[1::7, 0] = 0.0  # a zero weight first
+        raw[raw.sum(axis=1) == 0, K // 2] = 1.0  # every vertex keeps an influence
+    bits = (8, 12, 16, 5)[seed % 4]
+    weight = weight_levels(raw / raw.sum(axis=1, keepdims=True), 2**bits - 1).astype(np.uint16)
     pivot = rng.normal(0.0, 0.4, (B, 3)).astype(np.float32)
-    return EncodedBones(seg_t, pivot, index, weight, model, mu, step, codes, differences)
+    return EncodedBones(seg_t, pivot, index, weight, model, mu, step, codes, differences, bits)
 
 
 def _zero_curves(topo: bytes, C: int, looping: bool, bones: EncodedBones) -> bytes:
@@ -168,4 +173,5 @@ def bone_manifest(parts: ClipParts) -> dict | None:
     return {"n_bones": header["n_bones"], "influences": header["bone_influences"],
             "bone_segments": int(len(arrays["bone_segment_t"]) - 1),
             "spline_channels": int((model == TIME_SPLINE).sum()), "pair_channels": int((model == 0).sum()),
-            "bone_knot_differences": header["bone_knot_differences"], "residual_zero": curves_zero}
+            "bone_knot_differences": header["bone_knot_differences"],
+            "bone_weight_bits": header["bone_weight_bits"], "residual_zero": curves_zero}

@@ -36,7 +36,7 @@ from pdeanim.poses import make_poses
 
 from . import bonecases
 
-FIXTURE_VERSION = 9
+FIXTURE_VERSION = 10
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 

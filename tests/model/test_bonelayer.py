@@ -16,11 +16,14 @@ from pdeanim.model.bonelayer import (
     BoneMotion,
     BoneTracks,
     bones_header_arrays,
+    coarse_mu,
     decode_bones,
     encode_bones,
     skin,
     skinned_positions,
+    sorted_influences,
     unwrap_rotvec,
+    weight_levels,
     with_bone_layer,
 )
 from pdeanim.model.rigid import rodrigues
@@ -125,6 +128,7 @@ def test_encode_meets_its_target_on_a_bending_tube_and_chooses_time_models_per_c
         assert set(np.unique(enc.time_model)) <= {0, 1}
         assert np.all(enc.mu[:, enc.time_model == TIME_SPLINE] == 0)
         assert np.all(enc.mu > -np.pi)
+        np.testing.assert_array_equal(coarse_mu(enc.mu), enc.mu)  # few significant bits: cheap to store
         sizes.append(enc.n_segments)
     assert sizes[0] <= sizes[1]
 
@@ -139,6 +143,36 @@ def test_a_still_and_unused_bones_encode():
     assert np.abs(got - skin(m, rest)[0]).max() < 1e-3
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-3.0, 40.0), st.integers(1, 8))
+def test_coarse_time_constants_keep_a_few_bits_towards_zero(mu, bits):
+    got = float(coarse_mu(np.array([mu]), bits)[0])
+    assert abs(got) <= abs(mu) and np.sign(got) in (0.0, np.sign(mu))
+    assert abs(mu - got) <= abs(mu) * 2.0 ** (1 - bits)
+    mantissa, _ = np.frexp(abs(got))
+    assert float(mantissa * 2**bits) == int(mantissa * 2**bits)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 4), st.integers(1, 16), st.integers(0, 2**32 - 1))
+def test_weight_levels_sum_to_the_scale_and_stay_within_one_level(V, K, bits, seed):
+    rng = np.random.default_rng(seed)
+    w = rng.uniform(0.0, 1.0, (V, K)) ** 3 + 1e-9
+    w /= w.sum(axis=1, keepdims=True)
+    scale = 2**bits - 1
+    q = weight_levels(w, scale)
+    assert np.all(q.sum(axis=1) == scale) and np.all(q >= 0)
+    assert np.all(np.abs(q - w * scale) < 1.0)
+
+
+def test_sorted_influences_merge_repeats_and_put_zero_weights_last():
+    index = np.array([[3, 1, 3, 0], [2, 2, 5, 1], [4, 0, 1, 2]])
+    q = np.array([[10, 5, 7, 0], [1, 2, 0, 12], [0, 6, 0, 9]])
+    got_i, got_q = sorted_influences(index, q)
+    np.testing.assert_array_equal(got_i, [[1, 3, 3, 3], [1, 2, 2, 2], [0, 2, 2, 2]])
+    np.testing.assert_array_equal(got_q, [[5, 17, 0, 0], [12, 3, 0, 0], [6, 9, 0, 0]])
+
+
 def _stored(K: int = 2, B: int = 3, V: int = 8) -> tuple[dict, dict]:
     enc = synthetic_bones(V, B, K, seed=1)
     header, arrays = bones_header_arrays(enc)
@@ -147,6 +181,13 @@ def _stored(K: int = 2, B: int = 3, V: int = 8) -> tuple[dict, dict]:
 
 def _with(arrays: dict, name: str, value: np.ndarray) -> dict:
     return {**arrays, name: value}
+
+
+def _row_over(weight: np.ndarray) -> np.ndarray:
+    """The stored weights with row 2 above the 12-bit scale of the synthetic layer."""
+    out = weight.copy()
+    out[2] = 5000
+    return out
 
 
 REJECTIONS = [
@@ -160,9 +201,13 @@ REJECTIONS = [
     ("differences", lambda h, a: ({**h, "bone_knot_differences": 3}, a), "bone_knot_differences"),
     ("index >= B", lambda h, a: (h, _with(a, "bone_index", np.full_like(a["bone_index"], 3))),
      "below n_bones"),
-    ("weight row 0", lambda h, a: (h, _with(a, "bone_weight", np.where(np.arange(8)[:, None] == 2, 0,
-                                                                       a["bone_weight"]).astype(np.uint16))),
-     "sum to 0"),
+    ("weights over the scale", lambda h, a: (h, _with(a, "bone_weight", _row_over(a["bone_weight"]))),
+     "sum above 2\\^bone_weight_bits - 1 \\(4095\\)"),
+    ("weight bits 0", lambda h, a: ({**h, "bone_weight_bits": 0}, a), "bone_weight_bits"),
+    ("weight bits 17", lambda h, a: ({**h, "bone_weight_bits": 17}, a), "bone_weight_bits"),
+    ("weight bits missing", lambda h, a: ({k: v for k, v in h.items() if k != "bone_weight_bits"}, a),
+     "bone_weight_bits"),
+    ("weights K columns", lambda h, a: (h, _with(a, "bone_weight", np.ones((8, 2), np.uint16))), "shape"),
     ("step 0", lambda h, a: (h, _with(a, "bone_step", np.zeros_like(a["bone_step"]))), "positive"),
     ("step nan", lambda h, a: (h, _with(a, "bone_step", np.full_like(a["bone_step"], np.nan))), "non-finite"),
     ("mu -pi", lambda h, a: (h, _with(a, "bone_m", np.full_like(a["bone_m"], -np.float32(np.pi)))),
@@ -265,3 +310,15 @@ def test_cli_refuses_a_clip_that_requires_an_unknown_feature(tmp_path, capsys):
     assert main(["frame", str(tmp_path / "future.clip"), "--t", "0.5", "--out", str(tmp_path / "f.npz")]) == 2
     err = capsys.readouterr().err
     assert UNKNOWN_FEATURE in err and "supports: bones" in err
+
+
+def test_compiled_and_numpy_skinning_agree_bit_for_bit(monkeypatch):
+    from pdeanim.model import bonelayer
+
+    rng = np.random.default_rng(9)
+    enc = synthetic_bones(200, 5, 4, seed=7)
+    player = bonelayer.BonePlayer(enc, rng.normal(0.0, 1.0, (200, 3)))
+    t = np.linspace(-0.1, 1.1, 7)
+    compiled = player.positions(t)
+    monkeypatch.setattr(bonelayer, "COMPILED", False)
+    np.testing.assert_array_equal(player.positions(t), compiled)
