@@ -45,8 +45,8 @@ export function hasBones(header) {
 /**
  * The bone layer of a coefficients part (header ch, arrays ca) for V vertices, checked as docs/format.md
  * lists (knots: the curves' decoded knots, to tell whether they add a residual): {residual (false: every knot
- * is 0, the frame is the skinned base), nBones, influences, segmentT (Sb+1), pivot (B*3 float32), index (V*K), weight (V*K float64,
- * rows summing to 1), timeModel (B*6), m (Sb*B*6), knots ((Sb+1) * B*6 float64 of the float32 knot values,
+ * is 0, the frame is the skinned base), nBones, influences, segmentT (Sb+1), pivot (B*3 float32), index (V*K), weight (V*K float64:
+ * the stored K-1 and the implied last, rows summing to 1), timeModel (B*6), m (Sb*B*6), knots ((Sb+1) * B*6 float64 of the float32 knot values,
  * knot-major), tangents (same layout, natural-spline channels' tangents in float64, null without spline
  * channels)}. Plain typed arrays: a Web Worker can transfer them.
  */
@@ -68,7 +68,8 @@ export function decodeBones(ch, ca, V, motion, knots) {
   for (let i = 0; i < index.length; i++) {
     if (index[i] >= B) throw new ClipFormatError(`bone_index holds bone ${index[i]}, the clip has ${B} bones`);
   }
-  const weight = normalisedWeights(boneArray(ca, 'bone_weight', '<u2', [V, K]), K);
+  const bits = boneCount(ch, 'bone_weight_bits', 1, 16);
+  const weight = implicitWeights(boneArray(ca, 'bone_weight', '<u2', [V, K - 1]), V, K, 2 ** bits - 1);
   const timeModel = boneArray(ca, 'bone_time_model', '<u1', [B, BONE_CHANNELS]);
   const m = boneArray(ca, 'bone_m', '<f4', [Sb, B, BONE_CHANNELS]);
   const n = B * BONE_CHANNELS;
@@ -92,14 +93,23 @@ export function decodeBones(ch, ca, V, motion, knots) {
   return { residual, nBones: B, influences: K, segmentT: segT, pivot, index, weight, timeModel, m, knots: values, tangents };
 }
 
-/** Weights q (V*K uint16) normalised per row: w = q / sum_k q (float64); a row summing to 0 is refused. */
-function normalisedWeights(q, K) {
-  const w = new Float64Array(q.length);
-  for (let o = 0; o < q.length; o += K) {
+/**
+ * Weights of V vertices x K influences from the stored K-1 per vertex (q, V*(K-1) uint16): the last is implied,
+ * scale - sum of the others (refused when negative), and w = q / scale in float64 (scale = 2^bits - 1).
+ */
+function implicitWeights(q, V, K, scale) {
+  const w = new Float64Array(V * K);
+  for (let v = 0; v < V; v++) {
     let sum = 0;
-    for (let k = 0; k < K; k++) sum += q[o + k];
-    if (sum === 0) throw new ClipFormatError(`bone_weight row ${o / K} sums to 0`);
-    for (let k = 0; k < K; k++) w[o + k] = q[o + k] / sum;
+    for (let k = 0; k < K - 1; k++) {
+      const x = q[v * (K - 1) + k];
+      sum += x;
+      w[v * K + k] = x / scale;
+    }
+    if (sum > scale) {
+      throw new ClipFormatError(`bone_weight row ${v} sums to ${sum}, above 2^bone_weight_bits - 1 = ${scale}`);
+    }
+    w[v * K + K - 1] = (scale - sum) / scale;
   }
   return w;
 }

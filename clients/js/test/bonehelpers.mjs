@@ -41,11 +41,16 @@ export function boneLayer(rest, { B = 3, K = 2, Sb = 4, order = 1, seed = 7, ang
   const pivot = new Float32Array(B * 3);
   for (let b = 0; b < B; b++) for (let w = 0; w < 3; w++) pivot[b * 3 + w] = lo[w] + ((b + 0.5) / B) * (hi[w] - lo[w]);
   const index = new Uint16Array(V * K);
-  const weight = new Uint16Array(V * K);
+  const weight = new Uint16Array(V * (K - 1)); // the last influence's weight is implied (docs/format.md §3.9)
+  const bits = 12;
+  const scale = 2 ** bits - 1;
   for (let v = 0; v < V; v++) {
+    let left = scale;
     for (let k = 0; k < K; k++) {
       index[v * K + k] = (v + k * 2) % B;
-      weight[v * K + k] = k === 0 ? 1 + Math.floor(rand() * 60000) : Math.floor(rand() * 30000);
+      if (k === K - 1) break;
+      weight[v * (K - 1) + k] = Math.floor(rand() * (left + 1) * (k === 0 ? 1 : 0.5));
+      left -= weight[v * (K - 1) + k];
     }
   }
   const segT = Float64Array.from({ length: Sb + 1 }, (_, j) => (j === Sb ? 1 : (j / Sb) ** 1.3));
@@ -65,12 +70,15 @@ export function boneLayer(rest, { B = 3, K = 2, Sb = 4, order = 1, seed = 7, ang
       m[s * B * 6 + i] = timeModel[i] === 1 || kind === 0 ? 0 : kind === 1 ? 1.7 : kind === 2 ? -2.1 : 0.3;
     }
   }
-  const header = { format_version: '1.1', required: ['bones'], n_bones: B, bone_influences: K, bone_knot_differences: order };
+  const header = {
+    format_version: '1.1', required: ['bones'], n_bones: B, bone_influences: K, bone_knot_differences: order,
+    bone_weight_bits: bits,
+  };
   const arrays = {
     bone_segment_t: { dtype: '<f8', shape: [Sb + 1], data: segT },
     bone_pivot: { dtype: '<f4', shape: [B, 3], data: pivot },
     bone_index: { dtype: '<u2', shape: [V, K], data: index },
-    bone_weight: { dtype: '<u2', shape: [V, K], data: weight },
+    bone_weight: { dtype: '<u2', shape: [V, K - 1], data: weight },
     bone_time_model: { dtype: '<u1', shape: [B, 6], data: timeModel },
     bone_m: { dtype: '<f4', shape: [Sb, B, 6], data: m },
     bone_step: { dtype: '<f4', shape: [B, 6], data: step },
@@ -176,11 +184,12 @@ export function naiveBoneEvaluate(clip, coefficients, t) {
   const residual = naiveEvaluate(clip, t); // rest + the curves' value (displacement)
   const out = new Float64Array(clip.nVertices * 3);
   for (let v = 0; v < clip.nVertices; v++) {
-    let sum = 0;
-    for (let k = 0; k < K; k++) sum += a.bone_weight.data[v * K + k];
+    const scale = 2 ** header.bone_weight_bits - 1;
+    let stored = 0;
+    for (let k = 0; k < K - 1; k++) stored += a.bone_weight.data[v * (K - 1) + k];
     for (let k = 0; k < K; k++) {
       const b = a.bone_index.data[v * K + k];
-      const w = a.bone_weight.data[v * K + k] / sum;
+      const w = (k === K - 1 ? scale - stored : a.bone_weight.data[v * (K - 1) + k]) / scale;
       const R = axisAngle(values[b * 6], values[b * 6 + 1], values[b * 6 + 2]);
       const c = a.bone_pivot.data.subarray(b * 3, b * 3 + 3);
       const d = [0, 1, 2].map((j) => clip.rest[v * 3 + j] - c[j]);
