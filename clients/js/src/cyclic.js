@@ -67,6 +67,9 @@ function bodyFrame(f) {
 export function decodeCyclic(topo, coef) {
   checkFormatVersion(topo.header, 'topology');
   checkFormatVersion(coef.header, 'coefficients');
+  if ((coef.header.required ?? []).includes('bones')) {
+    throw new ClipFormatError('the bone layer (required "bones") is only defined for dynamic-pde clips');
+  }
   const ta = topo.arrays;
   const ca = coef.arrays;
   const missing = ['faces', 'rest', 'vertex_patch', 'vertex_uv'].filter((n) => !ta[n]);

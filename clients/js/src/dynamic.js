@@ -2,6 +2,7 @@
 
 import { ClipFormatError, checkFormatVersion } from './container.js';
 import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
+import { BonePose, decodeBones, hasBones } from './bones.js';
 
 /** Time models of an item (`time_model`, docs/format.md §3.2): the paper's time pairs, the natural spline. */
 export const TIME_PDE = 0;
@@ -436,6 +437,7 @@ export function decodeDynamic(topo, coef) {
     motion,
     looping: Boolean(ch.looping),
     rigid,
+    bones: hasBones(ch) ? decodeBones(ch, ca, V, motion, knots) : null,
     header: ch,
     topologyHeader: th,
   };
@@ -471,8 +473,8 @@ export function vertexBase(clip) {
 
 /** Rodrigues rotation of vector r (3 values at r[ro]) into the 9 values of R at out[o] (row-major). */
 export function rodrigues(rx, ry, rz, out, o = 0) {
-  const th2 = rx * rx + ry * ry + rz * rz;
-  const th = Math.sqrt(th2);
+  const th = Math.sqrt(rx * rx + ry * ry + rz * rz);
+  const th2 = th * th; // the square of the rounded norm, as the reference evaluator (numpy th**2)
   let a;
   let b;
   if (th < 1e-4) {
@@ -717,6 +719,10 @@ export class DynamicEvaluator {
       this.rot = new Float64Array(C * 9);
       this.trans = new Float64Array(C * 3);
     }
+    // the bone layer (format 1.1): its transforms at the time of segmentState(); base is then the skinned
+    // rest pose of the frame (evaluate() writes it), the curves adding their residual to it
+    this.bones = clip.bones ? new BonePose(clip.bones) : null;
+    if (this.bones) this.base = new Float32Array(V * 3);
   }
 
   /** Per knot the per-vertex contribution P[s] ((S+1) x V x 3 float32), computed on first use. */
@@ -796,6 +802,7 @@ export class DynamicEvaluator {
       for (let i = 0; i < 4; i++) cw[i] = Math.fround(cw[i]);
     }
     if (this.clip.rigid) this._rigidAt(this.loc[2]);
+    if (this.bones !== null) this.bones.at(this.loc[2]);
   }
 
   /** Positions (V, 3) at t into out (Float32Array of V * 3, original vertex order); returns out. */
@@ -803,6 +810,14 @@ export class DynamicEvaluator {
     if (out.length < this.nVertices * 3) throw new RangeError(`output needs ${this.nVertices * 3} floats`);
     const clip = this.clip;
     const s = this.prepare(t);
+    if (this.bones !== null) {
+      this.bones.skin(clip.rest, this.base);
+      // no residual: the skinned base is the frame (the knot fields are never made)
+      if (!clip.bones.residual) {
+        out.set(this.base);
+        return out;
+      }
+    }
     if (this.spline !== null) this._valuesSpline(s, out);
     else this._values(s, out);
     return clip.rigid ? applyRigid(out, this.rot, this.trans, clip.curveOf) : out;

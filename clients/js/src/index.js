@@ -9,8 +9,11 @@ export {
   CONTAINER_VERSION,
   ENCODINGS,
   FORMAT_VERSION,
+  SUPPORTED_FEATURES,
+  checkRequired,
   setZstdDecompress,
 } from './container.js';
+export { BonePose, decodeBones } from './bones.js';
 export {
   decodeClip,
   decodeClipFile,

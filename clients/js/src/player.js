@@ -203,7 +203,8 @@ export class ClipPlayer {
   get programKey() {
     const L = this.layout;
     const mode = this._onGPU ? (this.pass ? 'pass' : 'gpu') : 'cpu';
-    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}:${this.normals}:${L.width}:${mode}`;
+    const bones = L.bones ? ':bones' : '';
+    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}:${this.normals}:${L.width}:${mode}`;
   }
 
   /**

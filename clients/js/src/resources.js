@@ -47,6 +47,10 @@ export class ClipResources {
       pdeVertexTex: { value: this.textures.vertex },
       pdeFrameTex: { value: this.textures.frame ?? null },
       pdeDirect: { value: L.nDirect ?? 0 },
+      // clips with bones: the per-frame table's first bone row, the first skin-only vertex and its texel
+      pdeBones: { value: L.boneTexel ?? 0 },
+      pdeSkinOnly: { value: L.skinOnly ?? 0 },
+      pdeSkinTexel: { value: L.skinTexel ?? 0 },
       pdeAxis: { value: L.axis ? [...L.axis] : [1, 0, 0] },
       pdeBend: { value: L.bend ? [...L.bend] : [0, 1, 0] },
       pdeRotate: { value: Boolean(L.rotate) },

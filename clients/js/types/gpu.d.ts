@@ -19,6 +19,23 @@ export interface GpuLayout {
    * tangents of every knot in the orthonormal bases (the CPU applies them; the shader is the same).
    */
   spline: boolean;
+  /** Whether the clip has a bone layer: the shader skins the rest pose with the bone rows of the frame table. */
+  bones?: boolean;
+  /** false for a bone clip whose curves are all 0: no residual tables (no basis rows, curve texels, direct vertices). */
+  residual?: boolean;
+  /**
+   * Bone clips: the GPU number of the first skin-only vertex (those of curves whose knots are all 0, numbered
+   * last: 3 texels each, no residual tables); the clip's vertex count when every curve has a residual.
+   */
+  skinOnly?: number;
+  /** Vertex-texture texel of the first skin-only vertex. */
+  skinTexel?: number;
+  /** Bones B (0 without bones). */
+  nBones?: number;
+  /** Texels per GPU vertex with a residual in the vertex texture: 4, + 2 bone texels with bones. */
+  vertexTexels?: number;
+  /** Frame-table texel of the first bone row (3 texels per bone: [R_b | c_b + T_b - R_b c_b]); uniform pdeBones. */
+  boneTexel?: number;
   nCurves: number;
   nVertices: number;
   /** Segments S of a dynamic clip (0 for cyclic ones). */
@@ -49,7 +66,7 @@ export interface GpuLayout {
   /** Natural-spline tangents of every knot in the orthonormal bases (layout of clip.knots), or null. */
   tangents?: Float32Array | null;
   /** The direct vertices' basis rows, bases and curves, in GPU order (the CPU places them). */
-  direct?: { q: Float32Array; base: Float32Array; curve: Int32Array };
+  direct?: { q: Float32Array; base: Float32Array; curve: Int32Array; vertex: Int32Array };
   /** The CPU evaluator's index of time constants (dynamic clips; made with the tables, in a worker). */
   timeIndex?: object;
   /** The clip (gpuLayout; absent in gpuTables). */

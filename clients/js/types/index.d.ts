@@ -10,8 +10,18 @@ export declare const CONTAINER_VERSION: 1;
 export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
 /** The clip format written and read (docs/format.md): readers accept any "1.<minor>". */
 export declare const FORMAT_VERSION: '1.0';
-/** Throws ClipFormatError unless header.format_version is "1.<minor>". */
-export declare function checkFormatVersion(header: { format_version?: unknown }, part: string): void;
+/** The format features this reader implements (a part's `required` list may name only these). */
+export declare const SUPPORTED_FEATURES: readonly ['bones'];
+/**
+ * Throws ClipFormatError unless header.format_version is "1.<minor>" and every feature its `required` names
+ * is supported (checkRequired).
+ */
+export declare function checkFormatVersion(header: { format_version?: unknown; required?: unknown }, part: string): void;
+/**
+ * The features a part requires (`required`, absent = []); throws ClipFormatError naming any this reader lacks
+ * and the supported set, or when `required` is not a list of strings.
+ */
+export declare function checkRequired(header: { required?: unknown }, part: string): string[];
 /** Time models of an item (`time_model`): the paper's time pairs (0), the natural cubic spline (1). */
 export declare const TIME_PDE: 0;
 export declare const TIME_SPLINE: 1;
@@ -72,6 +82,60 @@ export interface RigidTracks {
   transMu: Float32Array;
 }
 
+/**
+ * The bone layer of a format 1.1 clip (feature "bones", docs/format.md): B rigid bone transforms over time,
+ * linear-blend skinning of the rest pose with at most 4 influences per vertex; the curves add a residual.
+ */
+export interface BoneLayer {
+  /** false when every curve knot is 0: the frame is the skinned rest pose (no residual tables on the GPU). */
+  residual: boolean;
+  nBones: number;
+  /** Influences K per vertex (1..4). */
+  influences: number;
+  /** The bone tracks' own segment boundaries (Sb+1), strictly increasing from 0 to 1. */
+  segmentT: Float64Array;
+  /** Rest-pose pivots (B, 3). */
+  pivot: Float32Array;
+  /** Bone of each influence (V, K), original vertex order. */
+  index: Uint16Array;
+  /** Normalised weights (V, K) float64, rows summing to 1. */
+  weight: Float64Array;
+  /** Time model of each channel (B, 6): 0 the paper's pair, 1 the natural spline. */
+  timeModel: Uint8Array;
+  /** Signed time constants (Sb, B, 6). */
+  m: Float32Array;
+  /** Knot values ((Sb+1), B * 6) float64 of the float32 values, knot-major. */
+  knots: Float64Array;
+  /** Natural-spline tangents in the layout of knots, or null without spline channels. */
+  tangents: Float64Array | null;
+}
+
+/** The bone transforms of a bone layer at a time (float64), and the skinning of the rest pose with them. */
+export declare class BonePose {
+  constructor(bones: BoneLayer);
+  /** Row-major R_b of every bone (B * 9) at the last at(). */
+  readonly rot: Float64Array;
+  /** T_b of every bone (B * 3) at the last at(). */
+  readonly trans: Float64Array;
+  /** The transforms at wrapped clip time tw in [0, 1]. */
+  at(tw: number): this;
+  /** Rows [R_b | c_b + T_b - R_b c_b] (B * 12): x -> R_b (x - c_b) + c_b + T_b as an affine map. */
+  affine(out?: Float64Array): Float64Array;
+  /** Skinned position of vertex v (float64) into out[o..o+2]. */
+  skinVertex(rest: Float32Array, v: number, out: Float64Array | number[], o?: number): Float64Array | number[];
+  /** Skinned rest pose (V * 3) into out (a Float32Array rounds each coordinate once). */
+  skin(rest: Float32Array, out: Float32Array): Float32Array;
+}
+
+/** The checked bone layer of a coefficients part (docs/format.md's rejections as ClipFormatError). */
+export declare function decodeBones(
+  header: Record<string, any>,
+  arrays: Record<string, ContainerArray>,
+  nVertices: number,
+  motion: string,
+  knots: Float32Array,
+): BoneLayer;
+
 export interface DynamicClip extends ClipBase {
   kind: 'dynamic-pde';
   nCurves: number;
@@ -96,6 +160,8 @@ export interface DynamicClip extends ClipBase {
    */
   timeModel: Uint8Array | null;
   rigid: RigidTracks | null;
+  /** The bone layer (format 1.1, `required` lists "bones"): the curves are then a residual on it; else null. */
+  bones: BoneLayer | null;
 }
 
 export interface SwimParams {
@@ -139,6 +205,8 @@ export interface Evaluator {
 export declare class DynamicEvaluator implements Evaluator {
   constructor(clip: DynamicClip);
   readonly nVertices: number;
+  /** The bone transforms at the last evaluated time (clips with bones), else null. */
+  readonly bones: BonePose | null;
   evaluate(t: number, out?: Float32Array): Float32Array;
 }
 

@@ -18,9 +18,13 @@ export const ENCODINGS = Object.freeze(['zstd', 'shuffle-zstd']);
 /** The clip format every part and CLIP file is written in (docs/format.md): readers accept any "1.<minor>". */
 export const FORMAT_VERSION = '1.0';
 
+/** The format features this reader implements (a part's `required` list may name only these). */
+export const SUPPORTED_FEATURES = Object.freeze(['bones']);
+
 /**
  * Throw ClipFormatError unless a part's header.format_version is "1.<minor>" (minor versions only add header
- * keys or arrays that readers ignore; another major version changes the layout).
+ * keys or arrays that readers ignore; another major version changes the layout) and every feature its
+ * `required` list names is one this reader implements (checkRequired).
  */
 export function checkFormatVersion(header, part) {
   const version = header?.format_version;
@@ -30,6 +34,26 @@ export function checkFormatVersion(header, part) {
       `unsupported clip format version ${JSON.stringify(version ?? null)} in the ${part} part (this build reads 1.x)`,
     );
   }
+  checkRequired(header, part);
+}
+
+/**
+ * The features a part's header requires (`required`: a list of strings, absent = none), after refusing, with
+ * a ClipFormatError naming them and the supported set, any this reader lacks: the part would be drawn wrong.
+ */
+export function checkRequired(header, part) {
+  const required = header?.required ?? [];
+  if (!Array.isArray(required) || !required.every((x) => typeof x === 'string')) {
+    throw new ClipFormatError(`the ${part} part's 'required' must be a list of feature names, got ${JSON.stringify(required)}`);
+  }
+  const missing = required.filter((x) => !SUPPORTED_FEATURES.includes(x));
+  if (missing.length) {
+    throw new ClipFormatError(
+      `the ${part} part requires format feature(s) ${missing.map((x) => JSON.stringify(x)).join(', ')} that this ` +
+        `reader lacks (it supports: ${SUPPORTED_FEATURES.join(', ')}); update pdeanim to play it`,
+    );
+  }
+  return required;
 }
 
 /** Error thrown for anything that is not a valid pdeanim clip, part or container. */

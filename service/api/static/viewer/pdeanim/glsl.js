@@ -10,6 +10,8 @@ function defines(layout, { normals, stage, pass, cpu }) {
   if (cpu) defs.push('#define PDEANIM_CPU');
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
+  if (layout.bones) defs.push('#define PDEANIM_BONES');
+  defs.push(`#define PDEANIM_VERTEX_TEXELS ${layout.vertexTexels ?? 4}`);
   defs.push(`#define PDEANIM_CURVE_TEXELS ${layout.curveTexels ?? 0}`);
   defs.push(`#define PDEANIM_COEFFICIENT_TEXELS ${layout.coefficientTexels ?? 0}`);
   defs.push(`#define PDEANIM_WIDTH_SHIFT ${Math.log2(layout.width)}`);
@@ -39,6 +41,11 @@ uniform int pdeVertices;
 uniform highp sampler2D pdeFrameTex;
 uniform int pdeDirect;
 #endif
+#ifdef PDEANIM_BONES
+uniform int pdeBones;
+uniform int pdeSkinOnly;
+uniform int pdeSkinTexel;
+#endif
 #ifdef PDEANIM_CYCLIC
 uniform float pdeSinWt;
 uniform float pdeCosWt;
@@ -54,16 +61,42 @@ vec4 pdeFetch(highp sampler2D tex, int i) {
 `;
 
 // one clip vertex v (the GPU's numbering, gpu.js): a direct vertex's position from the per-frame table,
-// else base + per coordinate the frame's coefficients of its curve (from the per-frame table, after the
-// direct positions) dotted with the vertex's basis row, then the curve's rigid motion
+// else base (with bones: the rest position skinned by the bone rows at the end of the per-frame table) + per
+// coordinate the frame's coefficients of its curve (from the per-frame table, after the direct positions)
+// dotted with the vertex's basis row, then the curve's rigid motion; with bones, the vertices from
+// pdeSkinOnly on (curves without residual) are their skinned rest position alone
 const DYNAMIC_EVAL = `
 #ifdef PDEANIM_DYNAMIC
+#ifdef PDEANIM_BONES
+vec3 pdeSkin(int r, vec3 rest) {
+  vec4 index = pdeFetch(pdeVertexTex, r);
+  vec4 weight = pdeFetch(pdeVertexTex, r + 1);
+  vec4 x = vec4(rest, 1.0);
+  vec3 acc = vec3(0.0);
+  for (int k = 0; k < 4; k++) {
+    if (weight[k] == 0.0) continue;
+    int b = pdeBones + int(index[k] + 0.5) * 3;
+    acc += weight[k] * vec3(dot(pdeFetch(pdeFrameTex, b), x), dot(pdeFetch(pdeFrameTex, b + 1), x),
+      dot(pdeFetch(pdeFrameTex, b + 2), x));
+  }
+  return acc;
+}
+#endif
 vec3 pdeEval(int v) {
   if (v < pdeDirect) return pdeFetch(pdeFrameTex, v).xyz;
-  int r = (v - pdeDirect) * 4;
+#ifdef PDEANIM_BONES
+  if (v >= pdeSkinOnly) {
+    int s = pdeSkinTexel + (v - pdeSkinOnly) * 3;
+    return pdeSkin(s + 1, pdeFetch(pdeVertexTex, s).yzw);
+  }
+#endif
+  int r = (v - pdeDirect) * PDEANIM_VERTEX_TEXELS;
   vec4 head = pdeFetch(pdeVertexTex, r);
-  int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   vec3 p = head.yzw;
+#ifdef PDEANIM_BONES
+  p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p);
+#endif
+  int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   for (int w = 0; w < 3; w++) p[w] += dot(pdeFetch(pdeFrameTex, c + w), pdeFetch(pdeVertexTex, r + 1 + w));
 #ifdef PDEANIM_RIGID
   vec4 r0 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS);

@@ -49,42 +49,52 @@ function texture(nTexels, width) {
  * every knot's coefficients in the orthonormal bases (orthonormalTangents) for clips with items on the spline
  * (docs/format.md §3.5); direct the basis rows (q, nDirect * 12), bases (nDirect * 3) and curves of the
  * direct vertices in GPU order; timeIndex the CPU evaluator's index of time constants (dynamic.js).
+ *
+ * Clips with bones (format 1.1): every GPU vertex has two more texels (vertexTexels 6), the bone indices and
+ * the normalised weights of its (up to 4) influences (unused ones weight 0), and the per-frame table ends,
+ * from texel boneTexel, with 3 texels per bone: the rows [R_b | c_b + T_b - R_b c_b] of its transform at the
+ * frame (evaluated on the CPU, B bones); the shader skins the rest position with them and adds the residual.
+ * The vertices of curves whose residual is zero (every knot 0) cost no residual tables: numbered last, from
+ * skinOnly, they have 3 texels each from texel skinTexel (rest, indices, weights), no basis rows, no curve
+ * coefficients and no direct positions. A clip whose residual is zero everywhere (residual false) has only
+ * those.
  */
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   if (clip.kind === 'cyclic-spine') return cyclicTables(clip, fittedWidth(clip.nVertices * 3, width));
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, offsets, rigid } = clip;
-  const spline = (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
+  const bones = clip.bones ?? null;
+  const residual = bones === null || bones.residual;
+  const spline = residual && (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
   const coefficientTexels = 3;
   const curveTexels = coefficientTexels + (rigid ? 3 : 0);
-  const { gpuIndex, gpuCurve, nDirect, nGpuCurves } = gpuNumbering(curveOf, offsets, curveTexels);
-  const frameTexels = nDirect + nGpuCurves * curveTexels;
-  width = fittedWidth(Math.max((V - nDirect) * 4, frameTexels), width);
+  const zero = bones ? zeroCurves(clip.knots, C) : null; // curves without residual (bone clips only)
+  const numbering = gpuNumbering(curveOf, offsets, curveTexels, zero);
+  const { gpuIndex, gpuCurve, nDirect, nGpuCurves, skinOnly } = numbering;
+  const vertexTexels = 4 + (bones ? 2 : 0);
+  const skinTexel = (skinOnly - nDirect) * vertexTexels;
+  const boneTexel = nDirect + nGpuCurves * curveTexels;
+  const frameTexels = boneTexel + (bones ? bones.nBones * 3 : 0);
+  const vertexTexelsAll = skinTexel + (V - skinOnly) * SKIN_TEXELS;
+  width = fittedWidth(Math.max(vertexTexelsAll, frameTexels), width);
   const base = vertexBase(clip);
-  const { q, r } = orthonormalBases(clip);
-  const vertex = texture((V - nDirect) * 4, width); // per GPU vertex: (curve, base xyz), basis x, y, z
-  const d = vertex.data;
-  const direct = { q: new Float32Array(nDirect * 12), base: new Float32Array(nDirect * 3), curve: new Int32Array(nDirect) };
-  for (let v = 0; v < V; v++) {
-    const g = gpuIndex[v];
-    if (g < nDirect) {
-      direct.curve[g] = curveOf[v];
-      direct.base.set(base.subarray(v * 3, v * 3 + 3), g * 3);
-      direct.q.set(q.subarray(v * 12, v * 12 + 12), g * 12);
-      continue;
-    }
-    const o = (g - nDirect) * 16;
-    d[o] = gpuCurve[curveOf[v]];
-    d[o + 1] = base[v * 3];
-    d[o + 2] = base[v * 3 + 1];
-    d[o + 3] = base[v * 3 + 2];
-    for (let k = 0; k < 12; k++) d[o + 4 + k] = q[v * 12 + k];
-  }
+  const { q, r } = residual ? orthonormalBases(clip) : { q: null, r: null };
+  // per GPU vertex: (curve, base xyz), basis x, y, z, with bones its bone indices and weights; then the
+  // skin-only vertices: (0, rest xyz), bone indices, bone weights
+  const vertex = texture(vertexTexelsAll, width);
+  const direct = vertexRows(clip, { ...numbering, vertexTexels, skinTexel, base, q }, vertex.data);
   const tangents = spline ? orthonormalTangents(clip, r) : null;
   const textures = { vertex, frame: texture(frameTexels, width) };
   return {
     kind: clip.kind,
     rigid: Boolean(rigid),
     spline,
+    bones: bones !== null,
+    residual,
+    nBones: bones ? bones.nBones : 0,
+    vertexTexels,
+    skinOnly,
+    skinTexel,
+    boneTexel,
     nCurves: C,
     nVertices: V,
     nSegments: S,
@@ -104,28 +114,81 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
 }
 
 /**
+ * The vertex texture's rows of the GPU vertices into d (vertexTexels per vertex: (GPU curve, base xyz), the
+ * basis rows q when the clip has a residual, the bone texels with bones); returns the direct vertices' data
+ * {q, base, curve, vertex} in GPU order.
+ */
+function vertexRows(clip, { gpuIndex, gpuCurve, nDirect, skinOnly, vertexTexels, skinTexel, base, q }, d) {
+  const { curveOf, bones } = clip;
+  const direct = {
+    q: new Float32Array(nDirect * 12),
+    base: new Float32Array(nDirect * 3),
+    curve: new Int32Array(nDirect),
+    vertex: new Int32Array(nDirect), // the clip vertex (bones: the CPU skins it each frame)
+  };
+  for (let v = 0; v < clip.nVertices; v++) {
+    const g = gpuIndex[v];
+    if (g < nDirect) {
+      direct.curve[g] = curveOf[v];
+      direct.vertex[g] = v;
+      direct.base.set(base.subarray(v * 3, v * 3 + 3), g * 3);
+      direct.q.set(q.subarray(v * 12, v * 12 + 12), g * 12);
+      continue;
+    }
+    const skin = g >= skinOnly; // no residual: rest and bone texels only
+    const o = skin ? (skinTexel + (g - skinOnly) * SKIN_TEXELS) * 4 : (g - nDirect) * vertexTexels * 4;
+    d[o] = skin ? 0 : gpuCurve[curveOf[v]];
+    d[o + 1] = base[v * 3];
+    d[o + 2] = base[v * 3 + 1];
+    d[o + 3] = base[v * 3 + 2];
+    if (!skin) for (let k = 0; k < 12; k++) d[o + 4 + k] = q[v * 12 + k];
+    if (bones) boneTexels(bones, v, d, o + ((skin ? SKIN_TEXELS : vertexTexels) - 2) * 4);
+  }
+  return direct;
+}
+
+/** Vertex v's bone indices, then its normalised weights (4 each, unused influences 0) into d[o..o+7]. */
+function boneTexels(bones, v, d, o) {
+  const K = bones.influences;
+  for (let k = 0; k < K; k++) {
+    d[o + k] = bones.index[v * K + k];
+    d[o + 4 + k] = bones.weight[v * K + k];
+  }
+}
+
+/** Texels per skin-only vertex (bone clips, a curve without residual): (0, rest xyz), indices, weights. */
+const SKIN_TEXELS = 3;
+
+/** Per curve (C) 1 when every knot of its items is 0 (knots (S+1, C, 3, 4)): it adds no residual. */
+function zeroCurves(knots, C) {
+  const zero = new Uint8Array(C).fill(1);
+  for (let i = 0; i < knots.length; i++) if (knots[i] !== 0) zero[Math.floor(i / 12) % C] = 0;
+  return zero;
+}
+
+/**
  * The GPU's numbering of a clip's vertices and curves: curves of at most `short` vertices are direct (the
  * CPU places their vertices), numbered first in clip order; the others follow in clip order, and their
- * curves get GPU curve numbers 0.. (gpuCurve, -1 for direct curves).
+ * curves get GPU curve numbers 0.. (gpuCurve, -1 for direct curves); last, from skinOnly, the vertices of
+ * the curves zero marks (bone clips: no residual; gpuCurve -1 too).
  */
-function gpuNumbering(curveOf, offsets, short) {
+function gpuNumbering(curveOf, offsets, short, zero = null) {
   const V = curveOf.length;
   const C = offsets.length - 1;
   const gpuCurve = new Int32Array(C);
+  const kind = new Uint8Array(C); // 0 direct, 1 GPU curve, 2 skin only
+  const counts = [0, 0, 0];
   let nGpuCurves = 0;
-  let nDirect = 0;
   for (let c = 0; c < C; c++) {
     const n = offsets[c + 1] - offsets[c];
-    if (n <= short) {
-      gpuCurve[c] = -1;
-      nDirect += n;
-    } else gpuCurve[c] = nGpuCurves++;
+    kind[c] = zero?.[c] ? 2 : n <= short ? 0 : 1;
+    gpuCurve[c] = kind[c] === 1 ? nGpuCurves++ : -1;
+    counts[kind[c]] += n;
   }
+  const next = [0, counts[0], counts[0] + counts[1]];
   const gpuIndex = new Int32Array(V);
-  for (let v = 0, nextDirect = 0, nextGpu = nDirect; v < V; v++) {
-    gpuIndex[v] = gpuCurve[curveOf[v]] < 0 ? nextDirect++ : nextGpu++;
-  }
-  return { gpuIndex, gpuCurve, nDirect, nGpuCurves };
+  for (let v = 0; v < V; v++) gpuIndex[v] = next[kind[curveOf[v]]]++;
+  return { gpuIndex, gpuCurve, nDirect: counts[0], nGpuCurves, skinOnly: counts[0] + counts[1] };
 }
 
 /**
@@ -247,7 +310,7 @@ export function timeUniforms(layout, t) {
   const loc = ev.locate(t);
   const seg = loc[0];
   const last = layout.tableAt ?? (layout.tableAt = [-1, NaN, NaN]);
-  if (seg === last[0] && loc[1] === last[1] && (!layout.rigid || loc[2] === last[2])) {
+  if (seg === last[0] && loc[1] === last[1] && ((!layout.rigid && !layout.bones) || loc[2] === last[2])) {
     return { seg, sw: 0, cw: 0, changed: false };
   }
   last[0] = seg;
@@ -350,20 +413,26 @@ function frameCoefficients(layout, ev, seg, rows) {
  * three coefficient texels and, for rigid clips, its rigid rows.
  */
 function writeFrame(layout, ev, seg, d) {
+  if (layout.bones) writeBones(layout, ev, d);
+  if (!layout.residual) return;
   const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg));
   const { nDirect, gpuCurve, direct } = layout;
   const { q, base, curve } = direct;
   const rot = layout.rigid ? ev.rot : null;
   const trans = layout.rigid ? ev.trans : null;
+  const skinned = layout.bones ? (layout.skinScratch ??= new Float64Array(3)) : null;
   for (let g = 0; g < nDirect; g++) {
     const c = curve[g];
     const Q = g * 12;
     const Y = c * 12;
     const o = g * 4;
+    // bones: the vertex's skinned rest position (float64) in place of its base
+    const b = skinned === null ? base : ev.bones.skinVertex(layout.clip.rest, direct.vertex[g], skinned);
+    const bo = skinned === null ? g * 3 : 0;
     for (let w = 0; w < 3; w++) {
       const k = Q + w * 4;
       const j = Y + w * 4;
-      d[o + w] = base[g * 3 + w] + (q[k] * y[j] + q[k + 1] * y[j + 1] + q[k + 2] * y[j + 2] + q[k + 3] * y[j + 3]);
+      d[o + w] = b[bo + w] + (q[k] * y[j] + q[k + 1] * y[j + 1] + q[k + 2] * y[j + 2] + q[k + 3] * y[j + 3]);
     }
     if (rot !== null) {
       const x = d[o];
@@ -389,6 +458,12 @@ function writeFrame(layout, ev, seg, d) {
       d[o + 15 + i * 4] = trans[c * 3 + i];
     }
   }
+}
+
+/** The bones' rows [R_b | c_b + T_b - R_b c_b] at the evaluator's time into d from texel layout.boneTexel. */
+function writeBones(layout, ev, d) {
+  const rows = ev.bones.affine((layout.boneRows ??= new Float64Array(layout.nBones * 12)));
+  d.set(rows, layout.boneTexel * 4);
 }
 
 /**
