@@ -27,6 +27,7 @@ uniform bool pdeEnabled;
 uniform float pdeInfluence;
 uniform mat4 pdeClipToLocal;
 uniform mat3 pdeNormalToLocal;
+uniform highp sampler2D pdeRingTex;
 #ifdef PDEANIM_CPU
 in vec3 pdeCpuPosition;
 in vec3 pdeCpuNormal;
@@ -130,7 +131,9 @@ vec3 pdeEval(int v) {
 `;
 
 // the mesh vertex: its clip vertex's position (read from the pass's texture, or evaluated here) in the
-// mesh's frame, and its normal turned with the frame of its triangle (p, a, b)
+// mesh's frame; a smooth vertex (pdeVertex.y -1) gets the area-weighted normal of its clip vertex's ring
+// (pair k of the ring texture: texel k / 2, half k % 2; pair v is (first, count) of GPU vertex v, then the
+// (a, b) of its triangles), any other its normal turned with the frame of its triangle (p, a, b)
 const VERTEX_STAGE = `
 #ifdef PDEANIM_VERTEX_STAGE
 vec3 pdeAt(int v) {
@@ -139,6 +142,21 @@ vec3 pdeAt(int v) {
 #else
   return pdeEval(v);
 #endif
+}
+vec2 pdeRingPair(int k) {
+  vec4 t = pdeFetch(pdeRingTex, k >> 1);
+  return (k & 1) == 0 ? t.xy : t.zw;
+}
+vec3 pdeRingNormal(int v, vec3 p) {
+  vec2 h = pdeRingPair(v);
+  int first = int(h.x + 0.5);
+  int last = first + int(h.y + 0.5);
+  vec3 n = vec3(0.0);
+  for (int k = first; k < last; k++) {
+    vec2 ab = pdeRingPair(k);
+    n += cross(pdeAt(int(ab.x + 0.5)) - p, pdeAt(int(ab.y + 0.5)) - p);
+  }
+  return n;
 }
 void pdeCompute() {
 #ifdef PDEANIM_CPU
@@ -153,7 +171,10 @@ void pdeCompute() {
   pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
 #ifndef PDEANIM_REST_NORMALS
-  if (va != v) {
+  if (pdeVertex.y < -0.5) {
+    vec3 n = pdeRingNormal(v, p);
+    if (dot(n, n) > 0.0) pdeNormal = normalize(pdeNormalToLocal * n);
+  } else if (va != v) {
     vec3 e1 = pdeAt(va) - p;
     vec3 e2 = pdeAt(vb) - p;
     vec3 t1 = normalize(e1);

@@ -161,8 +161,10 @@ test('GPU tables are plain typed arrays (a worker can transfer them) and gpuLayo
   const needed = {
     vertex: (clip.nVertices - tables.nDirect) * 4,
     frame: tables.nDirect + gpuCurves * tables.curveTexels,
+    // the normals' rings: a pair per vertex and per triangle corner, two pairs a texel
+    ring: Math.ceil((clip.nVertices + clip.faces.length) / 2),
   };
-  assert.equal(tables.width, fittedWidth(Math.max(needed.vertex, needed.frame), 128));
+  assert.equal(tables.width, fittedWidth(Math.max(needed.vertex, needed.frame, needed.ring), 128));
   for (const [k, t] of Object.entries(tables.textures)) assert.ok(t.width * t.height - Math.max(1, needed[k]) < t.width, k);
   assert.deepEqual(structuredClone(tables), tables);
 });
@@ -621,7 +623,7 @@ test('the per-frame table: direct vertices their positions, then per GPU curve i
     assert.equal(layout.curveTexels, layout.rigid ? 6 : 3);
     assert.equal(layout.spline, c.spline_items > 0);
     // the knots stay on the CPU: the GPU holds the vertex records and one frame
-    assert.deepEqual(Object.keys(layout.textures).sort(), ['frame', 'vertex']);
+    assert.deepEqual(Object.keys(layout.textures).sort(), ['frame', 'ring', 'vertex']);
     // direct vertices: those of curves with at most curveTexels vertices, numbered first
     const C = clip.nCurves;
     const length = (k) => clip.offsets[k + 1] - clip.offsets[k];
