@@ -171,7 +171,7 @@ function ringTexels(rings) {
  * (gpuIndex; null: the clip's): pairs of floats, two per texel; pair g (g < V) is GPU vertex g's (first,
  * count), pairs first .. first + count - 1 its ring's (a, b). 8 bytes per vertex and per triangle corner.
  */
-function ringTexture({ offset, pairs }, gpuIndex, width) {
+export function ringTexture({ offset, pairs }, gpuIndex, width) {
   const V = offset.length - 1;
   const total = V + offset[V];
   if (total >= 2 ** 24) throw new RangeError(`the clip's vertex rings need ${total} entries (float32 indices: < 2^24)`);
