@@ -143,11 +143,13 @@ export function vertexRings(faces, rest) {
 
 /**
  * Unit area-weighted normals (V * 3) of positions (V * 3) over vertexRings(): per vertex the sum of
- * cross(a - p, b - p) over its ring, normalised (zero when the sum is). Allocation-free; returns out.
+ * cross(a - p, b - p) over its ring, normalised (zero when the sum is); only those of vertices (a list of
+ * vertex numbers; null: all). Allocation-free; returns out.
  */
-export function ringNormals(positions, { offset, pairs }, out = new Float32Array(positions.length)) {
-  const V = offset.length - 1;
-  for (let v = 0; v < V; v++) {
+export function ringNormals(positions, { offset, pairs }, out = new Float32Array(positions.length), vertices = null) {
+  const n = vertices ? vertices.length : offset.length - 1;
+  for (let i = 0; i < n; i++) {
+    const v = vertices ? vertices[i] : i;
     const px = positions[v * 3];
     const py = positions[v * 3 + 1];
     const pz = positions[v * 3 + 2];

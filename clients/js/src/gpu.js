@@ -630,8 +630,18 @@ export function frameNormals(clipPositions, attrs, restNormals, out, clipNormals
   return out;
 }
 
-/** The clip's area-weighted vertex normals (V * 3) at positions (V * 3), over the tables' rings. */
-export function clipNormals(tables, positions, out = new Float32Array(positions.length)) {
-  return ringNormals(positions, tables.rings, out);
+/**
+ * The clip's area-weighted vertex normals (V * 3) at positions (V * 3), over the tables' rings (only those of
+ * vertices, a list of clip vertices, when given).
+ */
+export function clipNormals(tables, positions, out = new Float32Array(positions.length), vertices = null) {
+  return ringNormals(positions, tables.rings, out, vertices);
+}
+
+/** The clip vertices of the smooth mesh vertices of meshAttributes() (each once): those frameNormals reads. */
+export function smoothVertices({ pdeVertex }) {
+  const seen = new Set();
+  for (let i = 0; i < pdeVertex.length; i += 3) if (pdeVertex[i + 1] < 0) seen.add(pdeVertex[i]);
+  return Int32Array.from(seen);
 }
 export { glslHeader, glslPassMain, patchVertexShader } from './glsl.js';
