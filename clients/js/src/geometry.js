@@ -104,8 +104,8 @@ export function triangleQuality(pos, p, a, b) {
  * triangles (p, a, b), in winding order, so that the sum of cross(a - p, b - p) is three.js's
  * computeVertexNormals. Vertices at the same rest position (seam duplicates, rest V * 3) share one ring: each
  * lists the triangles of all of them, so that they get one normal as a smooth-shaded source gives them.
- * Returns {offset (Int32Array V + 1), pairs (Int32Array, 2 per triangle corner)}: v's pairs are
- * pairs[2 * offset[v] .. 2 * offset[v + 1]).
+ * Returns {offset (Int32Array V + 1), pairs (Int32Array, 2 per triangle corner), group (Int32Array V: the
+ * first vertex at each vertex's rest position)}: v's pairs are pairs[2 * offset[v] .. 2 * offset[v + 1]).
  */
 export function vertexRings(faces, rest) {
   const V = rest.length / 3;
@@ -138,7 +138,7 @@ export function vertexRings(faces, rest) {
     const g = group[v];
     pairs.set(groupPairs.subarray(start[g] * 2, start[g + 1] * 2), offset[v] * 2);
   }
-  return { offset, pairs };
+  return { offset, pairs, group };
 }
 
 /**

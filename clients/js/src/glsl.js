@@ -132,8 +132,8 @@ vec3 pdeEval(int v) {
 
 // the mesh vertex: its clip vertex's position (read from the pass's texture, or evaluated here) in the
 // mesh's frame; a smooth vertex (pdeVertex.y -1) gets the area-weighted normal of its clip vertex's ring
-// (pair k of the ring texture: texel k / 2, half k % 2; pair v is (first, count) of GPU vertex v, then the
-// (a, b) of its triangles), any other its normal turned with the frame of its triangle (p, a, b)
+// (gpu.js ringTable: a closed fan of neighbours, or the (a, b) pairs of its triangles), any other its normal
+// turned with the frame of its triangle (p, a, b)
 const VERTEX_STAGE = `
 #ifdef PDEANIM_VERTEX_STAGE
 vec3 pdeAt(int v) {
@@ -143,19 +143,29 @@ vec3 pdeAt(int v) {
   return pdeEval(v);
 #endif
 }
-vec2 pdeRingPair(int k) {
-  vec4 t = pdeFetch(pdeRingTex, k >> 1);
-  return (k & 1) == 0 ? t.xy : t.zw;
+float pdeRingValue(int i) {
+  vec4 t = pdeFetch(pdeRingTex, i >> 2);
+  int c = i & 3;
+  return c == 0 ? t.x : c == 1 ? t.y : c == 2 ? t.z : t.w;
+}
+vec3 pdeRingAt(int i, vec3 p) {
+  return pdeAt(int(pdeRingValue(i) + 0.5)) - p;
 }
 vec3 pdeRingNormal(int v, vec3 p) {
-  vec2 h = pdeRingPair(v);
-  int first = int(h.x + 0.5);
-  int last = first + int(h.y + 0.5);
+  int first = int(pdeRingValue(2 * v) + 0.5);
+  int count = int(pdeRingValue(2 * v + 1));
   vec3 n = vec3(0.0);
-  for (int k = first; k < last; k++) {
-    vec2 ab = pdeRingPair(k);
-    n += cross(pdeAt(int(ab.x + 0.5)) - p, pdeAt(int(ab.y + 0.5)) - p);
+  if (count > 0) {
+    vec3 e0 = pdeRingAt(first, p);
+    vec3 ea = e0;
+    for (int k = 1; k < count; k++) {
+      vec3 eb = pdeRingAt(first + k, p);
+      n += cross(ea, eb);
+      ea = eb;
+    }
+    return n + cross(ea, e0);
   }
+  for (int k = first; k < first - 2 * count; k += 2) n += cross(pdeRingAt(k, p), pdeRingAt(k + 1, p));
   return n;
 }
 void pdeCompute() {

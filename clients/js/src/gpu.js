@@ -62,7 +62,8 @@ function texture(nTexels, width) {
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   if (clip.kind === 'cyclic-spine') {
     const rings = vertexRings(clip.faces, clip.rest);
-    return cyclicTables(clip, fittedWidth(Math.max(clip.nVertices * 3, ringTexels(rings)), width), rings);
+    const ring = ringTable(rings);
+    return cyclicTables(clip, fittedWidth(Math.max(clip.nVertices * 3, Math.ceil(ring.length / 4)), width), rings, ring);
   }
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, offsets, rigid } = clip;
   const bones = clip.bones ?? null;
@@ -79,7 +80,8 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   const frameTexels = boneTexel + (bones ? bones.nBones * 3 : 0);
   const vertexTexelsAll = skinTexel + (V - skinOnly) * SKIN_TEXELS;
   const rings = vertexRings(clip.faces, clip.rest);
-  width = fittedWidth(Math.max(vertexTexelsAll, frameTexels, ringTexels(rings)), width);
+  const ring = ringTable(rings, gpuIndex);
+  width = fittedWidth(Math.max(vertexTexelsAll, frameTexels, Math.ceil(ring.length / 4)), width);
   const base = vertexBase(clip);
   const { q, r } = residual ? orthonormalBases(clip) : { q: null, r: null };
   // per GPU vertex: (curve, base xyz), basis x, y, z, with bones its bone indices and weights; then the
@@ -87,7 +89,7 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   const vertex = texture(vertexTexelsAll, width);
   const direct = vertexRows(clip, { ...numbering, vertexTexels, skinTexel, base, q }, vertex.data);
   const tangents = spline ? orthonormalTangents(clip, r) : null;
-  const textures = { vertex, frame: texture(frameTexels, width), ring: ringTexture(rings, gpuIndex, width) };
+  const textures = { vertex, frame: texture(frameTexels, width), ring: ringTexture(ring, width) };
   return {
     kind: clip.kind,
     rigid: Boolean(rigid),
@@ -161,35 +163,67 @@ function boneTexels(bones, v, d, o) {
   }
 }
 
-/** Texels of the ring texture of vertexRings() rings: a pair of floats per vertex and per ring entry. */
-function ringTexels(rings) {
-  return Math.max(1, Math.ceil((rings.offset.length - 1 + rings.offset[rings.offset.length - 1]) / 2));
+/**
+ * The ring table (the area-weighted normals' one-rings, geometry.js vertexRings) in GPU vertex numbers
+ * (gpuIndex; null: the clip's), as float32 values: values 2g, 2g + 1 are GPU vertex g's (first, count). A
+ * closed fan (count > 0: each neighbour starts one triangle and ends one, in one cycle: an inner vertex of a
+ * manifold mesh, seam duplicates counted as one vertex) lists its count neighbours n_i from value first, its
+ * triangles being (g, n_i, n_i+1 mod count); any other ring (count < 0) lists its -count triangles' (a, b)
+ * pairs. About 4 bytes per triangle corner and 8 per vertex.
+ */
+export function ringTable({ offset, pairs, group }, gpuIndex = null) {
+  const V = offset.length - 1;
+  const gpu = (v) => (gpuIndex ? gpuIndex[v] : v);
+  const head = new Float32Array(V * 2);
+  const body = [];
+  const fan = [];
+  for (let v = 0; v < V; v++) {
+    const g = gpu(v);
+    head[g * 2] = V * 2 + body.length;
+    if (closedFan(pairs, offset[v] * 2, offset[v + 1] * 2, group, group[v], fan)) {
+      head[g * 2 + 1] = fan.length;
+      for (const n of fan) body.push(gpu(n));
+    } else {
+      head[g * 2 + 1] = -(offset[v + 1] - offset[v]);
+      for (let j = offset[v] * 2; j < offset[v + 1] * 2; j++) body.push(gpu(pairs[j]));
+    }
+  }
+  const values = new Float32Array(V * 2 + body.length);
+  if (values.length >= 2 ** 24) throw new RangeError(`the clip's vertex rings need ${values.length} values (float32 indices: < 2^24)`);
+  values.set(head);
+  values.set(body, V * 2);
+  return values;
 }
 
 /**
- * The `ring` texture (the area-weighted normals' one-rings, geometry.js vertexRings) in GPU vertex numbers
- * (gpuIndex; null: the clip's): pairs of floats, two per texel; pair g (g < V) is GPU vertex g's (first,
- * count), pairs first .. first + count - 1 its ring's (a, b). 8 bytes per vertex and per triangle corner.
+ * Whether the pairs [lo, hi) of a ring (vertices compared by group, none the centre's group p) make one
+ * closed fan; if so its neighbours (group representatives), in order, are put in fan.
  */
-export function ringTexture({ offset, pairs }, gpuIndex, width) {
-  const V = offset.length - 1;
-  const total = V + offset[V];
-  if (total >= 2 ** 24) throw new RangeError(`the clip's vertex rings need ${total} entries (float32 indices: < 2^24)`);
-  const tex = texture(ringTexels({ offset, pairs }), width);
-  const d = tex.data;
-  const order = new Int32Array(V); // clip vertex of each GPU vertex
-  for (let v = 0; v < V; v++) order[gpuIndex ? gpuIndex[v] : v] = v;
-  let next = V;
-  for (let g = 0; g < V; g++) {
-    const v = order[g];
-    const n = offset[v + 1] - offset[v];
-    d[g * 2] = next;
-    d[g * 2 + 1] = n;
-    for (let j = offset[v] * 2; j < offset[v + 1] * 2; j += 2, next++) {
-      d[next * 2] = gpuIndex ? gpuIndex[pairs[j]] : pairs[j];
-      d[next * 2 + 1] = gpuIndex ? gpuIndex[pairs[j + 1]] : pairs[j + 1];
-    }
+function closedFan(pairs, lo, hi, group, p, fan) {
+  fan.length = 0;
+  const next = new Map();
+  for (let j = lo; j < hi; j += 2) {
+    const a = group[pairs[j]];
+    const b = group[pairs[j + 1]];
+    if (a === p || b === p || a === b || next.has(a)) return false;
+    next.set(a, b);
   }
+  const k = (hi - lo) / 2;
+  if (k < 3) return false;
+  let n = group[pairs[lo]];
+  for (let i = 0; i < k; i++) {
+    fan.push(n);
+    n = next.get(n);
+    if (n === undefined) return false;
+  }
+  // one cycle through all k: back at the start, every neighbour seen once
+  return n === fan[0] && new Set(fan).size === k;
+}
+
+/** The `ring` texture of ringTable() values: four values a texel (value i: texel i / 4, component i % 4). */
+function ringTexture(values, width) {
+  const tex = texture(Math.ceil(values.length / 4), width);
+  tex.data.set(values);
   return tex;
 }
 
@@ -298,7 +332,7 @@ export function gpuBytes(layout, { meshVertices = layout.nVertices, pass = true 
   return textureBytes(layout) + (pass ? passBytes(layout) : 0) + meshVertices * ATTRIBUTE_BYTES_PER_VERTEX;
 }
 
-function cyclicTables(clip, width, rings) {
+function cyclicTables(clip, width, rings, ring) {
   const ev = new CyclicEvaluator(clip);
   const V = clip.nVertices;
   const vertex = texture(V * 3, width); // per vertex: (rest xyz, ra), (dS, dC, gS, gC), (rl, 0, 0, 0)
@@ -320,9 +354,9 @@ function cyclicTables(clip, width, rings) {
     nVertices: V,
     nSegments: 0,
     width,
-    textures: { vertex, ring: ringTexture(rings, null, width) },
+    textures: { vertex, ring: ringTexture(ring, width) },
     rings,
-    maxHeight: Math.max(vertex.height, Math.ceil(ringTexels(rings) / width)),
+    maxHeight: Math.max(vertex.height, Math.ceil(ring.length / 4 / width)),
     axis: ev.axis,
     bend: ev.bend,
     rotate: ev.rotate,

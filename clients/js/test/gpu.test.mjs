@@ -16,9 +16,10 @@ import {
   decodeClipFile,
 } from '../src/index.js';
 import { naturalSplineTangents, vertexBasis } from '../src/dynamic.js';
-import { clipNormals, fittedWidth, frameNormals, gpuBytes, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
+import { clipNormals, fittedWidth, frameNormals, gpuBytes, ringTable, gpuLayout, gpuTables, meshAttributes, timeUniforms } from '../src/gpu.js';
 import { glslHeader, patchVertexShader } from '../src/glsl.js';
 import { orthonormalBases } from '../src/orthobasis.js';
+import { vertexRings } from '../src/geometry.js';
 import { WEBGPU_REFUSAL, ClipPlayer, attachClip, attachClipToScene } from '../src/three.js';
 import { FIXTURES, fixtureParts, manifest, readBytes, retimed } from './helpers.mjs';
 
@@ -161,8 +162,8 @@ test('GPU tables are plain typed arrays (a worker can transfer them) and gpuLayo
   const needed = {
     vertex: (clip.nVertices - tables.nDirect) * 4,
     frame: tables.nDirect + gpuCurves * tables.curveTexels,
-    // the normals' rings: a pair per vertex and per triangle corner, two pairs a texel
-    ring: Math.ceil((clip.nVertices + clip.faces.length) / 2),
+    // the normals' rings (gpu.js ringTable): four values a texel
+    ring: Math.ceil(ringTable(vertexRings(clip.faces, clip.rest), tables.gpuIndex).length / 4),
   };
   assert.equal(tables.width, fittedWidth(Math.max(needed.vertex, needed.frame, needed.ring), 128));
   for (const [k, t] of Object.entries(tables.textures)) assert.ok(t.width * t.height - Math.max(1, needed[k]) < t.width, k);
