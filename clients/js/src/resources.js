@@ -46,6 +46,7 @@ export class ClipResources {
       pdeVertices: { value: L.nVertices },
       pdeVertexTex: { value: this.textures.vertex },
       pdeFrameTex: { value: this.textures.frame ?? null },
+      pdeRingTex: { value: this.textures.ring ?? null }, // the area-weighted normals' one-rings
       pdeDirect: { value: L.nDirect ?? 0 },
       // clips with bones: the per-frame table's first bone row, the first skin-only vertex and its texel
       pdeBones: { value: L.boneTexel ?? 0 },

@@ -123,6 +123,13 @@ test(
         // the CPU in float64): worst seen 5.9e-8 of the diagonal
         assert.ok(c.gpuError < 3e-7, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
         assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
+        // frame normals: three.js's own drawing of the same positions (computeVertexNormals), lit alike
+        if (c.normals === 'frame') {
+          for (const k of ['gpuVsThree02', 'gpuVsThree07']) {
+            console.log(`${c.name} ${k}: ${c[k].differ} of the pixels differ from three.js's own`);
+            assert.ok(c[k].differ < 0.005, `${c.name} ${k}: ${c[k].differ} of the pixels differ from three.js's`);
+          }
+        }
       }
     } finally {
       clearTimeout(timer);

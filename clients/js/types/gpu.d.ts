@@ -60,7 +60,11 @@ export interface GpuLayout {
      * coefficients of the frame (and rigid rows).
      */
     frame?: FloatTexture;
+    /** The normals' one-rings (ringTable): per GPU vertex (first, count), then closed fans or corner pairs. */
+    ring: FloatTexture;
   };
+  /** The clip's vertex rings for area-weighted normals (vertexRings), in clip vertex numbers (the CPU path's). */
+  rings: VertexRings;
   /** Per item its R (C * 3 * 16, row-major upper triangular): knots to orthonormal-basis coefficients. */
   r?: Float64Array;
   /** Natural-spline tangents of every knot in the orthonormal bases (layout of clip.knots), or null. */
@@ -91,8 +95,19 @@ export interface TimeUniforms {
   changed: boolean;
 }
 
+/** One-rings of vertices (geometry.js vertexRings): v's (a, b) pairs are pairs[2 offset[v] .. 2 offset[v + 1]). */
+export interface VertexRings {
+  offset: Int32Array;
+  pairs: Int32Array;
+  /** The first vertex at each vertex's rest position (seam duplicates share their ring). */
+  group: Int32Array;
+}
+
 export interface MeshAttributes {
-  /** Per mesh vertex: clip vertex of itself and of two triangle neighbours (n * 3). */
+  /**
+   * Per mesh vertex: its clip vertex, then -1, -1 for a smooth vertex (the area-weighted normal of its clip
+   * vertex), else the clip vertices of two triangle neighbours (n * 3).
+   */
   pdeVertex: Float32Array;
   /** Per mesh vertex: its normal in the rest frame of that triangle (n * 3). */
   pdeNormalFrame: Float32Array;
@@ -114,7 +129,20 @@ export declare function meshAttributes(mesh: {
   positions: ArrayLike<number>;
   normals?: ArrayLike<number> | null;
   index?: ArrayLike<number> | null;
+  /** Unit area-weighted rest normals of the clip vertices (clipNormals of clip.rest); null: no smooth vertex. */
+  clipNormals?: ArrayLike<number> | null;
 }): MeshAttributes;
+/** The ring texture's values (first, count per GPU vertex, then closed fans or corner pairs) of vertex rings. */
+export declare function ringTable(rings: VertexRings, gpuIndex?: Int32Array | null): Float32Array;
+/** Unit area-weighted normals (V * 3) of the clip at positions over the tables' rings (only of vertices when given). */
+export declare function clipNormals(
+  tables: GpuLayout,
+  positions: ArrayLike<number>,
+  out?: Float32Array,
+  vertices?: ArrayLike<number> | null,
+): Float32Array;
+/** The clip vertices of the smooth mesh vertices (those frameNormals reads from clipNormals). */
+export declare function smoothVertices(attributes: MeshAttributes): Int32Array;
 /** The attributes the shader reads: pdeVertex in the GPU's numbering, pdeNormalFrame as normalised int16. */
 export declare function gpuAttributes(
   attributes: MeshAttributes,
@@ -133,6 +161,7 @@ export declare function frameNormals(
   attributes: MeshAttributes,
   restNormals: ArrayLike<number> | null,
   out: Float32Array,
+  clipNormals?: ArrayLike<number> | null,
 ): Float32Array;
 /** GLSL ES 3.00 declarations and functions (pdeCompute() sets pdePosition and pdeNormal). */
 export declare function glslHeader(

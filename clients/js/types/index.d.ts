@@ -297,6 +297,18 @@ export declare function computeNormals(
   out?: Float32Array,
 ): Float32Array;
 export declare function boundingBoxDiagonal(positions: ArrayLike<number>): number;
+/** Per vertex the (a, b) of its incident triangles; vertices at one rest position share one ring. */
+export declare function vertexRings(
+  faces: ArrayLike<number>,
+  rest: ArrayLike<number>,
+): { offset: Int32Array; pairs: Int32Array; group: Int32Array };
+/** Unit area-weighted normals over vertexRings (three.js's computeVertexNormals); only of vertices when given. */
+export declare function ringNormals(
+  positions: ArrayLike<number>,
+  rings: { offset: Int32Array; pairs: Int32Array },
+  out?: Float32Array,
+  vertices?: ArrayLike<number> | null,
+): Float32Array;
 
 /** Install the zstd streaming decoder class (fzstd's Decompress); the entry points install fzstd's. */
 export declare function setZstdDecompress(cls: unknown): void;

@@ -14,8 +14,8 @@ export interface AttachOptions {
   vertexMap?: Int32Array | number[];
   /** Clip coordinates to the mesh's local frame (Matrix4 or 16 numbers, column-major; default identity). */
   clipToLocal?: Matrix4 | number[];
-  /** 'frame' (default): normals turned with each vertex's triangle (3 evaluations per vertex); 'rest':
-   * kept as they are. */
+  /** 'frame' (default): each frame's area-weighted vertex normals, as three.js's computeVertexNormals
+   * (hard-edge vertices turned with a triangle); 'rest': kept as they are (one evaluation per vertex). */
   normals?: 'frame' | 'rest';
   /** Shared layout/textures/evaluator when several meshes play one clip. */
   resources?: ClipResources;

@@ -98,3 +98,81 @@ export function triangleQuality(pos, p, a, b) {
   const den = e1x * e1x + e1y * e1y + e1z * e1z + e2x * e2x + e2y * e2y + e2z * e2z;
   return den > 0 ? Math.hypot(cx, cy, cz) / den : 0;
 }
+
+/**
+ * The one-ring of every vertex for area-weighted normals: for vertex v, the pairs (a, b) of its incident
+ * triangles (p, a, b), in winding order, so that the sum of cross(a - p, b - p) is three.js's
+ * computeVertexNormals. Vertices at the same rest position (seam duplicates, rest V * 3) share one ring: each
+ * lists the triangles of all of them, so that they get one normal as a smooth-shaded source gives them.
+ * Returns {offset (Int32Array V + 1), pairs (Int32Array, 2 per triangle corner), group (Int32Array V: the
+ * first vertex at each vertex's rest position)}: v's pairs are pairs[2 * offset[v] .. 2 * offset[v + 1]).
+ */
+export function vertexRings(faces, rest) {
+  const V = rest.length / 3;
+  const group = new Int32Array(V); // the first vertex at the same rest position
+  const seen = new Map();
+  for (let v = 0; v < V; v++) {
+    const key = `${rest[v * 3]},${rest[v * 3 + 1]},${rest[v * 3 + 2]}`;
+    const g = seen.get(key);
+    if (g === undefined) seen.set(key, v);
+    group[v] = g ?? v;
+  }
+  const per = new Int32Array(V); // corners per group
+  for (let k = 0; k < faces.length; k++) per[group[faces[k]]]++;
+  const start = new Int32Array(V + 1);
+  for (let v = 0; v < V; v++) start[v + 1] = start[v] + per[v];
+  const fill = start.slice(0, V);
+  const groupPairs = new Int32Array(start[V] * 2);
+  for (let f = 0; f < faces.length; f += 3) {
+    for (let r = 0; r < 3; r++) {
+      const o = fill[group[faces[f + r]]]++ * 2;
+      groupPairs[o] = faces[f + ((r + 1) % 3)];
+      groupPairs[o + 1] = faces[f + ((r + 2) % 3)];
+    }
+  }
+  // every vertex gets its group's pairs (a copy per duplicate: the GPU reads one contiguous list)
+  const offset = new Int32Array(V + 1);
+  for (let v = 0; v < V; v++) offset[v + 1] = offset[v] + per[group[v]];
+  const pairs = new Int32Array(offset[V] * 2);
+  for (let v = 0; v < V; v++) {
+    const g = group[v];
+    pairs.set(groupPairs.subarray(start[g] * 2, start[g + 1] * 2), offset[v] * 2);
+  }
+  return { offset, pairs, group };
+}
+
+/**
+ * Unit area-weighted normals (V * 3) of positions (V * 3) over vertexRings(): per vertex the sum of
+ * cross(a - p, b - p) over its ring, normalised (zero when the sum is); only those of vertices (a list of
+ * vertex numbers; null: all). Allocation-free; returns out.
+ */
+export function ringNormals(positions, { offset, pairs }, out = new Float32Array(positions.length), vertices = null) {
+  const n = vertices ? vertices.length : offset.length - 1;
+  for (let i = 0; i < n; i++) {
+    const v = vertices ? vertices[i] : i;
+    const px = positions[v * 3];
+    const py = positions[v * 3 + 1];
+    const pz = positions[v * 3 + 2];
+    let nx = 0;
+    let ny = 0;
+    let nz = 0;
+    for (let j = offset[v] * 2; j < offset[v + 1] * 2; j += 2) {
+      const a = pairs[j] * 3;
+      const b = pairs[j + 1] * 3;
+      const ux = positions[a] - px;
+      const uy = positions[a + 1] - py;
+      const uz = positions[a + 2] - pz;
+      const wx = positions[b] - px;
+      const wy = positions[b + 1] - py;
+      const wz = positions[b + 2] - pz;
+      nx += uy * wz - uz * wy;
+      ny += uz * wx - ux * wz;
+      nz += ux * wy - uy * wx;
+    }
+    const l = Math.hypot(nx, ny, nz);
+    out[v * 3] = l > 0 ? nx / l : 0;
+    out[v * 3 + 1] = l > 0 ? ny / l : 0;
+    out[v * 3 + 2] = l > 0 ? nz / l : 0;
+  }
+  return out;
+}

@@ -27,6 +27,7 @@ uniform bool pdeEnabled;
 uniform float pdeInfluence;
 uniform mat4 pdeClipToLocal;
 uniform mat3 pdeNormalToLocal;
+uniform highp sampler2D pdeRingTex;
 #ifdef PDEANIM_CPU
 in vec3 pdeCpuPosition;
 in vec3 pdeCpuNormal;
@@ -130,7 +131,9 @@ vec3 pdeEval(int v) {
 `;
 
 // the mesh vertex: its clip vertex's position (read from the pass's texture, or evaluated here) in the
-// mesh's frame, and its normal turned with the frame of its triangle (p, a, b)
+// mesh's frame; a smooth vertex (pdeVertex.y -1) gets the area-weighted normal of its clip vertex's ring
+// (gpu.js ringTable: a closed fan of neighbours, or the (a, b) pairs of its triangles), any other its normal
+// turned with the frame of its triangle (p, a, b)
 const VERTEX_STAGE = `
 #ifdef PDEANIM_VERTEX_STAGE
 vec3 pdeAt(int v) {
@@ -139,6 +142,31 @@ vec3 pdeAt(int v) {
 #else
   return pdeEval(v);
 #endif
+}
+float pdeRingValue(int i) {
+  vec4 t = pdeFetch(pdeRingTex, i >> 2);
+  int c = i & 3;
+  return c == 0 ? t.x : c == 1 ? t.y : c == 2 ? t.z : t.w;
+}
+vec3 pdeRingAt(int i, vec3 p) {
+  return pdeAt(int(pdeRingValue(i) + 0.5)) - p;
+}
+vec3 pdeRingNormal(int v, vec3 p) {
+  int first = int(pdeRingValue(2 * v) + 0.5);
+  int count = int(pdeRingValue(2 * v + 1));
+  vec3 n = vec3(0.0);
+  if (count > 0) {
+    vec3 e0 = pdeRingAt(first, p);
+    vec3 ea = e0;
+    for (int k = 1; k < count; k++) {
+      vec3 eb = pdeRingAt(first + k, p);
+      n += cross(ea, eb);
+      ea = eb;
+    }
+    return n + cross(ea, e0);
+  }
+  for (int k = first; k < first - 2 * count; k += 2) n += cross(pdeRingAt(k, p), pdeRingAt(k + 1, p));
+  return n;
 }
 void pdeCompute() {
 #ifdef PDEANIM_CPU
@@ -153,7 +181,10 @@ void pdeCompute() {
   pdePosition = (pdeClipToLocal * vec4(p, 1.0)).xyz;
   pdeNormal = normal;
 #ifndef PDEANIM_REST_NORMALS
-  if (va != v) {
+  if (pdeVertex.y < -0.5) {
+    vec3 n = pdeRingNormal(v, p);
+    if (dot(n, n) > 0.0) pdeNormal = normalize(pdeNormalToLocal * n);
+  } else if (va != v) {
     vec3 e1 = pdeAt(va) - p;
     vec3 e2 = pdeAt(vb) - p;
     vec3 t1 = normalize(e1);

@@ -3,7 +3,7 @@
 
 import { CyclicEvaluator } from './cyclic.js';
 import { DynamicEvaluator, naturalSplineTangents, timeIndex, vertexBase } from './dynamic.js';
-import { triangleFrame, triangleQuality } from './geometry.js';
+import { ringNormals, triangleFrame, triangleQuality, vertexRings } from './geometry.js';
 import { orthonormalBases } from './orthobasis.js';
 
 export const TEXTURE_WIDTH = 4096;
@@ -60,7 +60,11 @@ function texture(nTexels, width) {
  * those.
  */
 export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
-  if (clip.kind === 'cyclic-spine') return cyclicTables(clip, fittedWidth(clip.nVertices * 3, width));
+  if (clip.kind === 'cyclic-spine') {
+    const rings = vertexRings(clip.faces, clip.rest);
+    const ring = ringTable(rings);
+    return cyclicTables(clip, fittedWidth(Math.max(clip.nVertices * 3, Math.ceil(ring.length / 4)), width), rings, ring);
+  }
   const { nVertices: V, nCurves: C, nSegments: S, curveOf, offsets, rigid } = clip;
   const bones = clip.bones ?? null;
   const residual = bones === null || bones.residual;
@@ -75,7 +79,9 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   const boneTexel = nDirect + nGpuCurves * curveTexels;
   const frameTexels = boneTexel + (bones ? bones.nBones * 3 : 0);
   const vertexTexelsAll = skinTexel + (V - skinOnly) * SKIN_TEXELS;
-  width = fittedWidth(Math.max(vertexTexelsAll, frameTexels), width);
+  const rings = vertexRings(clip.faces, clip.rest);
+  const ring = ringTable(rings, gpuIndex);
+  width = fittedWidth(Math.max(vertexTexelsAll, frameTexels, Math.ceil(ring.length / 4)), width);
   const base = vertexBase(clip);
   const { q, r } = residual ? orthonormalBases(clip) : { q: null, r: null };
   // per GPU vertex: (curve, base xyz), basis x, y, z, with bones its bone indices and weights; then the
@@ -83,7 +89,7 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   const vertex = texture(vertexTexelsAll, width);
   const direct = vertexRows(clip, { ...numbering, vertexTexels, skinTexel, base, q }, vertex.data);
   const tangents = spline ? orthonormalTangents(clip, r) : null;
-  const textures = { vertex, frame: texture(frameTexels, width) };
+  const textures = { vertex, frame: texture(frameTexels, width), ring: ringTexture(ring, width) };
   return {
     kind: clip.kind,
     rigid: Boolean(rigid),
@@ -108,6 +114,7 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
     r,
     tangents,
     direct,
+    rings,
     timeIndex: timeIndex(clip), // for the CPU evaluator (a worker makes it off the main thread)
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
@@ -154,6 +161,70 @@ function boneTexels(bones, v, d, o) {
     d[o + k] = bones.index[v * K + k];
     d[o + 4 + k] = bones.weight[v * K + k];
   }
+}
+
+/**
+ * The ring table (the area-weighted normals' one-rings, geometry.js vertexRings) in GPU vertex numbers
+ * (gpuIndex; null: the clip's), as float32 values: values 2g, 2g + 1 are GPU vertex g's (first, count). A
+ * closed fan (count > 0: each neighbour starts one triangle and ends one, in one cycle: an inner vertex of a
+ * manifold mesh, seam duplicates counted as one vertex) lists its count neighbours n_i from value first, its
+ * triangles being (g, n_i, n_i+1 mod count); any other ring (count < 0) lists its -count triangles' (a, b)
+ * pairs. About 4 bytes per triangle corner and 8 per vertex.
+ */
+export function ringTable({ offset, pairs, group }, gpuIndex = null) {
+  const V = offset.length - 1;
+  const gpu = (v) => (gpuIndex ? gpuIndex[v] : v);
+  const head = new Float32Array(V * 2);
+  const body = [];
+  const fan = [];
+  for (let v = 0; v < V; v++) {
+    const g = gpu(v);
+    head[g * 2] = V * 2 + body.length;
+    if (closedFan(pairs, offset[v] * 2, offset[v + 1] * 2, group, group[v], fan)) {
+      head[g * 2 + 1] = fan.length;
+      for (const n of fan) body.push(gpu(n));
+    } else {
+      head[g * 2 + 1] = -(offset[v + 1] - offset[v]);
+      for (let j = offset[v] * 2; j < offset[v + 1] * 2; j++) body.push(gpu(pairs[j]));
+    }
+  }
+  const values = new Float32Array(V * 2 + body.length);
+  if (values.length >= 2 ** 24) throw new RangeError(`the clip's vertex rings need ${values.length} values (float32 indices: < 2^24)`);
+  values.set(head);
+  values.set(body, V * 2);
+  return values;
+}
+
+/**
+ * Whether the pairs [lo, hi) of a ring (vertices compared by group, none the centre's group p) make one
+ * closed fan; if so its neighbours (group representatives), in order, are put in fan.
+ */
+function closedFan(pairs, lo, hi, group, p, fan) {
+  fan.length = 0;
+  const next = new Map();
+  for (let j = lo; j < hi; j += 2) {
+    const a = group[pairs[j]];
+    const b = group[pairs[j + 1]];
+    if (a === p || b === p || a === b || next.has(a)) return false;
+    next.set(a, b);
+  }
+  const k = (hi - lo) / 2;
+  if (k < 3) return false;
+  let n = group[pairs[lo]];
+  for (let i = 0; i < k; i++) {
+    fan.push(n);
+    n = next.get(n);
+    if (n === undefined) return false;
+  }
+  // one cycle through all k: back at the start, every neighbour seen once
+  return n === fan[0] && new Set(fan).size === k;
+}
+
+/** The `ring` texture of ringTable() values: four values a texel (value i: texel i / 4, component i % 4). */
+function ringTexture(values, width) {
+  const tex = texture(Math.ceil(values.length / 4), width);
+  tex.data.set(values);
+  return tex;
 }
 
 /** Texels per skin-only vertex (bone clips, a curve without residual): (0, rest xyz), indices, weights. */
@@ -261,7 +332,7 @@ export function gpuBytes(layout, { meshVertices = layout.nVertices, pass = true 
   return textureBytes(layout) + (pass ? passBytes(layout) : 0) + meshVertices * ATTRIBUTE_BYTES_PER_VERTEX;
 }
 
-function cyclicTables(clip, width) {
+function cyclicTables(clip, width, rings, ring) {
   const ev = new CyclicEvaluator(clip);
   const V = clip.nVertices;
   const vertex = texture(V * 3, width); // per vertex: (rest xyz, ra), (dS, dC, gS, gC), (rl, 0, 0, 0)
@@ -283,8 +354,9 @@ function cyclicTables(clip, width) {
     nVertices: V,
     nSegments: 0,
     width,
-    textures: { vertex },
-    maxHeight: vertex.height,
+    textures: { vertex, ring: ringTexture(ring, width) },
+    rings,
+    maxHeight: Math.max(vertex.height, Math.ceil(ring.length / 4 / width)),
     axis: ev.axis,
     bend: ev.bend,
     rotate: ev.rotate,
@@ -466,14 +538,21 @@ function writeBones(layout, ev, d) {
   d.set(rows, layout.boneTexel * 4);
 }
 
+/** A mesh normal within this angle (cos) of its clip vertex's area-weighted rest normal is smooth-shaded. */
+export const SMOOTH_COS = Math.cos((30 * Math.PI) / 180);
+
 /**
- * Per mesh vertex attributes: pdeVertex (n, 3) = clip vertex of the mesh vertex and of two neighbours (the
- * corners of its best-shaped triangle), pdeNormalFrame (n, 3) = the mesh normal in that triangle's rest
- * frame. vertexMap (n) maps mesh vertices to clip vertices; positions/normals (n * 3) are the mesh's; index
- * the triangle list (null for non-indexed geometry). A vertex without a usable triangle gets neighbours equal
- * to itself (its normal is then kept as it is).
+ * Per mesh vertex attributes: pdeVertex (n, 3) and pdeNormalFrame (n, 3). A smooth vertex (its rest normal
+ * within 30 degrees of clipNormals, its clip vertex's area-weighted rest normal: the usual smooth-shaded
+ * vertex) is (clip vertex, -1, -1): its normal at a frame is its clip vertex's area-weighted normal (the ring
+ * table). Any other (a hard edge's split vertex, a normal the source set by hand) is the clip vertex and two
+ * neighbours (the corners of its best-shaped triangle) with pdeNormalFrame its normal in that triangle's
+ * rest frame, so that it turns with the triangle. vertexMap (n) maps mesh vertices to clip vertices;
+ * positions/normals (n * 3) are the mesh's; index the triangle list (null for non-indexed geometry);
+ * clipNormals (V * 3, null: none smooth). A vertex without a usable triangle gets neighbours equal to itself
+ * (its normal is then kept as it is).
  */
-export function meshAttributes({ vertexMap, positions, normals, index }) {
+export function meshAttributes({ vertexMap, positions, normals, index, clipNormals = null }) {
   const n = vertexMap.length;
   const pdeVertex = new Float32Array(n * 3);
   const frame = new Float32Array(n * 3);
@@ -500,6 +579,12 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
   }
   const fr = new Float64Array(9);
   for (let i = 0; i < n; i++) {
+    if (normals && clipNormals && isSmooth(normals, i, clipNormals, vertexMap[i])) {
+      pdeVertex[i * 3] = vertexMap[i];
+      pdeVertex[i * 3 + 1] = -1;
+      pdeVertex[i * 3 + 2] = -1;
+      continue;
+    }
     const a = nb[i * 2];
     const b = nb[i * 2 + 1];
     const ok =
@@ -520,13 +605,22 @@ export function meshAttributes({ vertexMap, positions, normals, index }) {
   return { pdeVertex, pdeNormalFrame: frame };
 }
 
+/** Whether mesh normal i lies within 30 degrees of clip vertex v's area-weighted rest normal. */
+function isSmooth(normals, i, clipNormals, v) {
+  const x = normals[i * 3];
+  const y = normals[i * 3 + 1];
+  const z = normals[i * 3 + 2];
+  const d = x * clipNormals[v * 3] + y * clipNormals[v * 3 + 1] + z * clipNormals[v * 3 + 2];
+  return d >= SMOOTH_COS * Math.hypot(x, y, z);
+}
+
 /**
  * The attributes the shader reads, from meshAttributes(): pdeVertex with the GPU's vertex numbers (gpuIndex
  * of gpuTables(); null: the clip's), and pdeNormalFrame as normalised int16 (a unit vector: 3e-5 is plenty
  * for shading, at half the bytes). {pdeVertex: Float32Array, pdeNormalFrame: Int16Array}.
  */
 export function gpuAttributes(attrs, gpuIndex = null) {
-  const pdeVertex = gpuIndex ? attrs.pdeVertex.map((v) => gpuIndex[v]) : Float32Array.from(attrs.pdeVertex);
+  const pdeVertex = gpuIndex ? attrs.pdeVertex.map((v) => (v < 0 ? v : gpuIndex[v])) : Float32Array.from(attrs.pdeVertex);
   const pdeNormalFrame = new Int16Array(attrs.pdeNormalFrame.length);
   for (let i = 0; i < pdeNormalFrame.length; i++) {
     pdeNormalFrame[i] = Math.round(Math.max(-1, Math.min(1, attrs.pdeNormalFrame[i])) * 32767);
@@ -536,16 +630,24 @@ export function gpuAttributes(attrs, gpuIndex = null) {
 
 /**
  * CPU counterpart of the shader's normals: mesh normals (n * 3) from clip positions (V * 3) and the mesh
- * attributes of meshAttributes(); vertices without a frame keep restNormals. Allocation-free after the first
- * call (per frame).
+ * attributes of meshAttributes(): smooth vertices take their clip vertex's normal in clipNormals (V * 3,
+ * ringNormals() of the positions; a zero one keeps the rest normal), the others turn with their triangle;
+ * vertices without a frame keep restNormals. Allocation-free after the first call (per frame).
  */
-export function frameNormals(clipPositions, attrs, restNormals, out) {
+export function frameNormals(clipPositions, attrs, restNormals, out, clipNormals = null) {
   const { pdeVertex, pdeNormalFrame } = attrs;
   const fr = (frameNormals.scratch ??= new Float64Array(9));
   for (let i = 0; i < pdeVertex.length; i += 3) {
     const p = pdeVertex[i];
     const a = pdeVertex[i + 1];
-    if (a === p) {
+    const s = a < 0 ? p * 3 : -1;
+    if (s >= 0 && (clipNormals[s] !== 0 || clipNormals[s + 1] !== 0 || clipNormals[s + 2] !== 0)) {
+      out[i] = clipNormals[s];
+      out[i + 1] = clipNormals[s + 1];
+      out[i + 2] = clipNormals[s + 2];
+      continue;
+    }
+    if (a === p || a < 0) {
       out[i] = restNormals ? restNormals[i] : 0;
       out[i + 1] = restNormals ? restNormals[i + 1] : 0;
       out[i + 2] = restNormals ? restNormals[i + 2] : 1;
@@ -560,5 +662,20 @@ export function frameNormals(clipPositions, attrs, restNormals, out) {
     out[i + 2] = x * fr[2] + y * fr[5] + z * fr[8];
   }
   return out;
+}
+
+/**
+ * The clip's area-weighted vertex normals (V * 3) at positions (V * 3), over the tables' rings (only those of
+ * vertices, a list of clip vertices, when given).
+ */
+export function clipNormals(tables, positions, out = new Float32Array(positions.length), vertices = null) {
+  return ringNormals(positions, tables.rings, out, vertices);
+}
+
+/** The clip vertices of the smooth mesh vertices of meshAttributes() (each once): those frameNormals reads. */
+export function smoothVertices({ pdeVertex }) {
+  const seen = new Set();
+  for (let i = 0; i < pdeVertex.length; i += 3) if (pdeVertex[i + 1] < 0) seen.add(pdeVertex[i]);
+  return Int32Array.from(seen);
 }
 export { glslHeader, glslPassMain, patchVertexShader } from './glsl.js';

@@ -37,4 +37,4 @@ export {
 } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
 export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
-export { computeNormals, boundingBoxDiagonal, triangleFrame } from './geometry.js';
+export { computeNormals, boundingBoxDiagonal, ringNormals, triangleFrame, vertexRings } from './geometry.js';

@@ -5,7 +5,7 @@
 
 import { BufferAttribute, Matrix3, Matrix4 } from 'three';
 import { computeNormals } from './geometry.js';
-import { frameNormals, gpuAttributes, meshAttributes } from './gpu.js';
+import { clipNormals, frameNormals, gpuAttributes, meshAttributes, smoothVertices } from './gpu.js';
 import { ClipResources } from './resources.js';
 import { webglBackend } from './webgl.js';
 
@@ -108,8 +108,9 @@ function transformNormals(e, n) {
  * mapped to them by options.vertexMap / a _pdeanim_vertex attribute). options: gpu (default true), renderer
  * (bounds the data textures; with float render targets the clip is evaluated in a pass before drawing),
  * pass (force that either way), vertexMap, clipToLocal (Matrix4 or 16 numbers, column-major: clip
- * coordinates to the mesh's local frame; default identity), normals ('frame': turned with each vertex's
- * triangle, the default; 'rest': one evaluation per vertex, normals kept), textureWidth, maxTextureSize,
+ * coordinates to the mesh's local frame; default identity), normals ('frame', the default: each frame's
+ * area-weighted vertex normals, as three.js computes them, hard-edge vertices turned with a triangle;
+ * 'rest': one evaluation per vertex, normals kept), textureWidth, maxTextureSize,
  * tables (from a Web Worker), shadows (default true), frustumCulled (default false), resources (a
  * ClipResources shared between meshes), influence (default 1). backend: webglBackend, or the WebGPU one.
  */
@@ -170,7 +171,15 @@ export class ClipPlayer {
       normalsClip = computeNormals(restClip, faces);
     }
     this._restNormalsClip = normalsClip;
-    const attrs = meshAttributes({ vertexMap: this.vertexMap, positions: restClip, normals: normalsClip, index });
+    // smooth vertices take their clip vertex's area-weighted normal (the clip's rings, as three.js computes it)
+    const restRing = clipNormals(this.layout, this.clip.rest);
+    const attrs = meshAttributes({
+      vertexMap: this.vertexMap,
+      positions: restClip,
+      normals: normalsClip,
+      index,
+      clipNormals: restRing,
+    });
     // the shader's copy: the GPU's vertex numbers, the frame normals as normalised int16
     const gpu = gpuAttributes(attrs, this.layout.gpuIndex ?? null);
     geometry.setAttribute('pdeVertex', new BufferAttribute(gpu.pdeVertex, 3));
@@ -241,13 +250,21 @@ export class ClipPlayer {
     const normal = new BufferAttribute(new Float32Array(n * 3), 3);
     geometry.setAttribute('pdeCpuPosition', position);
     geometry.setAttribute('pdeCpuNormal', normal);
-    this._cpu = { clip: new Float32Array(this.clip.nVertices * 3), position, normal, scratch: new Float32Array(n * 3) };
+    const V3 = this.clip.nVertices * 3;
+    this._cpu = {
+      clip: new Float32Array(V3),
+      clipNormals: new Float32Array(V3), // the area-weighted normals of the smooth vertices' clip vertices
+      smooth: smoothVertices(this.attributes),
+      position,
+      normal,
+      scratch: new Float32Array(n * 3),
+    };
     return this._cpu;
   }
 
-  /** Write the clip positions (V * 3, clip order) and their frame-turned normals for this mesh. */
+  /** Write the clip positions (V * 3, clip order) and their frame normals for this mesh. */
   _writeCPU(positions) {
-    const { position, normal, scratch } = this._cpuBuffers();
+    const { position, normal, scratch, clipNormals: ring, smooth } = this._cpuBuffers();
     const map = this.vertexMap;
     for (let i = 0; i < map.length; i++) {
       const v = map[i] * 3;
@@ -258,7 +275,10 @@ export class ClipPlayer {
     transformPoints(this.clipToLocal.elements, scratch, position.array);
     position.needsUpdate = true;
     if (this.normals === 'rest') normal.array.set(this._restNormalsClip);
-    else frameNormals(positions, this.attributes, this._restNormalsClip, normal.array);
+    else {
+      clipNormals(this.layout, positions, ring, smooth);
+      frameNormals(positions, this.attributes, this._restNormalsClip, normal.array, ring);
+    }
     transformNormals(this.normalToLocal.elements, normal.array);
     normal.needsUpdate = true;
   }
