@@ -239,6 +239,30 @@ export function gpuLayout(clip, { width = TEXTURE_WIDTH, tables = null, evaluato
   return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip, t.timeIndex), tableAt: [-1, NaN, NaN] };
 }
 
+/** Texels of one per-frame table of a layout (1 for cyclic clips: the swim phase's sine and cosine). */
+export function frameTexels(layout) {
+  if (layout.kind === 'cyclic-spine') return 1;
+  return layout.boneTexel + layout.nBones * 3;
+}
+
+/**
+ * A view of layout whose per-frame table is data (Float32Array of frameTexels(layout) * 4 or more): what
+ * timeUniforms() needs to keep one more table at its own time (a player, or a slot of an instanced crowd),
+ * sharing everything else, the CPU evaluator and the segment rows included.
+ */
+export function frameView(layout, data) {
+  if (layout.kind !== 'cyclic-spine') {
+    // made once on the layout, so that views read them instead of making their own
+    if (layout.residual) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
+    if (layout.bones) layout.boneRows ??= new Float64Array(layout.nBones * 12);
+    if (layout.bones) layout.skinScratch ??= new Float64Array(3);
+  }
+  const view = Object.create(layout);
+  view.tableAt = [-1, NaN, NaN];
+  view.textures = { ...layout.textures, frame: { data, width: layout.width, height: data.length / 4 / layout.width } };
+  return view;
+}
+
 /** Bytes of the data textures of gpuTables() (what the GPU holds for the clip, whatever the mesh). */
 export function textureBytes(tables) {
   return Object.values(tables.textures).reduce((n, t) => n + t.data.byteLength, 0);
