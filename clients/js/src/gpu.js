@@ -254,6 +254,9 @@ export function frameView(layout, data) {
   if (layout.kind !== 'cyclic-spine') {
     // made once on the layout, so that views read them instead of making their own
     if (layout.residual) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
+    // a second view (another player's time): make every knot's row once rather than two per table switch
+    layout.views = (layout.views ?? 0) + 1;
+    if (layout.residual && layout.views === 2) layout.allRows = allKnotRows(layout);
     if (layout.bones) layout.boneRows ??= new Float64Array(layout.nBones * 12);
     if (layout.bones) layout.skinScratch ??= new Float64Array(3);
   }
@@ -378,6 +381,15 @@ function segmentRows(layout, seg) {
     y: new Float64Array(C * 12), // the frame's coefficients
   });
   if (rows.seg === seg) return rows;
+  if (layout.allRows) {
+    // players at other times: every knot's row made once (allKnotRows), read in place
+    const n = C * 12;
+    const { knots: k, tangents: tg } = layout.allRows;
+    [rows.a, rows.b] = [k.subarray(seg * n, (seg + 1) * n), k.subarray((seg + 1) * n, (seg + 2) * n)];
+    if (spline) [rows.tl, rows.th] = [tg.subarray(seg * n, (seg + 1) * n), tg.subarray((seg + 1) * n, (seg + 2) * n)];
+    rows.seg = seg;
+    return rows;
+  }
   const { knots } = layout.clip;
   const row = (j, out, tangentsOut) => {
     orthonormalRow(layout.r, knots, j * C * 12, out);
@@ -394,6 +406,19 @@ function segmentRows(layout, seg) {
   }
   rows.seg = seg;
   return rows;
+}
+
+/**
+ * Every knot's row (R k of its items, float64) and, for spline clips, its tangents in float64: what
+ * segmentRows reads in place once several players show other times (memory: 2 or 4 x the knots' float32).
+ */
+function allKnotRows(layout) {
+  const n = layout.nCurves * 12;
+  const { knots } = layout.clip;
+  const S1 = knots.length / n;
+  const rows = new Float64Array(knots.length);
+  for (let j = 0; j < S1; j++) orthonormalRow(layout.r, knots, j * n, rows.subarray(j * n, (j + 1) * n));
+  return { knots: rows, tangents: layout.tangents ? Float64Array.from(layout.tangents) : null };
 }
 
 /**
