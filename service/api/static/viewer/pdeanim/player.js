@@ -304,7 +304,7 @@ export class ClipPlayer {
   _privateGeometry() {
     const old = this.mesh.geometry;
     const user = GEOMETRY_USERS.get(old);
-    if (user.users === 1) return old;
+    if (!user || user.users === 1) return old; // (no user: the caller replaced the geometry)
     user.users--;
     const geometry = (this.mesh.geometry = old.clone());
     GEOMETRY_USERS.set(geometry, { ...user, users: 1 });
@@ -371,7 +371,8 @@ export class ClipPlayer {
     this._installed.uninstall();
     this.mesh.frustumCulled = this._originalCulled;
     const geometry = this.mesh.geometry;
-    if (--GEOMETRY_USERS.get(geometry).users === 0) {
+    const use = GEOMETRY_USERS.get(geometry); // none when the caller replaced the geometry meanwhile
+    if (!use || --use.users === 0) {
       for (const name of PLAYER_ATTRIBUTES) geometry.deleteAttribute(name);
       GEOMETRY_USERS.delete(geometry);
       if (geometry !== this._originalGeometry) {
