@@ -3,11 +3,12 @@
 // the evaluation pass's fragment shader. The math is docs/format.md's; gpu.js's CPU helpers mirror it.
 
 /** The #defines of a layout and the shader variant. */
-function defines(layout, { normals, stage, pass, cpu }) {
+function defines(layout, { normals, stage, pass, cpu, slots }) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
   if (stage === 'vertex') defs.push('#define PDEANIM_VERTEX_STAGE');
   if (pass) defs.push('#define PDEANIM_PASS');
   if (cpu) defs.push('#define PDEANIM_CPU');
+  if (slots && stage === 'vertex') defs.push('#define PDEANIM_SLOTS');
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.bones) defs.push('#define PDEANIM_BONES');
@@ -33,13 +34,22 @@ in vec3 pdeCpuPosition;
 in vec3 pdeCpuNormal;
 #endif
 #endif
+#ifdef PDEANIM_SLOTS
+in float pdeSlot;
+uniform int pdeSlotTexels;
+int pdeFrameBase;
+#else
+#define pdeFrameBase 0
+#endif
 #ifdef PDEANIM_PASS
 uniform highp sampler2D pdePosTex;
 #endif
 uniform highp sampler2D pdeVertexTex;
 uniform int pdeVertices;
-#ifdef PDEANIM_DYNAMIC
+#if defined(PDEANIM_DYNAMIC) || defined(PDEANIM_SLOTS)
 uniform highp sampler2D pdeFrameTex;
+#endif
+#ifdef PDEANIM_DYNAMIC
 uniform int pdeDirect;
 #endif
 #ifdef PDEANIM_BONES
@@ -59,6 +69,12 @@ vec3 pdeNormal;
 vec4 pdeFetch(highp sampler2D tex, int i) {
   return texelFetch(tex, ivec2(i & PDEANIM_WIDTH_MASK, i >> PDEANIM_WIDTH_SHIFT), 0);
 }
+#if defined(PDEANIM_DYNAMIC) || defined(PDEANIM_SLOTS)
+// texel i of the per-frame table shown (an instanced crowd: this instance's slot's)
+vec4 pdeFrame(int i) {
+  return pdeFetch(pdeFrameTex, i + pdeFrameBase);
+}
+#endif
 `;
 
 // one clip vertex v (the GPU's numbering, gpu.js): a direct vertex's position from the per-frame table,
@@ -77,14 +93,14 @@ vec3 pdeSkin(int r, vec3 rest) {
   for (int k = 0; k < 4; k++) {
     if (weight[k] == 0.0) continue;
     int b = pdeBones + int(index[k] + 0.5) * 3;
-    acc += weight[k] * vec3(dot(pdeFetch(pdeFrameTex, b), x), dot(pdeFetch(pdeFrameTex, b + 1), x),
-      dot(pdeFetch(pdeFrameTex, b + 2), x));
+    acc += weight[k] * vec3(dot(pdeFrame(b), x), dot(pdeFrame(b + 1), x),
+      dot(pdeFrame(b + 2), x));
   }
   return acc;
 }
 #endif
 vec3 pdeEval(int v) {
-  if (v < pdeDirect) return pdeFetch(pdeFrameTex, v).xyz;
+  if (v < pdeDirect) return pdeFrame(v).xyz;
 #ifdef PDEANIM_BONES
   if (v >= pdeSkinOnly) {
     int s = pdeSkinTexel + (v - pdeSkinOnly) * 3;
@@ -98,11 +114,11 @@ vec3 pdeEval(int v) {
   p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p);
 #endif
   int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
-  for (int w = 0; w < 3; w++) p[w] += dot(pdeFetch(pdeFrameTex, c + w), pdeFetch(pdeVertexTex, r + 1 + w));
+  for (int w = 0; w < 3; w++) p[w] += dot(pdeFrame(c + w), pdeFetch(pdeVertexTex, r + 1 + w));
 #ifdef PDEANIM_RIGID
-  vec4 r0 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS);
-  vec4 r1 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 1);
-  vec4 r2 = pdeFetch(pdeFrameTex, c + PDEANIM_COEFFICIENT_TEXELS + 2);
+  vec4 r0 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS);
+  vec4 r1 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 1);
+  vec4 r2 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 2);
   p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
 #endif
   return p;
@@ -116,10 +132,15 @@ vec3 pdeEval(int v) {
   vec4 a = pdeFetch(pdeVertexTex, v * 3);
   vec4 w = pdeFetch(pdeVertexTex, v * 3 + 1);
   float rl = pdeFetch(pdeVertexTex, v * 3 + 2).x;
+#ifdef PDEANIM_SLOTS
+  vec2 phase = pdeFrame(0).xy; // this instance's slot: sin and cos of its swim phase
+#else
+  vec2 phase = vec2(pdeSinWt, pdeCosWt);
+#endif
   float ca = 0.0;
-  float cl = w.x * pdeSinWt + w.y * pdeCosWt;
+  float cl = w.x * phase.x + w.y * phase.y;
   if (pdeRotate) {
-    float g = w.z * pdeSinWt + w.w * pdeCosWt;
+    float g = w.z * phase.x + w.w * phase.y;
     float c = 1.0 / sqrt(1.0 + g * g);
     float sn = g * c;
     ca = (c - 1.0) * a.w - sn * rl;
@@ -174,6 +195,9 @@ void pdeCompute() {
   pdePosition = pdeCpuPosition;
   pdeNormal = pdeCpuNormal;
 #else
+#ifdef PDEANIM_SLOTS
+  pdeFrameBase = int(pdeSlot + 0.5) * pdeSlotTexels;
+#endif
   int v = int(pdeVertex.x + 0.5);
   int va = int(pdeVertex.y + 0.5);
   int vb = int(pdeVertex.z + 0.5);
@@ -199,8 +223,11 @@ void pdeCompute() {
 `;
 
 /** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
-export function glslHeader(layout, { normals = 'frame', stage = 'vertex', pass = false, cpu = false } = {}) {
-  return `${defines(layout, { normals, stage, pass, cpu })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
+export function glslHeader(
+  layout,
+  { normals = 'frame', stage = 'vertex', pass = false, cpu = false, slots = false } = {},
+) {
+  return `${defines(layout, { normals, stage, pass, cpu, slots })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
 }
 
 /**

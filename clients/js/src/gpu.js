@@ -310,6 +310,33 @@ export function gpuLayout(clip, { width = TEXTURE_WIDTH, tables = null, evaluato
   return { ...t, clip, evaluator: evaluator ?? new DynamicEvaluator(clip, t.timeIndex), tableAt: [-1, NaN, NaN] };
 }
 
+/** Texels of one per-frame table of a layout (1 for cyclic clips: the swim phase's sine and cosine). */
+export function frameTexels(layout) {
+  if (layout.kind === 'cyclic-spine') return 1;
+  return layout.boneTexel + layout.nBones * 3;
+}
+
+/**
+ * A view of layout whose per-frame table is data (Float32Array of frameTexels(layout) * 4 or more): what
+ * timeUniforms() needs to keep one more table at its own time (a player, or a slot of an instanced crowd),
+ * sharing everything else, the CPU evaluator and the segment rows included.
+ */
+export function frameView(layout, data) {
+  if (layout.kind !== 'cyclic-spine') {
+    // made once on the layout, so that views read them instead of making their own
+    if (layout.residual) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
+    // a second view (another player's time): make every knot's row once rather than two per table switch
+    layout.views = (layout.views ?? 0) + 1;
+    if (layout.residual && layout.views === 2) layout.allRows = allKnotRows(layout);
+    if (layout.bones) layout.boneRows ??= new Float64Array(layout.nBones * 12);
+    if (layout.bones) layout.skinScratch ??= new Float64Array(3);
+  }
+  const view = Object.create(layout);
+  view.tableAt = [-1, NaN, NaN];
+  view.textures = { ...layout.textures, frame: { data, width: layout.width, height: data.length / 4 / layout.width } };
+  return view;
+}
+
 /** Bytes of the data textures of gpuTables() (what the GPU holds for the clip, whatever the mesh). */
 export function textureBytes(tables) {
   return Object.values(tables.textures).reduce((n, t) => n + t.data.byteLength, 0);
@@ -426,6 +453,15 @@ function segmentRows(layout, seg) {
     y: new Float64Array(C * 12), // the frame's coefficients
   });
   if (rows.seg === seg) return rows;
+  if (layout.allRows) {
+    // players at other times: every knot's row made once (allKnotRows), read in place
+    const n = C * 12;
+    const { knots: k, tangents: tg } = layout.allRows;
+    [rows.a, rows.b] = [k.subarray(seg * n, (seg + 1) * n), k.subarray((seg + 1) * n, (seg + 2) * n)];
+    if (spline) [rows.tl, rows.th] = [tg.subarray(seg * n, (seg + 1) * n), tg.subarray((seg + 1) * n, (seg + 2) * n)];
+    rows.seg = seg;
+    return rows;
+  }
   const { knots } = layout.clip;
   const row = (j, out, tangentsOut) => {
     orthonormalRow(layout.r, knots, j * C * 12, out);
@@ -442,6 +478,19 @@ function segmentRows(layout, seg) {
   }
   rows.seg = seg;
   return rows;
+}
+
+/**
+ * Every knot's row (R k of its items, float64) and, for spline clips, its tangents in float64: what
+ * segmentRows reads in place once several players show other times (memory: 2 or 4 x the knots' float32).
+ */
+function allKnotRows(layout) {
+  const n = layout.nCurves * 12;
+  const { knots } = layout.clip;
+  const S1 = knots.length / n;
+  const rows = new Float64Array(knots.length);
+  for (let j = 0; j < S1; j++) orthonormalRow(layout.r, knots, j * n, rows.subarray(j * n, (j + 1) * n));
+  return { knots: rows, tangents: layout.tangents ? Float64Array.from(layout.tangents) : null };
 }
 
 /**

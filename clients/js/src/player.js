@@ -3,10 +3,10 @@
 // two extra attributes; either way the patched shader puts the clip's vertex in place of the mesh's after
 // morphing and skinning, mixed by `influence` (1: the clip alone; 0: the mesh as without it).
 
-import { BufferAttribute, Matrix3, Matrix4 } from 'three';
+import { BufferAttribute, InstancedBufferAttribute, Matrix3, Matrix4 } from 'three';
 import { computeNormals } from './geometry.js';
 import { clipNormals, frameNormals, gpuAttributes, meshAttributes, smoothVertices } from './gpu.js';
-import { ClipResources } from './resources.js';
+import { ClipResources, FrameTables } from './resources.js';
 import { webglBackend } from './webgl.js';
 
 export const MAP_ATTRIBUTES = ['_pdeanim_vertex', '_PDEANIM_VERTEX'];
@@ -25,8 +25,22 @@ export const PLAYER_OPTIONS = Object.freeze([
   'shadows',
   'frustumCulled',
   'resources',
+  'frames',
   'influence',
+  'timeOffsets',
 ]);
+
+/** The per-vertex attributes a player adds to a geometry. */
+const PLAYER_ATTRIBUTES = ['pdeVertex', 'pdeNormalFrame', 'pdeSlot', 'pdeCpuPosition', 'pdeCpuNormal'];
+
+/** Who uses the pdeanim attributes of each geometry: {key, users} (geometries shared by cloned meshes). */
+const GEOMETRY_USERS = new WeakMap();
+
+/** Whether two geometry users' attributes are the same (same clip resources, vertex map, placement, slots). */
+function sameUse(a, b) {
+  const eq = (x, y) => x === y || (x !== null && y !== null && x.length === y.length && x.every((v, i) => v === y[i]));
+  return a.resources === b.resources && eq(a.vertexMap, b.vertexMap) && eq(a.placement, b.placement) && eq(a.slots, b.slots);
+}
 
 /** Throw a TypeError naming any option not in allowed (an ignored option would fail silently). */
 export function checkOptions(options, allowed, what) {
@@ -112,7 +126,10 @@ function transformNormals(e, n) {
  * area-weighted vertex normals, as three.js computes them, hard-edge vertices turned with a triangle;
  * 'rest': one evaluation per vertex, normals kept), textureWidth, maxTextureSize,
  * tables (from a Web Worker), shadows (default true), frustumCulled (default false), resources (a
- * ClipResources shared between meshes), influence (default 1). backend: webglBackend, or the WebGPU one.
+ * ClipResources; default: the clip's shared one, ClipResources.acquire), frames (a FrameTables shared by
+ * meshes showing the same time), influence (default 1), timeOffsets (InstancedMesh only: each instance's
+ * time offset, an instanced attribute; GPU only, no evaluation pass). Players of one clip share its data
+ * texture; each has its own time (per-frame table and uniforms) and its own patched materials.
  */
 export class ClipPlayer {
   constructor(mesh, clip, options = {}, backend = webglBackend) {
@@ -124,20 +141,34 @@ export class ClipPlayer {
     this.mesh = mesh;
     this.normals = normals;
     this.backend = backend;
-    this.resources = options.resources ?? new ClipResources(clip, options);
-    this.resources.users++;
-    const { layout, textures, evaluator, gpuReason } = this.resources;
-    Object.assign(this, { layout, textures, evaluator });
+    const offsets = instanceSlots(mesh, options.timeOffsets);
+    if (offsets && !gpu) throw new Error('timeOffsets play on the GPU only (gpu: false was given)');
+    this._options = { ...options };
+    this.vertexMap = resolveVertexMap(mesh.geometry, clip, options.vertexMap);
+    this.resources = options.resources ? options.resources.retain() : ClipResources.acquire(clip, options);
+    try {
+      if (offsets && this.resources.gpuReason) throw new Error(`timeOffsets play on the GPU only: ${this.resources.gpuReason}`);
+      this.frames = (options.frames ?? new FrameTables(this.resources, { offsets: offsets?.offsets ?? null })).retain();
+    } catch (e) {
+      this.resources.release();
+      throw e;
+    }
+    const { evaluator, gpuReason } = this.resources;
+    // the layout with this player's per-frame table (slot 0's for a crowd)
+    Object.assign(this, { layout: this.frames.views[0] ?? this.resources.layout, evaluator });
+    this.textures = { vertex: this.resources.textures.vertex, frame: this.frames.texture ?? undefined };
     /** Why the GPU path is unavailable (null when it is available). */
     this.gpuUnavailableReason = gpuReason;
-    const geometry = mesh.geometry;
-    this.vertexMap = resolveVertexMap(geometry, clip, options.vertexMap);
+    this.slots = offsets !== null;
     this.clipToLocal = toMatrix4(options.clipToLocal);
     this.normalToLocal = new Matrix3().getNormalMatrix(this.clipToLocal);
-    this.attributes = this._frameAttributes(geometry);
-    this.pass = backend.usePass(options, normals);
+    this._originalGeometry = mesh.geometry;
+    this._use = { resources: this.resources, vertexMap: this.vertexMap, placement: this.clipToLocal.elements, slots: offsets?.slot ?? null };
+    this.attributes = this._frameAttributes(offsets);
+    this.pass = !this.slots && backend.usePass(options, normals);
     this.uniforms = {
       ...this.resources.uniforms,
+      ...this.frames.uniforms,
       pdeEnabled: { value: false },
       pdeInfluence: { value: influence },
       pdeClipToLocal: { value: this.clipToLocal },
@@ -154,8 +185,30 @@ export class ClipPlayer {
     this.useGPU(this._onGPU);
   }
 
-  /** pdeVertex and pdeNormalFrame (meshAttributes) from the mesh's rest positions and normals. */
-  _frameAttributes(geometry) {
+  /**
+   * pdeVertex and pdeNormalFrame (meshAttributes) from the mesh's rest positions and normals, and pdeSlot for
+   * an instanced crowd: set on the mesh's geometry, or shared with the players of its clones (same clip, map
+   * and placement); a geometry that another player uses otherwise is copied for this mesh.
+   */
+  _frameAttributes(offsets) {
+    let geometry = this.mesh.geometry;
+    const user = GEOMETRY_USERS.get(geometry);
+    if (user && user.users > 0 && !sameUse(user.key, this._use)) {
+      geometry = this.mesh.geometry = geometry.clone();
+    }
+    const shared = GEOMETRY_USERS.get(geometry);
+    if (shared && shared.users > 0) {
+      shared.users++;
+      this._restNormalsClip = shared.restNormalsClip;
+      return shared.attrs;
+    }
+    const attrs = this._makeAttributes(geometry);
+    if (offsets) geometry.setAttribute('pdeSlot', new InstancedBufferAttribute(offsets.slot, 1));
+    GEOMETRY_USERS.set(geometry, { key: this._use, users: 1, attrs, restNormalsClip: this._restNormalsClip });
+    return attrs;
+  }
+
+  _makeAttributes(geometry) {
     const localToClip = this.clipToLocal.clone().invert();
     const restLocal = floatCopy(geometry.getAttribute('position'));
     const restClip = transformPoints(localToClip.elements, restLocal, new Float32Array(restLocal.length));
@@ -213,7 +266,8 @@ export class ClipPlayer {
     const L = this.layout;
     const mode = this._onGPU ? (this.pass ? 'pass' : 'gpu') : 'cpu';
     const bones = L.bones ? ':bones' : '';
-    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}:${this.normals}:${L.width}:${mode}`;
+    const slots = this.slots ? ':slots' : '';
+    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}${slots}:${this.normals}:${L.width}:${mode}`;
   }
 
   /**
@@ -222,7 +276,7 @@ export class ClipPlayer {
    * clip's CPU positions at t when the caller already has them (shared between meshes).
    */
   setTime(t, evaluated = null) {
-    if (this._onGPU) this.resources.frame(t);
+    if (this._onGPU) this.frames.frame(t);
     else this._writeCPU(evaluated ?? this.evaluator.evaluate(t, this._cpuBuffers().clip));
     this._time = t;
     return this;
@@ -231,12 +285,13 @@ export class ClipPlayer {
   /** Switch between GPU evaluation and the CPU fallback; returns whether the GPU is used. */
   useGPU(on) {
     const gpu = Boolean(on) && !this.gpuUnavailableReason;
+    if (!gpu && this.slots) throw new Error('timeOffsets play on the GPU only');
     const changed = gpu !== this._onGPU;
     this._onGPU = gpu;
     if (!gpu) this._cpuBuffers();
     this.uniforms.pdeEnabled.value = this._attached && this.influence > 0;
     if (changed) this._installed.refresh();
-    this.resources._lastT = null; // the shared state is set again below
+    this.frames.invalidate(); // the time state is set again below
     this.setTime(this._time);
     return gpu;
   }
@@ -245,7 +300,7 @@ export class ClipPlayer {
   _cpuBuffers() {
     if (this._cpu) return this._cpu;
     const n = this.vertexMap.length;
-    const geometry = this.mesh.geometry;
+    const geometry = this._privateGeometry();
     const position = new BufferAttribute(new Float32Array(n * 3), 3);
     const normal = new BufferAttribute(new Float32Array(n * 3), 3);
     geometry.setAttribute('pdeCpuPosition', position);
@@ -260,6 +315,17 @@ export class ClipPlayer {
       scratch: new Float32Array(n * 3),
     };
     return this._cpu;
+  }
+
+  /** The mesh's geometry, copied first when the players of other meshes use it too (CPU attributes are per time). */
+  _privateGeometry() {
+    const old = this.mesh.geometry;
+    const user = GEOMETRY_USERS.get(old);
+    if (!user || user.users === 1) return old; // (no user: the caller replaced the geometry)
+    user.users--;
+    const geometry = (this.mesh.geometry = old.clone());
+    GEOMETRY_USERS.set(geometry, { ...user, users: 1 });
+    return geometry;
   }
 
   /** Write the clip positions (V * 3, clip order) and their frame normals for this mesh. */
@@ -290,16 +356,31 @@ export class ClipPlayer {
 
   /** Bytes this player adds on the GPU for its mesh (per-vertex attributes), besides the shared textures. */
   get attributeBytes() {
-    const names = ['pdeVertex', 'pdeNormalFrame', 'pdeCpuPosition', 'pdeCpuNormal'];
-    return names.reduce((n, k) => n + (this.mesh.geometry.getAttribute(k)?.array.byteLength ?? 0), 0);
+    return PLAYER_ATTRIBUTES.reduce((n, k) => n + (this.mesh.geometry.getAttribute(k)?.array.byteLength ?? 0), 0);
   }
 
   /**
-   * Bytes on the GPU for the clip on this mesh: the shared data textures, the evaluation pass's texture
-   * (when the pass runs) and this mesh's attributes.
+   * Bytes on the GPU for the clip on this mesh: the clip's shared data texture, this player's per-frame
+   * table(s) and evaluation pass's texture (when the pass runs), and this mesh's attributes.
    */
   get gpuBytes() {
-    return this.resources.textureBytes + (this.resources.extras.pass?.bytes ?? 0) + this.attributeBytes;
+    return this.resources.sharedBytes + this.frames.bytes + this.attributeBytes;
+  }
+
+  /**
+   * A new player on a clone of the mesh (mesh.clone(), with the mesh's own materials), with this player's
+   * options: its own time, uniforms and patched materials, sharing the clip's data texture (and, while both
+   * play, the geometry's attributes). Add its mesh to a scene; player.setTime drives it alone.
+   */
+  clone() {
+    const mesh = this.mesh.clone();
+    this._installed.restoreOn(mesh);
+    mesh.frustumCulled = this._originalCulled;
+    const options = { ...this._options, influence: this.influence, resources: this.resources };
+    delete options.frames; // a per-frame table of its own
+    const player = new ClipPlayer(mesh, this.clip, options, this.backend);
+    player.setTime(this._time);
+    return player;
   }
 
   /** Restore the mesh's materials and geometry; the textures are freed with their last player. */
@@ -309,11 +390,41 @@ export class ClipPlayer {
     this.uniforms.pdeEnabled.value = false;
     this._installed.uninstall();
     this.mesh.frustumCulled = this._originalCulled;
-    for (const name of ['pdeVertex', 'pdeNormalFrame', 'pdeCpuPosition', 'pdeCpuNormal']) {
-      this.mesh.geometry.deleteAttribute(name);
+    const geometry = this.mesh.geometry;
+    const use = GEOMETRY_USERS.get(geometry); // none when the caller replaced the geometry meanwhile
+    if (!use || --use.users === 0) {
+      for (const name of PLAYER_ATTRIBUTES) geometry.deleteAttribute(name);
+      GEOMETRY_USERS.delete(geometry);
+      if (geometry !== this._originalGeometry) {
+        geometry.dispose(); // the copy made for this mesh
+        this.mesh.geometry = this._originalGeometry;
+      }
+    } else if (geometry !== this._originalGeometry) {
+      this.mesh.geometry = this._originalGeometry;
     }
-    if (--this.resources.users === 0) this.resources.dispose();
+    this.frames.release();
+    this.resources.release();
   }
+}
+
+/**
+ * For an InstancedMesh with timeOffsets (one number per instance): {offsets (the distinct ones), slot
+ * (Float32Array: each instance's index into offsets)}; null without timeOffsets.
+ */
+function instanceSlots(mesh, timeOffsets) {
+  if (timeOffsets === undefined || timeOffsets === null) return null;
+  if (!mesh.isInstancedMesh) throw new TypeError('timeOffsets needs an InstancedMesh (one offset per instance)');
+  if (timeOffsets.length !== mesh.count || ![...timeOffsets].every(Number.isFinite)) {
+    throw new RangeError(`timeOffsets must hold ${mesh.count} finite numbers (one per instance)`);
+  }
+  const index = new Map();
+  const slot = new Float32Array(timeOffsets.length);
+  for (let i = 0; i < timeOffsets.length; i++) {
+    const o = timeOffsets[i];
+    if (!index.has(o)) index.set(o, index.size);
+    slot[i] = index.get(o);
+  }
+  return { offsets: [...index.keys()], slot };
 }
 
 /** Play a decoded clip on mesh (see ClipPlayer for the options); returns the player. */

@@ -6,7 +6,7 @@ import './zstd.js';
 
 export { ClipPlayer, attachClip, PLAYER_OPTIONS } from './player.js';
 export { ScenePlayer, attachClipToScene } from './scene.js';
-export { ClipResources } from './resources.js';
+export { ClipResources, FrameTables } from './resources.js';
 export { PDEClipLoader } from './loader.js';
 export { clipAnimation, clipDuration } from './mixer.js';
 export { decodeClipOffThread, workerUnavailableReason } from './offthread.js';

@@ -280,7 +280,9 @@ test('a WebGPURenderer is refused with a reason: at attach when given, at the fi
   });
   const mesh = meshOf(clip, THREE.MeshBasicMaterial);
   attachClip(mesh, clip);
-  assert.throws(() => mesh.onBeforeRender(webgpu, null, null, mesh.geometry, mesh.material, null), /pdeanim\/webgpu/);
+  assert.throws(() => mesh.onBeforeRender(webgpu, null, null, mesh.geometry, mesh.material, null), {
+    message: WEBGPU_REFUSAL,
+  });
 });
 
 test('setTime drives the uniforms; the CPU fallback fills its own attributes, the geometry is kept', () => {

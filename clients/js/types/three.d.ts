@@ -17,8 +17,12 @@ export interface AttachOptions {
   /** 'frame' (default): each frame's area-weighted vertex normals, as three.js's computeVertexNormals
    * (hard-edge vertices turned with a triangle); 'rest': kept as they are (one evaluation per vertex). */
   normals?: 'frame' | 'rest';
-  /** Shared layout/textures/evaluator when several meshes play one clip. */
+  /** The clip's shared data texture, layout and evaluator (default: ClipResources.acquire(clip, options)). */
   resources?: ClipResources;
+  /** A per-frame table shared by meshes that show the same time (default: the player's own). */
+  frames?: FrameTables;
+  /** InstancedMesh only: each instance's time offset (one per-frame table per distinct offset; GPU only). */
+  timeOffsets?: ArrayLike<number>;
   /**
    * The renderer: its capabilities.maxTextureSize bounds the data textures (else 4096 is assumed), and with
    * float render targets (EXT_color_buffer_float) the clip is evaluated in a pass before drawing. A
@@ -46,18 +50,39 @@ export interface AttachOptions {
 export declare const PLAYER_OPTIONS: readonly string[];
 export declare const WEBGPU_REFUSAL: string;
 
+/** What a clip needs on the GPU whatever the time: one per clip (and texture width), reference-counted. */
 export declare class ClipResources {
   constructor(clip: Clip, options?: AttachOptions);
+  /** The clip's shared instance for these options, retained for the caller (release() it). */
+  static acquire(clip: Clip, options?: AttachOptions): ClipResources;
   readonly clip: Clip;
   readonly layout: GpuLayout;
-  readonly textures: Record<string, DataTexture>;
+  readonly textures: { vertex: DataTexture };
   readonly gpuReason: string | null;
   readonly evaluator: Evaluator;
   readonly uniforms: Record<string, { value: unknown }>;
-  /** Bytes of the data textures. */
+  readonly users: number;
+  /** Bytes of the shared data texture (once per clip). */
+  readonly sharedBytes: number;
+  /** Bytes of the data textures for one player: the shared texture and one per-frame table. */
   readonly textureBytes: number;
-  frame(t: number): void;
+  retain(): this;
+  release(): void;
   dispose(): void;
+}
+
+/** The per-frame table(s) of a player's time (one per distinct offset of an instanced crowd). */
+export declare class FrameTables {
+  constructor(resources: ClipResources, options?: { offsets?: ArrayLike<number> | null });
+  readonly resources: ClipResources;
+  readonly offsets: Float64Array;
+  readonly texture: DataTexture | null;
+  readonly uniforms: Record<string, { value: unknown }>;
+  /** Bytes of the table texture and of the evaluation pass's texture. */
+  readonly bytes: number;
+  frame(t: number): void;
+  retain(): this;
+  release(): void;
 }
 
 export declare class ClipPlayer {
@@ -77,11 +102,17 @@ export declare class ClipPlayer {
   /** Whether the clip is evaluated in a pass before drawing (else in the vertex shader). */
   readonly pass: boolean;
   readonly resources: ClipResources;
+  readonly frames: FrameTables;
+  /** Whether the mesh is an InstancedMesh played with timeOffsets. */
+  readonly slots: boolean;
   /** Bytes of the per-vertex attributes this player adds. */
   readonly attributeBytes: number;
-  /** Bytes on the GPU for the clip on this mesh: data textures, evaluation pass (when it runs), attributes. */
+  /** Bytes on the GPU for the clip on this mesh: the shared data texture, this player's per-frame table(s),
+   * evaluation pass (when it runs) and attributes. */
   readonly gpuBytes: number;
   influence: number;
+  /** A player on mesh.clone() (the mesh's own materials): its own time, sharing the clip's data texture. */
+  clone(): ClipPlayer;
   /** Show the clip at normalised time t: [0, 1] unless the clip loops (else RangeError). */
   setTime(t: number, evaluated?: Float32Array | null): this;
   /** Switch GPU evaluation on or off (CPU fallback); returns whether the GPU is used. */
@@ -98,20 +129,24 @@ export declare class ScenePlayer {
   readonly clip: Clip;
   readonly players: ClipPlayer[];
   readonly resources: ClipResources;
+  readonly frames: FrameTables;
   readonly evaluator: Evaluator;
   readonly gpuUnavailableReason: string | null;
   readonly gpu: boolean;
   readonly time: number;
-  /** Bytes on the GPU for the clip: data textures and every mesh's attributes. */
+  /** Bytes on the GPU for the clip: the shared data texture, this player's per-frame table and every mesh's
+   * attributes. */
   readonly gpuBytes: number;
   influence: number;
+  /** A player on root.clone() (the meshes' own materials): its own time, sharing the clip's data texture. */
+  clone(): ScenePlayer;
   setTime(t: number): this;
   useGPU(on: boolean): boolean;
   positions(t: number, out?: Float32Array): Float32Array;
   detach(): void;
 }
 
-export type SceneOptions = Omit<AttachOptions, 'vertexMap' | 'clipToLocal' | 'resources'> & {
+export type SceneOptions = Omit<AttachOptions, 'vertexMap' | 'clipToLocal' | 'resources' | 'frames' | 'timeOffsets'> & {
   filter?: (mesh: Mesh) => boolean;
 };
 

@@ -2,11 +2,11 @@
 // a GLB that pdeanim wrote), keeping materials, textures, UVs and the node hierarchy.
 
 import { ClipPlayer, MAP_ATTRIBUTES, PLAYER_OPTIONS, checkOptions } from './player.js';
-import { ClipResources } from './resources.js';
+import { ClipResources, FrameTables } from './resources.js';
 import { webglBackend } from './webgl.js';
 
 const SCENE_OPTIONS = Object.freeze([
-  ...PLAYER_OPTIONS.filter((k) => !['vertexMap', 'clipToLocal', 'resources'].includes(k)),
+  ...PLAYER_OPTIONS.filter((k) => !['vertexMap', 'clipToLocal', 'resources', 'frames', 'timeOffsets'].includes(k)),
   'filter',
 ]);
 
@@ -16,7 +16,9 @@ const SCENE_OPTIONS = Object.freeze([
  * carries one, the clip vertices of their _pdeanim_vertex attributes (pdeanim's welded GLBs); each is placed
  * with its transform relative to root, so that the clip's coordinates are root's. Skinned meshes play the clip in
  * place of their skinning (mixed by influence); meshes sharing one geometry get their own copy of it.
- * options: as ClipPlayer's (without vertexMap, clipToLocal, resources), plus filter(mesh) to skip meshes.
+ * options: as ClipPlayer's (without vertexMap, clipToLocal, resources, frames, timeOffsets), plus
+ * filter(mesh) to skip meshes. Scene players of one clip share its data texture (ClipResources.acquire);
+ * each has its own time (one per-frame table for its meshes).
  */
 export class ScenePlayer {
   constructor(root, clip, options = {}, backend = webglBackend) {
@@ -40,7 +42,10 @@ export class ScenePlayer {
     }
     this.root = root;
     this.clip = clip;
-    this.resources = new ClipResources(clip, rest);
+    this._options = { ...options };
+    this.resources = ClipResources.acquire(clip, rest);
+    this.frames = new FrameTables(this.resources).retain();
+    const shared = { resources: this.resources, frames: this.frames };
     const seen = new Set();
     let offset = 0;
     this.players = meshes.map((mesh) => {
@@ -51,8 +56,9 @@ export class ScenePlayer {
       const vertexMap = mapped.length ? undefined : Int32Array.from({ length: n }, (_, i) => offset + i);
       offset += n;
       const clipToLocal = rootInverse.clone().multiply(mesh.matrixWorld).invert();
-      return new ClipPlayer(mesh, clip, { ...rest, vertexMap, clipToLocal, resources: this.resources }, backend);
+      return new ClipPlayer(mesh, clip, { ...rest, vertexMap, clipToLocal, ...shared }, backend);
     });
+    this.backend = backend;
     this._positions = new Float32Array(clip.nVertices * 3);
     this._time = 0;
   }
@@ -101,14 +107,42 @@ export class ScenePlayer {
     return this.resources.evaluator.evaluate(t, out);
   }
 
-  /** Bytes on the GPU for the clip: shared data textures and evaluation pass plus every mesh's attributes. */
+  /**
+   * Bytes on the GPU for the clip: its shared data texture, this player's per-frame table and evaluation
+   * pass, and every mesh's attributes (counted here even where a clone's player shares them).
+   */
   get gpuBytes() {
-    const pass = this.resources.extras.pass?.bytes ?? 0;
-    return this.resources.textureBytes + pass + this.players.reduce((n, p) => n + p.attributeBytes, 0);
+    const attributes = this.players.reduce((n, p) => n + p.attributeBytes, 0);
+    return this.resources.sharedBytes + this.frames.bytes + attributes;
+  }
+
+  /**
+   * A new player on a clone of root (root.clone(), with the meshes' own materials) with this player's
+   * options: its own time, uniforms and patched materials, sharing the clip's data texture and, while both
+   * play, the meshes' attributes. Add its root to a scene.
+   */
+  clone() {
+    const root = this.root.clone();
+    const copies = [];
+    root.traverse((o) => copies.push(o));
+    const originals = [];
+    this.root.traverse((o) => originals.push(o));
+    for (const p of this.players) {
+      const copy = copies[originals.indexOf(p.mesh)];
+      p._installed.restoreOn(copy);
+      copy.frustumCulled = p._originalCulled;
+    }
+    const player = new ScenePlayer(root, this.clip, { ...this._options, influence: this.influence }, this.backend);
+    player.setTime(this._time);
+    return player;
   }
 
   detach() {
+    if (!this.frames) return;
     for (const p of this.players) p.detach();
+    this.frames.release();
+    this.resources.release();
+    this.frames = null;
   }
 }
 

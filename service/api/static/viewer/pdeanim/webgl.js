@@ -17,16 +17,22 @@ import {
 import { glslHeader, glslPassMain, patchVertexShader } from './glsl.js';
 
 export const WEBGPU_REFUSAL =
-  'pdeanim/three patches WebGL shaders (onBeforeCompile), which WebGPURenderer does not run: ' +
-  "play the clip with attachClip from 'pdeanim/webgpu' (node materials) instead";
+  'pdeanim/three patches WebGL shaders (onBeforeCompile), which WebGPURenderer does not run, and this ' +
+  'package has no WebGPU (node material) player yet: play the clip with a WebGLRenderer';
 
-/** The evaluation pass: a full-screen quad whose fragments evaluate one clip vertex each, into a texture. */
+/** The material each patched clone was made from (a mesh.clone() shares the patched one: patch its original). */
+const ORIGINAL = new WeakMap();
+
+/**
+ * The evaluation pass of a player's time (FrameTables): a full-screen quad whose fragments evaluate one clip
+ * vertex each, into a texture.
+ */
 class EvaluationPass {
-  constructor(resources) {
-    const layout = resources.layout;
-    this.resources = resources;
+  constructor(frames) {
+    const layout = frames.resources.layout;
+    this.frames = frames;
     this.material = new ShaderMaterial({
-      uniforms: resources.uniforms,
+      uniforms: { ...frames.resources.uniforms, ...frames.uniforms },
       vertexShader: 'void main() { gl_Position = vec4(position.xy, 0.0, 1.0); }',
       fragmentShader: `${glslHeader(layout, { stage: 'fragment' })}\n${glslPassMain()}`,
       depthTest: false,
@@ -56,8 +62,8 @@ class EvaluationPass {
 
   /** Evaluate every clip vertex into the position texture, once per state of the clip (nested render). */
   run(renderer) {
-    if (this.done === this.resources.version) return;
-    this.done = this.resources.version;
+    if (this.done === this.frames.version) return;
+    this.done = this.frames.version;
     const target = renderer.getRenderTarget();
     const xr = renderer.xr.enabled;
     renderer.xr.enabled = false;
@@ -93,10 +99,10 @@ export const webglBackend = {
     return options.pass ?? Boolean(options.renderer?.extensions?.has?.('EXT_color_buffer_float') && normals === 'frame');
   },
   install(player, { shadows }) {
-    const { mesh, resources, uniforms } = player;
+    const { mesh, frames, uniforms } = player;
     if (player.pass) {
-      resources.extras.pass ??= new EvaluationPass(resources);
-      uniforms.pdePosTex.value = resources.extras.pass.target.texture;
+      frames.pass ??= new EvaluationPass(frames);
+      uniforms.pdePosTex.value = frames.pass.target.texture;
     }
     const patch = (material) => patchMaterial(material, player);
     const original = {
@@ -116,19 +122,25 @@ export const webglBackend = {
     // a WebGPURenderer skips onBeforeCompile: refuse at the first frame rather than draw a still mesh
     mesh.onBeforeRender = function (renderer, ...rest) {
       if (isWebGPURenderer(renderer)) throw new Error(WEBGPU_REFUSAL);
-      if (player.pass && player.gpu && uniforms.pdeEnabled.value) resources.extras.pass.run(renderer);
+      if (player.pass && player.gpu && uniforms.pdeEnabled.value) frames.pass.run(renderer);
       return before.call(this, renderer, ...rest);
     };
     if (original.onBeforeShadow) {
       const shadow = original.onBeforeShadow;
       mesh.onBeforeShadow = function (renderer, ...rest) {
-        if (player.pass && player.gpu && uniforms.pdeEnabled.value) resources.extras.pass.run(renderer);
+        if (player.pass && player.gpu && uniforms.pdeEnabled.value) frames.pass.run(renderer);
         return shadow.call(this, renderer, ...rest);
       };
     }
     const materials = [patched, mesh.customDepthMaterial, mesh.customDistanceMaterial].flat();
     return {
       /** Recompile after a switch between GPU and CPU evaluation (another shader variant). */
+      /** Give a clone of the mesh (mesh.clone()) the mesh's own materials back. */
+      restoreOn(clone) {
+        clone.material = original.material;
+        clone.customDepthMaterial = original.depth;
+        clone.customDistanceMaterial = original.distance;
+      },
       refresh() {
         for (const m of materials) m.needsUpdate = true;
       },
@@ -146,13 +158,16 @@ export const webglBackend = {
 
 /** A clone of material whose vertex shader evaluates the clip (program variant per layout and mode). */
 function patchMaterial(material, player) {
+  material = ORIGINAL.get(material) ?? material;
   const m = material.clone();
+  ORIGINAL.set(m, material);
   const previous = material.onBeforeCompile;
   const inherited = material.constructor.prototype.onBeforeCompile;
   m.onBeforeCompile = (shader, renderer) => {
     if (previous && previous !== inherited) previous.call(m, shader, renderer);
     Object.assign(shader.uniforms, player.uniforms);
-    const header = glslHeader(player.layout, { normals: player.normals, pass: player.pass, cpu: !player.gpu });
+    const { normals, pass, slots } = player;
+    const header = glslHeader(player.layout, { normals, pass, cpu: !player.gpu, slots });
     shader.vertexShader = patchVertexShader(shader.vertexShader, header);
   };
   const prevKey = material.customProgramCacheKey?.bind(material);

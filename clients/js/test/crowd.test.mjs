@@ -1,0 +1,280 @@
+// Many players of one clip: one data texture per clip whatever the number of players (reference-counted,
+// freed with the last one), each player its own time (per-frame table, uniforms) and patched materials,
+// clone() of a playing mesh or scene, and instanced crowds (InstancedMesh, a time offset per instance: one
+// per-frame table per distinct offset, in one texture). Positions are checked through a float32 emulation of
+// the shader's reads (as gpu.test.mjs does) against the CPU evaluator.
+
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { join } from 'node:path';
+import * as THREE from 'three';
+import { createEvaluator, decodeClipFile } from '../src/index.js';
+import { gpuLayout, timeUniforms } from '../src/gpu.js';
+import { ClipResources, attachClip, attachClipToScene } from '../src/three.js';
+import { FIXTURES, manifest, readBytes } from './helpers.mjs';
+
+const man = manifest();
+const f = Math.fround;
+const byName = (name) => man.cases.find((c) => c.name === name);
+
+function loadCase(c) {
+  return decodeClipFile(readBytes(join(FIXTURES, c.clip)));
+}
+
+function geometryOf(clip) {
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(Float32Array.from(clip.rest), 3));
+  g.setIndex(new THREE.BufferAttribute(Uint32Array.from(clip.faces), 1));
+  return g;
+}
+
+function meshOf(clip) {
+  return new THREE.Mesh(geometryOf(clip), new THREE.MeshStandardMaterial({ color: 0x336699 }));
+}
+
+/** Texel i of a float RGBA texture (data, rows of width), from texel base on (a crowd's slot). */
+function fetch(data, width, i) {
+  const o = (Math.floor(i / width) * width + (i % width)) * 4;
+  return [...data.subarray(o, o + 4)];
+}
+
+function dot4(a, b) {
+  return f(f(f(f(a[0] * b[0]) + f(a[1] * b[1])) + f(a[2] * b[2])) + f(a[3] * b[3]));
+}
+
+/**
+ * The shader's pdeEval(v) in float32 for a dynamic clip without bones, reading the player's textures as the
+ * GPU does: the shared vertex texture, and the per-frame texture from texel base (slot * pdeSlotTexels).
+ */
+function emulate(player, v, base = 0) {
+  const L = player.layout;
+  const vertex = player.textures.vertex.image;
+  const frame = player.textures.frame.image;
+  const fr = (i) => fetch(frame.data, frame.width, i + base);
+  const g = L.gpuIndex[v];
+  if (g < L.nDirect) return fr(g).slice(0, 3);
+  const r = (g - L.nDirect) * 4;
+  const head = fetch(vertex.data, vertex.width, r);
+  const c = L.nDirect + Math.round(head[0]) * L.curveTexels;
+  let p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(fr(c + w), fetch(vertex.data, vertex.width, r + 1 + w))));
+  if (L.rigid) {
+    const rows = [0, 1, 2].map((i) => fr(c + L.coefficientTexels + i));
+    p = rows.map((row) => f(dot4([row[0], row[1], row[2], 0], [...p, 0]) + row[3]));
+  }
+  return p;
+}
+
+/** The largest deviation of the emulated shader (slot base) from the CPU evaluator at t. */
+function deviation(player, clip, t, base = 0) {
+  const cpu = createEvaluator(clip).evaluate(t);
+  let worst = 0;
+  for (let v = 0; v < clip.nVertices; v++) {
+    const g = emulate(player, v, base);
+    for (let w = 0; w < 3; w++) worst = Math.max(worst, Math.abs(g[w] - cpu[v * 3 + w]));
+  }
+  return worst;
+}
+
+test('players of one clip share its data texture; each has its own per-frame table and time', () => {
+  const c = byName('fit-rigid-chord-smooth-spline');
+  const clip = loadCase(c);
+  const a = attachClip(meshOf(clip), clip);
+  const b = attachClip(meshOf(clip), clip);
+  assert.equal(a.resources, b.resources);
+  assert.equal(a.textures.vertex, b.textures.vertex);
+  assert.notEqual(a.textures.frame, b.textures.frame);
+  assert.notEqual(a.uniforms.pdeFrameTex, b.uniforms.pdeFrameTex);
+  assert.equal(a.uniforms.pdeVertexTex, b.uniforms.pdeVertexTex);
+  a.setTime(0.2);
+  b.setTime(0.9);
+  assert.ok(deviation(a, clip, 0.2) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(b, clip, 0.9) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(a, clip, 0.9) > 1e-3 * c.diagonal, 'a shows its own time, not b');
+  // the second player adds its per-frame table and its mesh's attributes, not the data texture
+  assert.equal(b.gpuBytes - b.attributeBytes, a.resources.sharedBytes + b.frames.bytes);
+  assert.equal(a.resources.textureBytes, a.resources.sharedBytes + b.frames.bytes);
+  // freed with the last player; a later player makes the clip's texture again
+  let disposed = 0;
+  a.textures.vertex.addEventListener('dispose', () => disposed++);
+  a.detach();
+  assert.equal(disposed, 0);
+  b.detach();
+  assert.equal(disposed, 1);
+  const c2 = attachClip(meshOf(clip), clip);
+  assert.notEqual(c2.resources, a.resources);
+  assert.equal(c2.resources.users, 1);
+  c2.detach();
+});
+
+test('another texture width (another renderer limit) gets its own resources', () => {
+  const clip = loadCase(byName('fit-displacement-chord'));
+  const a = attachClip(meshOf(clip), clip);
+  const b = attachClip(meshOf(clip), clip, { maxTextureSize: 16 });
+  const c = attachClip(meshOf(clip), clip, { maxTextureSize: 16 });
+  assert.notEqual(a.resources, b.resources);
+  assert.equal(b.resources, c.resources);
+  assert.equal(b.resources.users, 2);
+  for (const p of [a, b, c]) p.detach();
+});
+
+test('clone() of a playing mesh: its own time, uniforms and materials, the clip texture and attributes shared', () => {
+  const c = byName('fit-displacement-chord-smooth-spline');
+  const clip = loadCase(c);
+  const mesh = meshOf(clip);
+  const original = mesh.material;
+  const player = attachClip(mesh, clip, { influence: 0.5 });
+  player.setTime(0.3);
+  const copy = player.clone();
+  assert.notEqual(copy.mesh, mesh);
+  assert.notEqual(copy.mesh.material, mesh.material);
+  assert.notEqual(copy.mesh.customDepthMaterial, mesh.customDepthMaterial);
+  assert.equal(copy.influence, 0.5);
+  assert.equal(copy.time, 0.3);
+  assert.equal(copy.textures.vertex, player.textures.vertex);
+  assert.equal(copy.mesh.geometry, mesh.geometry); // Object3D.clone shares it: so do the attributes
+  copy.setTime(0.8);
+  assert.equal(player.time, 0.3);
+  assert.ok(deviation(player, clip, 0.3) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(copy, clip, 0.8) <= 1e-6 * c.diagonal);
+  // the patched materials compile with each player's own uniforms
+  const shaderOf = (m) => {
+    const s = { uniforms: {}, vertexShader: THREE.ShaderLib.standard.vertexShader };
+    m.onBeforeCompile(s);
+    return s;
+  };
+  assert.equal(shaderOf(mesh.material).uniforms.pdeFrameTex, player.uniforms.pdeFrameTex);
+  assert.equal(shaderOf(copy.mesh.material).uniforms.pdeFrameTex, copy.uniforms.pdeFrameTex);
+  player.detach();
+  assert.equal(mesh.material, original);
+  assert.ok(copy.mesh.geometry.getAttribute('pdeVertex'), 'the clone still plays after the original detached');
+  copy.detach();
+  assert.equal(copy.mesh.geometry.getAttribute('pdeVertex'), undefined);
+  assert.equal(copy.mesh.material, original);
+});
+
+test("attachClip on a three.js clone of a playing mesh patches the mesh's own material, not the patched one", () => {
+  const c = byName('fit-displacement-chord');
+  const clip = loadCase(c);
+  const mesh = meshOf(clip);
+  const original = mesh.material;
+  const a = attachClip(mesh, clip);
+  const cloned = mesh.clone(); // shares the patched material and the geometry
+  const b = attachClip(cloned, clip);
+  assert.notEqual(cloned.material, mesh.material);
+  a.setTime(0.1);
+  b.setTime(0.7);
+  assert.ok(deviation(a, clip, 0.1) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(b, clip, 0.7) <= 1e-6 * c.diagonal);
+  b.detach();
+  assert.equal(cloned.material, mesh.material); // what it had before
+  a.detach();
+  assert.equal(mesh.material, original);
+});
+
+test('a player switching to the CPU on a geometry that others play gets its own copy of it', () => {
+  const clip = loadCase(byName('fit-displacement-chord'));
+  const mesh = meshOf(clip);
+  const a = attachClip(mesh, clip);
+  const b = a.clone();
+  const shared = mesh.geometry;
+  b.useGPU(false);
+  b.setTime(0.5);
+  assert.notEqual(b.mesh.geometry, shared);
+  assert.ok(b.mesh.geometry.getAttribute('pdeCpuPosition'));
+  assert.equal(shared.getAttribute('pdeCpuPosition'), undefined);
+  b.detach();
+  assert.equal(b.mesh.geometry, shared);
+  assert.ok(shared.getAttribute('pdeVertex'), "a's attributes are kept");
+  a.detach();
+  assert.equal(shared.getAttribute('pdeVertex'), undefined);
+});
+
+test('ScenePlayer.clone(): another root with its own time; one per-frame table per scene player', () => {
+  const c = byName('fit-displacement-chord-loop');
+  const clip = loadCase(c);
+  const root = new THREE.Group();
+  root.add(meshOf(clip));
+  const a = attachClipToScene(root, clip);
+  const b = a.clone();
+  assert.notEqual(b.root, root);
+  assert.equal(b.resources, a.resources);
+  assert.notEqual(b.frames, a.frames);
+  a.setTime(0.25);
+  b.setTime(0.75);
+  assert.ok(deviation(a.players[0], clip, 0.25) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(b.players[0], clip, 0.75) <= 1e-6 * c.diagonal);
+  // what the second scene adds on the GPU: its per-frame table (the attributes are shared with a's meshes)
+  assert.equal(b.gpuBytes - a.gpuBytes, 0);
+  assert.equal(b.resources.users, 4); // two scene players and their two meshes
+  a.detach();
+  b.detach();
+  assert.equal(b.resources.users, 0);
+});
+
+test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, each instance reads its own', () => {
+  for (const name of ['fit-rigid-paper-loop', 'fit-displacement-chord']) {
+    const c = byName(name);
+    const clip = loadCase(c);
+    const n = 6;
+    const mesh = new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshStandardMaterial(), n);
+    const offsets = [0, 0.25, 0.5, 0.25, 0.75, 0];
+    const player = attachClip(mesh, clip, { timeOffsets: offsets });
+    assert.equal(player.frames.offsets.length, 4);
+    assert.equal(player.pass, false);
+    assert.match(player.programKey, /:slots:/);
+    const slot = mesh.geometry.getAttribute('pdeSlot');
+    assert.ok(slot.isInstancedBufferAttribute);
+    assert.deepEqual([...slot.array], [0, 1, 2, 1, 3, 0]);
+    const t = 0.6;
+    player.setTime(t);
+    const stride = player.uniforms.pdeSlotTexels.value;
+    for (let i = 0; i < n; i++) {
+      let ti = t + offsets[i];
+      ti = clip.looping ? ti - Math.floor(ti) : Math.min(ti, 1);
+      const dev = deviation(player, clip, ti, slot.array[i] * stride);
+      assert.ok(dev <= 1e-6 * c.diagonal, `${name} instance ${i}: ${dev / c.diagonal}`);
+      // the slot's table is the one a single player shows at that time
+      const fresh = gpuLayout(clip, { width: player.layout.width });
+      timeUniforms(fresh, ti);
+      const k = slot.array[i] * stride * 4;
+      const atlas = player.textures.frame.image.data;
+      assert.deepEqual(atlas.subarray(k, k + stride * 4), fresh.textures.frame.data.subarray(0, stride * 4));
+    }
+    const s = { uniforms: {}, vertexShader: THREE.ShaderLib.standard.vertexShader };
+    mesh.material.onBeforeCompile(s);
+    assert.match(s.vertexShader, /#define PDEANIM_SLOTS/);
+    assert.match(s.vertexShader, /in float pdeSlot;/);
+    player.detach();
+    assert.equal(mesh.geometry.getAttribute('pdeSlot'), undefined);
+  }
+});
+
+test('cyclic clips in a crowd: each slot holds the sine and cosine of its swim phase', () => {
+  const clip = loadCase(byName('cyclic-eel-standing-rotate'));
+  const mesh = new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshBasicMaterial(), 3);
+  const player = attachClip(mesh, clip, { timeOffsets: [0, 0.5, 0.1] });
+  player.setTime(0.3);
+  const data = player.textures.frame.image.data;
+  for (const [k, o] of [0, 0.5, 0.1].entries()) {
+    const u = timeUniforms(gpuLayout(clip), 0.3 + o);
+    assert.equal(data[k * 4], f(u.sw));
+    assert.equal(data[k * 4 + 1], f(u.cw));
+  }
+  player.detach();
+});
+
+test('timeOffsets are refused with a reason where they cannot play', () => {
+  const clip = loadCase(byName('fit-displacement-chord'));
+  const inst = () => new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshBasicMaterial(), 2);
+  assert.throws(() => attachClip(meshOf(clip), clip, { timeOffsets: [0] }), /needs an InstancedMesh/);
+  assert.throws(() => attachClip(inst(), clip, { timeOffsets: [0] }), /must hold 2 finite numbers/);
+  assert.throws(() => attachClip(inst(), clip, { timeOffsets: [0, NaN] }), RangeError);
+  assert.throws(() => attachClip(inst(), clip, { timeOffsets: [0, 1], gpu: false }), /GPU only/);
+  const player = attachClip(inst(), clip, { timeOffsets: [0, 0.5] });
+  assert.throws(() => player.useGPU(false), /GPU only/);
+  player.detach();
+  const many = Array.from({ length: 300 }, (_, i) => i / 300);
+  const big = new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshBasicMaterial(), 300);
+  assert.throws(() => attachClip(big, clip, { timeOffsets: many, maxTextureSize: 16 }), /300 distinct time offsets/);
+  assert.equal(ClipResources.acquire(clip, { maxTextureSize: 16 }).users, 1, 'the refused attach left no user');
+});
