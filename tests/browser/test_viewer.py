@@ -15,7 +15,6 @@ import pytest
 
 from tests.service.harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
 HERE = Path(__file__).resolve().parent
 FRAMES = 12
 CYCLIC = {"mode": "eel", "frames": 8, "n_curves": 12, "points": 16, "modes": 3}

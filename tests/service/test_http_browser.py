@@ -15,7 +15,6 @@ import zstandard
 
 from .harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
 ORIGIN = "http://localhost:5173"
 PRIVATE = "private, max-age=31536000, immutable"
 
