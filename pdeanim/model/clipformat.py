@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .. import container
-from ..clipparts import FORMAT_VERSION, topology_id
+from ..clipparts import FORMAT_VERSION, VALUE_LIMIT, topology_id
 from ..curveset import CurveSet
 from ..errors import ClipFormatError
 from . import knotbasis, quantise
@@ -283,6 +283,7 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
     rest[order] = quantise.dequantise(quantise.undo_zigzag_deltas(zr, axis=0), rest_step, origin)
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(rest))):
         raise ClipFormatError("topology u or rest decode to non-finite values")
+    _bounded(rest, "topology rest")
     if faces.size and (faces.min() < 0 or faces.max() >= V):
         raise ClipFormatError("topology faces index outside the vertices")
     if u.shape[1] not in (1, 3):
@@ -425,7 +426,14 @@ def _knot_window(arrays: dict[str, np.ndarray], S: int, W: int) -> np.ndarray:
 def _finite_knots(knots: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(knots)):
         raise ClipFormatError("coefficients knots decode to non-finite values")
-    return knots
+    return _bounded(knots, "coefficients knots")
+
+
+def _bounded(values: np.ndarray, what: str) -> np.ndarray:
+    """``values``, refused when one is above VALUE_LIMIT in magnitude (its frames could overflow float32)."""
+    if values.size and not np.abs(values).max() <= VALUE_LIMIT:
+        raise ClipFormatError(f"{what} hold a value above 2^96 in magnitude (frames would not be finite)")
+    return values
 
 
 def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray]:
@@ -434,11 +442,11 @@ def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray
     Sr = len(seg) - 1
     if Sr < 1 or np.any(np.diff(seg) < 0):
         raise ClipFormatError("rigid segment boundaries must be non-decreasing with at least one segment")
-    out = {"rigid_segment_t": seg,
-           "rigid_centre": _need(arrays, "rigid_centre", (C, 3), "coefficients", "<f4")}
+    centre = _need(arrays, "rigid_centre", (C, 3), "coefficients", "<f4")
+    out = {"rigid_segment_t": seg, "rigid_centre": _bounded(centre, "rigid centres")}
     for name in ("rot", "trans"):
-        out[f"rigid_{name}_knots"] = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients",
-                                           "<f4")
+        knots = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients", "<f4")
+        out[f"rigid_{name}_knots"] = _bounded(knots, f"rigid_{name}_knots")
         mu = _need(arrays, f"rigid_{name}_mu", (Sr, C), "coefficients", "<f4")
         if np.any(mu <= -np.pi):
             raise ClipFormatError("rigid trig time constants must be above -pi")
