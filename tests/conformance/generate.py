@@ -32,7 +32,7 @@ from pdeanim.model.clipformat import TIME_SPLINE, CoefficientData, encode_coeffi
 from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 8
+FIXTURE_VERSION = 9
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -58,6 +58,17 @@ def _fit(motion: str, param_mode: str, loop: bool, time_model: str = "auto") -> 
         fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion, param_mode=param_mode,
                                                        loop=loop, time_model=time_model)),
         spline=False if loop or time_model == "pde" else None)
+
+
+OFF_ORIGIN = np.array([3000.0, -1500.0, 750.0])
+"""Where the off-origin case's sphere sits: coordinates a thousand times its diagonal, so that float32
+rounding of a coordinate (about 2^-24 of it) is far above 1e-6 of the diagonal (docs/format.md §6)."""
+
+
+def _off_origin() -> ClipParts:
+    poses = _sphere_poses()
+    moved = make_poses(np.asarray(poses.vertices, np.float64) + OFF_ORIGIN, poses.faces, poses.times)
+    return fit_poses(moved, FitOptions(segments=3))
 
 
 def _smooth_pde() -> ClipParts:
@@ -292,7 +303,13 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
                                                 {}),
+    "fit-displacement-chord-off-origin": (_off_origin, {}),
 }
+
+
+TOLERANCE_REL_COORDINATE = 2.0**-20
+"""Of the largest coordinate magnitude of a case's positions, added to 1e-6 of its diagonal: float32 keeps
+about 2^-24 of a coordinate, and evaluators that round in another order differ by a few of those."""
 
 
 def case_times(parts: ClipParts) -> list[float]:
@@ -312,7 +329,8 @@ def case_times(parts: ClipParts) -> list[float]:
 def generate(out: Path, names: list[str] | None = None) -> dict:
     """Write the fixture files of the chosen cases (all by default) into out; returns the manifest."""
     out.mkdir(parents=True, exist_ok=True)
-    manifest: dict = {"fixture_version": FIXTURE_VERSION, "tolerance_rel_diagonal": 1e-6, "cases": []}
+    manifest: dict = {"fixture_version": FIXTURE_VERSION, "tolerance_rel_diagonal": 1e-6,
+                      "tolerance_rel_coordinate": TOLERANCE_REL_COORDINATE, "cases": []}
     for name, (make, _) in CASES.items():
         if names and name not in names:
             continue
