@@ -80,6 +80,10 @@ def topology_id(topology: bytes) -> str:
     return hashlib.sha256(topology).hexdigest()
 
 
+VALUE_LIMIT = 2.0**96
+"""Largest magnitude of a position-scale number a reader accepts (docs/format.md §5): rest coordinates, knots,
+rigid centres and translations, cyclic rest positions and spine coefficients. With the space basis at most 2
+and the time weights below 2^25, no frame of such a clip overflows float32 (2^128)."""
 FORMAT_VERSION = "1.0"
 """The clip format every part and CLIP file is written in (docs/format.md). Readers accept any "1.<minor>":
 minor versions only add header keys or arrays that a reader may ignore; a new major version is refused."""

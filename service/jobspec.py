@@ -1,35 +1,29 @@
 """What a job of each kind needs from the library: its options class (validated at submission by the API,
-rebuilt by the worker) and the library versions recorded with every attempt. Imports are lazy so the
-API starts even when a stage is not installed in this build."""
+rebuilt by the worker) and the library versions recorded with every attempt."""
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
+from pdeanim.cyclic.job import CyclicOptions
 from pdeanim.errors import ParameterError
+from pdeanim.fit.options import FitOptions
+from pdeanim.gltf.clipexport import ExportOptions
+from pdeanim.sim.scene import SceneParams
 
-OPTIONS = {
-    "simulate": "pdeanim.sim.scene:SceneParams",
-    "fit": "pdeanim.fit.options:FitOptions",
-    "cyclic": "pdeanim.cyclic.job:CyclicOptions",
-    "export": "pdeanim.gltf.clipexport:ExportOptions",
+OPTIONS: dict[str, type] = {
+    "simulate": SceneParams,
+    "fit": FitOptions,
+    "cyclic": CyclicOptions,
+    "export": ExportOptions,
 }
-
-
-class StageUnavailable(RuntimeError):
-    """The library stage for a job kind cannot be imported in this build."""
 
 
 def options_class(kind: str) -> type:
     """The options dataclass of ``kind`` (with ``from_dict``/``to_dict``)."""
     if kind not in OPTIONS:
         raise ParameterError(f"unknown job kind {kind!r} (known: {', '.join(OPTIONS)})")
-    module, _, name = OPTIONS[kind].partition(":")
-    try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as exc:
-        raise StageUnavailable(f"the {kind} stage ({OPTIONS[kind]}) is not available: {exc}") from exc
+    return OPTIONS[kind]
 
 
 def normalize(kind: str, params: dict[str, Any] | None) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import httpx
 
-from service.cli import CONSOLE
+from service.console import CONSOLE
 
 
 def free_port() -> int:

@@ -13,6 +13,8 @@ from pdeanim.records import jsonable
 from service.settings import Settings
 from service.store.blobs import BlobStore
 
+from .clipstore import store_clip
+
 Partial = Callable[[dict], None]  # hands a part of the result to the parent before the stage goes on
 SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
 
@@ -22,17 +24,6 @@ def _mesh(job: dict, blobs: BlobStore, settings: Settings):  # noqa: ANN202 - Su
 
     limits = MeshLimits(settings.max_upload_bytes, settings.max_vertices, settings.max_faces)
     return load_mesh(blobs.get(job["mesh"]["blob_key"]), filename=job["mesh"]["filename"], limits=limits)
-
-
-def _store_clip(parts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict:  # noqa: ANN001
-    from pdeanim.container import unpack
-
-    header, _ = unpack(parts.coefficients)
-    report = jsonable(parts.report)
-    report.setdefault("sizes", jsonable(parts.sizes(n_frames, n_vertices)))
-    return {"kind": str(header.get("kind")), "topology_id": parts.topology_id,
-            "topology_key": blobs.put(parts.topology), "coefficients_key": blobs.put(parts.coefficients),
-            "report": report}
 
 
 def _labelled(progress: Progress) -> Progress:
@@ -58,7 +49,7 @@ def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int
         raise TargetNotMetError(
             f"{shortfall} (ask for best_effort: true in the fit options to keep the clip)"
         )
-    return _store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
+    return store_clip(parts, blobs, poses.n_frames, poses.n_vertices)
 
 
 def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
@@ -129,7 +120,7 @@ def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
     parts = make_cyclic_clip(mesh, CyclicOptions.from_dict(job["params"]["params"]), progress=progress,
                              source=blobs.get(job["mesh"]["blob_key"]))
     frames = int(parts.report.get("frames", 1)) if isinstance(parts.report.get("frames"), int) else 1
-    return {"clip": _store_clip(parts, blobs, frames, len(mesh.vertices))}
+    return {"clip": store_clip(parts, blobs, frames, len(mesh.vertices))}
 
 
 def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,

@@ -16,6 +16,8 @@ from service.settings import Settings
 from service.store import windows as keys
 from service.store.blobs import BlobStore
 
+from .clipstore import store_clip
+
 FRAME_BYTES = 12  # float32 x, y, z per vertex
 
 
@@ -79,8 +81,6 @@ def _join(plan: windowed.WindowPlan, fit_job: str, W: int, blobs: BlobStore) -> 
     from pdeanim.errors import TargetNotMetError
     from pdeanim.fit import target_shortfall
 
-    from .stages import _store_clip
-
     codes = [windowed.WindowCodes.from_bytes(blobs.get(keys.codes_key(fit_job, i))) for i in range(W)]
     parts = windowed.join_clip(plan, _space(blobs, fit_job), codes)
     parts.report["window_tasks"] = True
@@ -88,4 +88,4 @@ def _join(plan: windowed.WindowPlan, fit_job: str, W: int, blobs: BlobStore) -> 
     if shortfall and not plan.options.best_effort:
         raise TargetNotMetError(
             f"{shortfall} (ask for best_effort: true in the fit options to keep the clip)")
-    return _store_clip(parts, blobs, plan.n_frames, plan.layout.rest.shape[0])
+    return store_clip(parts, blobs, plan.n_frames, plan.layout.rest.shape[0])

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from .. import container
-from ..clipparts import FORMAT_VERSION, ClipParts, check_format_version, topology_id
+from ..clipparts import FORMAT_VERSION, VALUE_LIMIT, ClipParts, check_format_version, topology_id
 from ..errors import ClipFormatError, ParameterError
 from .body import BodyFrame
 from .retarget import VertexMap
@@ -180,6 +180,9 @@ def clip_from_parts(th: dict, ta: dict[str, np.ndarray], ch: dict, ca: dict[str,
         raise ClipFormatError("cyclic-spine clip arrays index outside their range")
     if not (np.all(np.isfinite(spine.coef)) and np.all(np.isfinite(rest)) and np.all(np.isfinite(uv))):
         raise ClipFormatError("cyclic-spine clip arrays hold non-finite values")
+    if max(np.abs(spine.coef).max(initial=0.0), np.abs(rest).max(initial=0.0)) > VALUE_LIMIT:
+        raise ClipFormatError("cyclic-spine rest or spine holds a value above 2^96 in magnitude (frames "
+                              "would not be finite)")
     u = uv[:, 0]
     s = (patch + u) / spine.n_patches
     extra = {

@@ -19,7 +19,7 @@ from ..progress import Progress, sub_progress
 from .encode import encode
 from .options import FitOptions, FitTolerances
 from .problem import prepare
-from .report import fit_report, header_errors, time_model_counts
+from .report import fit_report, time_model_counts
 from .search import best_candidate
 from .spacestage import space_fit
 from .windowed import fit_windowed, windowed_applies
@@ -39,22 +39,15 @@ def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progres
     best = best_candidate(sf, options, poses, report_progress, tol)
     t_time = time.perf_counter()
     report_progress(0.97, "report")
-    report = fit_report(sf.p, best, sf.floor_d, sf.targets, options, sf.curves, sf.diag, poses)
-    report.update(
-        curve_points=sf.curve_points, curve_splits=sf.splits, dense_fit=best.dense is not None,
-        segment_cap_reached=bool(best.cap) and not best.meets,
-        every_frame_a_knot=bool(best.unsplittable) and not best.meets,
-        quantisation_tolerance=best.quant.tolerance, quantisation_knot_rms=best.quant.knot_rms,
-        quantisation_knot_cap=best.quant.knot_cap, rate_control=best.trials, tolerances=tol.to_dict())
+    report = fit_report(sf, best, options, poses, tol)
     t_end = time.perf_counter()
-    report["timings_s"] = {"curves_and_space": t_space - t_start, "time_and_encode": t_time - t_space,
+    report.timings_s = {"curves_and_space": t_space - t_start, "time_and_encode": t_time - t_space,
                            "report": t_end - t_time, "total": t_end - t_start}
-    parts = encode(sf.p, sf.curves, sf.space, best.fitted, options, poses, header_errors(report), best.quant)
+    parts = encode(sf.p, sf.curves, sf.space, best.fitted, options, poses, report.header_errors(), best.quant)
     header, arrays = container.unpack(parts.coefficients)
-    report["format_version"] = header["format_version"]
-    report["knot_rank"] = header["knot_rank"]
-    report["time_models"] = time_model_counts(arrays["time_model"], arrays["m"].transpose(1, 2, 0))
-    parts.report = {**report, "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
+    report.format_version, report.knot_rank = header["format_version"], header["knot_rank"]
+    report.time_models = time_model_counts(arrays["time_model"], arrays["m"].transpose(1, 2, 0))
+    parts.report = {**report.to_dict(), "sizes": parts.sizes(poses.n_frames, poses.n_vertices)}
     report_progress(1.0, "done")
     return parts
 

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..curveset import CurveSet
-from ..model.adaptive import Targets
 from ..model.fitcore import items_from_curves, vertex_slots
 from ..model.parameterisation import curve_parameters
 from ..model.rigid import RigidTracks, fit_rigid, local_residual
@@ -70,12 +69,6 @@ def u_grid(points_per_curve: int) -> float:
     """Grid of the curve parameters, applied before the fit so that the topology part stores them exactly and
     cheaply: 2^-12, or finer for long curves (at least 256 steps between evenly spaced points)."""
     return 2.0 ** -max(12, int(np.ceil(np.log2(max(points_per_curve, 1)))) + 8)
-
-
-def meets(targets: Targets, d: np.ndarray) -> bool:
-    """Whether per-vertex distances (F, V) meet the targets."""
-    return bool((targets.rms is None or np.sqrt(np.mean(d * d)) <= targets.rms)
-                and (targets.max is None or d.max(initial=0.0) <= targets.max))
 
 
 def stored_distances(p: Problem, approx: np.ndarray, n_frames: int) -> np.ndarray:

@@ -102,8 +102,7 @@ class Errors:
 
     def meets(self, targets: Targets) -> bool:
         """Whether they meet the targets."""
-        return ((targets.rms is None or self.rms <= targets.rms)
-                and (targets.max is None or self.largest <= targets.max))
+        return targets.meets(self.rms, self.largest)
 
 
 def search_rounding(targets: Targets, unrounded: Errors, quant: Quantisation, tol: FitTolerances,
@@ -121,7 +120,7 @@ def search_rounding(targets: Targets, unrounded: Errors, quant: Quantisation, to
         found = measure(quant)
         if trials is not None:
             trials.append(_trial(targets, quant, found))
-        rms_missed = targets.rms is not None and found.rms > targets.rms
+        rms_missed = targets.misses(found.rms, found.largest)[0]
         over = None if bound is None or rms_missed else _over(found, unrounded, bound)
         if over is not None:  # finer steps on the curves past the bound, the budget kept
             quant = quant.refined(over, len(found.curve_max))

@@ -14,7 +14,7 @@ from ..poses import Poses
 from ..progress import Progress, sub_progress
 from .encode import Quantisation, encode
 from .options import FitOptions, FitTolerances
-from .problem import meets, stored_distances
+from .problem import stored_distances
 from .ratecontrol import max_bound, quantised
 from .spacestage import SpaceFit
 
@@ -59,7 +59,7 @@ def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progres
     exact = model_distances(sf.space, fitted, p.slots)
     trials: list[dict] = []
     quant, approx, size = quantised(sf, fitted, options, poses, exact, tol, trials)
-    ok = meets(sf.targets, stored_distances(p, approx, poses.n_frames))
+    ok = sf.targets.met_by(stored_distances(p, approx, poses.n_frames))
     if dense:  # a missed target is the dense fit's only when the spatial floor is not above it
         met = ok
         floor_high = not ok and _floor_above(sf)
@@ -69,9 +69,7 @@ def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progres
 
 def _floor_above(sf: SpaceFit) -> bool:
     """Whether the curves' spatial floor alone exceeds a target (no time fit can then meet it)."""
-    d = sf.floor_d
-    return bool((sf.targets.rms is not None and np.sqrt(np.mean(d * d)) >= sf.targets.rms)
-                or (sf.targets.max is not None and d.max(initial=0.0) >= sf.targets.max))
+    return not sf.targets.met_by(sf.floor_d)
 
 
 def best_candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progress | None,
@@ -101,12 +99,7 @@ def best_candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Pr
 def _excess(sf: SpaceFit, poses: Poses, c: Candidate) -> float:
     """How far a candidate's stored clip is from its targets: the larger of its RMS and max over them."""
     d = stored_distances(sf.p, c.approx, poses.n_frames)
-    ratios = [0.0]
-    if sf.targets.rms is not None:
-        ratios.append(float(np.sqrt(np.mean(d * d))) / sf.targets.rms)
-    if sf.targets.max is not None:
-        ratios.append(float(d.max(initial=0.0)) / sf.targets.max)
-    return max(ratios)
+    return float(sf.targets.excess(float(np.sqrt(np.mean(d * d))), float(d.max(initial=0.0))))
 
 
 def preferred(sf: SpaceFit, options: FitOptions, poses: Poses, a: Candidate, b: Candidate,

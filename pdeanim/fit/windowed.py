@@ -26,18 +26,13 @@ from typing import Any
 import numpy as np
 
 from .. import container
-from ..clipparts import FORMAT_VERSION, ClipParts, topology_id
+from ..clipparts import ClipParts, topology_id
 from ..curveset import CurveSet
 from ..errors import InputError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.clipformat import (
-    TIME_SPLINE,
-    TRIAL_LEVEL,
-    decode_topology,
-    segment_t_derivable,
-    topology_arrays,
-)
+from ..model.clipformat import TIME_SPLINE, decode_topology, topology_arrays
+from ..model.coefwriter import CoefficientFields, KnotCodes, write_coefficients
 from ..model.families import SPACE_KINDS, space_basis
 from ..model.fitcore import items_from_curves, vertex_slots
 from ..model.metrics import bbox_diagonal
@@ -50,7 +45,7 @@ from .encode import Quantisation
 from .options import FitOptions, FitTolerances
 from .problem import u_grid
 from .ratecontrol import Errors, first_quantisation, search_rounding
-from .report import header_errors
+from .report import FitReport
 from .spacestage import space_fit
 
 CURVE_FRAMES = 128
@@ -471,67 +466,27 @@ def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes
     for w in windows:  # each window's codes are released once copied
         f0, f1 = plan.window(w.index)
         codes[..., f0:f1], w.codes = w.codes, None
-    tracks, order = _tracks(codes)
+    order = quantise.difference_order(codes)
+    tracks = quantise.track_codes(codes, order, in_place=True)
     S = F - 1
     steps = windows[0].steps if W == 1 else np.stack([w.steps for w in windows])
     report = _report(plan, space, windows, spline)
-    header = {"errors": header_errors(report), "part": "coefficients", "kind": "dynamic-pde",
-              "format_version": FORMAT_VERSION, "topology_id": topology_id(plan.topology),
-              "motion": options.motion, "looping": False, "n_segments": int(S), "n_curves": int(C),
-              "n_frames": int(F), "knot_differences": order, "knot_rank": 0}
-    model_kind = space.kind.reshape(C, 3).astype(np.uint8)
-    seg_t = _normalised(plan.times)
-    arrays = {**({} if segment_t_derivable(seg_t, plan.times) else {"segment_t": seg_t}),
-              "frame_times": plan.times, "space_kind": model_kind,
-              "time_model": np.where(spline.reshape(C, 3), TIME_SPLINE, 0).astype(np.uint8),
-              "m": np.zeros((S, C, 3), np.float32), "D": space.D.reshape(C, 3).astype(np.float32),
-              "knot_step": steps.astype(np.float32), "knots": tracks}
-    if W > 1:
-        arrays["knot_windows"] = plan.bounds.astype(np.uint32)
+    time_model = np.where(spline.reshape(C, 3), TIME_SPLINE, 0)
+    fields = CoefficientFields(_normalised(plan.times), plan.times, space.kind.reshape(C, 3), time_model,
+                               np.zeros((S, C, 3), np.float32), space.D.reshape(C, 3), options.motion, False)
+    knots = KnotCodes(steps, tracks, order, windows=plan.bounds if W > 1 else None)
+    header, arrays = write_coefficients(fields, knots, topology_id(plan.topology),
+                                        {"errors": report.header_errors()})
     coefficients = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
     parts = ClipParts(plan.topology, coefficients)
-    if timings:
-        report["timings_s"] = timings
-    parts.report = {**report, "sizes": parts.sizes(F, lay.rest.shape[0])}
+    report.timings_s = timings or None
+    parts.report = {**report.to_dict(), "sizes": parts.sizes(F, lay.rest.shape[0])}
     return parts
 
 
-TRACK_SAMPLE = 1 << 22
-"""Codes on which the order of the track differences is chosen (evenly spaced curves, all their tracks)."""
-
-
-def _tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
-    """(uint32 tracks (C, 3, 4, F), order): zigzag differences of the int32 codes along time, of order 1 or 2,
-    whichever compresses smaller at the trial level on a sample of the curves (the in-memory encoder's rule),
-    computed in place: ``codes`` becomes the tracks."""
-    import zstandard
-
-    size = zstandard.ZstdCompressor(level=TRIAL_LEVEL).compress
-    C = codes.shape[0]
-    picked = np.linspace(0, C - 1, max(1, min(C, TRACK_SAMPLE // max(codes[0].size, 1))))
-    first = np.diff(codes[np.unique(picked.astype(np.int64))], axis=-1, prepend=0)
-    second = np.diff(first, axis=-1, prepend=0)
-    order = 1 if len(size(_zigzag(first))) <= len(size(_zigzag(second))) else 2
-    for _ in range(order):
-        for t in range(codes.shape[-1] - 1, 0, -1):  # backwards: each difference reads the value before it
-            codes[..., t] -= codes[..., t - 1]
-    return _zigzag(codes), order
-
-
-def _zigzag(d: np.ndarray) -> np.ndarray:
-    """uint32 zigzag codes of int32 differences, in place (codes stay within MAX_CODE, so their differences
-    of order 1 and 2 fit in int32)."""
-    d = np.asarray(d, np.int32)
-    negative = d < 0
-    z = d.view(np.uint32)
-    z <<= np.uint32(1)
-    np.bitwise_xor(z, np.uint32(0xFFFFFFFF), out=z, where=negative)
-    return z
-
-
 def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes], spline: np.ndarray
-            ) -> dict[str, Any]:
-    """The fit report of a windowed fit (the keys of an in-memory fit's report, plus ``windows``)."""
+            ) -> FitReport:
+    """The fit report of a windowed fit (an in-memory fit's, plus its windows)."""
     lay, targets, diag = plan.layout, plan.targets, plan.diagonal
     F, V, C = plan.n_frames, lay.rest.shape[0], lay.curves.n_curves
     frame_sq = np.concatenate([w.frame_sq for w in windows])
@@ -546,28 +501,28 @@ def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes],
     rel = (lambda x: x / diag) if diag else (lambda x: None)
     kg = 100.0 * found.rms * np.sqrt(F * V) / np.sqrt(space.spread) if space.spread > 0 else None
     K = lay.n_items
-    return {
-        "rms": found.rms, "max": found.largest, "rel_rms": rel(found.rms), "rel_max": rel(found.largest),
-        "kg": kg, "diagonal": diag, "frames": F, "vertices": V, "curves": C, "segments": F - 1,
-        "segment_t": _normalised(plan.times).tolist(), "segment_frames": list(range(F)),
-        "per_frame_rms": np.sqrt(frame_sq / V).tolist(), "per_frame_max": frame_max.tolist(),
-        "per_curve_rms": np.sqrt(curve_sq / np.maximum(counts, 1)).tolist(),
-        "per_curve_max": found.curve_max.tolist(),
-        "floor_rms": floor.rms, "floor_rel_rms": rel(floor.rms), "floor_max": floor.largest,
-        "gram_floor_rel_rms": rel(float(np.sqrt(max(space.gram_floor, 0.0) / (F * V)))),
-        "float32_vs_float64_max": None, "unrounded_rms": floor.rms, "unrounded_max": floor.largest,
-        "targets": {"rms": targets.rms, "max": targets.max}, "target_met": met,
-        "floor_exceeds_target": not floor.meets(targets), "adaptive_history": [],
-        "options": plan.options.to_dict(), **plan.report, "dense_fit": True, "windowed": True,
-        "windows": [{"frames": list(plan.window(w.index)), **w.quantisation,
-                     "rms": float(np.sqrt(w.frame_sq.sum() / (len(w.frame_sq) * V))),
-                     "trials": len(w.trials)} for w in windows],
-        "segment_cap_reached": False, "every_frame_a_knot": not met,
-        "quantisation_tolerance": plan.tolerance,
-        "rate_control": [dict(t, window=w.index) for w in windows for t in w.trials],
-        "tolerances": plan.tol.to_dict(), "format_version": FORMAT_VERSION, "knot_rank": 0,
-        "time_models": {"spline": int(spline.sum()), "pde": 0, "linear": int(K - spline.sum())},
-    }
+    return FitReport(
+        rms=found.rms, max=found.largest, rel_rms=rel(found.rms), rel_max=rel(found.largest), kg=kg,
+        diagonal=diag, frames=F, vertices=V, curves=C, segments=F - 1,
+        segment_t=_normalised(plan.times).tolist(), segment_frames=list(range(F)),
+        per_frame_rms=np.sqrt(frame_sq / V).tolist(), per_frame_max=frame_max.tolist(),
+        per_curve_rms=np.sqrt(curve_sq / np.maximum(counts, 1)).tolist(),
+        per_curve_max=found.curve_max.tolist(),
+        floor_rms=floor.rms, floor_rel_rms=rel(floor.rms), floor_max=floor.largest,
+        float32_vs_float64_max=None, unrounded_rms=floor.rms, unrounded_max=floor.largest,
+        targets={"rms": targets.rms, "max": targets.max}, target_met=met,
+        floor_exceeds_target=not floor.meets(targets), adaptive_history=[], options=plan.options.to_dict(),
+        curve_points=plan.report["curve_points"], curve_splits=plan.report["curve_splits"], dense_fit=True,
+        segment_cap_reached=False, every_frame_a_knot=not met, quantisation_tolerance=plan.tolerance,
+        quantisation_knot_rms=None, quantisation_knot_cap=None,
+        rate_control=[dict(t, window=w.index) for w in windows for t in w.trials],
+        tolerances=plan.tol.to_dict(), knot_rank=0,
+        time_models={"spline": int(spline.sum()), "pde": 0, "linear": int(K - spline.sum())},
+        windows=[{"frames": list(plan.window(w.index)), **w.quantisation,
+                  "rms": float(np.sqrt(w.frame_sq.sum() / (len(w.frame_sq) * V))),
+                  "trials": len(w.trials)} for w in windows],
+        curve_frames=plan.report["curve_frames"],
+        gram_floor_rel_rms=rel(float(np.sqrt(max(space.gram_floor, 0.0) / (F * V)))))
 
 
 def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: FitTolerances,

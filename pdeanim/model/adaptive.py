@@ -16,14 +16,7 @@ import numpy as np
 
 from .fitcore import SpaceStage, TimeStage, time_stage
 from .segments import Segmentation
-
-
-@dataclass
-class Targets:
-    """Absolute error targets (None = not requested): RMS and max of the per-vertex distance."""
-
-    rms: float | None = None
-    max: float | None = None
+from .targets import Targets
 
 
 @dataclass
@@ -40,16 +33,8 @@ class AdaptiveResult:
 
 def _frame_badness(d: np.ndarray, targets: Targets) -> tuple[np.ndarray, bool]:
     """(F,) how far each frame is over target (ratio), and whether all targets are met."""
-    ratios = []
-    if targets.rms is not None:
-        ratios.append(np.sqrt(np.mean(d * d, axis=1)) / max(targets.rms, 1e-300))
-        met_rms = np.sqrt(np.mean(d * d)) <= targets.rms
-    else:
-        met_rms = True
-    if targets.max is not None:
-        ratios.append(d.max(axis=1) / max(targets.max, 1e-300))
-    met_max = targets.max is None or d.max() <= targets.max
-    return np.max(ratios, axis=0), bool(met_rms and met_max)
+    badness = targets.excess(np.sqrt(np.mean(d * d, axis=1)), d.max(axis=1))
+    return np.asarray(badness), targets.met_by(d)
 
 
 def _splits(segm: Segmentation, badness: np.ndarray, n_split: int) -> Segmentation:
@@ -123,11 +108,7 @@ def _split_count(n_segments: int, rms: float, largest: float, targets: Targets) 
     sqrt(error / target) (the error of a piecewise-linear track falls with the square of the number of
     segments), between GROWTH_MIN and GROWTH_MAX: far from the target the search doubles, so long clips need a
     few rounds, not dozens."""
-    ratio = 1.0
-    if targets.rms is not None:
-        ratio = max(ratio, rms / max(targets.rms, 1e-300))
-    if targets.max is not None:
-        ratio = max(ratio, largest / max(targets.max, 1e-300))
+    ratio = max(1.0, targets.excess(rms, largest))
     growth = float(np.clip(np.sqrt(ratio), GROWTH_MIN, GROWTH_MAX))
     return int(np.floor(n_segments * (growth - 1.0) + 1e-9))
 
@@ -191,10 +172,7 @@ def _effective_targets(targets: Targets, floor_d: np.ndarray) -> tuple[Targets, 
     """Targets raised to just above the spatial floor where the floor alone exceeds them."""
     floor_rms = float(np.sqrt(np.mean(floor_d * floor_d)))
     floor_max = float(floor_d.max()) if floor_d.size else 0.0
-    high = False
-    rms, mx = targets.rms, targets.max
-    if rms is not None and floor_rms >= rms:
-        rms, high = floor_rms * 1.05, True
-    if mx is not None and floor_max >= mx:
-        mx, high = floor_max * 1.05, True
-    return Targets(rms, mx), high
+    rms_missed, max_missed = targets.misses(floor_rms, floor_max)
+    rms = floor_rms * 1.05 if rms_missed else targets.rms
+    mx = floor_max * 1.05 if max_missed else targets.max
+    return Targets(rms, mx), rms_missed or max_missed

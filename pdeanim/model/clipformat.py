@@ -38,21 +38,19 @@ from typing import Any
 import numpy as np
 
 from .. import container
-from ..clipparts import FORMAT_VERSION, topology_id
+from ..clipparts import FORMAT_VERSION, VALUE_LIMIT, topology_id
 from ..curveset import CurveSet
 from ..errors import ClipFormatError
 from . import knotbasis, quantise
-from .bonelayer import EncodedBones, add_bone_layer, decode_bones, has_bones
+from .bonelayer import EncodedBones, bones_header_arrays, decode_bones, has_bones
+from .coefwriter import CoefficientFields, KnotCodes, frame_segment_t, write_coefficients
 from .spline import spline_weight_bound
 
 BASIS_MARGIN = 0.9
 """The knots go on a shared basis only where that encoding is below this share of the plain tracks' bytes at
 the trial level: level 19 compresses plain tracks relatively better (horse-collapse, dense fit at 3e-3:
 rank 18 looked smaller at level 3, 161,200 B against 143,992 B at level 19)."""
-TRIAL_LEVEL = 3
-"""zstd level of trial encodings (the fit's rounding search, its choice between fits, and the choice between
-knot encodings): fast, and about proportional to the final level 19 sizes; only the clip that is kept is
-compressed at container.ZSTD_LEVEL."""
+TRIAL_LEVEL = quantise.TRIAL_LEVEL
 
 MOTIONS = ("displacement", "absolute", "rigid")
 TIME_PDE, TIME_SPLINE = 0, 1
@@ -170,15 +168,8 @@ def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
     (:func:`decode_coefficients` reads them as they are). ``choose`` False skips every choice made by trial
     compression (the order of the knot differences, and the rank unless ``knot_rank`` fixes it: then plain
     tracks): the same decoded knots, for a rate control that measures errors, not bytes."""
-    S, C = data.family.shape[:2]
-    spline = data.spline_items()
-    if np.any(spline[None] & (np.asarray(data.m) != 0)):
-        raise ValueError("items on the natural spline must have time constant 0 in every segment")
-    header = {**data.header, "part": "coefficients", "kind": "dynamic-pde", "format_version": FORMAT_VERSION,
-              "topology_id": topo_id, "motion": data.motion, "looping": bool(data.looping),
-              "n_segments": int(S), "n_curves": int(C), "n_frames": int(len(data.frame_times))}
-    m = np.asarray(data.m, np.float32)
     family = np.asarray(data.family, np.uint8)
+    m = np.asarray(data.m, np.float32)
     steps = _knot_steps(topo, data, family, m, tolerance, knot_rms, knot_cap)
     if knot_refine is not None:
         steps = quantise.refined_steps(steps, knot_refine, data.knots)
@@ -186,22 +177,14 @@ def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
         knot_rank = 0
     if spectrum is None and knot_rank != 0:
         spectrum = knotbasis.track_spectrum(topo.curves, topo.u, family, m, data.D, data.knots)
-    knot_arrays, differences, rank = _knot_encoding(data, steps, spectrum, choose, knot_rank)
-    header.update(knot_differences=differences, knot_rank=rank)
-    seg_t, frame_times = np.asarray(data.segment_t, np.float64), np.asarray(data.frame_times, np.float64)
-    arrays = {
-        **({} if segment_t_derivable(seg_t, frame_times) else {"segment_t": seg_t}),
-        "frame_times": frame_times,
-        "space_kind": (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8),
-        "time_model": spline.astype(np.uint8),
-        "m": np.where((family >= 2) & (m > 0), -m, m),
-        "D": np.asarray(data.D, np.float32),
-        **knot_arrays,
-        **{k: np.asarray(v) for k, v in data.extra.items()},
-    }
-    if data.bones is not None:
-        add_bone_layer(header, arrays, data.bones)
-    return header, arrays
+    codes = _knot_encoding(data, steps, spectrum, choose, knot_rank)
+    C = family.shape[1]
+    fields = CoefficientFields(
+        data.segment_t, data.frame_times, family[0] % 2 if len(family) else np.zeros((C, 3), np.uint8),
+        data.spline_items(), np.where((family >= 2) & (m > 0), -m, m), data.D, data.motion, data.looping)
+    layer_header, layer_arrays = ({}, {}) if data.bones is None else bones_header_arrays(data.bones)
+    return write_coefficients(fields, codes, topo_id, data.header, extra_header=layer_header,
+                              extra_arrays={**data.extra, **layer_arrays})
 
 
 def _knot_steps(topo: TopologyData, data: CoefficientData, family: np.ndarray, m: np.ndarray,
@@ -224,10 +207,10 @@ def _knot_steps(topo: TopologyData, data: CoefficientData, family: np.ndarray, m
 
 
 def _knot_encoding(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None,
-                   choose: bool, rank: int | None) -> tuple[dict[str, np.ndarray], int, int]:
-    """(arrays, knot_differences, knot_rank) of the knots: on ``rank`` shared tracks (0: plain tracks; a rank
-    whose codes would overflow falls back to plain ones), or with ``rank`` None the smallest encoding; the
-    order of the differences chosen by size only when ``choose``."""
+                   choose: bool, rank: int | None) -> KnotCodes:
+    """The stored knots: on ``rank`` shared tracks (0: plain tracks; a rank whose codes would overflow falls
+    back to plain ones), or with ``rank`` None the smallest encoding; the order of the differences chosen by
+    size only when ``choose``."""
     if rank is None:
         return _smallest_knots(data, steps, spectrum)
     found = None
@@ -239,34 +222,31 @@ def _knot_encoding(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis
     else:
         tracks, order = quantise.knot_tracks(residual, 1), 1
     if found is None:
-        return {"knot_step": steps, "knots": tracks}, order, 0
-    return ({"knot_step": steps, "knot_weights": quantise.zigzag(found.weights), "knot_basis": found.basis,
-             "knots": tracks}, order, found.rank)
+        return KnotCodes(steps, tracks, order)
+    return KnotCodes(steps, tracks, order, quantise.zigzag(found.weights), found.basis)
 
 
 def _smallest_knots(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None
-                    ) -> tuple[dict[str, np.ndarray], int, int]:
-    """(arrays, knot_differences, knot_rank) of the smallest knot encoding: plain tracks, or one of the
-    shared-basis candidates of ``spectrum`` (plain on a tie), held one at a time (each is as large as the
-    knots)."""
+                    ) -> KnotCodes:
+    """The smallest knot encoding: plain tracks, or one of the shared-basis candidates of ``spectrum`` (plain
+    on a tie), held one at a time (each is as large as the knots)."""
     codes = quantise.quantise_knots(data.knots, steps)
-    tracks, differences = quantise.encode_knot_tracks(codes)
-    best: dict[str, np.ndarray] = {"knot_step": steps, "knots": tracks}
-    size, rank = BASIS_MARGIN * _trial_bytes(best), 0
+    best = KnotCodes(steps, *quantise.encode_knot_tracks(codes))
+    size = BASIS_MARGIN * _trial_bytes(best)
     for b in knotbasis.basis_candidates(spectrum, steps, data.looping):
         residual, order = quantise.encode_knot_tracks(b.residual)
-        option = {"knot_step": steps, "knot_weights": quantise.zigzag(b.weights), "knot_basis": b.basis,
-                  "knots": residual}
+        option = KnotCodes(steps, residual, order, quantise.zigzag(b.weights), b.basis)
         del b
         trial = _trial_bytes(option)
         if trial < size:
-            best, size, differences, rank = option, trial, order, option["knot_weights"].shape[0]
-    return best, differences, rank
+            best, size = option, trial
+    return best
 
 
-def _trial_bytes(arrays: dict[str, np.ndarray]) -> int:
-    """Compressed size of arrays at the trial level (the choice must not depend on the final level: the fit
-    measures the clip of its trial encodings)."""
+def _trial_bytes(codes: KnotCodes) -> int:
+    """Compressed size of the knot arrays at the trial level (the choice must not depend on the final level:
+    the fit measures the clip of its trial encodings)."""
+    arrays = codes.arrays()
     packed = container.pack({}, arrays, {name: container.SMALLEST for name in arrays}, TRIAL_LEVEL)
     return len(packed)
 
@@ -307,6 +287,7 @@ def decode_topology(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> To
     rest[order] = quantise.dequantise(quantise.undo_zigzag_deltas(zr, axis=0), rest_step, origin)
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(rest))):
         raise ClipFormatError("topology u or rest decode to non-finite values")
+    _bounded(rest, "topology rest")
     if faces.size and (faces.min() < 0 or faces.max() >= V):
         raise ClipFormatError("topology faces index outside the vertices")
     if u.shape[1] not in (1, 3):
@@ -348,20 +329,6 @@ def _steps(header: dict[str, Any]) -> tuple[float, float, np.ndarray]:
     if not (u_step > 0 and rest_step > 0 and np.all(np.isfinite([u_step, rest_step, *origin]))):
         raise ClipFormatError("topology steps must be positive and finite")
     return u_step, rest_step, origin
-
-
-def frame_segment_t(frame_times: np.ndarray) -> np.ndarray:
-    """The segment boundaries of a clip with a knot at every frame: the frame times normalised to [0, 1]
-    (docs/format.md §3.3), computed as every reader computes them."""
-    ft = np.asarray(frame_times, np.float64)
-    return (ft - ft[0]) / (ft[-1] - ft[0])
-
-
-def segment_t_derivable(seg_t: np.ndarray, frame_times: np.ndarray) -> bool:
-    """Whether ``segment_t`` is what readers derive from the frame times, so that it need not be stored."""
-    if len(seg_t) != len(frame_times) or len(seg_t) < 2 or not frame_times[-1] > frame_times[0]:
-        return False
-    return bool(np.array_equal(seg_t, frame_segment_t(frame_times)))
 
 
 def _segment_t(arrays: dict[str, np.ndarray], S: int) -> np.ndarray:
@@ -464,7 +431,14 @@ def _knot_window(arrays: dict[str, np.ndarray], S: int, W: int) -> np.ndarray:
 def _finite_knots(knots: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(knots)):
         raise ClipFormatError("coefficients knots decode to non-finite values")
-    return knots
+    return _bounded(knots, "coefficients knots")
+
+
+def _bounded(values: np.ndarray, what: str) -> np.ndarray:
+    """``values``, refused when one is above VALUE_LIMIT in magnitude (its frames could overflow float32)."""
+    if values.size and not np.abs(values).max() <= VALUE_LIMIT:
+        raise ClipFormatError(f"{what} hold a value above 2^96 in magnitude (frames would not be finite)")
+    return values
 
 
 def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray]:
@@ -473,11 +447,11 @@ def _rigid_arrays(arrays: dict[str, np.ndarray], C: int) -> dict[str, np.ndarray
     Sr = len(seg) - 1
     if Sr < 1 or np.any(np.diff(seg) < 0):
         raise ClipFormatError("rigid segment boundaries must be non-decreasing with at least one segment")
-    out = {"rigid_segment_t": seg,
-           "rigid_centre": _need(arrays, "rigid_centre", (C, 3), "coefficients", "<f4")}
+    centre = _need(arrays, "rigid_centre", (C, 3), "coefficients", "<f4")
+    out = {"rigid_segment_t": seg, "rigid_centre": _bounded(centre, "rigid centres")}
     for name in ("rot", "trans"):
-        out[f"rigid_{name}_knots"] = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients",
-                                           "<f4")
+        knots = _need(arrays, f"rigid_{name}_knots", (Sr + 1, C, 3), "coefficients", "<f4")
+        out[f"rigid_{name}_knots"] = _bounded(knots, f"rigid_{name}_knots")
         mu = _need(arrays, f"rigid_{name}_mu", (Sr, C), "coefficients", "<f4")
         if np.any(mu <= -np.pi):
             raise ClipFormatError("rigid trig time constants must be above -pi")

@@ -22,24 +22,31 @@ MAX_CODE = 2**28
 def zigzag_deltas(q: np.ndarray, axis: int = 0) -> np.ndarray:
     """uint32 zigzag codes of the differences of integer array ``q`` along ``axis`` (the first element
     against 0): small magnitudes of either sign become small unsigned numbers."""
-    d = np.diff(np.asarray(q, np.int64), axis=axis, prepend=0)
+    return zigzag(_int32(np.diff(np.asarray(q, np.int64), axis=axis, prepend=0)))
+
+
+def _int32(d: np.ndarray) -> np.ndarray:
+    """int64 differences as int32; raises ValueError where they do not fit in 32 bits."""
     if d.size and (d.min() < -(2**31) or d.max() >= 2**31):
         raise ValueError("integer differences do not fit in 32 bits")
-    d = d.astype(np.int32)
-    return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
+    return d
 
 
 def undo_zigzag_deltas(z: np.ndarray, axis: int = 0) -> np.ndarray:
     """Inverse of :func:`zigzag_deltas`: the int64 running sums of the decoded differences."""
-    z = np.asarray(z, np.uint32)
-    d = (z >> np.uint32(1)).astype(np.int64) ^ -(z & np.uint32(1)).astype(np.int64)
-    return np.cumsum(d, axis=axis)
+    return np.cumsum(unzigzag(z), axis=axis)
 
 
-def zigzag(d: np.ndarray) -> np.ndarray:
-    """uint32 zigzag codes of int32-range integers (0, -1, 1, -2, 2 -> 0, 1, 2, 3, 4)."""
-    d = np.asarray(d, np.int64).astype(np.int32)
-    return ((d.astype(np.uint32) << np.uint32(1)) ^ (d >> 31).astype(np.uint32)).astype(np.uint32)
+def zigzag(d: np.ndarray, in_place: bool = False) -> np.ndarray:
+    """uint32 zigzag codes of int32-range integers (0, -1, 1, -2, 2 -> 0, 1, 2, 3, 4): the one zigzag encoder
+    of the format. ``in_place`` with an int32 array reuses its buffer (the codes of a long clip's knots)."""
+    if not (in_place and isinstance(d, np.ndarray) and d.dtype == np.int32):
+        d = np.asarray(d, np.int64).astype(np.int32)
+    negative = d < 0
+    z = d.view(np.uint32)
+    z <<= np.uint32(1)
+    np.bitwise_xor(z, np.uint32(0xFFFFFFFF), out=z, where=negative)
+    return z
 
 
 def unzigzag(z: np.ndarray) -> np.ndarray:
@@ -221,26 +228,59 @@ def _power_of_two(steps: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return (2.0 ** np.floor(np.log2(steps))).astype(np.float32)
 
 
+TRIAL_LEVEL = 3
+"""zstd level of trial encodings (the fit's rounding search, its choice between fits, and the choice between
+knot encodings): fast, and about proportional to the final level 19 sizes; only the clip that is kept is
+compressed at container.ZSTD_LEVEL."""
+TRACK_SAMPLE = 1 << 22
+"""Codes on which the order of the track differences is chosen (evenly spaced curves, all their tracks)."""
+
+
 def encode_knot_tracks(codes: np.ndarray) -> tuple[np.ndarray, int]:
     """(tracks (C, 3, 4, S+1) uint32, order): the integer knot codes (S+1, C, 3, 4) as one time track per
-    curve, coordinate and coefficient, coded as zigzag differences of order 1 or 2 along time, whichever
-    compresses smaller (order 2 wins where the knots move smoothly from segment to segment)."""
-    import zstandard
-
+    curve, coordinate and coefficient, coded as zigzag differences of the order :func:`difference_order`
+    chooses."""
     tracks = np.ascontiguousarray(np.moveaxis(np.asarray(codes, np.int64), 0, -1))
-    size = zstandard.ZstdCompressor(level=3).compress  # reads the arrays' buffers in place
-    first = zigzag_deltas(tracks, axis=-1)
-    first_size = len(size(first))
-    second = zigzag_deltas(np.diff(tracks, axis=-1, prepend=0), axis=-1)
-    del tracks
-    return (first, 1) if first_size <= len(size(second)) else (second, 2)
+    order = difference_order(tracks)
+    return track_codes(tracks, order), order
 
 
 def knot_tracks(codes: np.ndarray, order: int) -> np.ndarray:
     """(C, 3, 4, S+1) uint32 tracks of the integer knot codes (S+1, C, 3, 4): zigzag differences of order 1
     or 2 along time."""
-    tracks = np.moveaxis(np.asarray(codes, np.int64), 0, -1)
-    return zigzag_deltas(tracks if order == 1 else np.diff(tracks, axis=-1, prepend=0), axis=-1)
+    return track_codes(np.moveaxis(np.asarray(codes, np.int64), 0, -1), order)
+
+
+def difference_order(tracks: np.ndarray) -> int:
+    """1 or 2: the order of the differences along time of integer tracks (C, 3, 4, T) that compresses
+    smaller at TRIAL_LEVEL (order 2 wins where the knots move smoothly), judged on evenly spaced curves
+    holding at most TRACK_SAMPLE codes (all of them in most clips): the one choice of every writer."""
+    import zstandard
+
+    compress = zstandard.ZstdCompressor(level=TRIAL_LEVEL).compress
+
+    def size(z: np.ndarray) -> int:
+        return len(compress(np.ascontiguousarray(z)))
+
+    C = tracks.shape[0]
+    picked = np.linspace(0, C - 1, max(1, min(C, TRACK_SAMPLE // max(tracks[0].size, 1))))
+    first = np.diff(np.asarray(tracks[np.unique(picked.astype(np.int64))], np.int64), axis=-1, prepend=0)
+    second = np.diff(first, axis=-1, prepend=0)
+    return 1 if size(zigzag(first)) <= size(zigzag(second)) else 2
+
+
+def track_codes(tracks: np.ndarray, order: int, in_place: bool = False) -> np.ndarray:
+    """(C, 3, 4, T) uint32 zigzag differences of order 1 or 2 along time of integer tracks; ``in_place`` with
+    an int32 array computes them in its buffer (codes stay within MAX_CODE, so their differences fit)."""
+    if in_place and tracks.dtype == np.int32:
+        for _ in range(order):
+            for t in range(tracks.shape[-1] - 1, 0, -1):  # backwards: each difference reads the value before
+                tracks[..., t] -= tracks[..., t - 1]
+        return zigzag(tracks, in_place=True)
+    d = np.asarray(tracks, np.int64)
+    for _ in range(order):
+        d = _int32(np.diff(d, axis=-1, prepend=0))
+    return zigzag(d)
 
 
 def decode_knot_tracks(tracks: np.ndarray, order: int) -> np.ndarray:

@@ -10,20 +10,23 @@ flat next to ``kind`` (the released form); flat ones are checked by the same mod
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import types
 import typing
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, create_model
 
-from ..jobspec import StageUnavailable, options_class
+from pdeanim.cyclic.swim import SwimParams
+from pdeanim.sim.scene import IGNORED_KEYS as SCENE_IGNORED_KEYS
+
+from ..jobspec import options_class
 from .errors import ApiError
 
 STRICT = {int: Annotated[int, Strict()], float: Annotated[float, Strict()], bool: Annotated[bool, Strict()],
           str: Annotated[str, Strict()]}
 OPTIONS_CONFIG = ConfigDict(extra="forbid", allow_inf_nan=False)
-EXTRA_FIELDS = {"cyclic": "pdeanim.cyclic.swim:SwimParams"}  # accepted flat by CyclicOptions.from_dict
+EXTRA_FIELDS: dict[str, type] = {"cyclic": SwimParams}  # accepted flat by CyclicOptions.from_dict
+IGNORED_KEYS: dict[str, tuple[str, ...]] = {"simulate": SCENE_IGNORED_KEYS}  # accepted for old clients
 MODEL_NAMES = {
     "simulate": "SceneParams",
     "fit": "FitOptions",
@@ -69,23 +72,15 @@ def _fields(cls: type, optional: bool = False, skip: frozenset[str] = frozenset(
     return out
 
 
-def _import(path: str) -> type:
-    module, _, name = path.partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
 def options_model(kind: str) -> type[BaseModel]:
-    """The options model of ``kind``, generated from its dataclass (free-form if the stage is absent)."""
+    """The options model of ``kind``, generated from its dataclass."""
     name = MODEL_NAMES[kind]
-    try:
-        cls = options_class(kind)
-    except StageUnavailable:
-        return create_model(name, __config__=ConfigDict(extra="allow"))
+    cls = options_class(kind)
     fields = _fields(cls)
-    for key in getattr(importlib.import_module(cls.__module__), "IGNORED_KEYS", ()):
+    for key in IGNORED_KEYS.get(kind, ()):
         fields[key] = (Any, Field(None, deprecated=True, description="accepted for old clients and ignored"))
     if kind in EXTRA_FIELDS:
-        fields.update(_fields(_import(EXTRA_FIELDS[kind]), optional=True, skip=frozenset(fields) | {"mode"}))
+        fields.update(_fields(EXTRA_FIELDS[kind], optional=True, skip=frozenset(fields) | {"mode"}))
     doc = (cls.__doc__ or name).strip()
     return create_model(name, __config__=OPTIONS_CONFIG, __doc__=doc, **fields)
 

@@ -10,9 +10,6 @@ import sys
 
 from pdeanim.cli import main as library_main
 
-#: argv prefix that runs this console script with the current interpreter (for child processes)
-CONSOLE = [sys.executable, "-m", "service.cli"]
-
 EXTRA = "service"
 EXTRA_MODULES = frozenset({"fastapi", "starlette", "uvicorn", "sqlalchemy", "alembic", "psycopg", "boto3",
                            "botocore", "pydantic", "pydantic_settings", "httpx", "multipart",

@@ -9,7 +9,7 @@ import signal
 import subprocess
 import sys
 
-from service.cli import CONSOLE
+from service.console import CONSOLE
 from service.store.scratch import die_with_parent
 
 WORKER_CMD = [*CONSOLE, "worker"]

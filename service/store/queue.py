@@ -17,9 +17,9 @@ from sqlalchemy import Engine, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from .models import Job
+from .parents import ACTIVE, fail_parent, lock_parent_first
 
 STATES = ("queued", "running", "waiting", "succeeded", "failed", "cancelled")
-ACTIVE = ("queued", "running", "waiting")  # waiting: a fit whose window tasks run (service.store.windows)
 FINAL = ("succeeded", "failed", "cancelled")
 
 
@@ -195,8 +195,6 @@ class JobQueue:
 
     def _fail_locked(self, session: Session, job_id: str, attempt: int, message: str, code: str,
                      retry: bool, expired_only: bool, result: dict[str, Any] | None = None) -> str | None:
-        from .windows import lock_parent_first
-
         lock_parent_first(session, job_id)
         query = select(Job).where(Job.id == job_id, Job.attempt == attempt, Job.state == "running")
         if expired_only:
@@ -217,7 +215,5 @@ class JobQueue:
             if retry:
                 job.error = f"gave up after {job.failures} attempts; last: {message}"[:4000]
             if job.parent_id:
-                from .windows import fail_parent
-
                 fail_parent(session, job)
         return job.state

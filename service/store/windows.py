@@ -9,7 +9,7 @@ of the last task of a phase enqueues the next phase (:func:`task_done`, under a 
 all ``gram`` -> one ``space`` (joins the space model) -> one ``encode`` per window -> one ``join``, whose
 finish writes the clip row and marks the fit job succeeded. The intermediates live in the blob store under
 ``windowed/<fit job>/``. A task that fails for good fails its fit job and cancels the other tasks
-(:func:`fail_parent`); cancelling the fit job cancels every task (``JobQueue.cancel``).
+(:func:`service.store.parents.fail_parent`); cancelling the fit job cancels every task (``JobQueue.cancel``).
 """
 
 from __future__ import annotations
@@ -18,11 +18,12 @@ import logging
 import time
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from .models import ClipRecord, Job
-from .queue import ACTIVE, Claimed, JobQueue
+from .parents import locked as _locked
+from .queue import Claimed, JobQueue
 
 log = logging.getLogger("pdeanim.worker")
 TASK_KIND = "window"
@@ -81,10 +82,6 @@ def _task(parent: Job, phase: str, index: int, n_windows: int, max_attempts: int
                state="queued", max_attempts=max_attempts, run_after=time.time(), progress=0.0,
                stage="queued", result={}, versions={}, attempt=0, failures=0, parent_id=parent.id,
                window_index=index, phase=phase)
-
-
-def _locked(session: Session, job_id: str) -> Job | None:
-    return session.execute(select(Job).where(Job.id == job_id).with_for_update()).scalar_one_or_none()
 
 
 def split(queue: JobQueue, job: Claimed, n_windows: int) -> bool:
@@ -152,26 +149,3 @@ def task_done(queue: JobQueue, job: Claimed, result: dict[str, Any]) -> str | No
         session.flush()
         _advance(session, parent, task, result, queue.policy.max_attempts)
         return parent.state
-
-
-def lock_parent_first(session: Session, job_id: str) -> None:
-    """Lock the fit job of a window task before the task itself (the order every writer keeps, so that
-    concurrent finishes, failures and cancels of a fit's tasks never deadlock on PostgreSQL)."""
-    parent_id = session.execute(select(Job.parent_id).where(Job.id == job_id)).scalar_one_or_none()
-    if parent_id:
-        _locked(session, parent_id)
-
-
-def fail_parent(session: Session, task: Job) -> None:
-    """A window task failed for good: its fit job fails with the task's reason and the other tasks are
-    cancelled (their workers stop at the next heartbeat)."""
-    parent = session.get(Job, task.parent_id)
-    if parent is None or parent.state not in ACTIVE:
-        return
-    where = "the join" if task.phase in ("space", "join") else f"window {task.window_index} ({task.phase})"
-    parent.state, parent.stage, parent.finished_at = "failed", "failed", time.time()
-    parent.error, parent.error_code = f"{where} of the fit failed: {task.error}"[:4000], task.error_code
-    session.execute(update(Job).where(Job.parent_id == parent.id, Job.id != task.id, Job.state.in_(ACTIVE))
-                    .values(state="cancelled", stage="cancelled: another window task failed",
-                            lease_expires=None, finished_at=time.time())
-                    .execution_options(synchronize_session=False))

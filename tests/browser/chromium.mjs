@@ -21,3 +21,14 @@ export function launchChromium(extraArgs = []) {
     protocolTimeout: 300_000,
   });
 }
+
+// The browser of a check script: the one a test module shares (PDEANIM_BROWSER_WS, the endpoint that
+// chromium_serve.mjs prints) when there is one, else a browser of its own; release it with releaseBrowser.
+export function openBrowser() {
+  const ws = process.env.PDEANIM_BROWSER_WS;
+  return ws ? puppeteer.connect({ browserWSEndpoint: ws, protocolTimeout: 300_000 }) : launchChromium();
+}
+
+export function releaseBrowser(browser) {
+  return process.env.PDEANIM_BROWSER_WS ? browser.disconnect() : browser.close();
+}

@@ -1,11 +1,11 @@
 // Open /docs and /redoc in headless Chromium with every request to another host refused, and report whether
 // the API title rendered and which outside requests were attempted (tests/browser/test_viewer.py).
 // Usage: node docs_check.mjs BASE_URL
-import { launchChromium } from './chromium.mjs';
+import { openBrowser, releaseBrowser } from './chromium.mjs';
 
 const base = process.argv[2];
 const origin = new URL(base).origin;
-const browser = await launchChromium();
+const browser = await openBrowser();
 const out = {};
 try {
   for (const [page, selector] of [['/docs', '.swagger-ui .info .title'], ['/redoc', 'h1']]) {
@@ -29,6 +29,6 @@ try {
     await tab.close();
   }
 } finally {
-  await browser.close();
+  await releaseBrowser(browser);
 }
 console.log(JSON.stringify(out));

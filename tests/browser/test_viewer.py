@@ -15,7 +15,6 @@ import pytest
 
 from tests.service.harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
 HERE = Path(__file__).resolve().parent
 FRAMES = 12
 CYCLIC = {"mode": "eel", "frames": 8, "n_curves": 12, "points": 16, "modes": 3}
@@ -45,6 +44,25 @@ def browser_ready() -> None:
         pytest.fail(f"the browser test must run under CI: {reason}")
     if reason:
         pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def browser_env(browser_ready):
+    """The environment of the check scripts: one Chromium for the whole module (chromium_serve.mjs), which
+    each script connects to instead of launching its own."""
+    proc = subprocess.Popen(["node", str(HERE / "chromium_serve.mjs")], cwd=HERE, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        endpoint = proc.stdout.readline().strip()
+        assert endpoint.startswith("ws://"), f"chromium_serve.mjs printed {endpoint!r}"
+        yield {**os.environ, "PDEANIM_BROWSER_WS": endpoint}
+    finally:
+        proc.stdin.close()
+        try:
+            proc.wait(60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 @pytest.fixture(scope="module")
@@ -100,10 +118,11 @@ def clips(services, data_dir) -> dict:
     return out
 
 
-def run_viewer(services: Services, tmp_path: Path, job: dict, timeout: float = 300) -> dict:
-    """Run viewer_check.mjs on ``job``; its JSON result (with the page's console on failure)."""
+def run_viewer(services: Services, env: dict, tmp_path: Path, job: dict, timeout: float = 300) -> dict:
+    """Run viewer_check.mjs on ``job`` in the module's browser (``env``); its JSON result (with the page's
+    console on failure)."""
     job = {**job, "out": str(tmp_path / "result.json")}
-    proc = subprocess.run(["node", str(HERE / "viewer_check.mjs"), json.dumps(job)], cwd=HERE,
+    proc = subprocess.run(["node", str(HERE / "viewer_check.mjs"), json.dumps(job)], cwd=HERE, env=env,
                           capture_output=True, text=True, timeout=timeout)
     result = json.loads(Path(job["out"]).read_text()) if Path(job["out"]).exists() else {}
     assert proc.returncode == 0 and "error" not in result, (proc.stdout, proc.stderr, result, services.logs())
@@ -122,7 +141,7 @@ def canvas_part(img: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("kind", ["dynamic-pde", "cyclic-spine"])
-def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp_path):
+def test_viewer_plays_the_clip_as_python_evaluates_it(services, browser_env, clips, kind, tmp_path):
     from pdeanim.clip import load_clip
 
     cid, key = clips[kind], clips["key"]
@@ -134,7 +153,7 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, clips, kind, tmp
              {"t": 0.6, "mode": "cpu", "path": str(tmp_path / "cpu_b.png")}]
     job = {"url": f"{services.url}/viewer#clip={cid}&key={key}", "times": TIMES, "shots": shots,
            "measureGlb": kind == "dynamic-pde"}
-    result = run_viewer(services, tmp_path, job)
+    result = run_viewer(services, browser_env, tmp_path, job)
     info = result["info"]
     assert info["kind"] == kind and info["nVertices"] == clip.n_vertices
     assert info["mode"] == "gpu", info["gpuUnavailableReason"]
@@ -180,7 +199,7 @@ LOOK_FIT_RMS = 2e-4
 
 
 @pytest.mark.parametrize("flat", [True, False], ids=["flat", "smooth"])
-def test_viewer_plays_on_the_source_gltf_with_its_look(services, flat, tmp_path):
+def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, flat, tmp_path):
     """The mesh was uploaded as a textured, skinned GLB (flat: no normals, unwelded): the viewer plays the
     clip on that glTF (texture, flat or smooth shading kept) and its frames look like three.js's own rendering
     of the source at the same times, drawn in a page without the viewer's Content-Security-Policy."""
@@ -210,8 +229,8 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, flat, tmp_path)
              {"t": 0.0, "mode": "gpu", "path": str(tmp_path / "gpu.png")}]
     reference = {"times": LOOK_TIMES, "fileUrl": f"{services.url}/v1/meshes/{mid}/file", "key": key,
                  "dir": str(tmp_path)}
-    result = run_viewer(services, tmp_path, {"url": f"{services.url}/viewer#clip={cid}&key={key}&aa=0",
-                                             "shots": shots, "reference": reference})
+    job = {"url": f"{services.url}/viewer#clip={cid}&key={key}&aa=0", "shots": shots, "reference": reference}
+    result = run_viewer(services, browser_env, tmp_path, job)
     assert result["info"]["model"] == "gltf", result["info"]
     ref = result["reference"]
     assert ref["flat"] is flat  # GLTFLoader shades a glTF without normals flat
@@ -237,11 +256,11 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, flat, tmp_path)
     assert (np.abs(gpu - cpu).max(axis=2) > 40).mean() < 0.005  # no facets on the GPU path
 
 
-def test_viewer_without_a_valid_key_says_why(services, clips, tmp_path):
+def test_viewer_without_a_valid_key_says_why(services, browser_env, clips, tmp_path):
     job = {"url": f"{services.url}/viewer#clip={clips['dynamic-pde']}&key=pda_wrong",
            "out": str(tmp_path / "r.json")}
     proc = subprocess.run(["node", str(HERE / "viewer_check.mjs"), json.dumps(job)], cwd=HERE,
-                          capture_output=True, text=True, timeout=300)
+                          env=browser_env, capture_output=True, text=True, timeout=300)
     result = json.loads(Path(job["out"]).read_text())
     assert proc.returncode == 1 and "invalid API key" in result["error"], result
 
@@ -260,10 +279,10 @@ def test_viewer_page_needs_no_key_and_sends_none(services):
         assert "javascript" in got.headers["content-type"], path  # module scripts need a JavaScript type
 
 
-def test_docs_render_with_no_other_host_reachable(services):
+def test_docs_render_with_no_other_host_reachable(services, browser_env):
     """/docs and /redoc render the API's title in Chromium while every request to another host is refused."""
-    proc = subprocess.run(["node", str(HERE / "docs_check.mjs"), services.url], cwd=HERE, capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run(["node", str(HERE / "docs_check.mjs"), services.url], cwd=HERE, env=browser_env,
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     for page in ("/docs", "/redoc"):

@@ -3,14 +3,15 @@
 // Usage: node viewer_check.mjs JOB, JOB = JSON {"url", "times": [t...], "shots": [{"t", "mode", "path"}],
 // "measureGlb", "out"}
 import { writeFileSync } from 'node:fs';
-import { launchChromium } from './chromium.mjs';
+import { openBrowser, releaseBrowser } from './chromium.mjs';
 import { drawReference, writeDataUrl } from './look_reference.mjs';
 
 const job = JSON.parse(process.argv[2]);
-const browser = await launchChromium();
+const browser = await openBrowser();
 const logs = [];
+let page;
 try {
-  const page = await browser.newPage();
+  page = await browser.newPage();
   page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
   page.on('requestfailed', (r) => logs.push(`requestfailed: ${r.url()} ${r.failure()?.errorText}`));
@@ -70,5 +71,6 @@ try {
   writeFileSync(job.out, JSON.stringify({ error: String(err?.stack ?? err), logs }));
   process.exitCode = 1;
 } finally {
-  await browser.close();
+  await page?.close();
+  await releaseBrowser(browser);
 }

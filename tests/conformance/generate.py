@@ -36,7 +36,7 @@ from pdeanim.poses import make_poses
 
 from . import bonecases
 
-FIXTURE_VERSION = 10
+FIXTURE_VERSION = 11
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -62,6 +62,17 @@ def _fit(motion: str, param_mode: str, loop: bool, time_model: str = "auto") -> 
         fit_poses(_sphere_poses(loop=loop), FitOptions(segments=3, motion=motion, param_mode=param_mode,
                                                        loop=loop, time_model=time_model)),
         spline=False if loop or time_model == "pde" else None)
+
+
+OFF_ORIGIN = np.array([3000.0, -1500.0, 750.0])
+"""Where the off-origin case's sphere sits: coordinates a thousand times its diagonal, so that float32
+rounding of a coordinate (about 2^-24 of it) is far above 1e-6 of the diagonal (docs/format.md §6)."""
+
+
+def _off_origin() -> ClipParts:
+    poses = _sphere_poses()
+    moved = make_poses(np.asarray(poses.vertices, np.float64) + OFF_ORIGIN, poses.faces, poses.times)
+    return fit_poses(moved, FitOptions(segments=3))
 
 
 def _smooth_pde() -> ClipParts:
@@ -296,6 +307,7 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
                                                 {}),
+    "fit-displacement-chord-off-origin": (_off_origin, {}),
     "bones-synthetic-k1-zero": (bonecases.synthetic_bone_case(1, 2, residual=False), {}),
     "bones-synthetic-k2-residual": (bonecases.synthetic_bone_case(2, 3, residual=True, differences=2), {}),
     "bones-synthetic-k3-zero-loop": (bonecases.synthetic_bone_case(3, 4, residual=False, looping=True), {}),
@@ -308,6 +320,11 @@ REFUSED: dict[str, tuple[Callable[[], ClipParts], str]] = {
     "refused-unknown-feature": (bonecases.unknown_feature_case, bonecases.UNKNOWN_FEATURE),
 }
 """Clips every reader must refuse, with the text the refusal names (the feature it lacks)."""
+
+
+TOLERANCE_REL_COORDINATE = 2.0**-20
+"""Of the largest coordinate magnitude of a case's positions, added to 1e-6 of its diagonal: float32 keeps
+about 2^-24 of a coordinate, and evaluators that round in another order differ by a few of those."""
 
 
 def case_times(parts: ClipParts) -> list[float]:
@@ -327,7 +344,8 @@ def case_times(parts: ClipParts) -> list[float]:
 def generate(out: Path, names: list[str] | None = None) -> dict:
     """Write the fixture files of the chosen cases (all by default) into out; returns the manifest."""
     out.mkdir(parents=True, exist_ok=True)
-    manifest: dict = {"fixture_version": FIXTURE_VERSION, "tolerance_rel_diagonal": 1e-6, "cases": []}
+    manifest: dict = {"fixture_version": FIXTURE_VERSION, "tolerance_rel_diagonal": 1e-6,
+                      "tolerance_rel_coordinate": TOLERANCE_REL_COORDINATE, "cases": []}
     for name, (make, _) in CASES.items():
         if names and name not in names:
             continue

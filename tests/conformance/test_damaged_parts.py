@@ -66,3 +66,21 @@ def test_damaged_parts_load_or_raise_clip_format_error(name):
         with np.errstate(all="ignore"):
             assert np.all(np.isfinite(clip.evaluate(np.array([0.0, 0.37, 1.0]))))
     assert refused > 10  # the mutations do reach the checks
+
+
+@pytest.mark.parametrize("knot", [1.6e38, 2.0**97])
+def test_a_finite_knot_whose_frames_would_overflow_is_refused_at_load(knot):
+    """One finite knot of 1.6e38 (the largest float32s are finite, yet its frames between the probed times are
+    not): refused at load naming the limit, not at some later frame."""
+    parts = read_clip_file(FIXTURES / "fit-absolute-chord-pde.clip")
+    ch, ca = container.unpack(parts.coefficients)
+    assert ch["knot_rank"] == 0 and "knot_windows" not in ca
+    from pdeanim.model import quantise
+
+    codes = quantise.decode_knot_tracks(ca["knots"], ch["knot_differences"])  # (S+1, C, 3, 4)
+    s, c, w, k = (int(i[0]) for i in np.nonzero(codes))
+    steps = np.array(ca["knot_step"])
+    steps[c, w] = np.float32(abs(knot / codes[s, c, w, k]))  # that knot is +-knot
+    coef = container.pack(ch, {**ca, "knot_step": steps})
+    with pytest.raises(ClipFormatError, match="above 2\\^96"):
+        load_clip(parts.topology, coef)

@@ -21,6 +21,19 @@ def test_missing_fails_under_ci_and_skips_elsewhere(monkeypatch, value, ci):
 
 
 def test_ci_entry_point_exports_ci_true():
-    lines = (ROOT / ".ci" / "run").read_text().splitlines()
+    lines = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if not line.startswith("#")]
     assert "export CI=true" in lines
     assert lines.index("export CI=true") < next(i for i, line in enumerate(lines) if "script/test" in line)
+
+
+def test_ci_leaves_the_slow_tests_to_the_nightly_script_and_prints_its_times():
+    """CI runs ``-m "not slow"`` (the marker is registered), script/test-nightly runs ``-m slow``, and the run
+    ends with its wall time."""
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
+    assert any(m.startswith("slow:") for m in config["markers"])
+    test = (ROOT / "script" / "test").read_text()
+    assert 'select=(-m "not slow")' in test and '${select[@]+"${select[@]}"} "$@"' in test
+    assert "pytest -m slow" in (ROOT / "script" / "test-nightly").read_text()
+    assert "wall time" in (ROOT / ".ci" / "run").read_text().splitlines()[-2]

@@ -17,7 +17,6 @@ from ..service.harness import client, make_key, wait_job
 from .rig import BIPED, CONTROLLED, HEXAPOD, QUADRUPED, rig_glb
 from .test_cli import GAIT_CASES
 
-pytestmark = pytest.mark.slow
 RIGS = {"biped": BIPED, "quadruped": QUADRUPED, "hexapod": HEXAPOD}
 
 

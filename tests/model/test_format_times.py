@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from pdeanim import container
 from pdeanim.clip import load_clip
 from pdeanim.fit import FitOptions, fit_poses
-from pdeanim.model.clipformat import ClipFormatError, frame_segment_t, segment_t_derivable
+from pdeanim.model.clipformat import ClipFormatError, frame_segment_t
+from pdeanim.model.coefwriter import segment_t_derivable
 from tests.conformance.generate import _sphere_poses
 
 

@@ -77,6 +77,16 @@ def backend_kind(request) -> str:
     return request.param
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The PostgreSQL run of a module that tests HTTP routes over the store (``POSTGRES_NIGHTLY = True``) is
+    marked slow: CI runs those routes on SQLite, and the store, queue, worker, deletion and scale-out tests on
+    both backends; script/test-nightly runs the routes on PostgreSQL too."""
+    for item in items:
+        params = getattr(getattr(item, "callspec", None), "params", {})
+        if params.get("backend_kind") == "postgres" and getattr(item.module, "POSTGRES_NIGHTLY", False):
+            item.add_marker(pytest.mark.slow)
+
+
 @contextmanager
 def open_backend(kind: str, data_dir: Path, request) -> Iterator[Backend]:
     """An empty backend: its own data dir, and on PostgreSQL its own database and bucket (dropped after)."""

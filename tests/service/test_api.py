@@ -11,7 +11,8 @@ import pytest
 from .conftest import running_services
 from .harness import client, wait_job
 
-pytestmark = pytest.mark.slow
+POSTGRES_NIGHTLY = True  # routes over the store: CI runs them on SQLite (conftest)
+
 UPLOAD_LIMIT = 1_500_000
 IMMUTABLE = "private, max-age=31536000, immutable"
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}

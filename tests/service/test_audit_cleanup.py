@@ -15,8 +15,6 @@ import pytest
 from .conftest import Backend
 from .harness import Services, client, make_key
 
-pytestmark = pytest.mark.slow
-
 
 def wait_for(condition, timeout: float = 60.0, what: str = "condition"):  # noqa: ANN001
     deadline = time.monotonic() + timeout

@@ -15,7 +15,6 @@ from tests.robustness.test_audit_npz import declared_only, patch_local_and_centr
 
 from .harness import Services, client, make_key
 
-pytestmark = pytest.mark.slow
 TETRA = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"
 
 

@@ -15,8 +15,6 @@ from pdeanim.fit.budget import fit_memory_bytes
 from .conftest import Backend
 from .harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
-
 
 @pytest.fixture
 def svc(tmp_path):

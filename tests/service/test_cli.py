@@ -5,12 +5,8 @@ from __future__ import annotations
 import signal
 import subprocess
 
-import pytest
-
 from .conftest import Backend
 from .harness import PDEANIM, Services, client, make_key, process_env, wait_job
-
-pytestmark = pytest.mark.slow
 
 
 def test_keys_create_prints_a_working_key(module_backend, tmp_path):

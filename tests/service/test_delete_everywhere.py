@@ -20,7 +20,6 @@ from service.api.cache import CachedClip, ClipCache
 
 from .harness import Services, make_key, wait_job
 
-pytestmark = pytest.mark.slow
 DATA = Path(__file__).resolve().parents[1] / "data"
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
 FIXTURE = Path(__file__).resolve().parents[2] / "service" / "api" / "warmup" / "fit-rigid-chord.clip"

@@ -21,7 +21,8 @@ from ..gltf.builders import textured_scene_glb
 from .conftest import running_services
 from .harness import wait_job
 
-pytestmark = pytest.mark.slow
+POSTGRES_NIGHTLY = True  # routes over the store: CI runs them on SQLite (conftest)
+
 FRAMES = 10  # poses at 30 fps: 0.3 s
 VERTICES = 43  # of textured_scene_glb
 MAX_FPS = 60

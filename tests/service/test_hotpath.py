@@ -19,7 +19,8 @@ from worker.child import lower_priority
 from .conftest import running_services
 from .harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
+POSTGRES_NIGHTLY = True  # routes over the store: CI runs them on SQLite (conftest)
+
 KEY_TTL = 2.0  # seconds a verified key is trusted by an API process (PDEANIM_KEY_CACHE_SECONDS)
 JOB_NICE = 7
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}

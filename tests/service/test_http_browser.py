@@ -15,7 +15,8 @@ import zstandard
 
 from .harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
+POSTGRES_NIGHTLY = True  # routes over the store: CI runs them on SQLite (conftest)
+
 ORIGIN = "http://localhost:5173"
 PRIVATE = "private, max-age=31536000, immutable"
 

@@ -10,14 +10,12 @@ import time
 from pathlib import Path
 
 import httpx
-import pytest
 
 from service.store.scratch import alive
 
 from .harness import ROOT, Services, client, make_key
 from .test_worker import HEAVY, children, job_processes, submit, wait_state
 
-pytestmark = pytest.mark.slow
 GONE_SECONDS = 15.0  # they die within about a second; the margin is for a loaded machine
 
 

@@ -20,7 +20,6 @@ from service.store.tenants import create_key
 from worker.loop import Worker
 from worker.tetcache import tet_blob_key
 
-pytestmark = pytest.mark.slow
 SCENE = {"frames": 4, "target_tets": 300}
 
 

@@ -21,7 +21,6 @@ from service.store.models import ClipRecord, Job
 
 from .harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
 HOOK = Path(__file__).parent / "windowhold"
 WINDOWS = {"PDEANIM_FIT_WINDOW_FIT_VALUES": "100000", "PDEANIM_FIT_WINDOW_VALUES": "75000"}
 OPTIONS = {"target_rel_rms": 3e-3}

@@ -18,7 +18,6 @@ from service.store.models import ClipRecord, Job
 
 from .harness import Services, client, make_key, wait_job
 
-pytestmark = pytest.mark.slow
 HEAVY = {"mode": "eel", "frames": 240, "n_curves": 101, "points": 128, "modes": 12}
 LIGHT = {"mode": "eel", "frames": 8, "n_curves": 11, "points": 16, "modes": 3}
 

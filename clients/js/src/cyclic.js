@@ -1,6 +1,6 @@
 // Decode and evaluate "cyclic-spine" clips (docs/format.md §4) on the CPU.
 
-import { ClipFormatError, checkFormatVersion } from './container.js';
+import { ClipFormatError, checkBounded, checkFormatVersion } from './container.js';
 
 const WAVES = ['standing', 'travelling'];
 const RADIAL = ['rotate', 'translate'];
@@ -101,6 +101,8 @@ export function decodeCyclic(topo, coef) {
   if (faces.shape.length !== 2 || faces.shape[1] !== 3 || faces.data.some((i) => i < 0 || i >= V)) {
     throw new ClipFormatError('cyclic-spine faces must be (T, 3) indices of the vertices');
   }
+  checkBounded(rest.data, 'cyclic-spine rest');
+  checkBounded(spine.data, 'cyclic-spine spine');
   const period = 1 / swim.frequency;
   const frameTimes = new Float64Array(frames + 1).map((_, i) => i * (period / frames));
   return {

@@ -1,6 +1,6 @@
 // Decode and evaluate "dynamic-pde" clips (docs/format.md §3) on the CPU.
 
-import { ClipFormatError, checkFormatVersion } from './container.js';
+import { ClipFormatError, checkBounded, checkFormatVersion } from './container.js';
 import { locate, rigidTimePair, spaceBasis, timePair } from './basis.js';
 import { BonePose, decodeBones, hasBones } from './bones.js';
 
@@ -125,6 +125,7 @@ function topologyArrays(th, ta, V) {
   const restCurve = undoZigzag(zr, 3, (q, w) => Math.fround(origin[w] + q * restStep), new Float32Array(V * 3));
   checkFinite(uCurve, 'topology u');
   checkFinite(restCurve, 'topology rest');
+  checkBounded(restCurve, 'topology rest');
   return { order, offsets, faces, uCurve, restCurve, uColumns: cols };
 }
 
@@ -294,6 +295,7 @@ function decodeKnots(ch, ca, S, C) {
     }
   }
   checkFinite(knots, 'coefficients knots');
+  checkBounded(knots, 'coefficients knots');
   return knots;
 }
 
@@ -364,8 +366,10 @@ function rigidTracks(ca, C) {
     throw new ClipFormatError('rigid segment boundaries must be non-decreasing with at least one segment');
   }
   const rigid = { segmentT: rs, centre: need(ca, 'rigid_centre', [C, 3], 'coefficients', F4).data };
+  checkBounded(rigid.centre, 'rigid centres');
   for (const name of ['rot', 'trans']) {
     rigid[`${name}Knots`] = need(ca, `rigid_${name}_knots`, [Sr + 1, C, 3], 'coefficients', F4).data;
+    checkBounded(rigid[`${name}Knots`], `rigid_${name}_knots`);
     const mu = need(ca, `rigid_${name}_mu`, [Sr, C], 'coefficients', F4).data;
     if (mu.some((x) => x <= -Math.PI)) throw new ClipFormatError('rigid trig time constants must be above -pi');
     rigid[`${name}Mu`] = mu;

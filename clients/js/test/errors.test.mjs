@@ -720,3 +720,18 @@ test('segment_t may be left out only with a knot at every frame: it is then the 
   });
   refused(() => decodeClip(parts.topology, few), why);
 });
+
+test('finite knots or rest values whose frames could overflow float32 are refused at decode (format §5)', () => {
+  // knot steps of 2^97: every knot stays finite in float32, yet above 2^96 in magnitude
+  const big = edited(parts.coefficients, ({ arrays }) => {
+    arrays.knot_step.data = arrays.knot_step.data.map(() => 2 ** 97);
+  });
+  refused(() => decodeClip(parts.topology, big), /coefficients knots hold a value above 2\^96/);
+  const farCyclic = edited(cyclicParts.topology, ({ arrays }) => {
+    arrays.rest.data = arrays.rest.data.map((x, i) => (i === 0 ? 1.6e38 : x));
+  });
+  const coefficients = edited(cyclicParts.coefficients, ({ header }) => {
+    header.topology_id = undefined;
+  });
+  refused(() => decodeClip(farCyclic, coefficients), /cyclic-spine rest hold a value above 2\^96/);
+});

@@ -333,3 +333,14 @@ export function naiveEvaluate(clip, t) {
   }
   return out;
 }
+
+/**
+ * The conformance tolerance of docs/format.md §6 for a manifest case c whose positions are values: 1e-6 of
+ * the diagonal plus 2^-20 of the largest coordinate magnitude (float32 rounding grows with the coordinates).
+ */
+export function caseTolerance(c, values) {
+  const man = manifest();
+  let largest = 0;
+  for (let i = 0; i < values.length; i++) largest = Math.max(largest, Math.abs(values[i]));
+  return man.tolerance_rel_diagonal * c.diagonal + man.tolerance_rel_coordinate * largest;
+}

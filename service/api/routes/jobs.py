@@ -10,7 +10,7 @@ from fastapi import APIRouter, Query, Request, Response
 from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
-from ...jobspec import StageUnavailable, normalize_request
+from ...jobspec import normalize_request
 from ...settings import Settings
 from ...store.context import Store
 from ...store.lifecycle import release_window_blobs
@@ -115,11 +115,8 @@ def create_job(req: JobBody, tenant: TenantDep, session: SessionDep, store: Stor
                response: Response) -> JobOut:
     """Queue a job; its parameters are validated now (422 with the reason) and kept with the job."""
     mesh_id, poses_id = _inputs(req, tenant, session)
-    try:
-        fit = req.fit.model_dump(exclude_unset=True) if getattr(req, "fit", None) is not None else None
-        spec = normalize_request(req.kind, job_options(req), getattr(req, "then_fit", False), fit)
-    except StageUnavailable as exc:
-        raise ApiError(501, "not_implemented", str(exc)) from exc
+    fit = req.fit.model_dump(exclude_unset=True) if getattr(req, "fit", None) is not None else None
+    spec = normalize_request(req.kind, job_options(req), getattr(req, "then_fit", False), fit)
     if req.kind == "export":
         from ..exports import check_fps
 

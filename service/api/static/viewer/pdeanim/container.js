@@ -64,6 +64,22 @@ export class ClipFormatError extends Error {
   }
 }
 
+/**
+ * Largest magnitude of a position-scale number a reader accepts (docs/format.md §5): rest coordinates, knots,
+ * rigid centres and translations, cyclic rest positions and spine coefficients. With the space basis at most
+ * 2 and the time weights below 2^25, no frame of such a clip overflows float32.
+ */
+export const VALUE_LIMIT = 2 ** 96;
+
+/** Throw ClipFormatError unless every value is finite and at most VALUE_LIMIT in magnitude. */
+export function checkBounded(values, what) {
+  for (let i = 0; i < values.length; i++) {
+    if (!(Math.abs(values[i]) <= VALUE_LIMIT)) {
+      throw new ClipFormatError(`${what} hold a value above 2^96 in magnitude or not finite (frames would not be finite)`);
+    }
+  }
+}
+
 const DTYPES = {
   '<f4': [Float32Array, 4],
   '<f8': [Float64Array, 8],
