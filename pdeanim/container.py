@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import struct
+from collections.abc import Collection
 from typing import Any
 
 import numpy as np
@@ -140,10 +141,33 @@ def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str
     return np.frombuffer(raw, dtype=dtype, count=count)
 
 
-def unpack(blob: bytes,
-           max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def unpack(blob: bytes, max_decoded_bytes: int = MAX_DECODED_BYTES,
+           names: Collection[str] | None = None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError, also
-    when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding)."""
+    when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding).
+    ``names``: decode only those arrays (the others are checked, not decoded)."""
+    header, entries = _parse(blob, max_decoded_bytes)
+    arrays: dict[str, np.ndarray] = {}
+    for name, dtype, shape, lo, n, encoding, size in entries:
+        if names is not None and name not in names:
+            continue
+        count = size // dtype.itemsize
+        if encoding is None:
+            arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
+        else:
+            arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
+    return header, arrays
+
+
+def shapes(blob: bytes) -> tuple[dict[str, Any], dict[str, tuple[int, ...]]]:
+    """(header, shape of every array) of container bytes, nothing decoded; raises ClipFormatError as
+    :func:`unpack` would before decoding."""
+    header, entries = _parse(blob, MAX_DECODED_BYTES)
+    return header, {name: shape for name, _, shape, *_ in entries}
+
+
+def _parse(blob: bytes, max_decoded_bytes: int) -> tuple[dict[str, Any], list[tuple]]:
+    """(header, checked array entries) of container bytes (see :func:`_entry`); raises ClipFormatError."""
     if len(blob) < _PREFIX.size:
         raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
@@ -165,14 +189,7 @@ def unpack(blob: bytes,
             f"the container's arrays declare {declared} bytes once decoded, more than {limit} for a "
             f"container of {len(blob)} bytes (at most {MAX_EXPANSION}x its size or {EXPANSION_FLOOR} bytes, "
             f"and never over {max_decoded_bytes}): a damaged or forged file")
-    arrays: dict[str, np.ndarray] = {}
-    for name, dtype, shape, lo, n, encoding, size in entries:
-        count = size // dtype.itemsize
-        if encoding is None:
-            arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
-        else:
-            arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
-    return header, arrays
+    return header, entries
 
 
 def decoded_limit(stored: int, cap: int = MAX_DECODED_BYTES) -> int:

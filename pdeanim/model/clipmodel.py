@@ -25,6 +25,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a pinned dependency; this keeps the numpy path usable
     COMPILED = False
 
+from .. import container
 from ..errors import ClipFormatError
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
@@ -178,20 +179,43 @@ class DynamicClip:
 
     def info(self) -> dict[str, Any]:
         """JSON-able metadata: frames, segments, curves, motion, errors achieved."""
-        h = self.coef.header
-        return {
-            "kind": self.kind,
-            "n_vertices": self.n_vertices,
-            "n_frames": int(len(self.frame_times)),
-            "n_segments": int(len(self.segment_t) - 1),
-            "n_curves": self.topo.curves.n_curves,
-            "motion": self.coef.motion,
-            "looping": self.looping,
-            "param_mode": self.topo.param_mode,
-            "duration_s": float(self.frame_times[-1] - self.frame_times[0]),
-            "errors": h.get("errors", {}),
-            **{k: h[k] for k in ("gait", "travel") if isinstance(h.get(k), dict)},  # gait clips (cyclic)
-        }
+        return _info(self.n_vertices, int(len(self.frame_times)), int(len(self.segment_t) - 1),
+                     self.topo.curves.n_curves, self.topo.param_mode, self.coef.header,
+                     float(self.frame_times[-1] - self.frame_times[0]))
+
+
+def _info(n_vertices: int, n_frames: int, n_segments: int, n_curves: int, param_mode: str,
+          header: dict[str, Any], duration_s: float) -> dict[str, Any]:
+    """The metadata of :meth:`DynamicClip.info` from its parts (``header``: the coefficients part's)."""
+    return {
+        "kind": DynamicClip.kind,
+        "n_vertices": n_vertices,
+        "n_frames": n_frames,
+        "n_segments": n_segments,
+        "n_curves": n_curves,
+        "motion": str(header.get("motion")),
+        "looping": bool(header.get("looping", False)),
+        "param_mode": param_mode,
+        "duration_s": duration_s,
+        "errors": header.get("errors", {}),
+        **{k: header[k] for k in ("gait", "travel") if isinstance(header.get(k), dict)},  # gait clips
+    }
+
+
+def header_info(topology: bytes, coefficients: bytes) -> dict[str, Any]:
+    """:meth:`DynamicClip.info` of a clip's two parts from their headers, array shapes and frame times alone:
+    nothing whose size grows with segments x curves is decoded (the metadata route of a long clip)."""
+    th, t_shapes = container.shapes(topology)
+    ch, arrays = container.unpack(coefficients, names=("frame_times",))
+    ft = arrays.get("frame_times")
+    if ft is None or ft.ndim != 1 or len(ft) < 1 or "rest" not in t_shapes or "curve_lengths" not in t_shapes:
+        raise ClipFormatError("a dynamic-pde clip needs frame_times, rest and curve_lengths arrays")
+    S = ch.get("n_segments")
+    if not isinstance(S, int) or isinstance(S, bool) or S < 1:
+        raise ClipFormatError(f"coefficients header field 'n_segments' must be a positive integer, got {S!r}")
+    ft = np.asarray(ft, np.float64)
+    return _info(int(t_shapes["rest"][0]), int(len(ft)), S, int(t_shapes["curve_lengths"][0]),
+                 str(th.get("param_mode", "chord")), ch, float(ft[-1] - ft[0]))
 
 
 class _SegmentTime:

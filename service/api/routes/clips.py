@@ -98,10 +98,23 @@ def get_clip(
 ) -> ClipOut:
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
-    item = _cached(clip_id, tenant, store, cache)
-    info = jsonable(item.clip.info())
-    info.setdefault("looping", bool(item.clip.looping))
+    info = jsonable(_info(row, store, cache))
     return clip_out(row, info)
+
+
+def _info(row: ClipRecord, store: Store, cache) -> dict:  # noqa: ANN001 - a ClipCache
+    """The clip's metadata: from its decoded clip when this process holds it, else from the parts' headers
+    (nothing that grows with segments x vertices is decoded for it)."""
+    from pdeanim.clip import clip_info
+
+    item = cache.peek(row.id)
+    if item is not None and item.tenant_id == row.tenant_id:
+        info = item.clip.info()
+        info.setdefault("looping", bool(item.clip.looping))
+        return info
+    info = clip_info(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+    info.setdefault("looping", False)
+    return info
 
 
 @router.get("/v1/clips/{clip_id}/coefficients", operation_id="getClipCoefficients", response_class=Response,
