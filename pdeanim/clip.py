@@ -29,7 +29,7 @@ from .model.clipmodel import clip_from_parts as dynamic_clip
 from .model.clipmodel import header_info as dynamic_info
 
 __all__ = ["FORMAT_VERSION", "Clip", "ClipParts", "check_format_version", "clip_info", "load_clip",
-           "load_clip_file",
+           "load_clip_file", "open_clip",
            "read_clip_file", "topology_id", "write_clip_file"]
 
 DECODERS: dict[str, Callable[[dict[str, Any], dict[str, np.ndarray], dict[str, Any], dict[str, np.ndarray]],
@@ -95,6 +95,21 @@ def load_clip(topology: bytes, coefficients: bytes) -> Clip:
     if not np.all(np.isfinite(probe)):  # a damaged or hand-made part whose numbers overflow the evaluator
         raise ClipFormatError("the clip evaluates to non-finite positions")
     return clip
+
+
+def open_clip(topology: bytes, coefficients: bytes, max_decode_bytes: int) -> Clip:
+    """The clip of the two parts: decoded whole (:func:`load_clip`) unless decoding it would take more than
+    ``max_decode_bytes`` (0: no bound), then evaluated a block of curves at a time in bounded memory
+    (:class:`pdeanim.model.clipblocks.BlockedClip`: the same positions, bit for bit, computed per call)."""
+    from .model.clipblocks import BlockedClip, header_decode_cost
+
+    cost = header_decode_cost(topology, coefficients) if max_decode_bytes else None
+    if cost is None or cost <= max_decode_bytes:
+        return load_clip(topology, coefficients)
+    th, _ = container.shapes(topology)
+    ch, _ = container.shapes(coefficients)
+    _check_parts(th, ch, topology)
+    return BlockedClip(topology, coefficients)
 
 
 def load_clip_file(path: str | Path) -> Clip:

@@ -117,7 +117,7 @@ def _encode(a: np.ndarray, encoding: str, level: int = ZSTD_LEVEL) -> bytes:
     return writer.compress(raw)
 
 
-def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str) -> np.ndarray:
+def decode_array(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str) -> np.ndarray:
     """The flat array of ``count`` elements behind ``stored`` bytes; raises ClipFormatError."""
     import zstandard
 
@@ -146,28 +146,30 @@ def unpack(blob: bytes, max_decoded_bytes: int = MAX_DECODED_BYTES,
     """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError, also
     when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding).
     ``names``: decode only those arrays (the others are checked, not decoded)."""
-    header, entries = _parse(blob, max_decoded_bytes)
+    header, table = entries(blob, max_decoded_bytes)
     arrays: dict[str, np.ndarray] = {}
-    for name, dtype, shape, lo, n, encoding, size in entries:
+    for name, dtype, shape, lo, n, encoding, size in table:
         if names is not None and name not in names:
             continue
         count = size // dtype.itemsize
         if encoding is None:
             arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
         else:
-            arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
+            flat = decode_array(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name)
+            arrays[name] = flat.reshape(shape)
     return header, arrays
 
 
 def shapes(blob: bytes) -> tuple[dict[str, Any], dict[str, tuple[int, ...]]]:
     """(header, shape of every array) of container bytes, nothing decoded; raises ClipFormatError as
     :func:`unpack` would before decoding."""
-    header, entries = _parse(blob, MAX_DECODED_BYTES)
-    return header, {name: shape for name, _, shape, *_ in entries}
+    header, table = entries(blob)
+    return header, {name: shape for name, _, shape, *_ in table}
 
 
-def _parse(blob: bytes, max_decoded_bytes: int) -> tuple[dict[str, Any], list[tuple]]:
-    """(header, checked array entries) of container bytes (see :func:`_entry`); raises ClipFormatError."""
+def entries(blob: bytes, max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], list[tuple]]:
+    """(header, checked array entries) of container bytes: per array (name, dtype, shape, offset in the blob,
+    stored bytes, encoding or None, decoded bytes); nothing decoded. Raises ClipFormatError."""
     if len(blob) < _PREFIX.size:
         raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
@@ -182,14 +184,14 @@ def _parse(blob: bytes, max_decoded_bytes: int) -> tuple[dict[str, Any], list[tu
         header = json.loads(bytes(blob[_PREFIX.size:start]).decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
-    entries = [_entry(name, spec, start, len(blob)) for name, spec in _array_table(header).items()]
-    declared, limit = sum(size for *_, size in entries), decoded_limit(len(blob), max_decoded_bytes)
+    table = [_entry(name, spec, start, len(blob)) for name, spec in _array_table(header).items()]
+    declared, limit = sum(size for *_, size in table), decoded_limit(len(blob), max_decoded_bytes)
     if declared > limit:
         raise ClipFormatError(
             f"the container's arrays declare {declared} bytes once decoded, more than {limit} for a "
             f"container of {len(blob)} bytes (at most {MAX_EXPANSION}x its size or {EXPANSION_FLOOR} bytes, "
             f"and never over {max_decoded_bytes}): a damaged or forged file")
-    return header, entries
+    return header, table
 
 
 def decoded_limit(stored: int, cap: int = MAX_DECODED_BYTES) -> int:

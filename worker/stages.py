@@ -15,6 +15,7 @@ from service.store.blobs import BlobStore
 
 Partial = Callable[[dict], None]  # hands a part of the result to the parent before the stage goes on
 SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
+EXPORT_DECODE_BYTES = 256 << 20  # an export job decodes a clip whole up to this, else evaluates it by blocks
 
 
 def _mesh(job: dict, blobs: BlobStore, settings: Settings):  # noqa: ANN202 - SurfaceMesh
@@ -149,13 +150,14 @@ def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
                partial: Partial | None = None) -> dict:
     """Clip -> animation GLB (quantised, meshopt-compressed, keeping the source mesh's look) in the blob
     store."""
-    from pdeanim.clip import load_clip
+    from pdeanim.clip import open_clip
     from pdeanim.gltf.clipexport import ExportOptions, clip_animation_glb, estimate_export
     from pdeanim.gltf.layout import source_layout
 
     opts = ExportOptions.from_dict(job["params"]["params"])
     progress(0.0, "export: load clip")
-    clip = load_clip(blobs.get(job["clip"]["topology_key"]), blobs.get(job["clip"]["coefficients_key"]))
+    clip = open_clip(blobs.get(job["clip"]["topology_key"]), blobs.get(job["clip"]["coefficients_key"]),
+                     EXPORT_DECODE_BYTES)  # a long clip is evaluated a block of curves at a time
     estimate = estimate_export(clip, opts.fps, settings.max_frames)
     mesh = job.get("mesh") or {}
     data = blobs.get(mesh["blob_key"]) if mesh.get("blob_key") else None

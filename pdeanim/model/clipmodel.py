@@ -41,8 +41,11 @@ class DynamicClip:
 
     kind = "dynamic-pde"
 
-    def __init__(self, topo: TopologyData, coef: CoefficientData):
+    def __init__(self, topo: TopologyData, coef: CoefficientData, lazy_segments: bool = False):
+        """``lazy_segments``: build each segment's time tables on its first use instead of at load (a block
+        of curves evaluated at a few times, :mod:`pdeanim.model.clipblocks`)."""
         self.topo, self.coef = topo, coef
+        self._lazy = lazy_segments
         self.n_vertices = int(len(topo.rest))
         self.faces = np.asarray(topo.faces, np.int32)
         self.frame_times = np.asarray(coef.frame_times, np.float64)
@@ -54,7 +57,6 @@ class DynamicClip:
             raise ClipFormatError("the topology's curves do not cover every vertex (corrupt topology)")
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
-        self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
         spline = coef.spline_items().reshape(-1)
         self._cubic_items = [spline] * len(self._mu)  # per segment, the items on the spline (§3.5): all
 
@@ -75,13 +77,23 @@ class DynamicClip:
         """The flat (S+1, V * 3) knot fields and, per segment, the distinct time value of every value (its
         item's mu; uint16 where the segment has few, as the integer-coded format gives)."""
         self._knot_fields = np.ascontiguousarray(knot_fields.reshape(len(knot_fields), -1))  # (S+1, V*3)
-        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
-        self._value_code, self._cubic_values = [], []
-        for seg, cubic in zip(self._time, self._cubic_items, strict=True):
-            code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
-            small = seg.n_values < np.iinfo(np.uint16).max
-            self._value_code.append(np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32))
-            self._cubic_values.append(np.flatnonzero(cubic[item_of]) if cubic.any() else None)
+        self._item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
+        if self._lazy:
+            tables = _LazySegments(len(self._mu), self._segment_tables)
+            self._time, self._value_code, self._cubic_values = (_Column(tables, k) for k in range(3))
+            return
+        built = [self._segment_tables(s) for s in range(len(self._mu))]
+        self._time = [b[0] for b in built]
+        self._value_code = [b[1] for b in built]
+        self._cubic_values = [b[2] for b in built]
+
+    def _segment_tables(self, s: int) -> tuple[_SegmentTime, np.ndarray, np.ndarray | None]:
+        """Segment s's time pair, the code of every value's distinct time value, and its spline values."""
+        seg, cubic, item_of = _SegmentTime(self._mu[s].ravel()), self._cubic_items[s], self._item_of
+        code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
+        small = seg.n_values < np.iinfo(np.uint16).max
+        return (seg, np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32),
+                np.flatnonzero(cubic[item_of]) if cubic.any() else None)
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -216,6 +228,30 @@ def header_info(topology: bytes, coefficients: bytes) -> dict[str, Any]:
     ft = np.asarray(ft, np.float64)
     return _info(int(t_shapes["rest"][0]), int(len(ft)), S, int(t_shapes["curve_lengths"][0]),
                  str(th.get("param_mode", "chord")), ch, float(ft[-1] - ft[0]))
+
+
+class _LazySegments:
+    """Per-segment tables built on a segment's first use."""
+
+    def __init__(self, n: int, build: Any) -> None:
+        self._items: list[Any] = [None] * n
+        self._build = build
+
+    def get(self, s: int) -> Any:
+        item = self._items[s]
+        if item is None:
+            item = self._items[s] = self._build(s)
+        return item
+
+
+class _Column:
+    """One of the per-segment tables (column k of :class:`_LazySegments`), indexed by segment."""
+
+    def __init__(self, tables: _LazySegments, k: int) -> None:
+        self._tables, self._k = tables, k
+
+    def __getitem__(self, s: int) -> Any:
+        return self._tables.get(s)[self._k]
 
 
 class _SegmentTime:

@@ -36,14 +36,17 @@ INLINE_FRAME_VERTICES = 50_000
 def _load(clip_id: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
     """The clip from the cache, or read and decoded from the database row and blobs (blocking I/O)."""
     def load() -> CachedClip:
-        from pdeanim.clip import load_clip
+        from pdeanim.clip import open_clip
         from pdeanim.gltf.write import FrameGlb
 
         with store.sessions() as session:
             row = session.get(ClipRecord, clip_id)
         if row is None:
             raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
-        clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+        # a clip whose decoding would take more than the cache may hold is evaluated a block of curves at a
+        # time (the same bytes, in bounded memory, computed per request), never decoded whole
+        clip = open_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key),
+                         cache.max_bytes)
         layout = source_layout_loader(store, row.mesh_id, clip)  # keeps a glTF/OBJ source's look
         return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip,
                           FrameWriter(FrameGlb(clip.faces, clip.n_vertices), layout))
