@@ -14,10 +14,9 @@ import math
 import os
 import tempfile
 import threading
-import weakref
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -76,12 +75,11 @@ class BlockedClip:
         self.topo = decode_topology(th, ta)
         self.n_vertices = int(len(self.topo.rest))
         self.faces = self.topo.faces
-        self._files: list[Path] = []
-        self._cleanup = weakref.finalize(self, _remove, self._files)  # scratch files go with the object
+        self._files: list[IO[bytes]] = []  # unlinked scratch files: closed with the object at the latest
         self._blob = coefficients
         self.header, entries = container.entries(coefficients)
         self._small: dict[str, np.ndarray] = {}
-        self._large: dict[str, tuple[Path, np.dtype, tuple[int, ...]]] = {}
+        self._large: dict[str, tuple[IO[bytes], np.dtype, tuple[int, ...]]] = {}
         try:
             for entry in entries:
                 self._load(entry, scratch)
@@ -108,17 +106,17 @@ class BlockedClip:
             array = container.decode_array(stored, str(encoding), dtype, count, name)
             self._small[name] = array.reshape(shape)
         else:
-            path = _spool(memoryview(self._blob)[lo:lo + n], str(encoding), dtype, count, name, scratch)
-            self._files.append(path)
-            self._large[name] = (path, dtype, shape)
+            fh = _spool(memoryview(self._blob)[lo:lo + n], str(encoding), dtype, count, name, scratch)
+            self._files.append(fh)
+            self._large[name] = (fh, dtype, shape)
 
     def _block_arrays(self, c0: int, c1: int) -> dict[str, np.ndarray]:
         """The coefficient arrays of curves c0..c1-1 (per-curve arrays sliced on their curve axis)."""
         out = {}
         for name, a in self._small.items():
             out[name] = _take(a, CURVE_AXIS[name], c0, c1) if name in CURVE_AXIS else a
-        for name, (path, dtype, shape) in self._large.items():
-            mm = np.memmap(path, dtype=dtype, mode="r", shape=shape) if math.prod(shape) else np.empty(
+        for name, (fh, dtype, shape) in self._large.items():
+            mm = np.memmap(fh, dtype=dtype, mode="r", shape=shape) if math.prod(shape) else np.empty(
                 shape, dtype)
             out[name] = np.array(_take(mm, CURVE_AXIS[name], c0, c1))  # a copy: the mapping ends here
             del mm
@@ -166,29 +164,25 @@ class BlockedClip:
         the frames nor a mapping of them is ever held. Raises ClipFormatError on non-finite positions."""
         times = np.atleast_1d(np.asarray(times, np.float64))
         K, chunk = len(times), max(1, int(chunk))
-        fd, tmp = tempfile.mkstemp(prefix="pdeanim-frames-", dir=scratch)
-        try:
-            with os.fdopen(fd, "w+b") as fh:
-                layout = []
-                with _EVALUATING:
-                    for idx, clip in self.blocks():
-                        with np.errstate(all="ignore"):
-                            values = np.ascontiguousarray(clip.evaluate(times), np.float32)
-                        del clip
-                        if not np.all(np.isfinite(values)):
-                            raise ClipFormatError("the clip evaluates to non-finite positions")
-                        layout.append((idx, fh.tell()))
-                        fh.write(memoryview(values).cast("B"))
-                fh.flush()
-                for a in range(0, K, chunk):
-                    n = min(chunk, K - a)
-                    out = np.empty((n, self.n_vertices, 3), np.float32)
-                    for idx, offset in layout:
-                        data = os.pread(fh.fileno(), n * len(idx) * 12, offset + a * len(idx) * 12)
-                        out[:, idx] = np.frombuffer(data, np.float32).reshape(n, len(idx), 3)
-                    yield out
-        finally:
-            Path(tmp).unlink(missing_ok=True)
+        with tempfile.TemporaryFile(prefix="pdeanim-frames-", dir=scratch) as fh:
+            layout = []
+            with _EVALUATING:
+                for idx, clip in self.blocks():
+                    with np.errstate(all="ignore"):
+                        values = np.ascontiguousarray(clip.evaluate(times), np.float32)
+                    del clip
+                    if not np.all(np.isfinite(values)):
+                        raise ClipFormatError("the clip evaluates to non-finite positions")
+                    layout.append((idx, fh.tell()))
+                    fh.write(memoryview(values).cast("B"))
+            fh.flush()
+            for a in range(0, K, chunk):
+                n = min(chunk, K - a)
+                out = np.empty((n, self.n_vertices, 3), np.float32)
+                for idx, offset in layout:
+                    data = os.pread(fh.fileno(), n * len(idx) * 12, offset + a * len(idx) * 12)
+                    out[:, idx] = np.frombuffer(data, np.float32).reshape(n, len(idx), 3)
+                yield out
 
     def frame_t(self) -> np.ndarray:
         """(F,) normalised times of the source frames."""
@@ -205,20 +199,16 @@ class BlockedClip:
                      float(self.frame_times[-1] - self.frame_times[0]))
 
     def close(self) -> None:
-        """Remove the scratch files."""
-        self._cleanup()
+        """Close (and so free) the scratch files."""
+        for fh in self._files:
+            fh.close()
+        self._files.clear()
 
     def __enter__(self) -> BlockedClip:
         return self
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
-
-
-def _remove(files: list[Path]) -> None:
-    for path in files:
-        path.unlink(missing_ok=True)
-    files.clear()
 
 
 def _take(a: np.ndarray, axis: int, c0: int, c1: int) -> np.ndarray:
@@ -241,62 +231,60 @@ def _bounds(per_curve: np.ndarray, budget: int, C: int) -> list[tuple[int, int]]
 
 
 def _spool(stored: memoryview, encoding: str, dtype: np.dtype, count: int, name: str,
-           scratch: str | Path | None) -> Path:
-    """A scratch file holding the array's raw little-endian elements, decompressed (and un-shuffled) in
-    bounded memory; the same checks as :func:`pdeanim.container.decode_array`."""
+           scratch: str | Path | None) -> IO[bytes]:
+    """An unlinked scratch file (gone with the process, however it ends) holding the array's raw elements,
+    decompressed (and un-shuffled) in bounded memory; the same checks as
+    :func:`pdeanim.container.decode_array`."""
     import zstandard
 
     if encoding not in container.ENCODINGS:
         raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
     size = count * dtype.itemsize
-    fd, tmp = tempfile.mkstemp(prefix="pdeanim-clip-", dir=scratch)
-    path = Path(tmp)
+    fh = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            declared = zstandard.frame_content_size(stored)
-            if declared != size:
-                raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
-            reader, written = zstandard.ZstdDecompressor().decompressobj(), 0
-            for a in range(0, len(stored), FEED):
-                if reader.eof:
-                    raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame")
-                chunk = reader.decompress(stored[a:a + FEED])
-                written += len(chunk)
-                if written > size:
-                    raise ClipFormatError(f"array {name!r} decompresses to more than {size} bytes")
-                fh.write(chunk)
-            if not reader.eof or reader.unused_data or written != size:
-                raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame "
-                                      f"of {size} bytes")
+        declared = zstandard.frame_content_size(stored)
+        if declared != size:
+            raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
+        reader, written = zstandard.ZstdDecompressor().decompressobj(), 0
+        for a in range(0, len(stored), FEED):
+            if reader.eof:
+                raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame")
+            chunk = reader.decompress(stored[a:a + FEED])
+            written += len(chunk)
+            if written > size:
+                raise ClipFormatError(f"array {name!r} decompresses to more than {size} bytes")
+            fh.write(chunk)
+        if not reader.eof or reader.unused_data or written != size:
+            raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame "
+                                  f"of {size} bytes")
+        fh.flush()
         if encoding == "shuffle-zstd" and dtype.itemsize > 1:
-            path = _unshuffle(path, dtype.itemsize, count, scratch)
-        return path
+            return _unshuffle(fh, dtype.itemsize, count, scratch)
+        return fh
     except zstandard.ZstdError as exc:
-        path.unlink(missing_ok=True)
+        fh.close()
         raise ClipFormatError(f"array {name!r}: bad zstd data ({exc})") from exc
     except BaseException:
-        path.unlink(missing_ok=True)
+        fh.close()
         raise
 
 
-def _unshuffle(path: Path, itemsize: int, count: int, scratch: str | Path | None,
-               chunk: int = 1 << 20) -> Path:
-    """The file of byte planes ``path`` (byte j of element i at j * count + i) as plain elements, a chunk of
-    elements at a time; ``path`` is removed."""
-    fd, tmp = tempfile.mkstemp(prefix="pdeanim-clip-", dir=scratch)
-    out = Path(tmp)
+def _unshuffle(src: IO[bytes], itemsize: int, count: int, scratch: str | Path | None,
+               chunk: int = 1 << 20) -> IO[bytes]:
+    """The scratch file of byte planes ``src`` (byte j of element i at j * count + i) as plain elements, a
+    chunk of elements at a time, in a new unlinked scratch file; ``src`` is closed."""
+    dst = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
     try:
-        with open(path, "rb") as src, os.fdopen(fd, "wb") as dst:
-            for a in range(0, count, chunk):
-                n = min(chunk, count - a)
-                planes = np.empty((itemsize, n), np.uint8)
-                for j in range(itemsize):
-                    src.seek(j * count + a)
-                    planes[j] = np.frombuffer(src.read(n), np.uint8)
-                dst.write(planes.T.tobytes())
+        for a in range(0, count, chunk):
+            n = min(chunk, count - a)
+            planes = np.empty((itemsize, n), np.uint8)
+            for j in range(itemsize):
+                planes[j] = np.frombuffer(os.pread(src.fileno(), n, j * count + a), np.uint8)
+            dst.write(planes.T.tobytes())
+        dst.flush()
     except BaseException:
-        out.unlink(missing_ok=True)
+        dst.close()
         raise
     finally:
-        path.unlink(missing_ok=True)
-    return out
+        src.close()
+    return dst
