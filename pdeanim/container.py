@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import math
 import struct
-from collections.abc import Collection
+from collections.abc import Collection, Iterator
 from typing import Any
 
 import numpy as np
@@ -246,6 +246,22 @@ def to_json(blob: bytes) -> dict[str, Any]:
     header["arrays"] = {name: {"dtype": a.dtype.str, "shape": list(a.shape), "data": a.ravel().tolist()}
                         for name, a in arrays.items()}
     return {"container": "pdeanim", "version": VERSION, **header}  # arrays inlined: nothing is encoded
+
+
+def iter_json(blob: bytes, chunk: int = 1 << 16) -> Iterator[bytes]:
+    """``json.dumps(to_json(blob)).encode()`` in pieces: one array decoded at a time and its values written
+    ``chunk`` at a time, so the text is never held whole (nor the arrays as Python lists)."""
+    header, table = entries(blob)
+    head = json.dumps({"container": "pdeanim", "version": VERSION, **header})
+    yield (head[:-1] + ', "arrays": {').encode()
+    for i, (name, dtype, shape, *_) in enumerate(table):
+        flat = unpack(blob, names=(name,))[1][name].ravel()
+        spec = json.dumps({"dtype": dtype.str, "shape": list(shape)})
+        yield f'{", " if i else ""}{json.dumps(name)}: {spec[:-1]}, "data": ['.encode()
+        for a in range(0, len(flat), chunk):
+            yield ((", " if a else "") + json.dumps(flat[a:a + chunk].tolist())[1:-1]).encode()
+        yield b"]}"
+    yield b"}}"
 
 
 def from_json(doc: dict[str, Any]) -> bytes:

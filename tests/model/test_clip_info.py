@@ -30,3 +30,13 @@ def test_header_info_decodes_only_the_frame_times_and_checks_the_parts():
         clip_info(other.topology, parts.coefficients)
     with pytest.raises(ClipFormatError, match="expected a topology part"):
         clip_info(parts.coefficients, parts.coefficients)
+
+
+@pytest.mark.parametrize("path", FIXTURES[::4], ids=lambda p: p.stem)
+def test_json_form_in_pieces_is_the_json_form(path: Path):
+    import json
+
+    parts = read_clip_file(path)
+    for blob in (parts.topology, parts.coefficients):
+        want = json.dumps(container.to_json(blob)).encode()
+        assert all(b"".join(container.iter_json(blob, chunk)) == want for chunk in (1, 7, 1 << 16))

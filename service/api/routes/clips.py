@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
+from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from pdeanim.records import jsonable
@@ -128,12 +128,14 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
                      store: StoreDep) -> Response:
     """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form)."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
-    if "application/json" in request.headers.get("accept", ""):
-        from pdeanim.container import to_json
+    if "application/json" in request.headers.get("accept", ""):  # streamed: the text is never held whole
+        from pdeanim.container import iter_json
 
-        return immutable_response(request, row.coefficients_key + "-json",
-                                  lambda: json.dumps(to_json(store.blobs.get(row.coefficients_key))).encode(),
-                                  "application/json", {"Vary": "Accept"})
+        headers = {"ETag": f'"{row.coefficients_key}-json"', "Cache-Control": IMMUTABLE, "Vary": "Accept"}
+        if etag_matches(request, headers["ETag"]):
+            return Response(status_code=304, headers=headers)
+        body = iter_json(store.blobs.get(row.coefficients_key))
+        return StreamingResponse(body, media_type="application/json", headers=headers)
     return immutable_response(request, row.coefficients_key, lambda: store.blobs.get(row.coefficients_key),
                               "application/octet-stream", {"Vary": "Accept"})
 
