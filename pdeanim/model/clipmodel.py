@@ -78,22 +78,19 @@ class DynamicClip:
         item's mu; uint16 where the segment has few, as the integer-coded format gives)."""
         self._knot_fields = np.ascontiguousarray(knot_fields.reshape(len(knot_fields), -1))  # (S+1, V*3)
         self._item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
+        mu, cubic_items, item_of = self._mu, self._cubic_items, self._item_of
+
+        def build(s: int) -> tuple[_SegmentTime, np.ndarray, np.ndarray | None]:  # holds no reference to self
+            return _segment_tables(mu[s], cubic_items[s], item_of)
+
         if self._lazy:
-            tables = _LazySegments(len(self._mu), self._segment_tables)
+            tables = _LazySegments(len(mu), build)
             self._time, self._value_code, self._cubic_values = (_Column(tables, k) for k in range(3))
             return
-        built = [self._segment_tables(s) for s in range(len(self._mu))]
+        built = [build(s) for s in range(len(mu))]
         self._time = [b[0] for b in built]
         self._value_code = [b[1] for b in built]
         self._cubic_values = [b[2] for b in built]
-
-    def _segment_tables(self, s: int) -> tuple[_SegmentTime, np.ndarray, np.ndarray | None]:
-        """Segment s's time pair, the code of every value's distinct time value, and its spline values."""
-        seg, cubic, item_of = _SegmentTime(self._mu[s].ravel()), self._cubic_items[s], self._item_of
-        code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
-        small = seg.n_values < np.iinfo(np.uint16).max
-        return (seg, np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32),
-                np.flatnonzero(cubic[item_of]) if cubic.any() else None)
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -228,6 +225,17 @@ def header_info(topology: bytes, coefficients: bytes) -> dict[str, Any]:
     ft = np.asarray(ft, np.float64)
     return _info(int(t_shapes["rest"][0]), int(len(ft)), S, int(t_shapes["curve_lengths"][0]),
                  str(th.get("param_mode", "chord")), ch, float(ft[-1] - ft[0]))
+
+
+def _segment_tables(mu: np.ndarray, cubic: np.ndarray, item_of: np.ndarray
+                    ) -> tuple[_SegmentTime, np.ndarray, np.ndarray | None]:
+    """One segment's time pair (its items' signed mu (C, 3)), the code of every value's distinct time value,
+    and its values on the spline (``cubic`` (C*3,) items, ``item_of`` (V*3,) the item of every value)."""
+    seg = _SegmentTime(mu.ravel())
+    code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
+    small = seg.n_values < np.iinfo(np.uint16).max
+    return (seg, np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32),
+            np.flatnonzero(cubic[item_of]) if cubic.any() else None)
 
 
 class _LazySegments:
