@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import struct
+import tempfile
 from collections.abc import Collection, Iterator
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -48,6 +50,9 @@ allocate gigabytes (zstd packs 4 GiB of zeros into 131 KB). Measured on 250 part
 (the topology of a 34k-vertex fit, 227 KB -> 10.6 MB); 10x is common."""
 MAX_DECODED_BYTES = 8 * 1024**3
 """... and whatever their size, never more than this (the default of :func:`unpack`'s cap)."""
+FEED = 512  # compressed bytes per decompression call when spooling: bounds one call's output (zstd blocks
+# decode to at most 128 KiB each)
+SPOOL_BYTES = 4 << 20  # iter_json decodes arrays up to this in memory, larger ones through a scratch file
 ALLOWED_DTYPES = ("<f4", "<f8", "<i4", "<u4", "<i2", "<u2", "<u1", "<i1")
 _PREFIX = struct.Struct("<8sII")
 
@@ -194,6 +199,66 @@ def entries(blob: bytes, max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[di
     return header, table
 
 
+def spool_array(stored: memoryview, encoding: str, dtype: np.dtype, count: int, name: str,
+                scratch: str | None) -> IO[bytes]:
+    """An unlinked scratch file (gone with the process, however it ends) holding the array's raw elements,
+    decompressed (and un-shuffled) in bounded memory; the same checks as
+    :func:`decode_array`."""
+    import zstandard
+
+    if encoding not in ENCODINGS:
+        raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
+    size = count * dtype.itemsize
+    fh = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
+    try:
+        declared = zstandard.frame_content_size(stored)
+        if declared != size:
+            raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
+        reader, written = zstandard.ZstdDecompressor().decompressobj(), 0
+        for a in range(0, len(stored), FEED):
+            if reader.eof:
+                raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame")
+            chunk = reader.decompress(stored[a:a + FEED])
+            written += len(chunk)
+            if written > size:
+                raise ClipFormatError(f"array {name!r} decompresses to more than {size} bytes")
+            fh.write(chunk)
+        if not reader.eof or reader.unused_data or written != size:
+            raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame "
+                                  f"of {size} bytes")
+        fh.flush()
+        if encoding == "shuffle-zstd" and dtype.itemsize > 1:
+            return _unshuffle(fh, dtype.itemsize, count, scratch)
+        return fh
+    except zstandard.ZstdError as exc:
+        fh.close()
+        raise ClipFormatError(f"array {name!r}: bad zstd data ({exc})") from exc
+    except BaseException:
+        fh.close()
+        raise
+
+
+def _unshuffle(src: IO[bytes], itemsize: int, count: int, scratch: str | None,
+               chunk: int = 1 << 20) -> IO[bytes]:
+    """The scratch file of byte planes ``src`` (byte j of element i at j * count + i) as plain elements, a
+    chunk of elements at a time, in a new unlinked scratch file; ``src`` is closed."""
+    dst = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
+    try:
+        for a in range(0, count, chunk):
+            n = min(chunk, count - a)
+            planes = np.empty((itemsize, n), np.uint8)
+            for j in range(itemsize):
+                planes[j] = np.frombuffer(os.pread(src.fileno(), n, j * count + a), np.uint8)
+            dst.write(planes.T.tobytes())
+        dst.flush()
+    except BaseException:
+        dst.close()
+        raise
+    finally:
+        src.close()
+    return dst
+
+
 def decoded_limit(stored: int, cap: int = MAX_DECODED_BYTES) -> int:
     """The most bytes a container of ``stored`` bytes may declare for its decoded arrays: MAX_EXPANSION times
     its size (at least EXPANSION_FLOOR), and never more than ``cap``."""
@@ -254,14 +319,28 @@ def iter_json(blob: bytes, chunk: int = 1 << 16) -> Iterator[bytes]:
     header, table = entries(blob)
     head = json.dumps({"container": "pdeanim", "version": VERSION, **header})
     yield (head[:-1] + ', "arrays": {').encode()
-    for i, (name, dtype, shape, *_) in enumerate(table):
-        flat = unpack(blob, names=(name,))[1][name].ravel()
+    for i, (name, dtype, shape, lo, n, encoding, size) in enumerate(table):
         spec = json.dumps({"dtype": dtype.str, "shape": list(shape)})
         yield f'{", " if i else ""}{json.dumps(name)}: {spec[:-1]}, "data": ['.encode()
-        for a in range(0, len(flat), chunk):
-            yield ((", " if a else "") + json.dumps(flat[a:a + chunk].tolist())[1:-1]).encode()
+        count = size // dtype.itemsize
+        if encoding is None or size <= SPOOL_BYTES:
+            flat = unpack(blob, names=(name,))[1][name].ravel()
+            values = (flat[a:a + chunk] for a in range(0, count, chunk))
+        else:  # decompressed to a scratch file, read back a chunk of values at a time
+            spooled = spool_array(memoryview(blob)[lo:lo + n], str(encoding), dtype, count, name, None)
+            values = _spooled_chunks(spooled, dtype, count, chunk)
+        for k, part in enumerate(values):
+            yield ((", " if k else "") + json.dumps(part.tolist())[1:-1]).encode()
         yield b"]}"
     yield b"}}"
+
+
+def _spooled_chunks(fh: IO[bytes], dtype: np.dtype, count: int, chunk: int) -> Iterator[np.ndarray]:
+    """The elements of a spooled array (:func:`spool_array`), ``chunk`` at a time; then the file is closed."""
+    with fh:
+        for a in range(0, count, chunk):
+            n = min(chunk, count - a)
+            yield np.frombuffer(os.pread(fh.fileno(), n * dtype.itemsize, a * dtype.itemsize), dtype)
 
 
 def from_json(doc: dict[str, Any]) -> bytes:

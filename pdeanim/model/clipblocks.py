@@ -36,7 +36,6 @@ BLOCK_BYTES = 48 << 20
 """About the memory one block's decoded clip may take (its knot fields, tangents and their solve)."""
 BYTES_PER_KNOT_VALUE = 72  # per knot and vertex coordinate: fields, tangents, their float64 solve (measured)
 BYTES_PER_KNOT_CURVE = 400  # per knot and curve: the block's knot tracks, integer codes and knots
-FEED = 512  # compressed bytes per decompression call: bounds the output of one call (zstd blocks <= 128 KiB)
 SPLINE_CHUNK = 1 << 16  # values per block of a whole clip's tangent solve (pdeanim.model.clipmodel)
 _EVALUATING = threading.Lock()
 """One blocked evaluation at a time per process, so that its memory is one block however many ask."""
@@ -106,7 +105,8 @@ class BlockedClip:
             array = container.decode_array(stored, str(encoding), dtype, count, name)
             self._small[name] = array.reshape(shape)
         else:
-            fh = _spool(memoryview(self._blob)[lo:lo + n], str(encoding), dtype, count, name, scratch)
+            fh = container.spool_array(memoryview(self._blob)[lo:lo + n], str(encoding), dtype, count, name,
+                                       None if scratch is None else str(scratch))
             self._files.append(fh)
             self._large[name] = (fh, dtype, shape)
 
@@ -228,63 +228,3 @@ def _bounds(per_curve: np.ndarray, budget: int, C: int) -> list[tuple[int, int]]
     if C:
         out.append((c0, C))
     return out
-
-
-def _spool(stored: memoryview, encoding: str, dtype: np.dtype, count: int, name: str,
-           scratch: str | Path | None) -> IO[bytes]:
-    """An unlinked scratch file (gone with the process, however it ends) holding the array's raw elements,
-    decompressed (and un-shuffled) in bounded memory; the same checks as
-    :func:`pdeanim.container.decode_array`."""
-    import zstandard
-
-    if encoding not in container.ENCODINGS:
-        raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
-    size = count * dtype.itemsize
-    fh = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
-    try:
-        declared = zstandard.frame_content_size(stored)
-        if declared != size:
-            raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
-        reader, written = zstandard.ZstdDecompressor().decompressobj(), 0
-        for a in range(0, len(stored), FEED):
-            if reader.eof:
-                raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame")
-            chunk = reader.decompress(stored[a:a + FEED])
-            written += len(chunk)
-            if written > size:
-                raise ClipFormatError(f"array {name!r} decompresses to more than {size} bytes")
-            fh.write(chunk)
-        if not reader.eof or reader.unused_data or written != size:
-            raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame "
-                                  f"of {size} bytes")
-        fh.flush()
-        if encoding == "shuffle-zstd" and dtype.itemsize > 1:
-            return _unshuffle(fh, dtype.itemsize, count, scratch)
-        return fh
-    except zstandard.ZstdError as exc:
-        fh.close()
-        raise ClipFormatError(f"array {name!r}: bad zstd data ({exc})") from exc
-    except BaseException:
-        fh.close()
-        raise
-
-
-def _unshuffle(src: IO[bytes], itemsize: int, count: int, scratch: str | Path | None,
-               chunk: int = 1 << 20) -> IO[bytes]:
-    """The scratch file of byte planes ``src`` (byte j of element i at j * count + i) as plain elements, a
-    chunk of elements at a time, in a new unlinked scratch file; ``src`` is closed."""
-    dst = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
-    try:
-        for a in range(0, count, chunk):
-            n = min(chunk, count - a)
-            planes = np.empty((itemsize, n), np.uint8)
-            for j in range(itemsize):
-                planes[j] = np.frombuffer(os.pread(src.fileno(), n, j * count + a), np.uint8)
-            dst.write(planes.T.tobytes())
-        dst.flush()
-    except BaseException:
-        dst.close()
-        raise
-    finally:
-        src.close()
-    return dst

@@ -33,9 +33,11 @@ def test_header_info_decodes_only_the_frame_times_and_checks_the_parts():
 
 
 @pytest.mark.parametrize("path", FIXTURES[::4], ids=lambda p: p.stem)
-def test_json_form_in_pieces_is_the_json_form(path: Path):
+@pytest.mark.parametrize("spool", [0, container.SPOOL_BYTES])  # arrays through scratch files, or in memory
+def test_json_form_in_pieces_is_the_json_form(path: Path, spool: int, monkeypatch):
     import json
 
+    monkeypatch.setattr(container, "SPOOL_BYTES", spool)
     parts = read_clip_file(path)
     for blob in (parts.topology, parts.coefficients):
         want = json.dumps(container.to_json(blob)).encode()
