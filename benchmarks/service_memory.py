@@ -7,7 +7,7 @@ simulated for 1,000 frames; made and fitted on the first run, cached in benchmar
 a fit job stores its clip (blobs and a clip row) for a mesh uploaded through the API, in a fresh data
 directory, and read by ``pdeanim serve --workers 1 --with-workers 1``.
 
-    .venv/bin/python benchmarks/service_memory.py [--repeats 3] [--export-fps 10]
+    .venv/bin/python benchmarks/service_memory.py [--repeats 3] [--export-fps 2]
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ CURVE_AXIS = {"knots": 0, "m": 1, "space_kind": 0, "time_model": 0, "D": 0, "kno
 """The curve axis of every per-curve array of the coefficients part (docs/format.md §3.3, §3.7)."""
 SPOOL_BYTES = 4 << 20
 """A compressed array larger than this once decoded is decompressed to a scratch file, not into memory."""
-BLOCK_BYTES = 48 << 20
+BLOCK_BYTES = 40 << 20
 """About the memory one block's decoded clip may take (its knot fields, tangents and their solve)."""
 BYTES_PER_KNOT_VALUE = 72  # per knot and vertex coordinate: fields, tangents, their float64 solve (measured)
 BYTES_PER_KNOT_CURVE = 400  # per knot and curve: the block's knot tracks, integer codes and knots
