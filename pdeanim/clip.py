@@ -26,8 +26,10 @@ from .clipparts import (
 from .cyclic.clipcyclic import clip_from_parts as cyclic_clip
 from .errors import ClipFormatError
 from .model.clipmodel import clip_from_parts as dynamic_clip
+from .model.clipmodel import header_info as dynamic_info
 
-__all__ = ["FORMAT_VERSION", "Clip", "ClipParts", "check_format_version", "load_clip", "load_clip_file",
+__all__ = ["FORMAT_VERSION", "Clip", "ClipParts", "check_format_version", "clip_info", "load_clip",
+           "load_clip_file", "open_clip",
            "read_clip_file", "topology_id", "write_clip_file"]
 
 DECODERS: dict[str, Callable[[dict[str, Any], dict[str, np.ndarray], dict[str, Any], dict[str, np.ndarray]],
@@ -36,6 +38,39 @@ DECODERS: dict[str, Callable[[dict[str, Any], dict[str, np.ndarray], dict[str, A
     "cyclic-spine": cyclic_clip,
 }
 """Clip kind -> decoder of (topology header, topology arrays, coefficients header, coefficients arrays)."""
+
+
+HEADER_INFO: dict[str, Callable[[bytes, bytes], dict[str, Any]]] = {"dynamic-pde": dynamic_info}
+"""Clip kind -> its ``info()`` from the parts' headers (kinds whose decoded size grows with frames x
+vertices)."""
+
+
+def clip_info(topology: bytes, coefficients: bytes) -> dict[str, Any]:
+    """``load_clip(...).info()`` without decoding what grows with frames x vertices where the kind allows
+    (the metadata of a long clip costs its headers, not its evaluation tables); same checks of the parts."""
+    th, _ = container.shapes(topology)
+    ch, _ = container.shapes(coefficients)
+    kind = _check_parts(th, ch, topology)
+    if kind in HEADER_INFO:
+        return HEADER_INFO[kind](topology, coefficients)
+    return load_clip(topology, coefficients).info()
+
+
+def _check_parts(th: dict[str, Any], ch: dict[str, Any], topology: bytes) -> str:
+    """The clip's kind, once the parts' names, versions, topology id and kind are checked."""
+    if th.get("part") != "topology":
+        raise ClipFormatError(f"expected a topology part, got {th.get('part')!r}")
+    if ch.get("part") != "coefficients":
+        raise ClipFormatError(f"expected a coefficients part, got {ch.get('part')!r}")
+    check_format_version(th, "topology")
+    check_format_version(ch, "coefficients")
+    want = ch.get("topology_id")
+    if want and want != topology_id(topology):
+        raise ClipFormatError("the coefficients were made for another topology part (topology_id mismatch)")
+    kind = ch.get("kind")
+    if kind not in DECODERS:
+        raise ClipFormatError(f"unknown clip kind {kind!r} (known: {', '.join(sorted(DECODERS))})")
+    return kind
 
 
 def load_clip(topology: bytes, coefficients: bytes) -> Clip:
@@ -60,6 +95,21 @@ def load_clip(topology: bytes, coefficients: bytes) -> Clip:
     if not np.all(np.isfinite(probe)):  # a damaged or hand-made part whose numbers overflow the evaluator
         raise ClipFormatError("the clip evaluates to non-finite positions")
     return clip
+
+
+def open_clip(topology: bytes, coefficients: bytes, max_decode_bytes: int) -> Clip:
+    """The clip of the two parts: decoded whole (:func:`load_clip`) unless decoding it would take more than
+    ``max_decode_bytes`` (0: no bound), then evaluated a block of curves at a time in bounded memory
+    (:class:`pdeanim.model.clipblocks.BlockedClip`: the same positions, bit for bit, computed per call)."""
+    from .model.clipblocks import BlockedClip, header_decode_cost
+
+    cost = header_decode_cost(topology, coefficients) if max_decode_bytes else None
+    if cost is None or cost <= max_decode_bytes:
+        return load_clip(topology, coefficients)
+    th, _ = container.shapes(topology)
+    ch, _ = container.shapes(coefficients)
+    _check_parts(th, ch, topology)
+    return BlockedClip(topology, coefficients)
 
 
 def load_clip_file(path: str | Path) -> Clip:

@@ -19,8 +19,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import struct
-from typing import Any
+import tempfile
+from collections.abc import Collection, Iterator
+from typing import IO, Any
 
 import numpy as np
 
@@ -47,6 +50,9 @@ allocate gigabytes (zstd packs 4 GiB of zeros into 131 KB). Measured on 250 part
 (the topology of a 34k-vertex fit, 227 KB -> 10.6 MB); 10x is common."""
 MAX_DECODED_BYTES = 8 * 1024**3
 """... and whatever their size, never more than this (the default of :func:`unpack`'s cap)."""
+FEED = 512  # compressed bytes per decompression call when spooling: bounds one call's output (zstd blocks
+# decode to at most 128 KiB each)
+SPOOL_BYTES = 4 << 20  # iter_json decodes arrays up to this in memory, larger ones through a scratch file
 ALLOWED_DTYPES = ("<f4", "<f8", "<i4", "<u4", "<i2", "<u2", "<u1", "<i1")
 _PREFIX = struct.Struct("<8sII")
 
@@ -116,7 +122,7 @@ def _encode(a: np.ndarray, encoding: str, level: int = ZSTD_LEVEL) -> bytes:
     return writer.compress(raw)
 
 
-def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str) -> np.ndarray:
+def decode_array(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str) -> np.ndarray:
     """The flat array of ``count`` elements behind ``stored`` bytes; raises ClipFormatError."""
     import zstandard
 
@@ -140,10 +146,35 @@ def _decode(stored: bytes, encoding: str, dtype: np.dtype, count: int, name: str
     return np.frombuffer(raw, dtype=dtype, count=count)
 
 
-def unpack(blob: bytes,
-           max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def unpack(blob: bytes, max_decoded_bytes: int = MAX_DECODED_BYTES,
+           names: Collection[str] | None = None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Decode container bytes into (header, arrays); arrays are read-only views. Raises ClipFormatError, also
-    when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding)."""
+    when the arrays declare more than :func:`decoded_limit` bytes in total (checked before decoding).
+    ``names``: decode only those arrays (the others are checked, not decoded)."""
+    header, table = entries(blob, max_decoded_bytes)
+    arrays: dict[str, np.ndarray] = {}
+    for name, dtype, shape, lo, n, encoding, size in table:
+        if names is not None and name not in names:
+            continue
+        count = size // dtype.itemsize
+        if encoding is None:
+            arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
+        else:
+            flat = decode_array(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name)
+            arrays[name] = flat.reshape(shape)
+    return header, arrays
+
+
+def shapes(blob: bytes) -> tuple[dict[str, Any], dict[str, tuple[int, ...]]]:
+    """(header, shape of every array) of container bytes, nothing decoded; raises ClipFormatError as
+    :func:`unpack` would before decoding."""
+    header, table = entries(blob)
+    return header, {name: shape for name, _, shape, *_ in table}
+
+
+def entries(blob: bytes, max_decoded_bytes: int = MAX_DECODED_BYTES) -> tuple[dict[str, Any], list[tuple]]:
+    """(header, checked array entries) of container bytes: per array (name, dtype, shape, offset in the blob,
+    stored bytes, encoding or None, decoded bytes); nothing decoded. Raises ClipFormatError."""
     if len(blob) < _PREFIX.size:
         raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
     magic, version, hlen = _PREFIX.unpack_from(blob, 0)
@@ -158,21 +189,74 @@ def unpack(blob: bytes,
         header = json.loads(bytes(blob[_PREFIX.size:start]).decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
-    entries = [_entry(name, spec, start, len(blob)) for name, spec in _array_table(header).items()]
-    declared, limit = sum(size for *_, size in entries), decoded_limit(len(blob), max_decoded_bytes)
+    table = [_entry(name, spec, start, len(blob)) for name, spec in _array_table(header).items()]
+    declared, limit = sum(size for *_, size in table), decoded_limit(len(blob), max_decoded_bytes)
     if declared > limit:
         raise ClipFormatError(
             f"the container's arrays declare {declared} bytes once decoded, more than {limit} for a "
             f"container of {len(blob)} bytes (at most {MAX_EXPANSION}x its size or {EXPANSION_FLOOR} bytes, "
             f"and never over {max_decoded_bytes}): a damaged or forged file")
-    arrays: dict[str, np.ndarray] = {}
-    for name, dtype, shape, lo, n, encoding, size in entries:
-        count = size // dtype.itemsize
-        if encoding is None:
-            arrays[name] = np.frombuffer(blob, dtype=dtype, count=count, offset=lo).reshape(shape)
-        else:
-            arrays[name] = _decode(bytes(blob[lo:lo + n]), str(encoding), dtype, count, name).reshape(shape)
-    return header, arrays
+    return header, table
+
+
+def spool_array(stored: memoryview, encoding: str, dtype: np.dtype, count: int, name: str,
+                scratch: str | None) -> IO[bytes]:
+    """An unlinked scratch file (gone with the process, however it ends) holding the array's raw elements,
+    decompressed (and un-shuffled) in bounded memory; the same checks as
+    :func:`decode_array`."""
+    import zstandard
+
+    if encoding not in ENCODINGS:
+        raise ClipFormatError(f"array {name!r} has an unknown encoding {encoding!r}")
+    size = count * dtype.itemsize
+    fh = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
+    try:
+        declared = zstandard.frame_content_size(stored)
+        if declared != size:
+            raise ClipFormatError(f"array {name!r}: zstd frame holds {declared} bytes, expected {size}")
+        reader, written = zstandard.ZstdDecompressor().decompressobj(), 0
+        for a in range(0, len(stored), FEED):
+            if reader.eof:
+                raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame")
+            chunk = reader.decompress(stored[a:a + FEED])
+            written += len(chunk)
+            if written > size:
+                raise ClipFormatError(f"array {name!r} decompresses to more than {size} bytes")
+            fh.write(chunk)
+        if not reader.eof or reader.unused_data or written != size:
+            raise ClipFormatError(f"array {name!r}: the zstd data must be exactly one complete frame "
+                                  f"of {size} bytes")
+        fh.flush()
+        if encoding == "shuffle-zstd" and dtype.itemsize > 1:
+            return _unshuffle(fh, dtype.itemsize, count, scratch)
+        return fh
+    except zstandard.ZstdError as exc:
+        fh.close()
+        raise ClipFormatError(f"array {name!r}: bad zstd data ({exc})") from exc
+    except BaseException:
+        fh.close()
+        raise
+
+
+def _unshuffle(src: IO[bytes], itemsize: int, count: int, scratch: str | None,
+               chunk: int = 1 << 20) -> IO[bytes]:
+    """The scratch file of byte planes ``src`` (byte j of element i at j * count + i) as plain elements, a
+    chunk of elements at a time, in a new unlinked scratch file; ``src`` is closed."""
+    dst = tempfile.TemporaryFile(prefix="pdeanim-clip-", dir=scratch)
+    try:
+        for a in range(0, count, chunk):
+            n = min(chunk, count - a)
+            planes = np.empty((itemsize, n), np.uint8)
+            for j in range(itemsize):
+                planes[j] = np.frombuffer(os.pread(src.fileno(), n, j * count + a), np.uint8)
+            dst.write(planes.T.tobytes())
+        dst.flush()
+    except BaseException:
+        dst.close()
+        raise
+    finally:
+        src.close()
+    return dst
 
 
 def decoded_limit(stored: int, cap: int = MAX_DECODED_BYTES) -> int:
@@ -243,6 +327,36 @@ def to_json(blob: bytes) -> dict[str, Any]:
     header["arrays"] = {name: {"dtype": a.dtype.str, "shape": list(a.shape), "data": a.ravel().tolist()}
                         for name, a in arrays.items()}
     return {"container": "pdeanim", "version": VERSION, **header}  # arrays inlined: nothing is encoded
+
+
+def iter_json(blob: bytes, chunk: int = 1 << 16) -> Iterator[bytes]:
+    """``json.dumps(to_json(blob)).encode()`` in pieces: one array decoded at a time and its values written
+    ``chunk`` at a time, so the text is never held whole (nor the arrays as Python lists)."""
+    header, table = entries(blob)
+    head = json.dumps({"container": "pdeanim", "version": VERSION, **header})
+    yield (head[:-1] + ', "arrays": {').encode()
+    for i, (name, dtype, shape, lo, n, encoding, size) in enumerate(table):
+        spec = json.dumps({"dtype": dtype.str, "shape": list(shape)})
+        yield f'{", " if i else ""}{json.dumps(name)}: {spec[:-1]}, "data": ['.encode()
+        count = size // dtype.itemsize
+        if encoding is None or size <= SPOOL_BYTES:
+            flat = unpack(blob, names=(name,))[1][name].ravel()
+            values = (flat[a:a + chunk] for a in range(0, count, chunk))
+        else:  # decompressed to a scratch file, read back a chunk of values at a time
+            spooled = spool_array(memoryview(blob)[lo:lo + n], str(encoding), dtype, count, name, None)
+            values = _spooled_chunks(spooled, dtype, count, chunk)
+        for k, part in enumerate(values):
+            yield ((", " if k else "") + json.dumps(part.tolist())[1:-1]).encode()
+        yield b"]}"
+    yield b"}}"
+
+
+def _spooled_chunks(fh: IO[bytes], dtype: np.dtype, count: int, chunk: int) -> Iterator[np.ndarray]:
+    """The elements of a spooled array (:func:`spool_array`), ``chunk`` at a time; then the file is closed."""
+    with fh:
+        for a in range(0, count, chunk):
+            n = min(chunk, count - a)
+            yield np.frombuffer(os.pread(fh.fileno(), n * dtype.itemsize, a * dtype.itemsize), dtype)
 
 
 def from_json(doc: dict[str, Any]) -> bytes:

@@ -68,8 +68,8 @@ class Settings(BaseSettings):
     max_clip_cache: int = Field(32, ge=1, description="parsed clips kept in each API process")
     clip_cache_bytes: int = Field(
         1024**3, ge=0, description="memory of the parsed clips kept in each API process (their evaluation "
-        "tables grow with segments x vertices); the least recently used are dropped beyond it, the newest is "
-        "always kept; 0 = no bound")
+        "tables grow with segments x vertices); the least recently used are dropped before a clip is "
+        "kept, and a clip larger than this alone is never kept; 0 = no bound")
     warm_start: bool = Field(True, description="each API process imports the clip modules and loads the "
                              "compiled kernels (a few tiny bundled clips) before it accepts requests")
     preload_clips: int = Field(4, ge=0, description="with warm_start, each API process also decodes this "

@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 
 from service.store.queue import Claimed, JobQueue
+from service.store.windows import task_progress
 
 from .child import Outcome, child_main
 
@@ -117,4 +118,6 @@ def _pump(proc, conn, queue: JobQueue, job: Claimed, beat: Heartbeat,  # noqa: A
         if pending and time.monotonic() - last_write >= PROGRESS_WRITE_SECONDS:
             if not queue.report(job.id, job.attempt, *pending):
                 beat.lost.set()
+            elif job.parent_id:  # a window task: its fit job's progress follows it
+                task_progress(queue, job)
             pending, last_write = None, time.monotonic()

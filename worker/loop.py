@@ -96,7 +96,9 @@ class Worker:
                 mesh = session.get(Mesh, job.mesh_id)
                 payload["mesh"] = {"blob_key": mesh.blob_key, "filename": mesh.filename}
             if job.poses_id:
-                payload["poses"] = {"blob_key": session.get(PosesRecord, job.poses_id).blob_key}
+                poses = session.get(PosesRecord, job.poses_id)
+                payload["poses"] = {"blob_key": poses.blob_key, "n_frames": poses.n_frames,
+                                    "n_vertices": poses.n_vertices}  # to check the fit's memory first
             clip_id = (job.params or {}).get("clip_id")
             if clip_id:
                 clip = session.get(ClipRecord, clip_id)

@@ -17,6 +17,7 @@ from .clipstore import store_clip
 
 Partial = Callable[[dict], None]  # hands a part of the result to the parent before the stage goes on
 SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
+EXPORT_DECODE_BYTES = 256 << 20  # an export job decodes a clip whole up to this, else evaluates it by blocks
 
 
 def _mesh(job: dict, blobs: BlobStore, settings: Settings):  # noqa: ANN202 - SurfaceMesh
@@ -90,25 +91,38 @@ def run_simulate(job: dict, blobs: BlobStore, settings: Settings, progress: Prog
 
 def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
             partial: Partial | None = None) -> dict:
-    """Stored poses -> clip."""
+    """Stored poses -> clip. The memory estimate is checked from the poses row before the poses are loaded
+    (refused at once, with the message of the check after loading)."""
     from pdeanim.poses import PoseLimits, load_poses_npz
 
     limits = PoseLimits(max_frames=settings.max_frames, max_vertices=settings.max_vertices,
                         max_bytes=settings.max_pose_bytes)
-    poses = load_poses_npz(blobs.get(job["poses"]["blob_key"]), limits)
     tol, options = settings.fit_tolerances(), job["params"]["params"]
-    if settings.fit_window_tasks:
+    stored = job["poses"]
+    if isinstance(stored.get("n_frames"), int) and isinstance(stored.get("n_vertices"), int):
+        _fit_in_tasks(stored["n_frames"], stored["n_vertices"], options, settings, tol)
+    poses = load_poses_npz(blobs.get(stored["blob_key"]), limits)
+    if _fit_in_tasks(poses.n_frames, poses.n_vertices, options, settings, tol):
         from pdeanim.fit import FitOptions
-        from pdeanim.fit.budget import check_fit_memory
-        from pdeanim.fit.windowed import windowed_applies
 
         from .windowtasks import plan_fit
 
         fit_options = FitOptions.from_dict(options).validate()
-        if windowed_applies(poses.n_frames, poses.n_vertices, fit_options, tol):
-            check_fit_memory(poses.n_frames, poses.n_vertices, settings.job_memory_limit(), tol, tasks=True)
-            return plan_fit(job["id"], poses, fit_options, tol, blobs, _labelled(progress), workdir)
+        return plan_fit(job["id"], poses, fit_options, tol, blobs, _labelled(progress), workdir)
     return {"clip": _fit(poses, options, blobs, progress, settings.job_memory_limit(), tol)}
+
+
+def _fit_in_tasks(n_frames: int, n_vertices: int, options: dict, settings: Settings, tol) -> bool:  # noqa: ANN001
+    """Whether the fit of (F, V) poses runs as window tasks; LimitError (the job fails at once) when its
+    memory estimate (of the largest task, or of the fit in this process) is over the job memory limit."""
+    from pdeanim.fit import FitOptions
+    from pdeanim.fit.budget import check_fit_memory
+    from pdeanim.fit.windowed import windowed_applies
+
+    tasks = settings.fit_window_tasks and windowed_applies(
+        n_frames, n_vertices, FitOptions.from_dict(options).validate(), tol)
+    check_fit_memory(n_frames, n_vertices, settings.job_memory_limit(), tol, tasks=tasks)
+    return tasks
 
 
 def run_cyclic(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
@@ -127,13 +141,14 @@ def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
                partial: Partial | None = None) -> dict:
     """Clip -> animation GLB (quantised, meshopt-compressed, keeping the source mesh's look) in the blob
     store."""
-    from pdeanim.clip import load_clip
+    from pdeanim.clip import open_clip
     from pdeanim.gltf.clipexport import ExportOptions, clip_animation_glb, estimate_export
     from pdeanim.gltf.layout import source_layout
 
     opts = ExportOptions.from_dict(job["params"]["params"])
     progress(0.0, "export: load clip")
-    clip = load_clip(blobs.get(job["clip"]["topology_key"]), blobs.get(job["clip"]["coefficients_key"]))
+    clip = open_clip(blobs.get(job["clip"]["topology_key"]), blobs.get(job["clip"]["coefficients_key"]),
+                     EXPORT_DECODE_BYTES)  # a long clip is evaluated a block of curves at a time
     estimate = estimate_export(clip, opts.fps, settings.max_frames)
     mesh = job.get("mesh") or {}
     data = blobs.get(mesh["blob_key"]) if mesh.get("blob_key") else None

@@ -19,12 +19,15 @@ from service.store.blobs import BlobStore
 from .clipstore import store_clip
 
 FRAME_BYTES = 12  # float32 x, y, z per vertex
+READ_SHARE, STORE_AT = 0.2, 0.9  # the join's progress: windows' codes read by 0.2, joined by 0.9, then stored
 
 
 def plan_fit(job_id: str, poses, options, tol, blobs: BlobStore, progress: Progress,  # noqa: ANN001
              workdir: Path) -> dict:
     """The fit job's own attempt: plan the windows, store the plan and the frames as raw float32 (written
-    through a file, no second copy in memory); the worker then enqueues the window tasks."""
+    through a file, no second copy in memory); the worker then enqueues the window tasks. Its progress is
+    the planning share of the fit job's (the window tasks and the join move it on from there)."""
+    progress = sub_progress(progress, 0.0, keys.PLAN_SHARE)
     plan = windowed.plan_windows(poses, options, tol, sub_progress(progress, 0.0, 0.8))
     progress(0.85, f"fit: store {poses.n_frames} frames for {plan.n_windows} window tasks")
     raw = workdir / "frames.f32"
@@ -70,19 +73,24 @@ def run_window(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
         codes = windowed.encode_window(model, window_frames(blobs, fit_job, plan, index), index, progress)
         blobs.put(codes.to_bytes(), key=keys.codes_key(fit_job, index))
     elif phase == "join":
-        return {"clip": _join(plan, fit_job, W, blobs)}
+        return {"clip": _join(plan, fit_job, W, blobs, progress)}
     else:
         raise ValueError(f"unknown window task phase {phase!r}")
     return {"phase": phase, "window": index}
 
 
-def _join(plan: windowed.WindowPlan, fit_job: str, W: int, blobs: BlobStore) -> dict:
-    """The clip of every window's codes, stored (a missed target fails the fit unless ``best_effort``)."""
+def _join(plan: windowed.WindowPlan, fit_job: str, W: int, blobs: BlobStore, progress: Progress) -> dict:
+    """The clip of every window's codes, stored (a missed target fails the fit unless ``best_effort``);
+    progress in steps: each window's codes read, the join, the store."""
     from pdeanim.errors import TargetNotMetError
     from pdeanim.fit import target_shortfall
 
-    codes = [windowed.WindowCodes.from_bytes(blobs.get(keys.codes_key(fit_job, i))) for i in range(W)]
+    codes = []
+    for i in range(W):
+        codes.append(windowed.WindowCodes.from_bytes(blobs.get(keys.codes_key(fit_job, i))))
+        progress(READ_SHARE * (i + 1) / W, f"join: read the codes of window {i + 1} of {W}")
     parts = windowed.join_clip(plan, _space(blobs, fit_job), codes)
+    progress(STORE_AT, "join: store the clip")
     parts.report["window_tasks"] = True
     shortfall = target_shortfall(parts.report)
     if shortfall and not plan.options.best_effort:

@@ -93,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     used = (poses.meta or {}).get("animation")
     if isinstance(used, dict):
         print(f"animation: {used.get('name') or '(unnamed)'} (index {used.get('index')})")
+    check_memory_estimate(poses.n_frames, poses.n_vertices)
     progress = cli_progress("fit", args.quiet)
     try:
         parts = fit_poses(poses, options, progress=progress)
@@ -116,16 +117,36 @@ def run(args: argparse.Namespace) -> int:
 def out_of_memory_in_fit(exc: MemoryError, n_frames: int, n_vertices: int) -> Exception:
     """The OutOfMemoryError of a fit, with what a fit of this size is estimated to need."""
     from ..errors import OutOfMemoryError
-    from ..fit.budget import fit_memory_bytes
-    from ..outofmemory import gib, out_of_memory
+    from ..outofmemory import out_of_memory
 
     if isinstance(exc, OutOfMemoryError):
         return exc
+    return out_of_memory(exc, _fit_advice(n_frames, n_vertices))
+
+
+def _fit_advice(n_frames: int, n_vertices: int) -> str:
+    """What a fit of this size is estimated to need, and what would help."""
+    from ..fit.budget import fit_memory_bytes
+    from ..outofmemory import gib
+
     need = fit_memory_bytes(n_frames, n_vertices)
-    advice = (f"a fit of {n_frames} frames x {n_vertices} vertices needs about {gib(need)} "
-              "(pdeanim.fit.budget): fit fewer frames (a part of the poses) or a coarser mesh, or raise the "
-              "limit (ulimit -v, or the container's memory)")
-    return out_of_memory(exc, advice)
+    return (f"a fit of {n_frames} frames x {n_vertices} vertices needs about {gib(need)} "
+            "(pdeanim.fit.budget): fit fewer frames (a part of the poses) or a coarser mesh, or raise the "
+            "limit (ulimit -v, or the container's memory)")
+
+
+def check_memory_estimate(n_frames: int, n_vertices: int) -> None:
+    """OutOfMemoryError (exit 4) before any fitting when the fit's estimate is over the memory limit in force
+    (RLIMIT_AS, else the cgroup's), with the message an allocation failing later would give."""
+    from ..errors import OutOfMemoryError
+    from ..fit.budget import fit_memory_bytes
+    from ..outofmemory import gib, memory_limit
+
+    need, limit = fit_memory_bytes(n_frames, n_vertices), memory_limit()
+    if limit is not None and need > limit[0]:
+        raise OutOfMemoryError(f"out of memory: the estimated {gib(need)} of the fit is over the {limit[1]} "
+                               f"of {gib(limit[0])} (refused before fitting); "
+                               f"{_fit_advice(n_frames, n_vertices)}", need, limit[0])
 
 
 def write_pictures(poses, parts, out_dir: str, name: str) -> dict:  # noqa: ANN001

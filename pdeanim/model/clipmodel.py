@@ -25,8 +25,9 @@ try:
 except ImportError:  # pragma: no cover - numba is a pinned dependency; this keeps the numpy path usable
     COMPILED = False
 
+from .. import container
 from ..errors import ClipFormatError
-from .bonelayer import BonePlayer
+from .bonelayer import BonePlayer, has_bones
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
@@ -41,8 +42,11 @@ class DynamicClip:
 
     kind = "dynamic-pde"
 
-    def __init__(self, topo: TopologyData, coef: CoefficientData):
+    def __init__(self, topo: TopologyData, coef: CoefficientData, lazy_segments: bool = False):
+        """``lazy_segments``: build each segment's time tables on its first use instead of at load (a block
+        of curves evaluated at a few times, :mod:`pdeanim.model.clipblocks`)."""
         self.topo, self.coef = topo, coef
+        self._lazy = lazy_segments
         self.n_vertices = int(len(topo.rest))
         self.faces = np.asarray(topo.faces, np.int32)
         self.frame_times = np.asarray(coef.frame_times, np.float64)
@@ -54,7 +58,6 @@ class DynamicClip:
             raise ClipFormatError("the topology's curves do not cover every vertex (corrupt topology)")
         fam = coef.family.astype(np.int64)
         self._mu = np.where(fam >= 2, -1.0, 1.0) * coef.m.astype(np.float64)  # (S, C, 3) signed
-        self._time = [_SegmentTime(mu.ravel()) for mu in self._mu]
         spline = coef.spline_items().reshape(-1)
         self._cubic_items = [spline] * len(self._mu)  # per segment, the items on the spline (§3.5): all
 
@@ -76,13 +79,20 @@ class DynamicClip:
         """The flat (S+1, V * 3) knot fields and, per segment, the distinct time value of every value (its
         item's mu; uint16 where the segment has few, as the integer-coded format gives)."""
         self._knot_fields = np.ascontiguousarray(knot_fields.reshape(len(knot_fields), -1))  # (S+1, V*3)
-        item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
-        self._value_code, self._cubic_values = [], []
-        for seg, cubic in zip(self._time, self._cubic_items, strict=True):
-            code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
-            small = seg.n_values < np.iinfo(np.uint16).max
-            self._value_code.append(np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32))
-            self._cubic_values.append(np.flatnonzero(cubic[item_of]) if cubic.any() else None)
+        self._item_of = (np.asarray(self._cid, np.intp)[:, None] * 3 + np.arange(3)).ravel()  # (V*3,) item
+        mu, cubic_items, item_of = self._mu, self._cubic_items, self._item_of
+
+        def build(s: int) -> tuple[_SegmentTime, np.ndarray, np.ndarray | None]:  # holds no reference to self
+            return _segment_tables(mu[s], cubic_items[s], item_of)
+
+        if self._lazy:
+            tables = _LazySegments(len(mu), build)
+            self._time, self._value_code, self._cubic_values = (_Column(tables, k) for k in range(3))
+            return
+        built = [build(s) for s in range(len(mu))]
+        self._time = [b[0] for b in built]
+        self._value_code = [b[1] for b in built]
+        self._cubic_values = [b[2] for b in built]
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -189,23 +199,90 @@ class DynamicClip:
 
     def info(self) -> dict[str, Any]:
         """JSON-able metadata: frames, segments, curves, motion, errors achieved."""
-        h = self.coef.header
-        return {
-            "kind": self.kind,
-            "n_vertices": self.n_vertices,
-            "n_frames": int(len(self.frame_times)),
-            "n_segments": int(len(self.segment_t) - 1),
-            "n_curves": self.topo.curves.n_curves,
-            "motion": self.coef.motion,
-            "looping": self.looping,
-            "param_mode": self.topo.param_mode,
-            "duration_s": float(self.frame_times[-1] - self.frame_times[0]),
-            "errors": h.get("errors", {}),
-            **{k: h[k] for k in ("gait", "travel") if isinstance(h.get(k), dict)},  # gait clips (cyclic)
-            **({} if self.coef.bones is None else {"bones": {
-                "n_bones": self.coef.bones.n_bones, "influences": self.coef.bones.n_influences,
-                "segments": self.coef.bones.n_segments}}),
-        }
+        bones = self.coef.bones
+        return _info(self.n_vertices, int(len(self.frame_times)), int(len(self.segment_t) - 1),
+                     self.topo.curves.n_curves, self.topo.param_mode, self.coef.header,
+                     float(self.frame_times[-1] - self.frame_times[0]),
+                     None if bones is None else bones.n_segments)
+
+
+def _info(n_vertices: int, n_frames: int, n_segments: int, n_curves: int, param_mode: str,
+          header: dict[str, Any], duration_s: float, bone_segments: int | None = None) -> dict[str, Any]:
+    """The metadata of :meth:`DynamicClip.info` from its parts (``header``: the coefficients part's;
+    ``bone_segments``: the bone layer's segments, None without one)."""
+    return {
+        "kind": DynamicClip.kind,
+        "n_vertices": n_vertices,
+        "n_frames": n_frames,
+        "n_segments": n_segments,
+        "n_curves": n_curves,
+        "motion": str(header.get("motion")),
+        "looping": bool(header.get("looping", False)),
+        "param_mode": param_mode,
+        "duration_s": duration_s,
+        "errors": header.get("errors", {}),
+        **{k: header[k] for k in ("gait", "travel") if isinstance(header.get(k), dict)},  # gait clips
+        **({} if bone_segments is None else {"bones": {
+            "n_bones": header.get("n_bones"), "influences": header.get("bone_influences"),
+            "segments": bone_segments}}),
+    }
+
+
+def header_info(topology: bytes, coefficients: bytes) -> dict[str, Any]:
+    """:meth:`DynamicClip.info` of a clip's two parts from their headers, array shapes and frame times alone:
+    nothing whose size grows with segments x curves is decoded (the metadata route of a long clip)."""
+    th, t_shapes = container.shapes(topology)
+    ch, arrays = container.unpack(coefficients, names=("frame_times",))
+    ft = arrays.get("frame_times")
+    if ft is None or ft.ndim != 1 or len(ft) < 1 or "rest" not in t_shapes or "curve_lengths" not in t_shapes:
+        raise ClipFormatError("a dynamic-pde clip needs frame_times, rest and curve_lengths arrays")
+    S = ch.get("n_segments")
+    if not isinstance(S, int) or isinstance(S, bool) or S < 1:
+        raise ClipFormatError(f"coefficients header field 'n_segments' must be a positive integer, got {S!r}")
+    ft = np.asarray(ft, np.float64)
+    bone_segments = None
+    if has_bones(ch):
+        _, c_shapes = container.shapes(coefficients)
+        if len(c_shapes.get("bone_segment_t", ())) != 1:
+            raise ClipFormatError("coefficients with bones need a one-dimensional bone_segment_t array")
+        bone_segments = int(c_shapes["bone_segment_t"][0]) - 1
+    return _info(int(t_shapes["rest"][0]), int(len(ft)), S, int(t_shapes["curve_lengths"][0]),
+                 str(th.get("param_mode", "chord")), ch, float(ft[-1] - ft[0]), bone_segments)
+
+
+def _segment_tables(mu: np.ndarray, cubic: np.ndarray, item_of: np.ndarray
+                    ) -> tuple[_SegmentTime, np.ndarray, np.ndarray | None]:
+    """One segment's time pair (its items' signed mu (C, 3)), the code of every value's distinct time value,
+    and its values on the spline (``cubic`` (C*3,) items, ``item_of`` (V*3,) the item of every value)."""
+    seg = _SegmentTime(mu.ravel())
+    code = np.where(cubic, seg.n_values, seg.code)  # cubic items: one more code, past the pair values
+    small = seg.n_values < np.iinfo(np.uint16).max
+    return (seg, np.ascontiguousarray(code[item_of], np.uint16 if small else np.int32),
+            np.flatnonzero(cubic[item_of]) if cubic.any() else None)
+
+
+class _LazySegments:
+    """Per-segment tables built on a segment's first use."""
+
+    def __init__(self, n: int, build: Any) -> None:
+        self._items: list[Any] = [None] * n
+        self._build = build
+
+    def get(self, s: int) -> Any:
+        item = self._items[s]
+        if item is None:
+            item = self._items[s] = self._build(s)
+        return item
+
+
+class _Column:
+    """One of the per-segment tables (column k of :class:`_LazySegments`), indexed by segment."""
+
+    def __init__(self, tables: _LazySegments, k: int) -> None:
+        self._tables, self._k = tables, k
+
+    def __getitem__(self, s: int) -> Any:
+        return self._tables.get(s)[self._k]
 
 
 class _SegmentTime:

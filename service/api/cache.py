@@ -62,10 +62,12 @@ class _Loading:
 
 
 class ClipCache:
-    """LRU of at most ``max_entries`` clips holding at most ``max_bytes`` of arrays in total (the most recent
-    clip is kept whatever its size). A clip is loaded once however many requests ask for it meanwhile (they
-    wait for that load; other clips' requests go on), outside the lock. Ids marked gone (deleted, seen by
-    this process or by :class:`service.api.invalidation.DeletionWatch`) are never kept again."""
+    """LRU of at most ``max_entries`` clips holding at most ``max_bytes`` of arrays in total, by construction:
+    the least recently used are evicted before a clip is inserted, and a clip larger than ``max_bytes`` alone
+    is served to the requests that loaded it but never kept. A clip is loaded once however many requests ask
+    for it meanwhile (they wait for that load; other clips' requests go on), outside the lock. Ids marked gone
+    (deleted, seen by this process or by :class:`service.api.invalidation.DeletionWatch`) are never kept
+    again."""
 
     def __init__(self, max_entries: int, max_bytes: int = 0, max_gone: int = 100_000):
         self.max_entries = max(1, int(max_entries))
@@ -78,6 +80,7 @@ class ClipCache:
         self._gone: OrderedDict[str, None] = OrderedDict()
         self._lock = threading.Lock()
         self.hits = self.misses = 0
+        self.too_large = 0  # loads served but not kept: larger than max_bytes alone
 
     def peek(self, clip_id: str) -> CachedClip | None:
         """The cached clip (marked recently used) or None, without loading: no I/O, safe on the event loop."""
@@ -117,19 +120,24 @@ class ClipCache:
         return pending.item
 
     def _finish(self, clip_id: str, pending: _Loading) -> None:
-        """Keep a finished load (unless it failed or the clip was marked gone meanwhile), wake its waiters."""
+        """Keep a finished load (unless it failed, the clip was marked gone meanwhile, or it alone is over the
+        byte limit), evicting the least recently used first so the cache never holds more than its limit;
+        wake its waiters."""
         item = pending.item
         size = item.nbytes if self.max_bytes and item is not None else 0
         with self._lock:
             self._loading.pop(clip_id, None)
-            if pending.error is None and item is not None and clip_id not in self._gone:
+            fits = not self.max_bytes or size <= self.max_bytes
+            if pending.error is None and item is not None and clip_id not in self._gone and fits:
                 self._drop(clip_id)
+                while self._items and (len(self._items) + 1 > self.max_entries or (
+                        self.max_bytes and self._size + size > self.max_bytes)):
+                    self._drop(next(iter(self._items)))
                 self._items[clip_id] = item
                 self._sizes[clip_id] = size
                 self._size += size
-                while len(self._items) > self.max_entries or (
-                        self.max_bytes and self._size > self.max_bytes and len(self._items) > 1):
-                    self._drop(next(iter(self._items)))
+            elif item is not None and not fits:
+                self.too_large += 1
         pending.done.set()
 
     def _drop(self, clip_id: str) -> None:

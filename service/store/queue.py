@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Engine, select, update
+from sqlalchemy import Engine, case, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from .models import Job
@@ -109,8 +109,11 @@ class JobQueue:
         return self._fenced(job_id, attempt, lease_expires=time.time() + self.policy.lease_seconds)
 
     def report(self, job_id: str, attempt: int, fraction: float, stage: str) -> bool:
-        """Write progress (0..1) and stage text of a running attempt, renewing its lease."""
-        return self._fenced(job_id, attempt, progress=float(min(max(fraction, 0.0), 1.0)), stage=stage[:200],
+        """Write progress (0..1) and stage text of a running attempt, renewing its lease. Progress never goes
+        down (a retried attempt starting again keeps the job's highest)."""
+        value = float(min(max(fraction, 0.0), 1.0))
+        return self._fenced(job_id, attempt, progress=case((Job.progress > value, Job.progress), else_=value),
+                            stage=stage[:200],
                             lease_expires=time.time() + self.policy.lease_seconds)
 
     def finish(self, job_id: str, attempt: int, write: Callable[[Session], dict[str, Any]]) -> bool:

@@ -27,7 +27,9 @@ from .queue import Claimed, JobQueue
 
 log = logging.getLogger("pdeanim.worker")
 TASK_KIND = "window"
-PLAN_SHARE = 0.05  # of the fit job's progress: planning; as much for the join, the rest counts windows
+PLAN_SHARE = 0.05  # of the fit job's progress: planning (the fit job's own attempt)
+JOIN_SHARE = 0.2  # the join (the last task builds, compresses and stores the clip: a large share of the job)
+WINDOW_SHARE = 1.0 - PLAN_SHARE - JOIN_SHARE  # each window's Gram part and codes, counted as they run
 
 
 def blob_prefix(job_id: str) -> str:
@@ -94,7 +96,8 @@ def split(queue: JobQueue, job: Claimed, n_windows: int) -> bool:
         if parent is None:
             return False
         parent.state, parent.lease_expires, parent.worker_id = "waiting", None, None
-        parent.progress, parent.result = PLAN_SHARE, {"windows": n_windows, "windows_done": 0}
+        parent.progress = max(float(parent.progress or 0.0), PLAN_SHARE)
+        parent.result = {"windows": n_windows, "windows_done": 0}
         parent.stage = f"fit in {n_windows} windows: 0 of {n_windows} summed, 0 encoded"
         for i in range(n_windows):
             session.add(_task(parent, "gram", i, n_windows, queue.policy.max_attempts))
@@ -106,11 +109,38 @@ def _count(session: Session, parent_id: str, phase: str) -> int:
         Job.parent_id == parent_id, Job.phase == phase, Job.state == "succeeded")).scalar_one()
 
 
+def _fit_progress(session: Session, parent: Job) -> float:
+    """The fit job's progress from its tasks' rows: planning done, then each window's Gram part and codes
+    (a running task by its own progress), then the join by its progress."""
+    W = int(parent.result.get("windows", 0))
+    rows = session.execute(select(Job.phase, Job.state, Job.progress).where(Job.parent_id == parent.id)).all()
+
+    def done(phases: tuple[str, ...]) -> float:
+        return sum(1.0 if state == "succeeded" else float(p or 0.0) if state == "running" else 0.0
+                   for phase, state, p in rows if phase in phases)
+
+    windows = min(done(("gram", "encode")) / max(2 * W, 1), 1.0)
+    return PLAN_SHARE + WINDOW_SHARE * windows + JOIN_SHARE * min(done(("join",)), 1.0)
+
+
+def _raise_progress(session: Session, parent: Job) -> None:
+    """Move the fit job's progress up to what its tasks say, never down (a retried task starts again at 0)."""
+    parent.progress = max(float(parent.progress or 0.0), _fit_progress(session, parent))
+
+
+def task_progress(queue: JobQueue, job: Claimed) -> None:
+    """A running window task reported progress (its row is written): its fit job's progress follows."""
+    with queue._write() as session, session.begin():
+        parent = _locked(session, job.parent_id or "")
+        if parent is not None and parent.state == "waiting":
+            _raise_progress(session, parent)
+
+
 def _advance(session: Session, parent: Job, task: Job, result: dict[str, Any], max_attempts: int) -> None:
     """After ``task`` succeeded: the fit job's progress (windows summed and encoded) and the next phase."""
     W = int(parent.result.get("windows", 0))
     grams, encoded = _count(session, parent.id, "gram"), _count(session, parent.id, "encode")
-    parent.progress = PLAN_SHARE + (1 - 2 * PLAN_SHARE) * (grams + encoded) / max(2 * W, 1)
+    _raise_progress(session, parent)
     parent.stage = f"fit in {W} windows: {grams} of {W} summed, {encoded} encoded"
     parent.result = {**parent.result, "windows_done": encoded}
     if task.phase == "gram" and grams == W:

@@ -133,9 +133,9 @@ def test_trailing_bytes_after_the_zstd_frame_and_null_encodings_are_refused():
 
     raw = np.arange(64, dtype="<u4").tobytes()
     frame = zstandard.ZstdCompressor(write_content_size=True).compress(raw)
-    assert container._decode(frame, "zstd", np.dtype("<u4"), 64, "a").tobytes() == raw
+    assert container.decode_array(frame, "zstd", np.dtype("<u4"), 64, "a").tobytes() == raw
     with pytest.raises(ClipFormatError, match="exactly one complete frame"):
-        container._decode(frame + frame, "zstd", np.dtype("<u4"), 64, "a")
+        container.decode_array(frame + frame, "zstd", np.dtype("<u4"), 64, "a")
     blob = container.pack({"part": "x"}, {"a": np.arange(64, dtype=np.uint32)}, {"a": "zstd"})
     with pytest.raises(ClipFormatError, match="unknown encoding"):
         container.unpack(_table_edit(blob, "a", encoding=None))

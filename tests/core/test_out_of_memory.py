@@ -58,6 +58,23 @@ def test_cli_fit_out_of_memory_exits_4_naming_the_allocation_the_limit_and_the_a
     assert "raise the limit" in err and ("fewer frames" in err or "coarser mesh" in err), err
 
 
+def test_cli_fit_whose_estimate_is_over_the_limit_is_refused_before_fitting(tmp_path):
+    poses = tmp_path / "long.npz"
+    zero_poses_npz(poses, 2000, 1000)  # 24 MB inflated, loads under the limit; the fit's estimate: 1.39 GiB
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1",
+           "PDEANIM_PROGRESS_EVERY": "0.01"}
+    command = [sys.executable, "-m", "service.cli", "fit", str(poses), "--out", str(tmp_path / "out.clip")]
+    run = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600,
+                         preexec_fn=limited(LIMIT))
+    assert run.returncode == EXIT_OUT_OF_MEMORY == 4, run.stderr[-3000:]
+    err = run.stderr
+    assert "Traceback" not in err and "fit:" not in err.replace("pdeanim fit:", ""), err  # no progress line
+    assert "out of memory: the estimated 1.39 GiB of the fit is over the address-space limit (RLIMIT_AS, " \
+           "ulimit -v) of 1.00 GiB (refused before fitting)" in err, err
+    assert "a fit of 2000 frames x 1000 vertices needs about 1.39 GiB" in err and "raise the limit" in err
+    assert not (tmp_path / "out.clip").exists()
+
+
 def test_out_of_memory_message_names_size_limit_and_advice():
     try:
         np.empty((1 << 20, 1 << 20, 1 << 10), np.float64)  # 8 PiB: refused by any machine at once

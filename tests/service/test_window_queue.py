@@ -62,7 +62,8 @@ def test_phases_in_order_and_progress_counts_windows(store, fit_job):
     assert _row(store, fit_job).state == "waiting"
     _run_phase(store, "gram", W)
     job = _row(store, fit_job)
-    assert job.progress == pytest.approx(0.05 + 0.9 * W / (2 * W)) and f"{W} of {W} summed" in job.stage
+    assert job.progress == pytest.approx(windows.PLAN_SHARE + windows.WINDOW_SHARE * W / (2 * W))
+    assert f"{W} of {W} summed" in job.stage
     _run_phase(store, "space", 1)
     _run_phase(store, "encode", W - 1)
     assert _row(store, fit_job).result == {"windows": W, "windows_done": W - 1}
@@ -74,6 +75,63 @@ def test_phases_in_order_and_progress_counts_windows(store, fit_job):
     with store.sessions() as s:
         clips = s.scalars(select(ClipRecord).where(ClipRecord.job_id == fit_job)).all()
         assert [c.id for c in clips] == [job.result["clip_id"]]
+
+
+def test_progress_never_goes_back_from_submission_to_the_clip(store):
+    """The fit job's progress as its planning attempt (retried once), its window tasks (one retried) and the
+    join report it, recorded at every write: never lower than before, ending at 1.0 with the clip."""
+    from worker.windowtasks import READ_SHARE, STORE_AT
+
+    with store.sessions() as s:
+        _, t = create_key(s, "acme")
+        s.add(Mesh(id="mesh_1", tenant_id=t.id, filename="a.obj", blob_key="k", n_vertices=3, n_faces=1,
+                   stats={}))
+        s.commit()
+        job = store.queue.enqueue(s, tenant_id=t.id, kind="fit", params={}, mesh_id="mesh_1")
+        s.commit()
+        job_id = job.id
+    seen = [_row(store, job_id).progress]
+
+    def record() -> None:
+        seen.append(_row(store, job_id).progress)
+
+    def plan(claimed) -> None:  # noqa: ANN001 - the planning attempt's share (worker.windowtasks.plan_fit)
+        for f in (0.0, 0.4, 0.85, 1.0):
+            assert store.queue.report(claimed.id, claimed.attempt, windows.PLAN_SHARE * f, "fit: plan")
+            record()
+
+    first = store.queue.claim("w0")
+    plan(first)
+    assert store.queue.fail(first.id, first.attempt, "lost", "RuntimeError", True) == "queued"
+    again = store.queue.claim("w0")
+    assert again.attempt == 2
+    plan(again)  # the retry reports from 0 again
+    assert windows.split(store.queue, again, W)
+    record()
+    for phase, n, steps in (("gram", W, (0.0, 1.0)), ("space", 1, (0.0,)), ("encode", W, (0.0, 0.5, 1.0)),
+                            ("join", 1, (0.0, READ_SHARE / 2, READ_SHARE, STORE_AT, 1.0))):
+        for i in range(n):
+            task = store.queue.claim("w1")
+            assert task.phase == phase
+            if phase == "encode" and i == 1:  # a window task retried: it starts again at 0
+                for f in steps:
+                    assert store.queue.report(task.id, task.attempt, f, phase)
+                    windows.task_progress(store.queue, task)
+                    record()
+                assert store.queue.fail(task.id, task.attempt, "lost", "RuntimeError", True) == "queued"
+                task = store.queue.claim("w1")
+            for f in steps:
+                assert store.queue.report(task.id, task.attempt, f, phase)
+                windows.task_progress(store.queue, task)
+                record()
+            windows.task_done(store.queue, task, {"clip": CLIP} if phase == "join" else {"phase": phase})
+            record()
+    assert _row(store, job_id).state == "succeeded"
+    assert all(b >= a for a, b in zip(seen, seen[1:], strict=False)), seen
+    assert seen[0] == 0.0 and seen[-1] == 1.0
+    assert len(set(seen)) > 2 * W + 6, seen  # it moved while the windows and the join ran
+    join_steps = [p for p in seen if 1.0 - windows.JOIN_SHARE < p < 1.0]
+    assert len(set(join_steps)) >= 3, seen  # the join reported in steps
 
 
 def test_concurrent_finishes_enqueue_the_next_phase_once(store, fit_job):

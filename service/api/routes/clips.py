@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
+from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from pdeanim.records import jsonable
@@ -36,14 +36,17 @@ INLINE_FRAME_VERTICES = 50_000
 def _load(clip_id: str, store: Store, cache) -> CachedClip:  # noqa: ANN001
     """The clip from the cache, or read and decoded from the database row and blobs (blocking I/O)."""
     def load() -> CachedClip:
-        from pdeanim.clip import load_clip
+        from pdeanim.clip import open_clip
         from pdeanim.gltf.write import FrameGlb
 
         with store.sessions() as session:
             row = session.get(ClipRecord, clip_id)
         if row is None:
             raise ApiError(404, "not_found", f"clip {clip_id!r} not found")
-        clip = load_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+        # a clip whose decoding would take more than the cache may hold is evaluated a block of curves at a
+        # time (the same bytes, in bounded memory, computed per request), never decoded whole
+        clip = open_clip(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key),
+                         cache.max_bytes)
         layout = source_layout_loader(store, row.mesh_id, clip)  # keeps a glTF/OBJ source's look
         return CachedClip(row.tenant_id, row.coefficients_key, row.topology_key, clip,
                           FrameWriter(FrameGlb(clip.faces, clip.n_vertices), layout))
@@ -98,10 +101,23 @@ def get_clip(
 ) -> ClipOut:
     """Frames, segments, curves, sizes in bytes and the errors achieved."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
-    item = _cached(clip_id, tenant, store, cache)
-    info = jsonable(item.clip.info())
-    info.setdefault("looping", bool(item.clip.looping))
+    info = jsonable(_info(row, store, cache))
     return clip_out(row, info)
+
+
+def _info(row: ClipRecord, store: Store, cache) -> dict:  # noqa: ANN001 - a ClipCache
+    """The clip's metadata: from its decoded clip when this process holds it, else from the parts' headers
+    (nothing that grows with segments x vertices is decoded for it)."""
+    from pdeanim.clip import clip_info
+
+    item = cache.peek(row.id)
+    if item is not None and item.tenant_id == row.tenant_id:
+        info = item.clip.info()
+        info.setdefault("looping", bool(item.clip.looping))
+        return info
+    info = clip_info(store.blobs.get(row.topology_key), store.blobs.get(row.coefficients_key))
+    info.setdefault("looping", False)
+    return info
 
 
 @router.get("/v1/clips/{clip_id}/coefficients", operation_id="getClipCoefficients", response_class=Response,
@@ -112,12 +128,14 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
                      store: StoreDep) -> Response:
     """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form)."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
-    if "application/json" in request.headers.get("accept", ""):
-        from pdeanim.container import to_json
+    if "application/json" in request.headers.get("accept", ""):  # streamed: the text is never held whole
+        from pdeanim.container import iter_json
 
-        return immutable_response(request, row.coefficients_key + "-json",
-                                  lambda: json.dumps(to_json(store.blobs.get(row.coefficients_key))).encode(),
-                                  "application/json", {"Vary": "Accept"})
+        headers = {"ETag": f'"{row.coefficients_key}-json"', "Cache-Control": IMMUTABLE, "Vary": "Accept"}
+        if etag_matches(request, headers["ETag"]):
+            return Response(status_code=304, headers=headers)
+        body = iter_json(store.blobs.get(row.coefficients_key))
+        return StreamingResponse(body, media_type="application/json", headers=headers)
     return immutable_response(request, row.coefficients_key, lambda: store.blobs.get(row.coefficients_key),
                               "application/octet-stream", {"Vary": "Accept"})
 
