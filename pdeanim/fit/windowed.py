@@ -203,7 +203,7 @@ def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress
     picked = np.unique(np.round(np.linspace(0, F - 1, n_picked)).astype(np.int64))
     sub = make_poses(np.asarray(poses.vertices[picked]), poses.faces, poses.times[picked])
     sf = space_fit(sub, options, curves, progress or (lambda *_: None), tol)
-    layout = Layout.of(sf.curves, poses.vertices[0], options.motion == "absolute")
+    layout = Layout.of(sf.curves, poses.rest_pose(), options.motion == "absolute")
     diagonal = bbox_diagonal(layout.rest)
     tolerance = first_quantisation(options.targets(diagonal), 0.0, tol).tolerance
     header, arrays = topology_arrays(layout.curves, layout.u_per_vertex(), poses.faces, layout.rest,
