@@ -85,19 +85,50 @@ FORMAT_VERSION = "1.0"
 minor versions only add header keys or arrays that a reader may ignore; a new major version is refused."""
 
 
+SUPPORTED_FEATURES = ("bones",)
+"""Features of minor versions this reader implements; a part whose ``required`` lists another is refused
+(docs/format.md §2). "bones" (1.1, §3.9) is read by the dynamic-PDE kind only."""
+FEATURE_KINDS = {"bones": ("dynamic-pde",)}
+
+
 def check_format_version(header: dict[str, Any], part: str) -> None:
-    """Raise ClipFormatError unless the header's ``format_version`` is "1.<minor>" (see FORMAT_VERSION)."""
+    """Raise ClipFormatError unless the header's ``format_version`` is "1.<minor>" (see FORMAT_VERSION) and
+    this reader implements every feature its ``required`` lists."""
     version = header.get("format_version")
     major, _, minor = version.partition(".") if isinstance(version, str) else ("", "", "")
     if major != FORMAT_VERSION.partition(".")[0] or not minor.isdigit() or not minor.isascii():
         raise ClipFormatError(f"unsupported clip format version {version!r} in the {part} part "
                               f"(this build reads {FORMAT_VERSION.partition('.')[0]}.x)")
+    check_required(header, part)
+
+
+def check_required(header: dict[str, Any], part: str) -> None:
+    """Raise ClipFormatError unless ``required`` (absent: none) is a list of feature names that this reader
+    implements for the part's kind."""
+    required = header.get("required", [])
+    if not isinstance(required, list) or not all(isinstance(name, str) for name in required):
+        raise ClipFormatError(f"the {part} part's 'required' must be a list of feature names, "
+                              f"got {required!r}")
+    missing = sorted(set(required) - set(SUPPORTED_FEATURES))
+    if missing:
+        supported = ", ".join(SUPPORTED_FEATURES)
+        raise ClipFormatError(f"the {part} part requires feature(s) {', '.join(map(repr, missing))} that "
+                              f"this reader does not implement (it supports: {supported})")
+    kind = header.get("kind")
+    for name in required:
+        if kind is not None and kind not in FEATURE_KINDS.get(name, (kind,)):
+            raise ClipFormatError(f"the {part} part of kind {kind!r} requires feature {name!r}, which only "
+                                  f"kind(s) {', '.join(FEATURE_KINDS[name])} implement")
 
 
 def write_clip_file(path: str | Path, parts: ClipParts) -> None:
     """Write both parts into one CLIP file."""
-    blob = container.pack({"part": "clip-file", "format_version": FORMAT_VERSION,
-                           "topology_id": parts.topology_id, "report": parts.report},
+    header = {"part": "clip-file", "format_version": FORMAT_VERSION, "topology_id": parts.topology_id,
+              "report": parts.report}
+    coef = container.read_header(parts.coefficients)
+    if coef.get("required"):  # a feature of a minor version (the bone layer, 1.1): the file says so too
+        header.update(format_version=coef["format_version"], required=coef["required"])
+    blob = container.pack(header,
                           {"topology": np.frombuffer(parts.topology, np.uint8),
                            "coefficients": np.frombuffer(parts.coefficients, np.uint8)})
     Path(path).write_bytes(blob)

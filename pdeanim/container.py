@@ -210,6 +210,22 @@ def _entry(name: str, spec: Any, start: int, total: int) -> tuple:
     return name, dtype, shape, lo, n, encoding, size
 
 
+def read_header(blob: bytes) -> dict[str, Any]:
+    """The JSON header of container bytes without decoding any array (its ``arrays`` table removed); raises
+    ClipFormatError as :func:`unpack` does for a damaged prefix or header."""
+    if len(blob) < _PREFIX.size:
+        raise ClipFormatError(f"blob of {len(blob)} bytes is too short to be a pdeanim container")
+    magic, version, hlen = _PREFIX.unpack_from(blob, 0)
+    if magic != MAGIC or version != VERSION or _PREFIX.size + hlen > len(blob):
+        raise ClipFormatError("not a pdeanim container of version 1 (bad magic, version or header length)")
+    try:
+        header = json.loads(bytes(blob[_PREFIX.size:_PREFIX.size + hlen]).decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ClipFormatError(f"container header is not valid JSON: {exc}") from exc
+    _array_table(header)
+    return header
+
+
 def with_header(blob: bytes, extra: dict[str, Any]) -> bytes:
     """The container ``blob`` with keys added to its JSON header (the arrays' bytes untouched: their offsets
     count from the start of the data, which follows the header)."""

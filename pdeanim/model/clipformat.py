@@ -42,6 +42,7 @@ from ..clipparts import FORMAT_VERSION, topology_id
 from ..curveset import CurveSet
 from ..errors import ClipFormatError
 from . import knotbasis, quantise
+from .bonelayer import EncodedBones, add_bone_layer, decode_bones, has_bones
 from .spline import spline_weight_bound
 
 BASIS_MARGIN = 0.9
@@ -89,6 +90,7 @@ class CoefficientData:
     header: dict[str, Any]
     extra: dict[str, np.ndarray] = field(default_factory=dict)  # "rigid_*" arrays of motion "rigid"
     time_model: np.ndarray | None = None  # (C, 3) uint8; None: every item TIME_PDE
+    bones: EncodedBones | None = None  # format 1.1 bone layer (§3.9); the curves are then the residual
 
     def spline_items(self) -> np.ndarray:
         """(C, 3) bool: the items on the natural spline."""
@@ -187,7 +189,7 @@ def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
     knot_arrays, differences, rank = _knot_encoding(data, steps, spectrum, choose, knot_rank)
     header.update(knot_differences=differences, knot_rank=rank)
     seg_t, frame_times = np.asarray(data.segment_t, np.float64), np.asarray(data.frame_times, np.float64)
-    return header, {
+    arrays = {
         **({} if segment_t_derivable(seg_t, frame_times) else {"segment_t": seg_t}),
         "frame_times": frame_times,
         "space_kind": (family[0] % 2 if len(family) else np.zeros((C, 3))).astype(np.uint8),
@@ -197,6 +199,9 @@ def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
         **knot_arrays,
         **{k: np.asarray(v) for k, v in data.extra.items()},
     }
+    if data.bones is not None:
+        add_bone_layer(header, arrays, data.bones)
+    return header, arrays
 
 
 def _knot_steps(topo: TopologyData, data: CoefficientData, family: np.ndarray, m: np.ndarray,
@@ -391,9 +396,10 @@ def decode_coefficients(header: dict[str, Any], arrays: dict[str, np.ndarray], n
     if motion not in MOTIONS:
         raise ClipFormatError(f"unknown motion mode {motion!r}")
     extra = _rigid_arrays(arrays, C) if motion == "rigid" else {}
+    bones = decode_bones(header, arrays) if has_bones(header) else None
     return CoefficientData(seg_t, _need(arrays, "frame_times", (None,), "coefficients", "<f8"), family,
                            np.abs(signed), _need(arrays, "D", (C, 3), "coefficients", "<f4"), knots, motion,
-                           bool(header.get("looping", False)), header, extra, time_model)
+                           bool(header.get("looping", False)), header, extra, time_model, bones)
 
 
 def _family(arrays: dict[str, np.ndarray], S: int, C: int) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency; this kee
     COMPILED = False
 
 from ..errors import ClipFormatError
+from .bonelayer import BonePlayer
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
@@ -58,6 +59,7 @@ class DynamicClip:
         self._cubic_items = [spline] * len(self._mu)  # per segment, the items on the spline (§3.5): all
 
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
+        self._bones = None if coef.bones is None else BonePlayer(coef.bones, topo.rest, self.looping)
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
         elif self._rigid is not None:
@@ -117,25 +119,29 @@ class DynamicClip:
         tau = min(max((t - t0) / (t1 - t0 if t1 > t0 else 1.0), 0.0), 1.0)
         return seg, tau, t
 
-    def _frame(self, s: int, tau: float, out: np.ndarray | None = None) -> np.ndarray:
-        """(V, 3) float32 positions (before any rigid motion) in segment s at local time tau."""
+    def _frame(self, s: int, tau: float, out: np.ndarray | None = None, base: np.ndarray | None = None
+               ) -> np.ndarray:
+        """(V, 3) float32 positions (before any rigid motion) in segment s at local time tau; ``base``
+        (V * 3,) float32 in place of the clip's (the skinned positions of a bone layer)."""
         if out is None:
             out = np.empty((self.n_vertices, 3), np.float32)
+        base = self._base_flat if base is None else base
         flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
         phi = self._time[s].pair_values(tau)  # (2, U) float32 of the segment's distinct values
         if self._cubic_values[s] is not None:
-            return self._cubic_frame(s, tau, phi, out)
+            return self._cubic_frame(s, tau, phi, out, base)
         if COMPILED:
-            _combine(phi[0], phi[1], code, fields[s], fields[s + 1], self._base_flat, flat)
+            _combine(phi[0], phi[1], code, fields[s], fields[s + 1], base, flat)
             return out
         a, b = np.take(phi[0], code), np.take(phi[1], code)
         np.multiply(a, fields[s], out=a)  # phi0 * P[s]
         np.multiply(b, fields[s + 1], out=b)  # phi1 * P[s+1]
         np.add(a, b, out=flat)
-        np.add(flat, self._base_flat, out=flat)
+        np.add(flat, base, out=flat)
         return out
 
-    def _cubic_frame(self, s: int, tau: float, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
+    def _cubic_frame(self, s: int, tau: float, phi: np.ndarray, out: np.ndarray, base: np.ndarray
+                     ) -> np.ndarray:
         """:meth:`_frame` of a segment with spline items: their values sum four fields, the tangents and
         knots at s and s+1 (§3.5)."""
         flat, fields, code = out.reshape(-1), self._knot_fields, self._value_code[s]
@@ -144,31 +150,36 @@ class DynamicClip:
         w32 = np.array(w, np.float32)
         if COMPILED:
             _combine_cubic(phi[0], phi[1], code, phi.shape[1], w32[0], w32[1], w32[2], w32[3], first,
-                           fields[s], fields[s + 1], last, self._base_flat, flat)
+                           fields[s], fields[s + 1], last, base, flat)
             return out
         phi = np.concatenate([phi, np.zeros((2, 1), np.float32)], axis=1)  # the cubic code: pair unused
         a, b = np.take(phi[0], code), np.take(phi[1], code)
-        np.add(a * fields[s] + b * fields[s + 1], self._base_flat, out=flat)
+        np.add(a * fields[s] + b * fields[s + 1], base, out=flat)
         i = self._cubic_values[s]
         flat[i] = (((w32[0] * first[i] + w32[1] * fields[s][i]) + w32[2] * fields[s + 1][i])
-                   + w32[3] * last[i]) + self._base_flat[i]
+                   + w32[3] * last[i]) + base[i]
         return out
 
     def evaluate(self, t: float | np.ndarray) -> np.ndarray:
         """Positions in the original vertex order: (V, 3) float32 for scalar t, (K, V, 3) for an array."""
         if (self._rigid is None and isinstance(t, (int, float, np.floating, np.integer))
                 and math.isfinite(t)):
-            s, tau, _ = self._locate_scalar(float(t))  # one frame: no per-call array bookkeeping
-            return self._frame(s, tau)
+            s, tau, tw = self._locate_scalar(float(t))  # one frame: no per-call array bookkeeping
+            return self._frame(s, tau, base=self._bone_base(np.array([tw]), 0))
         scalar = np.ndim(t) == 0
         seg, tau, tw = self._locate(np.atleast_1d(t))
         out = np.empty((len(seg), self.n_vertices, 3), np.float32)
+        bases = None if self._bones is None else self._bones.positions(tw).reshape(len(tw), -1)
         for k, (s, x) in enumerate(zip(seg, tau, strict=True)):
-            self._frame(int(s), float(x), out[k])
+            self._frame(int(s), float(x), out[k], None if bases is None else bases[k])
         if self._rigid is not None:
             R, c = self._rigid.at(tw)  # (K, C, 3, 3), (K, C, 3)
             out = (np.einsum("kvij,kvj->kvi", R[:, self._cid], out) + c[:, self._cid]).astype(np.float32)
         return out[0] if scalar else out
+
+    def _bone_base(self, tw: np.ndarray, k: int) -> np.ndarray | None:
+        """(V * 3,) float32 skinned positions of the bone layer at wrapped time tw[k] (None: no bones)."""
+        return None if self._bones is None else self._bones.positions(tw[k:k + 1]).reshape(-1)
 
     def frame_t(self) -> np.ndarray:
         """(F,) normalised times of the source frames."""
@@ -191,6 +202,9 @@ class DynamicClip:
             "duration_s": float(self.frame_times[-1] - self.frame_times[0]),
             "errors": h.get("errors", {}),
             **{k: h[k] for k in ("gait", "travel") if isinstance(h.get(k), dict)},  # gait clips (cyclic)
+            **({} if self.coef.bones is None else {"bones": {
+                "n_bones": self.coef.bones.n_bones, "influences": self.coef.bones.n_influences,
+                "segments": self.coef.bones.n_segments}}),
         }
 
 
