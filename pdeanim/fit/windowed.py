@@ -65,10 +65,11 @@ MIN_WINDOW_FRAMES = 8
 def windowed_applies(n_frames: int, n_vertices: int, options: FitOptions, tol: FitTolerances) -> bool:
     """Whether a fit of (n_frames, n_vertices) poses runs in windows: inputs of more than
     tol.window_fit_values frame-vertex values, fitted with targets, displacement or absolute motion, chord
-    parameters and an open clip (the other fits need every frame at once)."""
+    parameters and an open clip, without a bone layer (the other fits need every frame at once; a bone fit's
+    residual may then be fitted in windows)."""
     return (n_frames * n_vertices > tol.window_fit_values and tol.dense_fit
             and not options.segments and not options.loop and options.motion != "rigid"
-            and options.param_mode == "chord")
+            and options.param_mode == "chord" and options.bones == 0)
 
 
 def curve_frames(n_frames: int, n_vertices: int) -> int:
