@@ -9,9 +9,11 @@ from pdeanim.bones.trajweld import weld_trajectories
 from pdeanim.model.rigid import rodrigues
 
 
-def bending_tube(frames: int = 12, rings: int = 25, around: int = 10) -> tuple[np.ndarray, np.ndarray]:
+def bending_tube(frames: int = 12, rings: int = 25, around: int = 10, angles: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """(F, V, 3) a tube along x bent at x = 1 and x = 2 (three bones, smooth weights near the joints), the
-    first column of every ring duplicated (a seam), and the (V,) index of the vertex each one copies."""
+    first column of every ring duplicated (a seam), and the (V,) index of the vertex each one copies;
+    ``angles`` (F,): the bend per frame (default a steady bend from 0 to 1)."""
     x = np.linspace(0.0, 3.0, rings)
     ang = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
     ang = np.concatenate([ang, ang[:1]])  # the seam: the first column again
@@ -22,7 +24,7 @@ def bending_tube(frames: int = 12, rings: int = 25, around: int = 10) -> tuple[n
     w1 = np.clip((rest[:, 0] - 0.75) / 0.5, 0, 1)  # bone 1 from x = 0.75 .. 1.25
     w2 = np.clip((rest[:, 0] - 1.75) / 0.5, 0, 1)
     W = np.stack([1 - w1, w1 - w2, w2], axis=1)
-    s = np.linspace(0.0, 1.0, frames)
+    s = np.linspace(0.0, 1.0, frames) if angles is None else angles
     out = np.empty((frames, len(rest), 3))
     for f in range(frames):
         R1 = rodrigues(np.array([0.0, 0.0, 0.9 * s[f]]))
