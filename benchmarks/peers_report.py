@@ -105,6 +105,27 @@ def clip_table(results: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def skinned_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
+    """Per skinned input and target: the clip's coefficients on the wire against the smallest gltfpack'd
+    skinned animation (animation + skin data) that meets the target."""
+    head = ["input", "target", "clip bones", "clip coefficients wire", "clip rel-RMS / rel-max",
+            "skinned gltfpack wire (setting; rel-RMS, rel-max)", "ratio"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        if not any(r.get("method") == "skinned" for r in rows):
+            continue
+        for t in targets:
+            c, p = clip_at(rows, t), best(rows, "skinned", t)
+            if c is None or "wire_bytes" not in c or p is None:
+                lines.append(f"| {name} | {t:g} | - | - | - | {peer_cell(p, t)} | - |")
+                continue
+            lines.append(f"| {name} | {t:g} | {c.get('bones', 0)} | {nbytes(c.get('coefficients_wire'))} | "
+                         f"{c['rel_rms']:.3g} / {c['rel_max']:.3g} | {nbytes(p['wire_bytes'])} "
+                         f"({p['setting']}; {p['rel_rms']:.2g}, {p['rel_max']:.2g}) | "
+                         f"{c['coefficients_wire'] / p['wire_bytes']:.2f} |")
+    return "\n".join(lines)
+
+
 def _share(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f}%"
 
