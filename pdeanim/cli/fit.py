@@ -145,6 +145,8 @@ def _bones_for(args: argparse.Namespace) -> int | str:
 
 def _bones_line(b: dict | None) -> str:
     """How many bones the clip has, where they came from and the residual's share of the bytes."""
+    if b and b.get("skipped"):
+        return f"bones: none ({b['skipped']})"
     if not b or not b.get("n_bones"):
         tried = (b or {}).get("candidates")
         return "bones: none" + (f" (tried {', '.join(str(c['bones']) for c in tried)}: smallest without)"

@@ -27,6 +27,7 @@ from ..bones.motion import fitted_bones
 from ..bones.trajweld import weld_trajectories
 from ..clipparts import ClipParts
 from ..curveset import CurveSet
+from ..errors import ParameterError
 from ..model import quantise
 from ..model.adaptive import Targets
 from ..model.bonelayer import BoneMotion, add_bone_layer, encode_bones, skinned_positions
@@ -58,7 +59,16 @@ def fit_with_bones(poses: Poses, options: FitOptions, progress: Progress, tol: F
     pipeline's fit without bones)."""
     start = time.perf_counter()
     plain = replace(options, bones=0)
-    if skin is not None:
+    too_big = poses.n_frames * poses.n_vertices > tol.window_fit_values
+    if too_big and options.bones != "auto":
+        raise ParameterError(f"a bone layer is fitted with every frame in memory: at most "
+                             f"{tol.window_fit_values:,} frame-vertex values, this input has "
+                             f"{poses.n_frames * poses.n_vertices:,} (fit it without bones, or fewer frames)")
+    if too_big:
+        parts = fit(poses, plain, progress, curves=curves, tolerances=tol)
+        parts.report["bones"] = {"n_bones": 0, "source": "none", "skipped": "input larger than a bone fit "
+                                 "holds in memory (FitTolerances.window_fit_values)"}
+    elif skin is not None:
         parts = _bone_clip(poses, plain, progress, tol, curves, skin.motion, skin.rest, fit)
         parts.report["bones"].update(source="gltf skin", joints=skin.n_joints)
     elif options.bones != "auto":
