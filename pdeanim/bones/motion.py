@@ -8,16 +8,18 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..model.bonelayer import BoneMotion
-from .decompose import Decomposition, decompose
+from .decompose import INFLUENCES, ITERATIONS, Decomposition, decompose
 from .trajweld import weld_trajectories
 
 
-def fitted_bones(frames: np.ndarray, bones: int, iterations: int | None = None) -> tuple[BoneMotion, float]:
+def fitted_bones(frames: np.ndarray, bones: int, iterations: int = ITERATIONS,
+                 influences: int = INFLUENCES) -> tuple[BoneMotion, float]:
     """The bone motion of frames (F, V, 3) (rest pose: frame 0) by a skinning decomposition with at most
-    ``bones`` bones on the welded trajectories, and the skinning's RMS error per vertex over all frames."""
+    ``bones`` bones and ``influences`` per vertex on the welded trajectories, and the skinning's RMS error
+    per vertex over all frames."""
     welded = weld_trajectories(frames)
     X = np.asarray(frames, np.float64)[:, welded.keep]
-    dec = decompose(X, bones) if iterations is None else decompose(X, bones, iterations)
+    dec = decompose(X, bones, iterations, influences)
     counts = np.bincount(welded.point_of, minlength=welded.n_points)
     rms = float(np.sqrt((dec.point_sq * counts).sum() / (X.shape[0] * len(welded.point_of))))
     return to_motion(dec, welded.point_of), rms
