@@ -107,7 +107,8 @@ def run_sequence(name: str, source: Path | str, args: argparse.Namespace) -> lis
             "clip": lambda: peers_clip.method_clip(name, npz, X, t, work, tmo),
             "gltfpack": lambda: peers_gltfpack.method_gltfpack(X, faces, work, tmo, q),
             "pca": lambda: peers_lowrank.method_pca(X, faces, t, q),
-            "dembones": lambda: peers_dembones.method_dembones(name, X, faces, args.cache, q),
+            "dembones": lambda: peers_dembones.method_dembones(name, X, faces, args.cache, q,
+                                                               args.dembones_bones),
             "skinned": lambda: (peers_skinned.method_skinned(npz, X, work, tmo)
                                 if npz.suffix.lower() in (".glb", ".gltf") else []),
             "keyframes": lambda: peers_lowrank.method_keyframes(X, faces, t, q),
@@ -210,6 +211,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--cache", type=Path,
                     default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pdeanim-bench",
                     help="cache folder of Dem Bones solves (outside the repository)")
+    ap.add_argument("--dembones-bones", help="comma-separated Dem Bones bone counts (default 8,16,32,64,128)")
     ap.add_argument("--fit-timeout", type=float, default=3600.0, help="seconds per fit / gltfpack run")
     ap.add_argument("--resume", action="store_true", help="keep the inputs already in OUT/results.json")
     args = ap.parse_args(argv)
@@ -218,6 +220,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     if unknown:
         ap.error(f"unknown methods: {', '.join(sorted(unknown))}")
     args.targets = tuple(float(t) for t in args.targets.split(","))
+    if args.dembones_bones:
+        args.dembones_bones = tuple(int(b) for b in args.dembones_bones.split(","))
     if "gltfpack" in args.methods and not peers_gltfpack.GLTFPACK_CLI.exists():  # a missing peer flatters
         ap.error(f"{peers_gltfpack.GLTFPACK_CLI} is missing: run ./script/setup (npm ci in benchmarks/peers)")
     return args
