@@ -49,7 +49,7 @@ BONE_SHARE = 0.5
 curves correct it): coarser bones cost fewer bytes but leave more to the curves."""
 AUTO_SKIN_SHARE = 0.7
 """``bones="auto"``: decompositions stop once the skinning alone is within this share of the RMS target ..."""
-AUTO_GAIN = 0.15
+AUTO_GAIN = 0.1
 """... or once doubling the bones cut its RMS error by less than this share (motion that bones do not
 explain: a morph, cloth). A count is fitted only where its skinning is within the target: more is left to
 the residual curves than a clip without bones spends (horse-collapse at 3e-3: 32 bones skin to 0.94 of the
@@ -90,8 +90,8 @@ def _auto(poses: Poses, options: FitOptions, progress: Progress, tol: FitToleran
           curves: CurveSet | None, fit: FitFn) -> ClipParts:
     """The smallest clip among no bones and the ladder's counts. Decompositions (cheap next to a fit) go up
     the ladder until the skinning alone is within AUTO_SKIN_SHARE of the RMS target or stops improving by
-    AUTO_GAIN; where it is then within the target, that count and the next ones up are fitted while each
-    clip is smaller than the best so far."""
+    AUTO_GAIN. The first count within that share (else the last one within the target) and the next ones up
+    are fitted while each clip is smaller than the best so far."""
     best = fit(poses, options, sub_progress(progress, 0.0, 0.3), curves=curves, tolerances=tol)
     best.report["bones"] = {"n_bones": 0, "source": "none"}
     tried = [{"bones": 0, "bytes": _size(best), "rel_rms": best.report.get("rel_rms")}]
@@ -112,7 +112,8 @@ def _auto(poses: Poses, options: FitOptions, progress: Progress, tol: FitToleran
         if rms <= AUTO_SKIN_SHARE * targets.rms or rms > (1 - AUTO_GAIN) * previous:
             break
         previous = rms
-    start = [B for B in found if found[B][1] <= targets.rms][:1]
+    close = [B for B in found if found[B][1] <= AUTO_SKIN_SHARE * targets.rms]
+    start = close[:1] or [B for B in found if found[B][1] <= targets.rms][-1:]
     fits = [b for b in ladder if start and b >= start[0]]
     for i, B in enumerate(fits):
         step = sub_progress(progress, 0.6 + 0.4 * i / len(fits), 0.6 + 0.4 * (i + 1) / len(fits))
