@@ -75,6 +75,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.write_bytes(glb)
     packing = [w for w, on in (("quantised", args.quantize), ("meshopt", args.compress)) if on]
+    joints = _joints(glb)
+    if joints:  # a clip with a bone layer, written as a skinned animation (float32, not packed)
+        packing = [f"skinned, {joints} joints, float32"]
     written = _written_vertices(glb)
     if written != clip.n_vertices:
         packing.append(f"welded to {written} vertices")
@@ -95,3 +98,11 @@ def _written_vertices(glb: bytes) -> int:
     doc, _ = unpack_glb(glb)
     return sum(doc["accessors"][p["attributes"]["POSITION"]]["count"]
                for m in doc.get("meshes", []) for p in m["primitives"] if "POSITION" in p["attributes"])
+
+
+def _joints(glb: bytes) -> int:
+    """Joints of the GLB's skins (0: a morph-target animation)."""
+    from ..gltf.glb import unpack_glb
+
+    doc, _ = unpack_glb(glb)
+    return sum(len(skin["joints"]) for skin in doc.get("skins", []))

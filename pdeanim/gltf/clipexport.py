@@ -15,6 +15,7 @@ from ..errors import LimitError, ParameterError
 from ..progress import Progress
 from .compact import PackOptions, layout_animation_glb, layout_frame_glb
 from .layout import Layout, plain_layout
+from .skinexport import has_bone_layer, skinned_animation_glb
 from .write import _check_times, _key_plan, animation_glb, frame_glb
 
 DEFAULT_MAX_FRAMES = 10_000
@@ -120,11 +121,19 @@ def clip_animation_glb(clip: Clip, fps: float = 30.0, *, options: PackOptions | 
     default to quantised + meshopt-compressed with per-frame normal deltas and welded vertices; ``layout``
     (default plain) keeps a source mesh's look. ``PackOptions(quantize=False, compress=False, weld=False)``
     writes the plain float32 layout of :func:`~.write.animation_glb`. Frames are evaluated in chunks so
-    ``progress`` hears about long exports."""
+    ``progress`` hears about long exports. A clip with a bone layer (format 1.1) and no source look
+    (``layout`` None or plain) is written as a skinned animation (:mod:`.skinexport`: joints, skin, morph
+    targets only for a non-zero residual; float32, not quantised or compressed); with a source look its
+    frames are baked into morph targets as for any clip."""
     opts = options or PackOptions()
     duration = clip_duration(clip)
     seconds = export_times(duration, fps, max_frames)
     t = seconds / duration if duration > 0 else seconds
+    if has_bone_layer(clip) and (layout is None or layout.source == "plain"):
+        glb = skinned_animation_glb(clip, seconds, t, normals=opts.normals, names=[f"t{x:.4f}" for x in t])
+        if progress is not None:
+            progress(1.0, "write GLB")
+        return glb
     frames = np.empty((len(t), clip.n_vertices, 3), np.float32)
     for lo in range(0, len(t), EVALUATE_CHUNK):
         hi = min(lo + EVALUATE_CHUNK, len(t))

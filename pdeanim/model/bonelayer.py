@@ -15,6 +15,14 @@ from typing import Any
 
 import numpy as np
 
+try:
+    from numba import njit
+
+    COMPILED = True
+except ImportError:  # pragma: no cover - numba is a pinned dependency; the numpy path stays usable
+    COMPILED = False
+
+from .. import container
 from ..errors import ClipFormatError, ParameterError
 from . import quantise
 from .adaptive import Targets, _split_count, _splits
@@ -22,7 +30,7 @@ from .families import time_pair
 from .rigid import rodrigues
 from .segments import Segmentation, normalised_times, uniform_segmentation
 from .spline import hermite_basis, natural_tangents, prefer_spline
-from .timefit import fit_tracks, fit_tracks_spline, predict
+from .timefit import fit_tracks_spline, predict, solve_knots
 
 BONES_FEATURE = "bones"
 """The feature name a part with a bone layer lists in its header's ``required``."""
@@ -35,11 +43,18 @@ TIME_PDE, TIME_SPLINE = 0, 1
 FIT_SHARE, KNOT_SHARE, WEIGHT_SHARE = 0.8, 0.4, 0.3
 """Shares of the bone layer's RMS budget: the time fit, the rounding of the knots, the rounding of the weights
 (in quadrature: 0.94 of the budget)."""
-WEIGHT_BITS = (8, 16)
-"""Range of the weights' quantisation: q = rint(w * (2^n - 1)) with n bits chosen from the budget."""
+WEIGHT_BITS = (4, 16)
+"""Range of the weights' quantisation: levels of 1 / (2^n - 1), n chosen from the budget (format: 1..16)."""
 HALVINGS = 8
 """Most halvings of every knot step when the rounded tracks miss their budget (spline weights above 1)."""
 WEIGHT_SAMPLE_FRAMES = 8
+MU_MANTISSA_BITS = 4
+"""Significant bits kept of a bone channel's time constant (truncated towards 0, so caps still hold; the
+knots are solved again for the kept constants): a few distinct float32 patterns compress to a fraction of the
+golden-section refinement's values (CesiumMan, 16 segments x 19 bones x 6 channels: 2.7 KB of bone_m)."""
+MAX_BONE_CODE = 2**23
+"""Largest magnitude of a bone knot code: p * h (h a power of two) then has at most 24 significant bits, so
+float32(p * h) is exact and a knot is off its value by the rounding to the step alone."""
 
 
 @dataclass(frozen=True)
@@ -64,12 +79,13 @@ class EncodedBones:
     segment_t: np.ndarray  # (Sb+1,) float64 strictly increasing from 0 to 1
     pivot: np.ndarray  # (B, 3) float32
     index: np.ndarray  # (V, K) uint16
-    weight_q: np.ndarray  # (V, K) uint16 quantised weights (rows sum > 0)
+    weight_q: np.ndarray  # (V, K) uint16 quantised weights, each row summing to 2^weight_bits - 1
     time_model: np.ndarray  # (B, 6) uint8: TIME_PDE or TIME_SPLINE
     mu: np.ndarray  # (Sb, B, 6) float32 signed time constants (0 on spline channels)
     step: np.ndarray  # (B, 6) float32 power-of-two knot steps
     codes: np.ndarray  # (Sb+1, B, 6) int64 knot codes
     knot_differences: int = 1  # order of the zigzag differences of the stored tracks
+    weight_bits: int = 16  # the weights are q / (2^weight_bits - 1); the last column is implied when stored
     report: dict[str, Any] = field(default_factory=dict, compare=False)  # what the encoder did (not stored)
 
     @property
@@ -89,9 +105,8 @@ class EncodedBones:
         return quantise.dequantise(self.codes, self.step[None])
 
     def weights(self) -> np.ndarray:
-        """(V, K) float64 normalised weights q / sum q."""
-        q = self.weight_q.astype(np.float64)
-        return q / q.sum(axis=1, keepdims=True)
+        """(V, K) float64 weights q / (2^weight_bits - 1)."""
+        return self.weight_q.astype(np.float64) / float(2**self.weight_bits - 1)
 
 
 # ---------------------------------------------------------------- evaluation (readers and the fit)
@@ -155,7 +170,10 @@ class BonePlayer:
         R, T = self.tracks.transforms(t)
         out = np.empty((len(R), len(self.rest), 3), np.float32)
         for f in range(len(R)):
-            out[f] = blend(R[f], T[f], self.pivot, self.index, self.weight, self.rest)
+            if COMPILED:  # one pass over the vertices, no (V, 3, 3) gathers: the frame route's hot path
+                _blend_into(R[f], T[f], self.pivot, self.index, self.weight, self.rest, out[f])
+            else:
+                out[f] = blend(R[f], T[f], self.pivot, self.index, self.weight, self.rest)
         return out
 
 
@@ -171,6 +189,27 @@ def blend(R: np.ndarray, T: np.ndarray, pivot: np.ndarray, index: np.ndarray, we
         ry = (Rb[:, :, 0] * y[:, 0:1] + Rb[:, :, 1] * y[:, 1:2]) + Rb[:, :, 2] * y[:, 2:3]
         acc += weight[:, k:k + 1] * ((ry + pivot[b]) + T[b])
     return acc
+
+
+def _blend_into(R: np.ndarray, T: np.ndarray, pivot: np.ndarray, index: np.ndarray, weight: np.ndarray,
+                rest: np.ndarray, out: np.ndarray) -> None:
+    """Compiled :func:`blend` rounded to float32 into ``out`` (V, 3), in the same float64 order."""
+    for v in range(rest.shape[0]):
+        a0 = a1 = a2 = 0.0
+        for k in range(index.shape[1]):
+            b, w = index[v, k], weight[v, k]
+            y0, y1, y2 = rest[v, 0] - pivot[b, 0], rest[v, 1] - pivot[b, 1], rest[v, 2] - pivot[b, 2]
+            r0 = (R[b, 0, 0] * y0 + R[b, 0, 1] * y1) + R[b, 0, 2] * y2
+            r1 = (R[b, 1, 0] * y0 + R[b, 1, 1] * y1) + R[b, 1, 2] * y2
+            r2 = (R[b, 2, 0] * y0 + R[b, 2, 1] * y1) + R[b, 2, 2] * y2
+            a0 += w * ((r0 + pivot[b, 0]) + T[b, 0])
+            a1 += w * ((r1 + pivot[b, 1]) + T[b, 1])
+            a2 += w * ((r2 + pivot[b, 2]) + T[b, 2])
+        out[v, 0], out[v, 1], out[v, 2] = np.float32(a0), np.float32(a1), np.float32(a2)
+
+
+if COMPILED:
+    _blend_into = njit(cache=True, nogil=True, boundscheck=False)(_blend_into)
 
 
 def skinned_positions(enc: EncodedBones, rest: np.ndarray, t: np.ndarray, looping: bool = False
@@ -278,33 +317,37 @@ def encode_bones(motion: BoneMotion, frame_times: np.ndarray, target_rms: float,
     distance, fit and rounding together) from skin(motion, rest) at the frames where the segments allow.
     Segments are added where frames miss the fit's share of the budget; each channel takes the natural
     spline or the paper's time pair (per segment constants) as the curves choose them (spline.prefer_spline,
-    timefit.fit_tracks_spline); looping clips use periodic knots and the time pair."""
+    timefit.fit_tracks_spline). ``looping`` clips are fitted the same way: t = 1 wraps to 0, so the last knot
+    is only approached, and a motion that loops meets its first pose there in rotation (a bone that turns a
+    full circle per cycle too, which periodic rotation-vector knots could not hold); it is recorded in the
+    report."""
     frame_times = np.asarray(frame_times, np.float64)
     _check_motion(motion, frame_times, rest)
     if not target_rms > 0:
         raise ParameterError(f"the bone layer's target RMS must be positive, got {target_rms}")
     pivot = np.asarray(motion.pivot, np.float32).astype(np.float64)  # what readers get
-    index = np.asarray(motion.index, np.int64)
     rest32 = np.asarray(rest, np.float32).astype(np.float64)
     rotvec = unwrap_rotvec(motion.rotvec)
     values = np.concatenate([rotvec, np.asarray(motion.translation, np.float64)], axis=2)  # (F, B, 6)
     weight_q, weight_bits, weight_rms = _quantise_weights(motion, rest32, pivot, target_rms)
-    weight = weight_q / weight_q.sum(axis=1, keepdims=True)
+    index, weight_q = sorted_influences(np.asarray(motion.index, np.int64), weight_q)
+    weight = weight_q / float(2**weight_bits - 1)
     moments = _Moments.of(rest32, pivot, index, weight)
     R, T = rodrigues(rotvec), values[..., 3:]
-    segm, z, mu, spline, fit_rms = _fit_segments(values, frame_times, moments, R, T, FIT_SHARE * target_rms,
-                                                 looping)
-    step, codes, rms = _quantise_knots(z, mu, spline, segm, values, moments, R, T, target_rms)
+    segm, z, mu, spline, fit_rms = _fit_segments(values, frame_times, moments, R, T, FIT_SHARE * target_rms)
+    step, codes, rms = _quantise_knots(z, mu, spline, segm, moments, R, T, target_rms)
     B = motion.n_bones
     _, order = quantise.encode_knot_tracks(codes)
     report = {"segments": segm.n_segments, "spline_channels": int(spline.sum()), "fit_rms_bound": fit_rms,
               "rms_bound": rms, "weight_bits": weight_bits, "weight_rms_estimate": weight_rms,
-              "target_rms": float(target_rms), "met": bool(math.hypot(rms, weight_rms) <= target_rms)}
+              "target_rms": float(target_rms), "met": bool(math.hypot(rms, weight_rms) <= target_rms),
+              "looping": bool(looping)}
     return EncodedBones(segment_t=_segment_times(segm), pivot=pivot.astype(np.float32),
                         index=index.astype(np.uint16), weight_q=weight_q.astype(np.uint16),
                         time_model=spline.reshape(B, CHANNELS).astype(np.uint8),
                         mu=np.moveaxis(mu.reshape(B, CHANNELS, -1), -1, 0).astype(np.float32),
-                        step=step.reshape(B, CHANNELS), codes=codes, knot_differences=order, report=report)
+                        step=step.reshape(B, CHANNELS), codes=codes, knot_differences=order,
+                        weight_bits=weight_bits, report=report)
 
 
 def _segment_times(segm: Segmentation) -> np.ndarray:
@@ -315,7 +358,7 @@ def _segment_times(segm: Segmentation) -> np.ndarray:
 
 
 def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments, R: np.ndarray,
-                  T: np.ndarray, goal: float, looping: bool
+                  T: np.ndarray, goal: float
                   ) -> tuple[Segmentation, np.ndarray, np.ndarray, np.ndarray, float]:
     """(segmentation, knots (B*6, Sb+1), constants (B*6, Sb), spline (B*6,) bool, RMS bound): segments split
     at the worst frames until the time fit's vertex error bound meets ``goal`` or every frame is a knot."""
@@ -326,14 +369,14 @@ def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments
         still = Segmentation(np.array([0, 0]), np.zeros(1))
         return still, z, np.zeros((len(b), 1)), np.zeros(len(b), bool), 0.0
     t = normalised_times(frame_times)
-    candidates = np.zeros(len(b), bool) if looping else prefer_spline(b, t)
+    candidates = prefer_spline(b, t)
     segm = uniform_segmentation(frame_times, 1)
     while True:
-        if looping:
-            z, mu = fit_tracks(b, segm, loop=True)
-            spline = np.zeros(len(b), bool)
-        else:
-            z, mu, spline = fit_tracks_spline(b, segm, candidates)
+        z, mu, spline = fit_tracks_spline(b, segm, candidates)
+        mu = coarse_mu(mu)
+        pair = ~spline
+        if pair.any():
+            z[pair] = solve_knots(b[pair], segm, mu[pair])
         fitted = np.moveaxis(predict(z, segm, mu, spline)[:, :, 0], 0, 1).reshape(F, B, CHANNELS)
         err = moments.frame_error_sq(rodrigues(fitted[..., :3]), fitted[..., 3:], R, T)
         rms = float(np.sqrt(err.mean()))
@@ -347,9 +390,16 @@ def _fit_segments(values: np.ndarray, frame_times: np.ndarray, moments: _Moments
     return segm, z[:, :, 0], mu, spline, rms
 
 
-def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Segmentation, values: np.ndarray,
-                    moments: _Moments, R: np.ndarray, T: np.ndarray, target: float
-                    ) -> tuple[np.ndarray, np.ndarray, float]:
+def coarse_mu(mu: np.ndarray, bits: int = MU_MANTISSA_BITS) -> np.ndarray:
+    """Time constants with ``bits`` significant bits, truncated towards 0 (float32-exact)."""
+    mu = np.asarray(mu, np.float64)
+    mantissa, exponent = np.frexp(np.abs(mu))  # |mu| = mantissa * 2^exponent, mantissa in [0.5, 1)
+    kept = np.floor(mantissa * 2.0**bits) / 2.0**bits
+    return np.sign(mu) * np.ldexp(kept, exponent)
+
+
+def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Segmentation, moments: _Moments,
+                    R: np.ndarray, T: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray, float]:
     """(steps (B*6,) float32, codes (Sb+1, B, 6) int64, RMS bound of the rounded tracks): power-of-two steps
     from the rounding's share of the budget (rotations through each bone's lever arm), halved while the
     decoded tracks miss the budget."""
@@ -374,17 +424,17 @@ def _quantise_knots(z: np.ndarray, mu: np.ndarray, spline: np.ndarray, segm: Seg
         enc = EncodedBones(step=step.reshape(B, CHANNELS), codes=codes, **enc_base)
         v = BoneTracks(enc).channels(frames_t)
         rms = float(np.sqrt(moments.frame_error_sq(rodrigues(v[..., :3]), v[..., 3:], R, T).mean()))
-        if rms <= math.hypot(FIT_SHARE, KNOT_SHARE) * target or not np.all(np.isfinite(tol)):
+        if rms <= math.hypot(FIT_SHARE, KNOT_SHARE) * target:
             break
     return step, codes, rms
 
 
 def _steps(tol: np.ndarray, biggest: np.ndarray) -> np.ndarray:
     """(n,) float32 power-of-two steps whose half is at most ``tol`` (inf: the coarsest useful step, a bone
-    that moves no vertex), coarse enough that every code stays within quantise.MAX_CODE."""
+    that moves no vertex), coarse enough that every code stays within MAX_BONE_CODE."""
     top = 2.0 ** np.ceil(np.log2(np.maximum(biggest, 2.0**-100)))
     step = np.minimum(2.0 * tol, top)
-    step = np.maximum(step, biggest / quantise.MAX_CODE)
+    step = np.maximum(step, biggest / MAX_BONE_CODE)
     step = np.clip(step, np.finfo(np.float32).tiny, 2.0**100)
     return (2.0 ** np.floor(np.log2(step))).astype(np.float32)
 
@@ -408,14 +458,37 @@ def _quantise_weights(motion: BoneMotion, rest: np.ndarray, pivot: np.ndarray, t
         spread += float(((p - mean[:, None]) ** 2).sum()) / max(len(rest), 1)
     spread /= max(len(frames), 1)
     for bits in range(WEIGHT_BITS[0], WEIGHT_BITS[1] + 1):
-        scale = 2.0**bits - 1.0
+        scale = 2**bits - 1
         rms = math.sqrt(spread / 12.0) / scale
         if rms <= WEIGHT_SHARE * target or bits == WEIGHT_BITS[1]:
             break
-    q = np.rint(w * scale).astype(np.int64)
-    empty = q.sum(axis=1) == 0  # cannot happen for rows summing to 1 (their largest weight is >= 1/K)
-    q[empty, np.argmax(w[empty], axis=1)] = 1
-    return q, bits, rms
+    return weight_levels(w, scale), bits, rms
+
+
+def weight_levels(w: np.ndarray, scale: int) -> np.ndarray:
+    """(V, K) int64 integers q, each row summing to ``scale``, nearest w * scale (largest remainders)."""
+    exact = w * scale
+    q = np.floor(exact).astype(np.int64)
+    short = scale - q.sum(axis=1)  # 0..K-1 units still to hand out per row
+    rank = np.argsort(np.argsort(-(exact - q), axis=1, kind="stable"), axis=1, kind="stable")
+    return q + (rank < short[:, None])
+
+
+def sorted_influences(index: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(index, q) (V, K) with a vertex's repeated bone merged, influences by ascending bone, zero weights
+    last with the previous slot's bone: the order writers store (it compresses best)."""
+    index, q = np.array(index, np.int64), np.array(q, np.int64)
+    K = index.shape[1]
+    for k in range(1, K):
+        for j in range(k):
+            same = (index[:, k] == index[:, j]) & (q[:, j] > 0)
+            q[same, j] += q[same, k]
+            q[same, k] = 0
+    order = np.argsort(np.where(q > 0, index, np.iinfo(np.int64).max), axis=1, kind="stable")
+    index, q = np.take_along_axis(index, order, 1), np.take_along_axis(q, order, 1)
+    for k in range(1, K):
+        index[:, k] = np.where(q[:, k] > 0, index[:, k], index[:, k - 1])
+    return index, q
 
 
 # ---------------------------------------------------------------- the stored form
@@ -424,12 +497,13 @@ def bones_header_arrays(enc: EncodedBones) -> tuple[dict[str, Any], dict[str, np
     """(header keys, arrays) the bone layer adds to a coefficients part (§3.9), ``format_version`` and
     ``required`` included."""
     header = {"format_version": BONES_VERSION, "required": [BONES_FEATURE], "n_bones": enc.n_bones,
-              "bone_influences": enc.n_influences, "bone_knot_differences": int(enc.knot_differences)}
+              "bone_influences": enc.n_influences, "bone_knot_differences": int(enc.knot_differences),
+              "bone_weight_bits": int(enc.weight_bits)}
     arrays = {
         "bone_segment_t": np.asarray(enc.segment_t, np.float64),
         "bone_pivot": np.asarray(enc.pivot, np.float32),
         "bone_index": np.asarray(enc.index, np.uint16),
-        "bone_weight": np.asarray(enc.weight_q, np.uint16),
+        "bone_weight": np.ascontiguousarray(np.asarray(enc.weight_q)[:, :-1], np.uint16),  # last implied
         "bone_time_model": np.asarray(enc.time_model, np.uint8),
         "bone_m": np.asarray(enc.mu, np.float32),
         "bone_step": np.asarray(enc.step, np.float32),
@@ -475,17 +549,21 @@ def decode_bones(header: dict[str, Any], arrays: dict[str, np.ndarray], n_vertic
     B = _int_key(header, "n_bones", 1, np.iinfo(np.uint16).max + 1)
     K = _int_key(header, "bone_influences", 1, MAX_INFLUENCES)
     order = _int_key(header, "bone_knot_differences", 1, 2)
+    bits = _int_key(header, "bone_weight_bits", 1, 16)
     seg_t = _array(arrays, "bone_segment_t", (None,), "<f8")
     Sb = len(seg_t) - 1
     if Sb < 1 or seg_t[0] != 0.0 or seg_t[-1] != 1.0 or np.any(np.diff(seg_t) <= 0):
         raise ClipFormatError("bone_segment_t must increase strictly from 0 to 1 with at least one segment")
     pivot = _array(arrays, "bone_pivot", (B, 3), "<f4")
     index = _array(arrays, "bone_index", (n_vertices, K), "<u2")
-    weight = _array(arrays, "bone_weight", (len(index), K), "<u2")
+    stored = _array(arrays, "bone_weight", (len(index), K - 1), "<u2").astype(np.int64)
     if index.size and int(index.max()) >= B:
         raise ClipFormatError(f"a bone_index is not below n_bones ({B})")
-    if np.any(weight.astype(np.int64).sum(axis=1) == 0):
-        raise ClipFormatError("a vertex's bone weights sum to 0")
+    last = (2**bits - 1) - stored.sum(axis=1)
+    if np.any(last < 0):
+        raise ClipFormatError(f"a vertex's stored bone weights sum above 2^bone_weight_bits - 1 "
+                              f"({2**bits - 1})")
+    weight = np.concatenate([stored, last[:, None]], axis=1)
     time_model = _array(arrays, "bone_time_model", (B, CHANNELS), "<u1")
     if time_model.size and time_model.max() > TIME_SPLINE:
         raise ClipFormatError("bone_time_model must be 0 (paper pair) or 1 (natural spline)")
@@ -499,9 +577,11 @@ def decode_bones(header: dict[str, Any], arrays: dict[str, np.ndarray], n_vertic
         raise ClipFormatError("bone knot steps must be positive")
     tracks = _array(arrays, "bone_knots", (B, CHANNELS, Sb + 1), "<u4")
     codes = quantise.decode_knot_tracks(tracks, order)
-    enc = EncodedBones(np.array(seg_t), np.array(pivot), np.array(index), np.array(weight),
-                       np.array(time_model), np.array(mu), np.array(step), codes, order)
-    if not np.all(np.isfinite(enc.knots())):
+    enc = EncodedBones(np.array(seg_t), np.array(pivot), np.array(index), weight.astype(np.uint16),
+                       np.array(time_model), np.array(mu), np.array(step), codes, order, bits)
+    with np.errstate(over="ignore"):  # a float32 overflow is what this check reports
+        finite = np.all(np.isfinite(enc.knots()))
+    if not finite:
         raise ClipFormatError("bone knots decode to non-finite values")
     return enc
 
@@ -513,3 +593,14 @@ def add_bone_layer(header: dict[str, Any], arrays: dict[str, np.ndarray], enc: E
     required = sorted(set(header.get("required", [])) | set(keys.pop("required")))
     header.update(keys, required=required)
     arrays.update(bone_arrays)
+
+
+def with_bone_layer(coefficients: bytes, enc: EncodedBones, level: int = container.ZSTD_LEVEL) -> bytes:
+    """The coefficients part ``coefficients`` (kind "dynamic-pde", motion "displacement") with the bone layer
+    added: its curves become the residual on the skinned rest pose; their arrays are kept as they are."""
+    header, arrays = container.unpack(coefficients)
+    if header.get("kind") != "dynamic-pde" or header.get("motion") != "displacement":
+        raise ParameterError("a bone layer goes on a dynamic-PDE clip with motion 'displacement'")
+    arrays = dict(arrays)
+    add_bone_layer(header, arrays, enc)
+    return container.pack(header, arrays, {name: container.SMALLEST for name in arrays}, level)

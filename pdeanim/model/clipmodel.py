@@ -59,7 +59,7 @@ class DynamicClip:
         self._cubic_items = [spline] * len(self._mu)  # per segment, the items on the spline (§3.5): all
 
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
-        self._bones = None if coef.bones is None else BonePlayer(coef.bones, topo.rest, self.looping)
+        self.bones = None if coef.bones is None else BonePlayer(coef.bones, topo.rest, self.looping)
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
         elif self._rigid is not None:
@@ -169,7 +169,7 @@ class DynamicClip:
         scalar = np.ndim(t) == 0
         seg, tau, tw = self._locate(np.atleast_1d(t))
         out = np.empty((len(seg), self.n_vertices, 3), np.float32)
-        bases = None if self._bones is None else self._bones.positions(tw).reshape(len(tw), -1)
+        bases = None if self.bones is None else self.bones.positions(tw).reshape(len(tw), -1)
         for k, (s, x) in enumerate(zip(seg, tau, strict=True)):
             self._frame(int(s), float(x), out[k], None if bases is None else bases[k])
         if self._rigid is not None:
@@ -179,7 +179,7 @@ class DynamicClip:
 
     def _bone_base(self, tw: np.ndarray, k: int) -> np.ndarray | None:
         """(V * 3,) float32 skinned positions of the bone layer at wrapped time tw[k] (None: no bones)."""
-        return None if self._bones is None else self._bones.positions(tw[k:k + 1]).reshape(-1)
+        return None if self.bones is None else self.bones.positions(tw[k:k + 1]).reshape(-1)
 
     def frame_t(self) -> np.ndarray:
         """(F,) normalised times of the source frames."""

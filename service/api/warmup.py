@@ -1,9 +1,9 @@
 """Warm start: before an API process accepts its first request, import what the clip routes use and run a
 few tiny bundled clips (one per kind of evaluator: rigid, displacement, absolute, spline and PDE tangents,
-windows, blend basis, cyclic) through decoding, evaluation, the frame GLB and a short animation, so that
-numba's compiled kernels are loaded (from its on-disk cache, or compiled) by then. In a cold process the
-first frame requests otherwise waited for these imports and kernels (0.5 s and more) on top of loading their
-clip."""
+windows, blend basis, cyclic, bones with a residual and its skinned export) through decoding, evaluation, the
+frame GLB and a short animation, so that numba's compiled kernels are loaded (from its on-disk cache, or
+compiled) by then. In a cold process the first frame requests otherwise waited for these imports and kernels
+(0.5 s and more) on top of loading their clip."""
 
 from __future__ import annotations
 

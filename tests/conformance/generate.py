@@ -10,7 +10,9 @@ zero-length segment, large and tiny rigid rotations). Every case is format 1.0; 
 optional features it covers: "-spline" cases have items on the natural-spline time model (docs/format.md
 §3.5), "-basis" cases store their knots on a shared low-rank time basis (§3.4), "-pde" cases were fitted with
 the paper's time model alone, "-windows" cases were fitted in windows of frames and store a knot step per
-window (§3.4) (the generator checks that the writer did choose what each covers).
+window (§3.4) (the generator checks that the writer did choose what each covers). "bones-" cases are format
+1.1 with a bone layer (§3.9, :mod:`tests.conformance.bonecases`); ``refused`` lists clips every reader must
+refuse (a ``required`` feature no reader implements).
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ from pdeanim.model.clipformat import TIME_SPLINE, CoefficientData, encode_coeffi
 from pdeanim.model.families import MU_TRIG_MAX
 from pdeanim.poses import make_poses
 
-FIXTURE_VERSION = 8
+from . import bonecases
+
+FIXTURE_VERSION = 10
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -292,14 +296,25 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "cyclic-dolphin-travelling-translate": (_cyclic("dolphin", wave="travelling", radial="translate"), {}),
     "cyclic-trout-travelling-rotate-vertical": (_cyclic("trout", wave="travelling", direction="vertical"),
                                                 {}),
+    "bones-synthetic-k1-zero": (bonecases.synthetic_bone_case(1, 2, residual=False), {}),
+    "bones-synthetic-k2-residual": (bonecases.synthetic_bone_case(2, 3, residual=True, differences=2), {}),
+    "bones-synthetic-k3-zero-loop": (bonecases.synthetic_bone_case(3, 4, residual=False, looping=True), {}),
+    "bones-synthetic-k4-residual": (bonecases.synthetic_bone_case(4, 5, residual=True), {}),
+    "bones-fit-k2-zero": (bonecases.fitted_bone_case(2, 3, residual=False), {}),
+    "bones-fit-k4-residual": (bonecases.fitted_bone_case(4, 5, residual=True), {}),
 }
+
+REFUSED: dict[str, tuple[Callable[[], ClipParts], str]] = {
+    "refused-unknown-feature": (bonecases.unknown_feature_case, bonecases.UNKNOWN_FEATURE),
+}
+"""Clips every reader must refuse, with the text the refusal names (the feature it lacks)."""
 
 
 def case_times(parts: ClipParts) -> list[float]:
     """t = 0 and 1, every segment boundary (rigid ones too), midpoints, clamping or loop wrap."""
     ch, ca = container.unpack(parts.coefficients)
     ts = {0.0, 1.0, 0.37, 0.999}
-    for name in ("segment_t", "rigid_segment_t"):
+    for name in ("segment_t", "rigid_segment_t", "bone_segment_t"):
         if name in ca:
             b = [float(x) for x in ca[name]]
             ts.update(b)
@@ -332,7 +347,13 @@ def generate(out: Path, names: list[str] | None = None) -> dict:
             "format_version": ch.get("format_version"), "knot_rank": ch.get("knot_rank"),
             "spline_items": int((ca["time_model"] == TIME_SPLINE).sum()) if "time_model" in ca else None,
             "n_vertices": int(clip.n_vertices), "t": ts,
-            "diagonal": float(np.linalg.norm(np.ptp(rest, axis=0)))})
+            "diagonal": float(np.linalg.norm(np.ptp(rest, axis=0))),
+            **({"bones": bones} if (bones := bonecases.bone_manifest(parts)) else {})})
+    for name, (make, feature) in REFUSED.items():
+        if names and name not in names:
+            continue
+        write_clip_file(out / f"{name}.clip", make())
+        manifest.setdefault("refused", []).append({"name": name, "clip": f"{name}.clip", "names": feature})
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
     return manifest
 

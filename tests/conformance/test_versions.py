@@ -67,3 +67,40 @@ def test_unknown_kind_is_refused():
     topo, coef = _parts("fit-displacement-chord")
     with pytest.raises(ClipFormatError, match="unknown clip kind"):
         load_clip(topo, _edit(coef, kind="spline"))
+
+
+def test_a_required_feature_the_reader_lacks_is_refused():
+    import json
+
+    refused = json.loads((FIXTURES / "manifest.json").read_text())["refused"]
+    assert refused, "the fixtures hold a clip that requires an unknown feature"
+    for case in refused:
+        with pytest.raises(ClipFormatError, match=f"requires feature.*'{case['names']}'.*supports: bones"):
+            read_clip_file(FIXTURES / case["clip"])
+        header, arrays = container.unpack((FIXTURES / case["clip"]).read_bytes())
+        with pytest.raises(ClipFormatError, match=case["names"]):  # the part itself, past the file header
+            load_clip(arrays["topology"].tobytes(), arrays["coefficients"].tobytes())
+
+
+def test_a_reader_without_bones_refuses_a_bone_clip_and_still_reads_1_0(monkeypatch):
+    from pdeanim import clipparts
+
+    topo, coef = _parts("bones-synthetic-k2-residual")
+    assert container.unpack(coef)[0]["required"] == ["bones"]
+    monkeypatch.setattr(clipparts, "SUPPORTED_FEATURES", ())
+    with pytest.raises(ClipFormatError, match="requires feature.*'bones'"):
+        load_clip(topo, coef)
+    load_clip(*_parts("fit-displacement-chord"))  # no `required`: read as ever
+
+
+@pytest.mark.parametrize("required", ["bones", [1], {"bones": 1}, [["bones"]]])
+def test_required_must_be_a_list_of_names(required):
+    topo, coef = _parts("bones-synthetic-k1-zero")
+    with pytest.raises(ClipFormatError, match="'required' must be a list of feature names"):
+        load_clip(topo, _edit(coef, required=required))
+
+
+def test_bones_are_refused_on_a_cyclic_clip():
+    topo, coef = _parts("cyclic-eel-standing-rotate")
+    with pytest.raises(ClipFormatError, match="kind 'cyclic-spine' requires feature 'bones'"):
+        load_clip(topo, _edit(coef, required=["bones"], format_version="1.1"))

@@ -222,3 +222,15 @@ def test_cli_frame_of_a_forged_clip_exits_2_without_a_traceback(tmp_path):
                          env={**os.environ, "PYTHONPATH": str(root)})
     assert run.returncode == 2, run.stderr
     assert "Traceback" not in run.stderr and "declare 4294967296 bytes" in run.stderr, run.stderr
+
+
+def test_read_header_is_the_header_without_decoding_arrays():
+    blob = container.pack({"part": "x", "n": 3}, {"a": np.arange(1000, dtype=np.float32)})
+    assert container.read_header(blob) == container.unpack(blob)[0] == {"part": "x", "n": 3}
+    header_only = blob[:16 + int.from_bytes(blob[12:16], "little")]  # the arrays cut off
+    assert container.read_header(header_only)["n"] == 3
+    with pytest.raises(ClipFormatError):
+        container.unpack(header_only)
+    for bad in (b"", b"NOTPDEAN" + blob[8:], blob[:12] + (10**6).to_bytes(4, "little") + blob[16:]):
+        with pytest.raises(ClipFormatError):
+            container.read_header(bad)
