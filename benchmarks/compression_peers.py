@@ -11,6 +11,8 @@ bounding-box diagonal of frame 0; ``pdeanim.model.metrics.error_summary`` scores
 * ``pca``: k by bisection, quantised, zstd; ``keyframes`` (floor reference): quantised frames, zstd
   (benchmarks/peers_lowrank.py);
 * ``dembones``: 8/16/32/64 bones, <= 4 influences, quantised, zstd (benchmarks/peers_dembones.py);
+* ``skinned`` (skinned glTF inputs, ``--gltf``): the source's own skeletal animation after ``gltfpack -cc``,
+  animation and skin data only, against the clip's coefficients part (benchmarks/peers_skinned.py);
 * ``heldout``: every 4th frame fitted at the same target, error at the frames in between, against linear and
   Catmull-Rom interpolation (benchmarks/peers_heldout.py).
 
@@ -39,10 +41,11 @@ import peers_gltfpack
 import peers_heldout
 import peers_lowrank
 import peers_report
+import peers_skinned
 from peers_common import ROOT, log
 from peers_synthetic import SYNTHETIC
 
-METHODS = ("clip", "gltfpack", "pca", "dembones", "keyframes", "heldout")
+METHODS = ("clip", "gltfpack", "pca", "dembones", "skinned", "keyframes", "heldout")
 TARGETS = (3e-3, 1e-3)
 QUICK_SHARED = ("horse-collapse",)
 
@@ -63,7 +66,8 @@ def load_inputs(args: argparse.Namespace) -> dict[str, Path | str]:
     """name -> the shared .npz, or the name of a synthetic animation, in the order they run."""
     folder = find_sequences(args.data)
     shared = {p.stem: p for p in sorted(folder.glob("*.npz"))}
-    inputs: dict[str, Path | str] = {**{n: n for n in SYNTHETIC}, **shared}
+    gltf = {p.stem: p for p in map(Path, args.gltf.split(","))} if args.gltf else {}
+    inputs: dict[str, Path | str] = {**{n: n for n in SYNTHETIC}, **shared, **gltf}
     if args.sequences:
         want = args.sequences.split(",")
         missing = [n for n in want if n not in inputs]
@@ -76,7 +80,13 @@ def load_inputs(args: argparse.Namespace) -> dict[str, Path | str]:
 
 
 def frames_of(source: Path | str, work: Path) -> tuple[np.ndarray, np.ndarray, Path]:
-    """(frames float64, faces, a .npz the CLI can fit): shared files in place, synthetic ones written."""
+    """(frames float64, faces, a file the CLI can fit): shared files and glTF inputs (sampled at 30 fps) in
+    place, synthetic ones written."""
+    if isinstance(source, Path) and source.suffix.lower() in (".glb", ".gltf"):
+        from pdeanim.gltf.read import read_animated_poses
+
+        poses = read_animated_poses(source, fps=30.0)
+        return poses.vertices.astype(np.float64), poses.faces, source
     if isinstance(source, Path):
         with np.load(source) as d:
             return d["vertices"].astype(np.float64), d["faces"].astype(np.int32), source
@@ -97,7 +107,10 @@ def run_sequence(name: str, source: Path | str, args: argparse.Namespace) -> lis
             "clip": lambda: peers_clip.method_clip(name, npz, X, t, work, tmo),
             "gltfpack": lambda: peers_gltfpack.method_gltfpack(X, faces, work, tmo, q),
             "pca": lambda: peers_lowrank.method_pca(X, faces, t, q),
-            "dembones": lambda: peers_dembones.method_dembones(name, X, faces, args.cache, q),
+            "dembones": lambda: peers_dembones.method_dembones(name, X, faces, args.cache, q,
+                                                               args.dembones_bones),
+            "skinned": lambda: (peers_skinned.method_skinned(npz, X, work, tmo)
+                                if npz.suffix.lower() in (".glb", ".gltf") else []),
             "keyframes": lambda: peers_lowrank.method_keyframes(X, faces, t, q),
             "heldout": lambda: [r for tg in t for r in peers_heldout.stated_protocol(name, X, faces, tg, work,
                                                                                     tmo)]
@@ -166,6 +179,9 @@ def write_outputs(results: dict[str, list[dict]], args: argparse.Namespace, head
         "Wire ratio = clip wire bytes / the smallest of gltfpack, PCA and Dem Bones on the wire; file ratio "
         "the same with file bytes:",
         peers_report.summary_table(results, targets),
+        "Skinned glTF inputs: the clip's coefficients part (bone layer + residual curves) against the "
+        "source's own animation and skin after gltfpack -cc (the mesh counted on neither side):",
+        peers_report.skinned_table(results, targets),
         "The project's fits:",
         peers_report.clip_table(results),
         "Held-out frames (rel-RMS / rel-max at the frames left out, to frame 0's bbox diagonal):",
@@ -186,6 +202,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                                               "../shared/data/sequences)")
     ap.add_argument("--sequences", help="comma-separated names (shared .npz stems or "
                                         f"{', '.join(SYNTHETIC)}; default: all)")
+    ap.add_argument("--gltf", help="comma-separated skinned (or other animated) glTF files to add as inputs")
     ap.add_argument("--targets", default=",".join(f"{t:g}" for t in TARGETS), help="rel-RMS targets")
     ap.add_argument("--methods", default=",".join(METHODS), help=f"subset of {','.join(METHODS)}")
     ap.add_argument("--quick", action="store_true",
@@ -194,6 +211,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--cache", type=Path,
                     default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pdeanim-bench",
                     help="cache folder of Dem Bones solves (outside the repository)")
+    ap.add_argument("--dembones-bones", help="comma-separated Dem Bones bone counts (default 8,16,32,64,128)")
     ap.add_argument("--fit-timeout", type=float, default=3600.0, help="seconds per fit / gltfpack run")
     ap.add_argument("--resume", action="store_true", help="keep the inputs already in OUT/results.json")
     args = ap.parse_args(argv)
@@ -202,6 +220,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     if unknown:
         ap.error(f"unknown methods: {', '.join(sorted(unknown))}")
     args.targets = tuple(float(t) for t in args.targets.split(","))
+    if args.dembones_bones:
+        args.dembones_bones = tuple(int(b) for b in args.dembones_bones.split(","))
     if "gltfpack" in args.methods and not peers_gltfpack.GLTFPACK_CLI.exists():  # a missing peer flatters
         ap.error(f"{peers_gltfpack.GLTFPACK_CLI} is missing: run ./script/setup (npm ci in benchmarks/peers)")
     return args

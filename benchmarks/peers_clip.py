@@ -102,7 +102,10 @@ def clip_row(parts, approx: np.ndarray, X: np.ndarray, target: float, res: dict)
     r = result("clip", f"rel-RMS {target:g}", len(parts.topology) + len(parts.coefficients), approx, X,
                wire=wire, target=target, fit_s=res["seconds"], peak_mb=res["peak_mb"], exit_code=res["rc"],
                segments=parts.report.get("segments"), curves=parts.report.get("curves"),
-               format_version=parts.report.get("format_version"), message=res.get("message", ""))
+               format_version=parts.report.get("format_version"), message=res.get("message", ""),
+               bones=(parts.report.get("bones") or {}).get("n_bones", 0),
+               residual_share=(parts.report.get("bones") or {}).get("residual_share"),
+               coefficients_wire=wire_bytes(parts.coefficients))
     r["target_met"] = bool(res["rc"] == 0 and r["rel_rms"] <= target * (1 + 1e-9))
     return r
 

@@ -99,3 +99,31 @@ def smallest_meeting(lo: int, hi: int, meets: Callable[[int], bool]) -> int | No
         else:
             lo = mid + 1
     return lo
+
+
+class WeldedInput:
+    """An input with its seam duplicates merged (vertices whose positions agree in every frame, as a glTF
+    export leaves them at UV and normal seams): the array peers fit the P distinct trajectories and ship the
+    vertex -> point remap (counted in their bytes) to give every vertex its point's motion back."""
+
+    def __init__(self, X: np.ndarray, faces: np.ndarray) -> None:
+        from pdeanim.bones.trajweld import weld_trajectories
+
+        w = weld_trajectories(X.astype(np.float32))
+        self.point_of = w.point_of
+        self.merged = w.n_points < X.shape[1]
+        self.X = X[:, w.keep]
+        f = self.point_of[np.asarray(faces, np.int64)]
+        keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+        self.faces = f[keep].astype(np.int32)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The remap as a file holds it (differences of consecutive point ids, int32), none when nothing
+        merged."""
+        if not self.merged:
+            return {}
+        return {"remap": np.diff(self.point_of, prepend=0).astype(np.int32)}
+
+    def expand(self, approx: np.ndarray) -> np.ndarray:
+        """Decoded frames of the points (F, P, 3) -> of every vertex (F, V, 3)."""
+        return approx if not self.merged else approx[:, self.point_of]

@@ -1,7 +1,9 @@
 """The Dem Bones peer of the compression benchmark (PyPI ``py-dem-bones``): linear blend skinning with 8, 16,
-32 and 64 bones and at most 4 influences per vertex, quantised (rest positions, quaternions and translations
-at 10-16 bits; 8-bit weights and bone indices), each array zstd -19, faces with meshoptimizer's index codec.
-Solves are cached on disk outside the repository (minutes each on the larger sequences)."""
+32, 64 and 128 bones and at most 4 influences per vertex, quantised (rest positions, quaternions and
+translations at 10-16 bits; 8-bit weights and bone indices), each array zstd -19, faces with meshoptimizer's
+index codec. Solved on the welded trajectories (seam duplicates merged, the remap in the file: Dem Bones fails
+on unwelded meshes). Solves are cached on disk outside the repository (minutes each on the larger
+sequences)."""
 
 from __future__ import annotations
 
@@ -9,9 +11,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from peers_common import faces_code, log, pack_payload, quantise, result
+from peers_common import WeldedInput, faces_code, log, pack_payload, quantise, result
 
-BONES = (8, 16, 32, 64)
+BONES = (8, 16, 32, 64, 128)
 QUICK_BONES = (8, 16)
 PRECISIONS = ((16, 16), (14, 14), (12, 12), (10, 12))
 """(rest position bits, quaternion and translation bits): the error of a few bones is mostly the skinning's,
@@ -57,6 +59,7 @@ def quantised_skinning(X: np.ndarray, weights: np.ndarray, M: np.ndarray, rest_b
     top = np.argsort(-Wt, axis=1)[:, :INFLUENCES]
     wv = np.take_along_axis(Wt, top, 1)
     w8 = np.rint(wv / np.maximum(wv.sum(1, keepdims=True), 1e-12) * 255).astype(np.uint8)
+    bone_dtype = np.uint8 if B <= 256 else np.uint16
     Wq = np.zeros_like(Wt)
     np.put_along_axis(Wq, top, w8 / 255.0, 1)
     quat = Rotation.from_matrix(M[..., :3, :3].reshape(-1, 3, 3)).as_quat().reshape(F, B, 4)
@@ -64,22 +67,26 @@ def quantised_skinning(X: np.ndarray, weights: np.ndarray, M: np.ndarray, rest_b
     q_quat, quat_dq, r_quat = quantise(quat, axis=(0, 2), bits=bone_bits)
     q_tr, tr_dq, r_tr = quantise(M[..., :3, 3], axis=(0, 2), bits=bone_bits)
     Rq = Rotation.from_quat(quat_dq.reshape(-1, 4)).as_matrix().reshape(F, B, 3, 3)
-    arrays = {"rest": q_rest, "rest_range": r_rest, "weights": w8, "bones": top.astype(np.uint8),
+    arrays = {"rest": q_rest, "rest_range": r_rest, "weights": w8, "bones": top.astype(bone_dtype),
               "quaternions": q_quat, "quaternion_range": r_quat, "translations": q_tr,
               "translation_range": r_tr}
     return skin(rest_dq, Wq, Rq, tr_dq), arrays
 
 
-def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path, quick: bool) -> list[dict]:
-    """Dem Bones at each bone count, quantised + zstd, faces included."""
-    fc = faces_code(faces, X.shape[1])
+def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path, quick: bool,
+                    bones: tuple[int, ...] | None = None) -> list[dict]:
+    """Dem Bones at each bone count (``bones``, default BONES), on the welded trajectories, quantised + zstd,
+    faces and remap included."""
+    w = WeldedInput(X, faces)
+    fc = faces_code(w.faces, w.X.shape[1])
     rows = []
-    for b in QUICK_BONES if quick else BONES:
+    for b in bones or (QUICK_BONES if quick else BONES):
         log(f"{name}: dem bones {b} bones")
-        sol = solve(name, X, faces, b, cache)
+        sol = solve(name, w.X, w.faces, b, cache)
         for rest_bits, bone_bits in QUICK_PRECISIONS if quick else PRECISIONS:
-            approx, arrays = quantised_skinning(X, sol["weights"], sol["transforms"], rest_bits, bone_bits)
-            blob = pack_payload("dembones", {"faces": fc, **arrays})
+            approx, arrays = quantised_skinning(w.X, sol["weights"], sol["transforms"], rest_bits, bone_bits)
+            approx = w.expand(approx)
+            blob = pack_payload("dembones", {"faces": fc, **w.arrays(), **arrays})
             solved = sol["weights"].shape[0]
             setting = f"{b} bones ({solved} solved), rest {rest_bits}-bit, bones {bone_bits}-bit"
             rows.append(result("dembones", setting, blob, approx, X, solve_s=sol["seconds"]))

@@ -11,7 +11,7 @@
 from __future__ import annotations
 
 import numpy as np
-from peers_common import faces_code, pack_payload, quantise, result, smallest_meeting
+from peers_common import WeldedInput, faces_code, pack_payload, quantise, result, smallest_meeting
 
 from pdeanim.fit.heldout import linear_interpolation
 from pdeanim.model.metrics import bbox_diagonal
@@ -94,18 +94,22 @@ def pca_settings(m: PcaModel, targets: tuple[float, ...], quick: bool) -> dict[f
 
 def method_pca(X: np.ndarray, faces: np.ndarray, targets: tuple[float, ...], quick: bool) -> list[dict]:
     """For each target, the smallest PCA file that meets it (bits of the bases and the mean searched, k by
-    bisection), sized at zstd -19 for the shortlisted settings."""
-    m = PcaModel(X)
-    fc = faces_code(faces, X.shape[1])
+    bisection), sized at zstd -19 for the shortlisted settings; on the welded trajectories (seam duplicates
+    merged, the remap in the file)."""
+    w = WeldedInput(X, faces)
+    m = PcaModel(w.X)
+    fc = faces_code(w.faces, w.X.shape[1])
     rows, done = [], set()
     for settings in pca_settings(m, targets, quick).values():
         for bits, mean_bits, k in settings[:SHORTLIST]:
             if (bits, mean_bits, k) in done:
                 continue
             done.add((bits, mean_bits, k))
-            blob = pack_payload("pca", {"faces": fc, **m.arrays(k, bits, mean_bits)})
-            rows.append(result("pca", f"k={k}, bases {bits}-bit, mean {mean_bits}-bit", blob,
-                               m.approx(k, bits, mean_bits), X, k=k, bits=bits, mean_bits=mean_bits))
+            blob = pack_payload("pca", {"faces": fc, **w.arrays(), **m.arrays(k, bits, mean_bits)})
+            rows.append(result("pca", f"k={k}, bases {bits}-bit, mean {mean_bits}-bit"
+                               + (f", welded {w.X.shape[1]} points" if w.merged else ""), blob,
+                               w.expand(m.approx(k, bits, mean_bits)), X, k=k, bits=bits,
+                               mean_bits=mean_bits))
     return rows
 
 

@@ -310,6 +310,13 @@ def read_header(blob: bytes) -> dict[str, Any]:
     return header
 
 
+def array_encodings(blob: bytes) -> dict[str, str]:
+    """The encoding of every compressed array of container bytes (to pack its arrays again the same way)."""
+    magic, version, hlen = _PREFIX.unpack_from(blob, 0)
+    table = json.loads(bytes(blob[_PREFIX.size:_PREFIX.size + hlen]).decode()).get("arrays", {})
+    return {name: spec["encoding"] for name, spec in table.items() if "encoding" in spec}
+
+
 def with_header(blob: bytes, extra: dict[str, Any]) -> bytes:
     """The container ``blob`` with keys added to its JSON header (the arrays' bytes untouched: their offsets
     count from the start of the data, which follows the header)."""

@@ -36,12 +36,19 @@ class Poses:
     faces : (T, 3) int32 triangle indices into V (may be empty for point data)
     times : (F,) float64 strictly increasing seconds
     meta : free-form provenance (source file, simulation parameters, reports)
+    rest : (V, 3) the rest pose a fit stores and measures displacements from (None: the first frame); a
+        bone layer's residual is fitted about the pose its bones skin
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     times: np.ndarray
     meta: dict = field(default_factory=dict)
+    rest: np.ndarray | None = None
+
+    def rest_pose(self) -> np.ndarray:
+        """(V, 3) the rest pose: ``rest`` where given, else the first frame."""
+        return self.vertices[0] if self.rest is None else self.rest
 
     @property
     def n_frames(self) -> int:

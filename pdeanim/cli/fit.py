@@ -58,6 +58,10 @@ def register(subparsers) -> None:  # noqa: ANN001
                         "else the paper's), pde (the paper's time solution alone: families with a constant "
                         "m per segment) or spline (every moving curve coordinate of an open clip on the "
                         "spline)")
+    p.add_argument("--bones", default="auto", type=_bones_arg, metavar="auto|0|N",
+                   help="bone layer under the curves (format 1.1): 'auto' (default) the bone count, none "
+                        "included, whose clip is smallest; 0 none; N at most N bones from a skinning "
+                        "decomposition. A skinned glTF keeps its own skeleton unless 0")
     p.add_argument("--best-effort", action="store_true",
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",
@@ -87,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
         **({} if args.max_segments is None else {"max_segments": args.max_segments}),
         best_effort=args.best_effort,
         time_model=args.time_model,
+        bones=_bones_for(args),
     )
     start = time.perf_counter()
     poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
@@ -94,9 +99,13 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(used, dict):
         print(f"animation: {used.get('name') or '(unnamed)'} (index {used.get('index')})")
     check_memory_estimate(poses.n_frames, poses.n_vertices)
+    skin = None
+    if options.bones != 0 and Path(args.poses).suffix.lower() in (".glb", ".gltf"):
+        from ..bones.gltfskin import skin_bones
+        skin = skin_bones(args.poses, poses)
     progress = cli_progress("fit", args.quiet)
     try:
-        parts = fit_poses(poses, options, progress=progress)
+        parts = fit_poses(poses, options, progress=progress, skin=skin)
     except MemoryError as exc:
         raise out_of_memory_in_fit(exc, poses.n_frames, poses.n_vertices) from None
     finally:
@@ -112,6 +121,42 @@ def run(args: argparse.Namespace) -> int:
         print(f"pdeanim fit: {shortfall} (the best clip found was written to {args.out})", file=sys.stderr)
         return 0 if args.best_effort else EXIT_TARGET_NOT_MET
     return 0
+
+
+def _bones_arg(value: str) -> int | str:
+    """--bones: "auto" or a bone count >= 0."""
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--bones must be auto or a count >= 0, got {value!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"--bones must be auto or a count >= 0, got {value!r}")
+    return n
+
+
+def _bones_for(args: argparse.Namespace) -> int | str:
+    """The bones option: "auto" becomes 0 where no bone layer can apply (a fixed segment count, motion
+    other than displacement); an explicit count is passed on (and refused there with a reason)."""
+    if args.bones == "auto" and (args.segments is not None or args.motion != "displacement"):
+        return 0
+    return args.bones
+
+
+def _bones_line(b: dict | None) -> str:
+    """How many bones the clip has, where they came from and the residual's share of the bytes."""
+    if b and b.get("skipped"):
+        return f"bones: none ({b['skipped']})"
+    if not b or not b.get("n_bones"):
+        tried = (b or {}).get("candidates")
+        return "bones: none" + (f" (tried {', '.join(str(c['bones']) for c in tried)}: smallest without)"
+                                if tried and len(tried) > 1 else "")
+    line = (f"bones: {b['n_bones']} ({b.get('source')}), bone layer {b['bone_bytes']} bytes, residual curves "
+            f"{b['residual_bytes']} bytes ({100 * b['residual_share']:.0f}% of the clip)")
+    if b.get("skinning_rel_rms") is not None:
+        line += f", skinning alone rel rms {b['skinning_rel_rms']:.3g}"
+    return line
 
 
 def out_of_memory_in_fit(exc: MemoryError, n_frames: int, n_vertices: int) -> Exception:
@@ -193,5 +238,6 @@ def summary_text(r: dict, seconds: float, out: str) -> str:
         + (f", knots on {r['knot_rank']} shared time tracks" if r.get("knot_rank") else ""),
         _time_models_line(r.get("time_models")),
         f"time {seconds:.2f} s -> {out}",
+        _bones_line(r.get("bones")),
     ]
     return "\n".join(lines)

@@ -20,6 +20,7 @@ TIME_MODELS = ("auto", "pde", "spline")
 as the paper's time pairs, else the paper's; the default), "pde" (the paper's time solution alone: families
 with a constant m per segment, Eq. 5-8) or "spline" (every moving item of an open clip on the spline)."""
 DEFAULT_TARGET_REL_RMS = 3e-3
+MAX_BONES = 1024
 
 
 @dataclass
@@ -31,7 +32,9 @@ class FitOptions:
     "absolute" | "rigid" (per-curve rigid tracks + residual in the curve's frame); loop: periodic knots (last
     frame flows into the first); max_segments caps the adaptivity (reaching it is reported, never silent).
     best_effort: a missed target is not an error (the CLI exits 0, a fit job succeeds with the best clip).
-    time_model: see TIME_MODELS.
+    time_model: see TIME_MODELS. bones: a bone layer under the curves (format 1.1): 0 none, N at most N
+    bones fitted by a skinning decomposition, "auto" the bone count (0 included) whose clip is smallest; a
+    skinned glTF input keeps its own skeleton instead (pdeanim.fit.bonefit).
     """
 
     target_rms: float | None = None
@@ -46,6 +49,7 @@ class FitOptions:
     curve_points: int = 10
     best_effort: bool = False
     time_model: str = "auto"
+    bones: int | str = 0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -69,6 +73,12 @@ class FitOptions:
         for name in ("loop", "best_effort"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if self.bones != "auto" and not (isinstance(self.bones, int) and not isinstance(self.bones, bool)
+                                         and 0 <= self.bones <= MAX_BONES):
+            raise ParameterError(f"bones must be 'auto' or an integer in 0..{MAX_BONES}, got {self.bones!r}")
+        if self.bones not in (0, "auto") and (self.motion != "displacement" or self.segments is not None):
+            raise ParameterError("a bone layer needs motion 'displacement' and error targets (not a fixed "
+                                 "segment count)")
         for name in ("max_segments", "curve_points"):
             v = getattr(self, name)
             if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 4096):

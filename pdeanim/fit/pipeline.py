@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from .. import container
+from ..bones.gltfskin import SkinBones
 from ..clipparts import ClipParts
 from ..curves.bounded import CurveErrors
 from ..curveset import CurveSet
@@ -16,6 +17,7 @@ from ..model.fitcore import floor_distances, space_stage
 from ..model.metrics import bbox_diagonal
 from ..poses import Poses
 from ..progress import Progress, sub_progress
+from .bonefit import fit_with_bones
 from .encode import encode
 from .options import FitOptions, FitTolerances
 from .problem import prepare
@@ -26,12 +28,16 @@ from .windowed import fit_windowed, windowed_applies
 
 
 def fit_poses(poses: Poses, options: FitOptions | None = None, progress: Progress | None = None,
-              curves: CurveSet | None = None, tolerances: FitTolerances | None = None) -> ClipParts:
-    """Fit a dynamic-PDE clip to poses (F frames, V vertices); returns both parts and a report."""
+              curves: CurveSet | None = None, tolerances: FitTolerances | None = None,
+              skin: SkinBones | None = None) -> ClipParts:
+    """Fit a dynamic-PDE clip to poses (F frames, V vertices); returns both parts and a report. With
+    ``options.bones`` the clip has a bone layer (``skin``: a skinned glTF input's own bones)."""
     options = (options or FitOptions()).validate()
     tol = tolerances or FitTolerances()
     t_start = time.perf_counter()
     report_progress = sub_progress(progress, 0.0, 1.0)
+    if options.bones != 0:
+        return fit_with_bones(poses, options, report_progress, tol, curves, skin, fit_poses)
     if windowed_applies(poses.n_frames, poses.n_vertices, options, tol):
         return fit_windowed(poses, options, report_progress, tol, curves)
     sf = space_fit(poses, options, curves, report_progress, tol)

@@ -44,7 +44,7 @@ def prepare(poses: Poses, options: FitOptions, curves: CurveSet) -> Problem:
     times = np.asarray(poses.times, np.float64)
     if len(X) == 1:
         X, times = np.concatenate([X, X]), np.array([times[0], times[0] + 1.0])
-    rest = X[0].astype(np.float64)
+    rest = np.asarray(poses.rest_pose(), np.float32).astype(np.float64)
     idx, mask = curves.padded()
     u = curve_parameters(X[:, idx].astype(np.float64) if options.param_mode == "paper" else rest[idx], mask,
                          options.param_mode)

@@ -49,7 +49,7 @@ def space_fit(poses: Poses, options: FitOptions, curves: CurveSet | None, progre
     auto = curves is None
     for cp in _curve_point_ladder(options.curve_points if auto else None):
         progress(0.02, f"curves {cp or 'given'}")
-        cs = checked_curves(default_curves(poses.vertices[0], poses.faces, cp) if auto else curves,
+        cs = checked_curves(default_curves(poses.rest_pose(), poses.faces, cp) if auto else curves,
                             poses.n_vertices)
         p, space, floor_d = space_of(poses, options, cs, progress, tol)
         diag = bbox_diagonal(p.rest)

@@ -60,10 +60,11 @@ MIN_WINDOW_FRAMES = 8
 def windowed_applies(n_frames: int, n_vertices: int, options: FitOptions, tol: FitTolerances) -> bool:
     """Whether a fit of (n_frames, n_vertices) poses runs in windows: inputs of more than
     tol.window_fit_values frame-vertex values, fitted with targets, displacement or absolute motion, chord
-    parameters and an open clip (the other fits need every frame at once)."""
+    parameters and an open clip, without a bone layer (the other fits need every frame at once; a bone fit's
+    residual may then be fitted in windows)."""
     return (n_frames * n_vertices > tol.window_fit_values and tol.dense_fit
             and not options.segments and not options.loop and options.motion != "rigid"
-            and options.param_mode == "chord")
+            and options.param_mode == "chord" and options.bones == 0)
 
 
 def curve_frames(n_frames: int, n_vertices: int) -> int:
@@ -198,7 +199,7 @@ def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress
     picked = np.unique(np.round(np.linspace(0, F - 1, n_picked)).astype(np.int64))
     sub = make_poses(np.asarray(poses.vertices[picked]), poses.faces, poses.times[picked])
     sf = space_fit(sub, options, curves, progress or (lambda *_: None), tol)
-    layout = Layout.of(sf.curves, poses.vertices[0], options.motion == "absolute")
+    layout = Layout.of(sf.curves, poses.rest_pose(), options.motion == "absolute")
     diagonal = bbox_diagonal(layout.rest)
     tolerance = first_quantisation(options.targets(diagonal), 0.0, tol).tolerance
     header, arrays = topology_arrays(layout.curves, layout.u_per_vertex(), poses.faces, layout.rest,

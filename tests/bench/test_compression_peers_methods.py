@@ -76,6 +76,16 @@ def test_pca_peer_uses_the_smallest_k_that_meets_the_target() -> None:
     assert m.rel_rms(best["k"] - 1, best["bits"], best["mean_bits"]) > target
 
 
+def test_pca_peer_welds_seam_duplicates_and_ships_the_remap() -> None:
+    X, faces = seam_tube()
+    w = peers_common.WeldedInput(X, faces)
+    assert w.merged and w.X.shape[1] == X.shape[1] - 6
+    assert np.array_equal(w.expand(w.X), X)
+    assert "remap" in w.arrays() and w.faces.max() < w.X.shape[1]
+    rows = peers_lowrank.method_pca(X, faces, (3e-3,), quick=True)
+    assert rows and all("welded" in r["setting"] and r["rel_rms"] <= 3e-3 for r in rows)
+
+
 @pytest.mark.parametrize("frames", [48, 49, 53, 54])
 def test_held_out_frames_are_every_fourth_from_zero_without_forcing_the_last(frames: int) -> None:
     keep, inside, left = peers_heldout.stated_split(frames)

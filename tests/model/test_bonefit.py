@@ -1,0 +1,102 @@
+"""Fits with a bone layer (pdeanim.fit.bonefit): smaller than without bones on articulated motion and within
+the target as a reader decodes the clip; no bones where they do not pay; a skinned glTF keeps its skeleton."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pdeanim import container
+from pdeanim.bones.gltfskin import skin_bones
+from pdeanim.clip import load_clip
+from pdeanim.fit import FitOptions, fit_poses
+from pdeanim.gltf.read import read_animated_poses
+from pdeanim.poses import make_poses
+from tests.model.test_bones_decompose import bending_tube
+
+CESIUM_MAN = Path(__file__).parents[1] / "gltf" / "data" / "CesiumMan.glb"
+
+
+def tube_poses():
+    """The three-bone tube (with its seam duplicates) bending back and forth at random (a random walk of
+    its angles, as a capture jitters), as poses with faces."""
+    rings, around, frames = 100, 40, 32
+    walk = np.cumsum(np.random.default_rng(8).normal(0.0, 0.3, frames))
+    X, _ = bending_tube(frames, rings, around, walk - walk[0])
+    grid = np.arange(rings * (around + 1)).reshape(rings, around + 1)
+    a, b, c, d = grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]
+    faces = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3), np.stack([b, c, d], -1).reshape(-1, 3)])
+    return make_poses(X, faces)
+
+
+def decoded_rel_errors(parts, poses) -> tuple[float, float]:
+    """(rel RMS, rel max) of the stored clip, decoded by the clip reader, at the source frames."""
+    clip = load_clip(parts.topology, parts.coefficients)
+    approx = clip.evaluate(clip.frame_t())
+    d = np.linalg.norm(approx.astype(np.float64) - poses.vertices, axis=-1)
+    diag = np.linalg.norm(np.ptp(poses.vertices[0], axis=0))
+    return float(np.sqrt(np.mean(d * d)) / diag), float(d.max() / diag)
+
+
+@pytest.fixture(scope="module")
+def tube_fits():
+    poses = tube_poses()
+    plain = fit_poses(poses, FitOptions(target_rel_rms=3e-3))
+    bones = fit_poses(poses, FitOptions(target_rel_rms=3e-3, bones=4))
+    return poses, plain, bones
+
+
+def test_bones_meet_target_and_beat_the_plain_fit(tube_fits):
+    poses, plain, bones = tube_fits
+    header = container.unpack(bones.coefficients)[0]
+    assert header["format_version"] == "1.1" and header["required"] == ["bones"]
+    assert 1 <= header["n_bones"] <= 4
+    rel_rms, rel_max = decoded_rel_errors(bones, poses)
+    assert rel_rms <= 3e-3 and bones.report["target_met"]
+    assert rel_rms == pytest.approx(bones.report["rel_rms"], rel=1e-3)
+    size = len(bones.topology) + len(bones.coefficients)
+    assert size < len(plain.topology) + len(plain.coefficients)  # 8.7 KB against 9.7 KB measured
+    b = bones.report["bones"]
+    assert b["n_bones"] == header["n_bones"] and 0 < b["residual_share"] < 1
+    assert b["skinning_rel_rms"] < 1e-3
+
+
+def test_auto_keeps_no_bones_on_a_morph(morph_poses):
+    p = morph_poses
+    poses = make_poses(p.vertices[::6], p.faces, p.times[::6])
+    parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3, bones="auto"))
+    b = parts.report["bones"]
+    assert b["n_bones"] == 0 and b["skinning"]  # decompositions were tried
+    assert all(s["skinning_rel_rms"] > 3e-3 for s in b["skinning"]) or len(b["candidates"]) >= 2
+    assert container.unpack(parts.coefficients)[0]["format_version"] == "1.0"
+    assert len(parts.topology) + len(parts.coefficients) == min(c["bytes"] for c in b["candidates"])
+
+
+def test_skinned_gltf_keeps_its_joints():
+    poses = read_animated_poses(CESIUM_MAN, fps=10)
+    skin = skin_bones(CESIUM_MAN, poses)
+    assert skin.n_joints == 19 and skin.motion.n_bones == 19
+    parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3, bones="auto"), skin=skin)
+    header = container.unpack(parts.coefficients)[0]
+    assert header["n_bones"] == 19
+    assert parts.report["bones"]["source"] == "gltf skin"
+    rel_rms, _ = decoded_rel_errors(parts, poses)
+    assert rel_rms <= 3e-3
+
+
+@pytest.mark.slow  # five fits of the tube: ~20 s on an idle machine
+def test_auto_fits_bones_where_the_skinning_explains_the_motion():
+    poses = tube_poses()
+    parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3, bones="auto"))
+    b = parts.report["bones"]
+    assert b["n_bones"] >= 1 and [c["bones"] for c in b["candidates"]][:2] == [0, 8]
+    assert len(parts.topology) + len(parts.coefficients) == min(c["bytes"] for c in b["candidates"])
+
+
+def test_bones_need_displacement_and_targets():
+    with pytest.raises(Exception, match="bone layer"):
+        FitOptions(segments=3, bones=8)
+    with pytest.raises(Exception, match="bones must be"):
+        FitOptions(bones=-1)
