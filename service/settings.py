@@ -62,6 +62,10 @@ class Settings(BaseSettings):
     upload_timeout_seconds: float = Field(120.0, gt=0, description="longest validation of one upload")
     max_concurrent_uploads: int = Field(2, ge=1, description="uploads one API process receives and "
                                         "validates at once; more: 503 with Retry-After")
+    http_worker_healthcheck_seconds: float = Field(
+        120.0, gt=0, description="pdeanim serve with several HTTP processes: how long uvicorn's supervisor "
+        "waits for a process to answer its health check before it kills and replaces it (uvicorn's own "
+        "default, 5 s, kills processes that are still starting on a loaded host)")
     max_json_bytes: int = Field(1024**2, gt=0, description="largest non-upload request body (job requests)")
     max_header_bytes: int = Field(32 * 1024, gt=0, description="largest total size of a request's headers")
     access_log: bool = Field(True, description="one log line per request (logger pdeanim.access, level INFO)")
