@@ -94,6 +94,12 @@ class Settings(BaseSettings):
                                      "0 = always ask")
     max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
+    blob_sweep_seconds: float = Field(3600.0, ge=0, description="each worker removes the blobs that no row "
+                                      "names this often (the first sweep this long after it starts); "
+                                      "0 = never (run `pdeanim blobs sweep` instead)")
+    blob_sweep_grace_seconds: float = Field(3600.0, ge=0, description="a blob that no row names is removed "
+                                            "by the sweeper only once it was stored this long ago (an upload "
+                                            "or a job between storing its blob and writing its row)")
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
     max_attempts: int = Field(3, ge=1, description="attempts before a job fails for good")
     backoff_seconds: float = Field(2.0, ge=0, description="first retry delay; doubles per failed attempt")
