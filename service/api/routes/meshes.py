@@ -42,15 +42,16 @@ def _ingest(upload: Upload, settings: Settings) -> dict:
 
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
-             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422, 503),
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 408, 413, 415, 422, 429, 503),
                                                   **created(201, "mesh", {
                  "GetMesh": ("getMesh", "mesh_id"), "UploadPoses": ("uploadPoses", "mesh_id"),
                  "GetTopology": ("getMeshTopology", "mesh_id"), "DeleteMesh": ("deleteMesh", "mesh_id")})})
 async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:
     """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
     settings = store.settings
-    with request.app.state.upload_slots.hold():
-        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+    with request.app.state.upload_slots.hold(tenant):
+        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes,
+                                    settings.upload_pace())
         try:
             stats = await run_in_threadpool(_ingest, upload, settings)
             key = await run_in_threadpool(store.blobs.put_file, upload.path)

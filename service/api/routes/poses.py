@@ -91,7 +91,7 @@ def _store_poses(upload: Upload, mesh: Mesh, store: Store, tenant: str, fps: flo
 
 @router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses",
              response_model=PosesOut, openapi_extra=UPLOAD_BODY,
-             responses={**responses(400, 401, 404, 413, 415, 422, 503),
+             responses={**responses(400, 401, 404, 408, 413, 415, 422, 429, 503),
                         **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
 async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
                        store: StoreDep,
@@ -103,8 +103,9 @@ async def upload_poses(mesh_id: str, request: Request, response: Response, tenan
     animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
     mesh = await run_in_threadpool(_owned_mesh, store, mesh_id, tenant)
     settings = store.settings
-    with request.app.state.upload_slots.hold():
-        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+    with request.app.state.upload_slots.hold(tenant):
+        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes,
+                                    settings.upload_pace())
         try:
             row = await run_in_threadpool(_store_poses, upload, mesh, store, tenant, fps, animation)
         finally:
