@@ -242,6 +242,10 @@ class S3BlobStore:
         from boto3.s3.transfer import TransferConfig
 
         key = key or file_key(path)
+        if Path(path).stat().st_size <= 8 * _CHUNK:  # one PUT: the transfer manager's threads cost more
+            with open(path, "rb") as fh:
+                self.client.put_object(Bucket=self.bucket, Key=self._name(key), Body=fh)
+            return key
         config = TransferConfig(multipart_chunksize=8 * _CHUNK, max_concurrency=2)
         self.client.upload_file(str(path), self.bucket, self._name(key), Config=config)
         return key
