@@ -204,11 +204,13 @@ def world(backend, tmp_path) -> Iterator[World]:
     store.close()
 
 
-def race(w: World, rounds: int, seed: int = 34) -> dict[str, int]:
-    """``rounds`` raced rounds (alternately stepped and threaded), checked after each; then everything is
-    deleted and swept, and the store must be empty."""
-    rng = random.Random(seed)
+def race(w: World, rounds: int, seed: int = 34, every: int = 0) -> dict[str, int]:
+    """``rounds`` raced rounds (alternately stepped and threaded), checked after each (a progress line every
+    ``every`` rounds when set); then everything is deleted and swept, and the store must be empty."""
+    rng, started = random.Random(seed), time.perf_counter()
     for i in range(rounds):
+        if every and i and i % every == 0:
+            print(f"{i} rounds checked in {time.perf_counter() - started:.0f} s: {w.counts}", flush=True)
         threaded = i % 2 == 1
         ops = _ops(w, rng, rng.randint(2, 4), with_sweeper=threaded or rng.random() < 0.2)
         if threaded:
@@ -235,7 +237,45 @@ def test_no_acknowledged_upload_is_lost_in_raced_rounds(world, backend_kind):
 @pytest.mark.slow
 def test_no_acknowledged_upload_is_lost_in_ten_thousand_rounds(world, capsys):
     started = time.perf_counter()
-    counts = race(world, BENCH_ROUNDS, seed=2026)
     with capsys.disabled():
+        counts = race(world, BENCH_ROUNDS, seed=2026, every=1000)
         print(f"\n{BENCH_ROUNDS} raced rounds in {time.perf_counter() - started:.1f} s: {counts}; 0 lost, "
               "0 orphan blobs")
+
+
+def test_the_sweeper_keeps_named_young_and_intermediate_blobs(world, monkeypatch, capsys):
+    store, now = world.store, time.time()
+    for _ in upload_mesh(world, "ann", CONTENTS[0]):
+        pass
+    named_key = next(iter(world.meshes.values()))[1]
+    orphan, young = store.blobs.put(b"left by a killed process"), store.blobs.put(b"being committed")
+    intermediate = store.blobs.put(b"a window's frames", key="windowed/job_x/frames.f32")
+    old = now - 7200
+    if store.settings.resolved_blob_url().startswith("file://"):  # S3 keeps its own times: age them here only
+        for key in (orphan, named_key, intermediate):
+            os.utime(store.blobs._path(key), (old, old))  # noqa: SLF001
+        kept = {named_key, young, intermediate}
+        out = sweep(store, grace_seconds=3600)
+    else:
+        kept = {named_key, intermediate}
+        out = sweep(store, grace_seconds=0, now=time.time() + 5)  # S3 keeps whole seconds
+    assert out.removed == len({orphan, young} - kept), out
+    assert {k for k in (orphan, young, named_key, intermediate) if store.blobs.exists(k)} == kept
+    monkeypatch.setenv("PDEANIM_DATA_DIR", str(store.settings.data_dir))
+    for name, value in world_env(store).items():
+        monkeypatch.setenv(name, value)
+    from service.cli import main
+
+    assert main(["blobs", "sweep", "--grace", "0"]) == 0  # the command: same settings, one sweep, JSON
+    assert '"removed"' in capsys.readouterr().out
+    assert store.blobs.exists(named_key) and store.blobs.exists(intermediate)
+    assert not store.blobs.exists(young)
+
+
+def world_env(store: Store) -> dict[str, str]:
+    """The PDEANIM_* variables of ``store``'s settings (for the command run in this process)."""
+    s = store.settings
+    env = {"PDEANIM_DATABASE_URL": s.resolved_database_url(), "PDEANIM_BLOB_URL": s.resolved_blob_url()}
+    if s.s3_endpoint_url:
+        env["PDEANIM_S3_ENDPOINT_URL"] = s.s3_endpoint_url
+    return env
