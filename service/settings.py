@@ -60,8 +60,19 @@ class Settings(BaseSettings):
                                      "upload may add to its child process (RLIMIT_AS over the preloaded "
                                      "libraries); over it: 413; 0 = no limit")
     upload_timeout_seconds: float = Field(120.0, gt=0, description="longest validation of one upload")
-    max_concurrent_uploads: int = Field(2, ge=1, description="uploads one API process receives and "
-                                        "validates at once; more: 503 with Retry-After")
+    max_concurrent_uploads: int = Field(4, ge=1, description="uploads one API process receives and "
+                                        "validates at once; more: 429 with Retry-After")
+    max_tenant_uploads: int = Field(2, ge=1, description="uploads of one tenant one API process receives "
+                                    "and validates at once; more: 429 with Retry-After")
+    upload_min_bytes_per_second: float = Field(16384.0, ge=0, description="an upload body must arrive at "
+                                               "least this fast on average after the grace; slower: 408 "
+                                               "(0 = no minimum)")
+    upload_body_grace_seconds: float = Field(10.0, ge=0, description="time an upload body gets before the "
+                                             "minimum rate applies")
+    http_worker_healthcheck_seconds: float = Field(
+        120.0, gt=0, description="pdeanim serve with several HTTP processes: how long uvicorn's supervisor "
+        "waits for a process to answer its health check before it kills and replaces it (uvicorn's own "
+        "default, 5 s, kills processes that are still starting on a loaded host)")
     max_json_bytes: int = Field(1024**2, gt=0, description="largest non-upload request body (job requests)")
     max_header_bytes: int = Field(32 * 1024, gt=0, description="largest total size of a request's headers")
     access_log: bool = Field(True, description="one log line per request (logger pdeanim.access, level INFO)")
@@ -90,6 +101,12 @@ class Settings(BaseSettings):
                                      "0 = always ask")
     max_wait_seconds: float = Field(30.0, ge=0, description="longest GET /v1/jobs/{id}?wait= long poll")
 
+    blob_sweep_seconds: float = Field(3600.0, ge=0, description="each worker removes the blobs that no row "
+                                      "names this often (the first sweep this long after it starts); "
+                                      "0 = never (run `pdeanim blobs sweep` instead)")
+    blob_sweep_grace_seconds: float = Field(3600.0, ge=0, description="a blob that no row names is removed "
+                                            "by the sweeper only once it was stored this long ago (an upload "
+                                            "or a job between storing its blob and writing its row)")
     lease_seconds: float = Field(30.0, gt=0, description="a job's lease; the running worker renews it")
     max_attempts: int = Field(3, ge=1, description="attempts before a job fails for good")
     backoff_seconds: float = Field(2.0, ge=0, description="first retry delay; doubles per failed attempt")
@@ -116,6 +133,12 @@ class Settings(BaseSettings):
                                        "windows of frames; 0 = the library's (4,000,000)")
     fit_window_values: int = Field(0, ge=0, description="frame-vertex values per window of frames (the "
                                    "unit of a window task); 0 = the library's (4,194,304)")
+
+    def upload_pace(self):  # noqa: ANN201 - service.api.uploadslots.BodyPace (imported when needed)
+        """The slowest an upload body may arrive, from these settings."""
+        from service.api.uploadslots import BodyPace
+
+        return BodyPace(self.upload_min_bytes_per_second, self.upload_body_grace_seconds)
 
     def cors_origin_list(self) -> list[str]:
         """The allowed CORS origins (scheme://host[:port], no trailing slash); empty when CORS is off."""

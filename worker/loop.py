@@ -16,6 +16,7 @@ import time
 from pdeanim.records import library_versions
 from service.settings import Settings
 from service.store import windows
+from service.store.blobrefs import BlobGone, sweep
 from service.store.context import Store
 from service.store.models import ClipRecord, Mesh, PosesRecord
 from service.store.queue import Claimed
@@ -40,6 +41,7 @@ class Worker:
         self.versions = library_versions()
         self.ctx = child_context()
         self.jobs_done = 0
+        self.next_sweep = time.monotonic() + settings.blob_sweep_seconds
 
     def request_stop(self, *_: object) -> None:
         """Signal handler: stop after the current attempt (or abandon it after the grace period)."""
@@ -60,6 +62,7 @@ class Worker:
         while not self.stop_requested.is_set():
             try:
                 self._reap()
+                self._sweep()
                 job = self.store.queue.claim(self.id, self.versions)
                 errors = 0
             except Exception:  # noqa: BLE001 - database not reachable or not migrated yet: wait and retry
@@ -88,6 +91,16 @@ class Worker:
                 log.warning("returned %d jobs with expired leases to the queue", n)
         except Exception:  # noqa: BLE001 - the next loop tries again
             log.warning("reaper failed", exc_info=True)
+
+    def _sweep(self) -> None:
+        """Remove unreferenced blobs when a sweep is due (PDEANIM_BLOB_SWEEP_SECONDS; 0: never)."""
+        if not self.settings.blob_sweep_seconds or time.monotonic() < self.next_sweep:
+            return
+        self.next_sweep = time.monotonic() + self.settings.blob_sweep_seconds
+        try:
+            sweep(self.store, self.settings.blob_sweep_grace_seconds)
+        except Exception:  # noqa: BLE001 - the next sweep tries again
+            log.warning("blob sweep failed", exc_info=True)
 
     def _payload(self, job: Claimed) -> dict:
         payload = {"id": job.id, "kind": job.kind, "attempt": job.attempt, "params": job.params}
@@ -120,8 +133,8 @@ class Worker:
             outcome = run_attempt(self.ctx, self.store.queue, job, payload,
                                   self.settings.model_dump_json(), self._should_stop,
                                   self.settings.job_timeout_seconds,
-                                  lambda part: self.store.queue.store_partial(job.id, job.attempt,
-                                                                              result_writer(job, part)))
+                                  lambda part: self.store.queue.store_partial(
+                                      job.id, job.attempt, result_writer(job, part, self.store.blobs)))
         finally:
             remove(workdir)
         self._record(job, outcome)
@@ -134,8 +147,13 @@ class Worker:
         if outcome.status == "done" and (job.parent_id or "windowed" in (outcome.result or {})):
             self._record_window(job, outcome.result or {})
         elif outcome.status == "done":
-            if not queue.finish(job.id, job.attempt, result_writer(job, outcome.result or {})):
-                log.warning("job %s attempt %d was fenced out; its result is discarded", job.id, job.attempt)
+            try:
+                if not queue.finish(job.id, job.attempt, result_writer(job, outcome.result or {},
+                                                                        self.store.blobs)):
+                    log.warning("job %s attempt %d was fenced out; its result is discarded", job.id,
+                                job.attempt)
+            except BlobGone as exc:  # a delete took a shared blob of the result meanwhile: run it again
+                queue.fail(job.id, job.attempt, str(exc), "blob_lost", retry=True)
         elif outcome.status == "error" and job.parent_id:
             state = queue.fail(job.id, job.attempt, outcome.message, outcome.code, outcome.retry)
             if state == "failed":
@@ -164,7 +182,11 @@ class Worker:
                 if self._state(job.id) in ("cancelled", None):  # no newer attempt will use the plan
                     windows.release_blobs(self.store.blobs, job.id, n_windows)
             return
-        state = windows.task_done(self.store.queue, job, result)
+        try:
+            state = windows.task_done(self.store.queue, job, result, self.store.blobs)
+        except BlobGone as exc:  # a delete took a shared blob of the clip meanwhile: run the join again
+            self.store.queue.fail(job.id, job.attempt, str(exc), "blob_lost", retry=True)
+            return
         if state is None:
             log.warning("window task %s attempt %d was fenced out (or its fit job ended); its result is "
                         "discarded", job.id, job.attempt)

@@ -8,7 +8,9 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from service.store.models import ClipRecord, PosesRecord
+from service.store.blobrefs import hold
+from service.store.blobs import BlobStore
+from service.store.models import ClipRecord, Job, PosesRecord
 from service.store.queue import Claimed
 
 
@@ -24,11 +26,27 @@ def _upsert_poses(session: Session, job: Claimed, p: dict[str, Any]) -> str:
     return row.id
 
 
-def result_writer(job: Claimed, result: dict[str, Any]) -> Callable[[Session], dict[str, Any]]:
+def result_blob_keys(result: dict[str, Any]) -> list[str]:
+    """The blobs the rows of ``result`` will name: poses, the clip's parts, an export's GLB (tets are a cache
+    that any simulation makes again, so they are not checked)."""
+    keys = [result["poses"]["blob_key"]] if "poses" in result else []
+    if "clip" in result:
+        keys += [result["clip"]["topology_key"], result["clip"]["coefficients_key"]]
+    if "export" in result:
+        keys.append(result["export"]["blob_key"])
+    return keys
+
+
+def result_writer(job: Claimed, result: dict[str, Any],
+                  blobs: BlobStore) -> Callable[[Session], dict[str, Any]]:
     """A ``write(session)`` for :meth:`JobQueue.finish` or ``store_partial``: adds poses/clip rows, returns
-    their ids (and the tet cache key of a simulation)."""
+    their ids (and the tet cache key of a simulation). Their blobs are checked under their locks first
+    (:func:`service.store.blobrefs.hold`: BlobGone if a concurrent delete took a shared one)."""
 
     def write(session: Session) -> dict[str, Any]:
+        # the job's row first, then the blobs' locks: the order of every transaction taking both
+        session.execute(select(Job.id).where(Job.id == job.id).with_for_update())
+        hold(session, blobs, dict.fromkeys(result_blob_keys(result)))
         ids: dict[str, Any] = {}
         poses_id = job.poses_id
         if "tet_cache_key" in result:

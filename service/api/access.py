@@ -22,9 +22,11 @@ def owned(session: Session, model: type[T], row_id: str, tenant_id: str, what: s
 
 DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malformed request",
                 401: "missing or invalid API key", 404: "not found (or another tenant's)",
+                408: "the upload body arrived slower than PDEANIM_UPLOAD_MIN_BYTES_PER_SECOND",
                 409: "conflict with the resource's state (e.g. an export job still running, a finished job)",
                 413: "over a configured limit", 415: "wrong content type",
                 422: "invalid input or parameters",
+                429: "too many uploads of this tenant or in all at once (Retry-After)",
                 501: "stage not available in this build",
                 503: "a dependency (database, blobs) is unavailable",
                 431: "request headers over PDEANIM_MAX_HEADER_BYTES"}

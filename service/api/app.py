@@ -24,7 +24,7 @@ from .middleware import install_http_middleware
 from .routes import clips, health, jobs, lifecycle, meshes, poses
 from .routes.pages import install_pages
 from .threads import single_threaded_blas
-from .validator import UploadSlots
+from .uploadslots import UploadSlots
 from .warmup import preload_recent_clips, warm_clip_routes
 
 log = logging.getLogger("pdeanim.api")
@@ -70,7 +70,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.state.deletions = DeletionWatch(app.state.clip_cache, app.state.frame_cache,
                                         settings.clip_invalidation_seconds)
     app.state.key_cache = KeyCache(ttl=settings.key_cache_seconds)
-    app.state.upload_slots = UploadSlots(settings.max_concurrent_uploads)
+    app.state.upload_slots = UploadSlots(settings.max_concurrent_uploads, settings.max_tenant_uploads)
     install_error_handlers(app)
     app.add_middleware(RequestGuard, max_header_bytes=settings.max_header_bytes,
                        max_json_bytes=settings.max_json_bytes, log_access=settings.access_log)

@@ -14,9 +14,9 @@ from pdeanim.errors import InputError
 log = logging.getLogger("pdeanim.api")
 
 STATUS_CODES = {400: "bad_request", 401: "unauthorized", 403: "forbidden", 404: "not_found",
-                405: "method_not_allowed", 406: "not_acceptable", 409: "conflict", 413: "payload_too_large",
-                415: "unsupported_media_type", 422: "validation_error", 501: "not_implemented",
-                503: "unavailable"}
+                405: "method_not_allowed", 406: "not_acceptable", 408: "request_timeout", 409: "conflict",
+                413: "payload_too_large", 415: "unsupported_media_type", 422: "validation_error",
+                429: "too_many_requests", 501: "not_implemented", 503: "unavailable"}
 
 
 class ApiError(StarletteHTTPException):

@@ -11,9 +11,16 @@ from typing import Any
 
 import numpy as np
 
-from pdeanim.errors import PosesInputError
+from pdeanim.errors import InputError, PosesInputError
 
 from ..settings import Settings
+
+
+class MeshGone(InputError):
+    """The mesh that uploaded poses belong to was deleted while they were being validated."""
+
+    code = "not_found"
+    status = 404
 
 
 def mesh_stats(path: str, filename: str, settings_json: str) -> dict:
@@ -50,9 +57,13 @@ def _mesh_faces(mesh: dict[str, Any], settings: Settings) -> np.ndarray:
     """The faces of the stored mesh the poses belong to (read from the blob store in this process)."""
     from pdeanim.mesh.io import MeshLimits, load_mesh
 
-    from ..store.blobs import open_blob_store
+    from ..store.blobs import BlobNotFound, open_blob_store
 
-    data = open_blob_store(settings).get(mesh["blob_key"])
+    try:
+        data = open_blob_store(settings).get(mesh["blob_key"])
+    except BlobNotFound:  # its last row went (a mesh's blob is stored as long as its row exists)
+        raise MeshGone(f"mesh {mesh['id']!r} not found (it was deleted while the poses were "
+                       "uploaded)") from None
     limits = MeshLimits(max(settings.max_upload_bytes, len(data)), settings.max_vertices, settings.max_faces,
                         settings.gltf_limits())
     return load_mesh(data, filename=mesh["filename"], limits=limits).faces

@@ -3,8 +3,11 @@ enforced while the body is being read (413 as soon as it is passed), never after
 
 from __future__ import annotations
 
+import asyncio
 import os
 import tempfile
+import time
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,6 +17,7 @@ from python_multipart.multipart import MultipartParser, parse_options_header
 
 from ..store.scratch import prefix
 from .errors import ApiError
+from .uploadslots import BodyPace
 
 FORM_OVERHEAD = 64 * 1024  # boundaries, part headers and small extra fields
 
@@ -103,8 +107,26 @@ class _FilePart:
             self.fh = None
 
 
-async def receive_file(request: Request, tmp_dir: Path, limit: int, field: str = "file") -> Upload:
-    """Read a multipart/form-data body, keeping the ``field`` file part on disk (at most ``limit`` bytes)."""
+async def _paced(request: Request, pace: BodyPace) -> AsyncIterator[bytes]:
+    """The body's chunks, or a 408 as soon as it falls behind ``pace``."""
+    started, received = time.monotonic(), 0
+    chunks = request.stream().__aiter__()
+    while True:
+        left = pace.seconds_left(started, received)
+        try:
+            chunk = await (anext(chunks) if left is None else asyncio.wait_for(anext(chunks), max(left, 0)))
+        except StopAsyncIteration:
+            return
+        except TimeoutError:
+            raise pace.too_slow(started, received) from None
+        received += len(chunk)
+        yield chunk
+
+
+async def receive_file(request: Request, tmp_dir: Path, limit: int, pace: BodyPace,
+                       field: str = "file") -> Upload:
+    """Read a multipart/form-data body, keeping the ``field`` file part on disk (at most ``limit`` bytes,
+    arriving at least at ``pace``)."""
     ctype, params = parse_options_header(request.headers.get("content-type", ""))
     if ctype != b"multipart/form-data" or not params.get(b"boundary"):
         raise ApiError(415, "unsupported_media_type",
@@ -116,7 +138,7 @@ async def receive_file(request: Request, tmp_dir: Path, limit: int, field: str =
     parser = MultipartParser(params[b"boundary"], part.callbacks())
     received = 0
     try:
-        async for chunk in request.stream():
+        async for chunk in _paced(request, pace):
             received += len(chunk)
             if received > limit + FORM_OVERHEAD:
                 raise _too_large(limit)

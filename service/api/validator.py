@@ -3,7 +3,8 @@ decoding a legal upload can take gigabytes (a 1 GiB poses .npz, a morph-target G
 freed heap (:mod:`service.api.memory`). The child forks from a forkserver that preloaded the readers (a few
 milliseconds per upload), runs under an address-space limit (``PDEANIM_UPLOAD_MEMORY_BYTES`` over what the
 preloaded libraries map) and a time limit, and sends back only small results. At most
-``PDEANIM_MAX_CONCURRENT_UPLOADS`` uploads are received and validated at once per API process."""
+``PDEANIM_MAX_CONCURRENT_UPLOADS`` uploads are received and validated at once per API process
+(:mod:`service.api.uploadslots`)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,6 @@ import os
 import resource
 import signal
 import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 from ..settings import Settings
@@ -155,25 +154,3 @@ def run_checked(target: str, args: tuple, settings: Settings) -> Any:
         if proc.is_alive():
             proc.kill()
         proc.join(5)
-
-
-class UploadSlots:
-    """A count of the uploads this process is receiving and validating, refused past ``limit``."""
-
-    def __init__(self, limit: int) -> None:
-        self.limit, self.active = limit, 0
-
-    @contextmanager
-    def hold(self) -> Iterator[None]:
-        """Take a slot for the block, or raise 503 with Retry-After when all are taken."""
-        if self.active >= self.limit:
-            raise ApiError(503, "too_many_uploads",
-                           f"this API process is already receiving or validating {self.active} uploads, its "
-                           f"limit (setting PDEANIM_MAX_CONCURRENT_UPLOADS); retry in a few seconds",
-                           headers={"Retry-After": str(RETRY_AFTER_SECONDS)})
-        self.active += 1
-        try:
-            yield
-        finally:
-            self.active -= 1
-

@@ -21,9 +21,9 @@ def service_commands() -> tuple:
     """The service-side sub-command modules (plain imports; they import the service's packages lazily)."""
     from worker import cli as worker_cli
 
-    from . import demo, keys, serve
+    from . import blobs, demo, keys, serve
 
-    return serve, worker_cli, keys, demo
+    return serve, worker_cli, keys, blobs, demo
 
 
 def main(argv: list[str] | None = None) -> int:

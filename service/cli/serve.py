@@ -104,8 +104,9 @@ def run(args: argparse.Namespace) -> int:
     if args.migrate_only:
         print("pdeanim serve: database is at the newest schema")
         return 0
+    http_workers = args.workers or default_http_workers()
     print(f"pdeanim serve: listening on http://{args.host}:{args.port} (data {settings.resolved_data_dir()}, "
-          f"{args.workers} HTTP worker(s), {max(args.with_workers, 0)} job worker(s))", file=sys.stderr,
+          f"{http_workers} HTTP worker(s), {max(args.with_workers, 0)} job worker(s))", file=sys.stderr,
           flush=True)
     workers = [subprocess.Popen(WORKER_CMD, preexec_fn=_die_with_serve(os.getpid()))
                for _ in range(max(args.with_workers, 0))]
@@ -114,16 +115,16 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: None)
     try:
-        uvicorn.run(
-            "service.cli.serve:http_app",
-            factory=True,
-            host=args.host,
-            port=args.port,
-            workers=args.workers or default_http_workers(),
-            log_level=args.log_level,
-            access_log=False,
-            log_config=log_config(args.log_level),
-        )
+        uvicorn.run(**uvicorn_options(args, settings, http_workers))
     finally:
         _stop(workers)
     return 0
+
+
+def uvicorn_options(args: argparse.Namespace, settings, http_workers: int) -> dict:  # noqa: ANN001 - Settings
+    """The keyword arguments of ``uvicorn.run`` (and ``uvicorn.Config``) for these arguments and settings,
+    the supervisor's health-check timeout included (``PDEANIM_HTTP_WORKER_HEALTHCHECK_SECONDS``)."""
+    return {"app": "service.cli.serve:http_app", "factory": True, "host": args.host, "port": args.port,
+            "workers": http_workers, "log_level": args.log_level, "access_log": False,
+            "log_config": log_config(args.log_level),
+            "timeout_worker_healthcheck": settings.http_worker_healthcheck_seconds}

@@ -10,6 +10,7 @@ import hashlib
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol
 from urllib.parse import urlparse
@@ -56,6 +57,14 @@ class BlobStore(Protocol):
 
     def ping(self) -> None:
         """Raise if the store cannot be reached."""
+        ...
+
+    def keys(self, before: float) -> Iterator[str]:
+        """Every key stored (or last stored again) before epoch time ``before`` (for the sweeper)."""
+        ...
+
+    def remove_temp_files(self, before: float) -> int:
+        """Remove temporary files of writes that began before ``before`` and never finished; how many."""
         ...
 
 
@@ -107,8 +116,11 @@ class LocalBlobStore:
 
     def _write_atomic(self, key: str, fill) -> str:  # noqa: ANN001 - fill(fileobj) writes the content
         target = self._path(key)
-        if target.exists():
+        try:
+            os.utime(target)  # stored already: now counts as its last store (the sweeper's grace)
             return key
+        except FileNotFoundError:
+            pass
         tmp = self._temp_file(target, fill)
         try:
             os.replace(tmp, target)
@@ -172,6 +184,36 @@ class LocalBlobStore:
         if not os.access(self.root, os.W_OK):
             raise OSError(f"blob directory {self.root} is not writable")
 
+    def _files(self) -> Iterator[tuple[Path, str]]:
+        """(path, key) of every file under the shard directories, temporary files included."""
+        for shard in sorted(self.root.iterdir()):
+            if shard.is_dir():
+                for folder, _, names in os.walk(shard):
+                    for name in names:
+                        path = Path(folder) / name
+                        yield path, path.relative_to(shard).as_posix()
+
+    def keys(self, before: float) -> Iterator[str]:
+        """Every key whose file was last stored before ``before``."""
+        for path, key in self._files():
+            try:
+                if not path.name.startswith(".tmp-") and path.stat().st_mtime < before:
+                    yield key
+            except FileNotFoundError:
+                continue  # removed meanwhile
+
+    def remove_temp_files(self, before: float) -> int:
+        """Remove ``.tmp-*`` files older than ``before`` (writes of a killed process)."""
+        removed = 0
+        for path, _ in self._files():
+            try:
+                if path.name.startswith(".tmp-") and path.stat().st_mtime < before:
+                    path.unlink()
+                    removed += 1
+            except FileNotFoundError:
+                continue
+        return removed
+
 
 class S3BlobStore:
     """Blobs as objects in an S3 bucket under a prefix (boto3; endpoint configurable for MinIO/moto)."""
@@ -200,6 +242,10 @@ class S3BlobStore:
         from boto3.s3.transfer import TransferConfig
 
         key = key or file_key(path)
+        if Path(path).stat().st_size <= 8 * _CHUNK:  # one PUT: the transfer manager's threads cost more
+            with open(path, "rb") as fh:
+                self.client.put_object(Bucket=self.bucket, Key=self._name(key), Body=fh)
+            return key
         config = TransferConfig(multipart_chunksize=8 * _CHUNK, max_concurrency=2)
         self.client.upload_file(str(path), self.bucket, self._name(key), Config=config)
         return key
@@ -265,6 +311,19 @@ class S3BlobStore:
     def ping(self) -> None:
         """Raise if the bucket cannot be reached."""
         self.client.head_bucket(Bucket=self.bucket)
+
+    def keys(self, before: float) -> Iterator[str]:
+        """Every key under the prefix whose object was last written before ``before`` (paginated listing)."""
+        start = f"{self.prefix}/" if self.prefix else ""
+        for page in self.client.get_paginator("list_objects_v2").paginate(Bucket=self.bucket, Prefix=start):
+            for item in page.get("Contents", []):
+                if item["LastModified"].timestamp() < before:
+                    yield item["Key"][len(start):]
+
+    def remove_temp_files(self, before: float) -> int:
+        """Nothing to do: an S3 object appears whole or not at all (unfinished multipart uploads are the
+        bucket's lifecycle rules' to abort)."""
+        return 0
 
 
 def open_blob_store(settings: Settings) -> LocalBlobStore | S3BlobStore:

@@ -3,24 +3,22 @@ nothing references any more (an export job's GLB goes with its clip or mesh, row
 
 Blobs are content-addressed and shared between rows and tenants (the same file uploaded twice is one blob;
 tets are shared by mesh hash), so a blob is removed only when no row of any tenant still names it. Rows go
-first, in one transaction; blobs after the commit, each after a reference check.
+first, in one transaction; blobs after the commit, each under its lock after a reference check
+(:mod:`service.store.blobrefs`).
 """
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 
-from sqlalchemy import delete, exists, or_, select
+from sqlalchemy import delete, or_, select
 from sqlalchemy.orm import Session
 
+from .blobrefs import TETS_PREFIX, release, write_session
 from .context import Store
 from .models import ClipRecord, Job, Mesh, PosesRecord
 from .queue import ACTIVE
 from .windows import release_blobs as release_intermediates
-
-log = logging.getLogger("pdeanim.api")
-TETS_PREFIX = "tets-"  # blob key prefix of shared tets (worker.tetcache.BLOB_PREFIX)
 
 
 @dataclass
@@ -34,16 +32,12 @@ class Deleted:
     cancelled_jobs: int = 0
     blobs_removed: int = 0
     clip_ids: list[str] = field(default_factory=list)
+    keys: set[str] = field(default_factory=set)  # the blobs the deleted rows named
 
     def summary(self) -> dict[str, int]:
         """The counts, for the API answer."""
         return {"meshes": self.meshes, "poses": self.poses, "clips": self.clips, "jobs": self.jobs,
                 "cancelled_jobs": self.cancelled_jobs, "blobs_removed": self.blobs_removed}
-
-
-def _write_session(store: Store) -> Session:
-    # a transaction that starts by writing (BEGIN IMMEDIATE on SQLite) waits for the lock instead of failing
-    return Session(store.engine.execution_options(immediate=True), expire_on_commit=False)
 
 
 def _delete(session: Session, model: type, condition) -> int:  # noqa: ANN001 - a SQL expression
@@ -78,6 +72,15 @@ def _of_clip(clip_id: str):  # noqa: ANN202 - a SQL expression
 def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
     """Delete a tenant's mesh with its poses, clips and jobs (running jobs cancelled first, so their workers
     stop at the next heartbeat), then the blobs left unreferenced. None if the mesh is not the tenant's."""
+    out = delete_mesh_rows(store, mesh_id, tenant_id)
+    if out is not None:
+        out.blobs_removed = release(store, out.keys)
+    return out
+
+
+def delete_mesh_rows(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
+    """The rows of :func:`delete_mesh` (and a windowed fit's intermediates), in one transaction; the blobs
+    they named are in ``keys``, for :func:`service.store.blobrefs.release`."""
     out = Deleted()
     with store.sessions() as session:
         mesh = session.get(Mesh, mesh_id)
@@ -86,8 +89,9 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
         active = session.scalars(select(Job.id).where(Job.mesh_id == mesh_id, Job.state.in_(ACTIVE),
                                                       Job.parent_id.is_(None))).all()
     out.cancelled_jobs = store.queue.cancel(list(active))  # with their window tasks
-    with _write_session(store) as session, session.begin():
-        mesh = session.get(Mesh, mesh_id)
+    with write_session(store) as session, session.begin():
+        # locked first (PostgreSQL): a poses upload committing meanwhile is either seen here or sees none
+        mesh = session.get(Mesh, mesh_id, with_for_update=True)
         if mesh is None:
             return None  # deleted meanwhile by a concurrent request
         poses_ids = select(PosesRecord.id).where(PosesRecord.mesh_id == mesh_id)
@@ -96,7 +100,7 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
         of_mesh = or_(Job.mesh_id == mesh_id, Job.poses_id.in_(poses_ids))
         jobs = session.scalars(select(Job).where(of_mesh)).all()
         keys = {mesh.blob_key} | {p.blob_key for p in poses} | _tet_keys(jobs) | _export_keys(jobs)
-        keys |= {c.topology_key for c in clips} | {c.coefficients_key for c in clips}
+        out.keys = keys | {c.topology_key for c in clips} | {c.coefficients_key for c in clips}
         out.clip_ids = [c.id for c in clips]
         out.clips = _delete(session, ClipRecord, ClipRecord.mesh_id == mesh_id)
         out.jobs = _delete(session, Job, of_mesh)
@@ -106,7 +110,6 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
                     if j.parent_id is None and isinstance((j.result or {}).get("windows"), int)}
     for job_id, n_windows in windowed.items():  # a windowed fit's intermediates (no row names them)
         release_intermediates(store.blobs, job_id, n_windows)
-    out.blobs_removed = release_blobs(store, keys)
     return out
 
 
@@ -120,7 +123,7 @@ def delete_clip(store: Store, clip_id: str, tenant_id: str) -> Deleted | None:
             return None
         active = session.scalars(select(Job.id).where(_of_clip(clip_id), Job.state.in_(ACTIVE))).all()
     out.cancelled_jobs = store.queue.cancel(list(active))
-    with _write_session(store) as session, session.begin():
+    with write_session(store) as session, session.begin():
         clip = session.get(ClipRecord, clip_id)
         if clip is None or clip.tenant_id != tenant_id:
             return None  # deleted meanwhile by a concurrent request
@@ -128,7 +131,7 @@ def delete_clip(store: Store, clip_id: str, tenant_id: str) -> Deleted | None:
         keys = {clip.topology_key, clip.coefficients_key} | _export_keys(jobs)
         out.jobs = _delete(session, Job, _of_clip(clip_id))
         out.clips = _delete(session, ClipRecord, ClipRecord.id == clip_id)
-    out.blobs_removed = release_blobs(store, keys)
+    out.blobs_removed = release(store, keys)
     return out
 
 
@@ -140,31 +143,3 @@ def release_window_blobs(store: Store, job_ids: list[str]) -> None:
     for job_id, result in rows:
         if isinstance((result or {}).get("windows"), int):
             release_intermediates(store.blobs, job_id, int(result["windows"]))
-
-
-def referenced(session: Session, key: str) -> bool:
-    """Whether any row of any tenant still names blob ``key``."""
-    if key.startswith(TETS_PREFIX):
-        cache_key = key.removeprefix(TETS_PREFIX)
-        return session.execute(select(exists().where(Job.result["tet_cache_key"].as_string() == cache_key))
-                               ).scalar()
-    checks = [exists().where(Mesh.blob_key == key), exists().where(PosesRecord.blob_key == key),
-              exists().where(ClipRecord.topology_key == key),
-              exists().where(ClipRecord.coefficients_key == key),
-              exists().where(Job.kind == "export", Job.result["export_key"].as_string() == key)]
-    return any(session.execute(select(check)).scalar() for check in checks)
-
-
-def release_blobs(store: Store, keys: set[str]) -> int:
-    """Remove each blob of ``keys`` that no row references any more; returns how many were removed."""
-    removed = 0
-    for key in sorted(keys):
-        with store.sessions() as session:
-            if referenced(session, key):
-                continue
-        try:
-            store.blobs.delete(key)
-            removed += 1
-        except Exception:  # noqa: BLE001 - an orphan blob wastes space but breaks nothing
-            log.warning("could not remove unreferenced blob %s", key, exc_info=True)
-    return removed

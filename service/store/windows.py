@@ -21,6 +21,8 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from .blobrefs import hold
+from .blobs import BlobStore
 from .models import ClipRecord, Job
 from .parents import locked as _locked
 from .queue import Claimed, JobQueue
@@ -163,10 +165,11 @@ def _advance(session: Session, parent: Job, task: Job, result: dict[str, Any], m
         parent.result = {"clip_id": clip.id, "windows": W, "windows_done": W}
 
 
-def task_done(queue: JobQueue, job: Claimed, result: dict[str, Any]) -> str | None:
+def task_done(queue: JobQueue, job: Claimed, result: dict[str, Any], blobs: BlobStore) -> str | None:
     """Fenced success of a window task: the task succeeds, its fit job advances (next phase enqueued once
-    the phase is complete; the join writes the clip). Returns the fit job's state, or None if the attempt
-    no longer owns the task or the fit job no longer waits for it (cancelled, failed, deleted)."""
+    the phase is complete; the join writes the clip, its blobs checked under their locks: BlobGone if a
+    concurrent delete took one). Returns the fit job's state, or None if the attempt no longer owns the task
+    or the fit job no longer waits for it (cancelled, failed, deleted)."""
     with queue._write() as session, session.begin():
         parent = _locked(session, job.parent_id or "")  # the fit job first: every writer locks it first
         task = session.execute(select(Job).where(Job.id == job.id, Job.attempt == job.attempt,
@@ -174,6 +177,9 @@ def task_done(queue: JobQueue, job: Claimed, result: dict[str, Any]) -> str | No
                                ).scalar_one_or_none()
         if task is None or parent is None or parent.state != "waiting":
             return None
+        if "clip" in result:  # the join: the clip row will name these
+            hold(session, blobs, dict.fromkeys([result["clip"]["topology_key"],
+                                                result["clip"]["coefficients_key"]]))
         task.state, task.progress, task.stage, task.finished_at = "succeeded", 1.0, "done", time.time()
         task.lease_expires, task.result = None, {k: v for k, v in result.items() if k != "clip"}
         session.flush()

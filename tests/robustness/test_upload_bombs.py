@@ -2,7 +2,7 @@
 corpus (generated here) is refused with a 4xx that gives the figures, quickly, and the API process's peak
 memory (VmHWM from /proc) grows by less than 50 MB, whatever the file declares; legal uploads that inflate
 to hundreds of MB are validated in a child process, not in the API; a body 20x the copy buffer streams to
-the blob store; uploads past the concurrency limit get 503 with Retry-After."""
+the blob store; uploads past the concurrency limit get 429 with Retry-After."""
 
 from __future__ import annotations
 
@@ -168,7 +168,7 @@ def test_large_upload_streams_with_bounded_memory(api, sphere) -> None:
     assert growth < 20 * MB, f"the API grew by {growth / MB:.1f} MB for a {len(data) / MB:.0f} MB upload"
 
 
-def test_uploads_past_the_limit_get_503_with_retry_after(api) -> None:
+def test_uploads_past_the_limit_get_429_with_retry_after(api) -> None:
     """With PDEANIM_MAX_CONCURRENT_UPLOADS=1, a second upload while one is still being received is refused
     at once with Retry-After; the first then completes."""
     svc, http = api
@@ -197,7 +197,7 @@ def test_uploads_past_the_limit_get_503_with_retry_after(api) -> None:
             assert time.monotonic() < deadline, "the slow upload never reached the server's scratch file"
             time.sleep(0.05)
         r = http.post("/v1/meshes", files={"file": ("other.glb", data)})
-        assert r.status_code == 503 and r.headers.get("Retry-After") == "2", r.text  # noqa: PLR2004
+        assert r.status_code == 429 and r.headers.get("Retry-After") == "2", r.text  # noqa: PLR2004
         assert "PDEANIM_MAX_CONCURRENT_UPLOADS" in r.json()["error"]["message"]
     finally:
         release.set()

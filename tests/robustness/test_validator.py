@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from service.api.errors import ApiError
-from service.api.validator import UploadSlots, run_checked
+from service.api.validator import run_checked
 from service.settings import Settings
 
 from . import bombs
@@ -46,13 +46,3 @@ def test_time_limit_is_a_413_naming_it(tmp_path) -> None:
     with pytest.raises(ApiError) as info:
         _mesh(tmp_path, "p.glb", bombs.primitive_flood(200_000), upload_timeout_seconds=0.05)
     assert info.value.status_code == 413 and "PDEANIM_UPLOAD_TIMEOUT_SECONDS" in info.value.detail
-
-
-def test_slots_refuse_past_the_limit_with_retry_after() -> None:
-    slots = UploadSlots(1)
-    with slots.hold():
-        with pytest.raises(ApiError) as info, slots.hold():
-            pass
-    assert info.value.status_code == 503 and info.value.headers["Retry-After"] == "2"
-    with slots.hold():
-        assert slots.active == 1

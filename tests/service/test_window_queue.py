@@ -54,7 +54,7 @@ def _run_phase(store, phase: str, n: int, result: dict | None = None) -> list[st
     for _ in range(n):
         task = store.queue.claim("w1")
         assert task is not None and task.phase == phase and task.kind == windows.TASK_KIND
-        out.append(windows.task_done(store.queue, task, result or {"phase": phase}))
+        out.append(windows.task_done(store.queue, task, result or {"phase": phase}, store.blobs))
     return out
 
 
@@ -68,6 +68,8 @@ def test_phases_in_order_and_progress_counts_windows(store, fit_job):
     _run_phase(store, "encode", W - 1)
     assert _row(store, fit_job).result == {"windows": W, "windows_done": W - 1}
     _run_phase(store, "encode", 1)
+    store.blobs.put(b"topology", key="t")  # the join's clip row names stored blobs (checked under their lock)
+    store.blobs.put(b"coefficients", key="c")
     assert _run_phase(store, "join", 1, {"clip": CLIP}) == ["succeeded"]
     assert store.queue.claim("w1") is None
     job = _row(store, fit_job)
@@ -124,7 +126,11 @@ def test_progress_never_goes_back_from_submission_to_the_clip(store):
                 assert store.queue.report(task.id, task.attempt, f, phase)
                 windows.task_progress(store.queue, task)
                 record()
-            windows.task_done(store.queue, task, {"clip": CLIP} if phase == "join" else {"phase": phase})
+            if phase == "join":  # the join's clip row names stored blobs (checked under their lock)
+                store.blobs.put(b"topology", key="t")
+                store.blobs.put(b"coefficients", key="c")
+            windows.task_done(store.queue, task, {"clip": CLIP} if phase == "join" else {"phase": phase},
+                              store.blobs)
             record()
     assert _row(store, job_id).state == "succeeded"
     assert all(b >= a for a, b in zip(seen, seen[1:], strict=False)), seen
@@ -140,7 +146,7 @@ def test_concurrent_finishes_enqueue_the_next_phase_once(store, fit_job):
 
     def finish(task) -> None:
         barrier.wait()
-        windows.task_done(store.queue, task, {})
+        windows.task_done(store.queue, task, {}, store.blobs)
 
     threads = [threading.Thread(target=finish, args=(t,)) for t in claimed]
     for t in threads:
@@ -165,7 +171,7 @@ def test_a_task_failing_for_good_fails_the_fit_and_cancels_the_others(store, fit
         states = {t.id: t.state for t in s.scalars(select(Job).where(Job.parent_id == fit_job))}
     assert states.pop(first.id) == "failed" and set(states.values()) == {"cancelled"}
     second = next(t for t in claimed if t.id != task.id)
-    assert windows.task_done(store.queue, second, {}) is None  # fenced out: cancelled
+    assert windows.task_done(store.queue, second, {}, store.blobs) is None  # fenced out: cancelled
 
 
 def test_cancel_reaches_every_task(store, fit_job):
@@ -175,7 +181,7 @@ def test_cancel_reaches_every_task(store, fit_job):
         states = {t.state for t in s.scalars(select(Job).where(Job.parent_id == fit_job))}
     assert states == {"cancelled"} and _row(store, fit_job).state == "cancelled"
     assert not store.queue.heartbeat(running.id, running.attempt)  # its worker stops it
-    assert windows.task_done(store.queue, running, {}) is None
+    assert windows.task_done(store.queue, running, {}, store.blobs) is None
 
 
 def test_ranged_blob_reads(store):

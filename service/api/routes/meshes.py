@@ -6,6 +6,7 @@ from fastapi import APIRouter, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
 from ...settings import Settings
+from ...store.blobrefs import add_row
 from ...store.models import ClipRecord, Mesh
 from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
@@ -41,23 +42,26 @@ def _ingest(upload: Upload, settings: Settings) -> dict:
 
 
 @router.post("/v1/meshes", status_code=201, operation_id="uploadMesh", response_model=MeshOut,
-             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 413, 415, 422, 503),
+             openapi_extra=UPLOAD_BODY, responses={**responses(400, 401, 408, 413, 415, 422, 429, 503),
                                                   **created(201, "mesh", {
                  "GetMesh": ("getMesh", "mesh_id"), "UploadPoses": ("uploadPoses", "mesh_id"),
                  "GetTopology": ("getMeshTopology", "mesh_id"), "DeleteMesh": ("deleteMesh", "mesh_id")})})
 async def upload_mesh(request: Request, response: Response, tenant: TenantDep, store: StoreDep) -> MeshOut:
     """Upload a mesh file (OBJ, PLY, STL, OFF, GLB) as multipart field ``file``; 201 with its stats."""
     settings = store.settings
-    with request.app.state.upload_slots.hold():
-        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+    with request.app.state.upload_slots.hold(tenant):
+        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes,
+                                    settings.upload_pace())
         try:
             stats = await run_in_threadpool(_ingest, upload, settings)
             key = await run_in_threadpool(store.blobs.put_file, upload.path)
+            row = Mesh(tenant_id=tenant, filename=upload.filename[:255], blob_key=key,
+                       n_vertices=stats["vertices"], n_faces=stats["faces"], stats=stats)
+            # the row and the check that its blob is stored, under the blob's lock (a database wait must not
+            # stall the event loop); the upload is the source if a concurrent delete took the shared blob
+            await run_in_threadpool(add_row, store, row, {key: upload.path})
         finally:
             upload.path.unlink(missing_ok=True)
-    row = Mesh(tenant_id=tenant, filename=upload.filename[:255], blob_key=key, n_vertices=stats["vertices"],
-               n_faces=stats["faces"], stats=stats)
-    await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop
     response.headers["Location"] = f"/v1/meshes/{row.id}"
     return mesh_out(row)
 

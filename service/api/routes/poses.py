@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from fastapi import APIRouter, Query, Request, Response
+from sqlalchemy import select
+from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from ...settings import Settings
+from ...store.blobrefs import add_row, release
 from ...store.context import Store
 from ...store.models import Mesh, PosesRecord
 from ...store.scratch import prefix
 from ..access import created, owned, responses
 from ..deps import SessionDep, StoreDep, TenantDep
+from ..errors import ApiError
 from ..httpcache import immutable_response
 from ..schemas import PosesOut
 from ..uploads import UPLOAD_BODY, Upload, receive_file
@@ -33,25 +38,60 @@ def _owned_mesh(store: Store, mesh_id: str, tenant: str) -> Mesh:
         return owned(session, Mesh, mesh_id, tenant, "mesh")
 
 
-def _store_poses(upload: Upload, mesh: Mesh, store: Store, fps: float,
-                 animation: str | None) -> tuple[str, int, dict]:
-    """The poses' blob key, frame count and the row's meta (with the glTF animation used, if any): validated
-    and written as a canonical POSES.npz by a validator child, then streamed to the blob store."""
+def _validated(upload: Upload, mesh: Mesh, store: Store, fps: float,
+               animation: str | None) -> tuple[Path, int, dict]:
+    """The canonical POSES.npz written by a validator child (the caller deletes it), its frame count and the
+    row's meta (with the glTF animation used, if any)."""
     settings: Settings = store.settings
     about = {"id": mesh.id, "n_vertices": mesh.n_vertices, "blob_key": mesh.blob_key,
              "filename": mesh.filename}
     out, frames, meta = run_checked("poses_file", (str(upload.path), upload.filename, about,
                                                    settings.model_dump_json(), fps, animation,
                                                    prefix("upload")), settings)
+    return Path(out), frames, meta
+
+
+def _mesh_still_there(mesh_id: str, tenant: str) -> Callable[[Session], bool]:
+    """A check, run in the transaction that adds the poses row, that their mesh still exists (on PostgreSQL
+    with a key-share lock, so a delete of the mesh waits for the insert or the insert sees it gone)."""
+    def check(session: Session) -> bool:
+        stmt = (select(Mesh.id).where(Mesh.id == mesh_id, Mesh.tenant_id == tenant)
+                .with_for_update(read=True, key_share=True))
+        return session.execute(stmt).first() is not None
+
+    return check
+
+
+def commit_poses(store: Store, key: str, source: Path, tenant: str, mesh: Mesh, frames: int,
+                 meta: dict) -> PosesRecord | None:
+    """Add the row of poses stored under ``key`` (``source``: their file, to restore the blob from if a
+    concurrent delete took it), in one transaction with the blob's lock; None if their mesh was deleted
+    meanwhile, and then no blob is left behind that no row names."""
+    row = PosesRecord(tenant_id=tenant, mesh_id=mesh.id, source="upload", blob_key=key, n_frames=frames,
+                      n_vertices=mesh.n_vertices, meta=meta)
+    if add_row(store, row, {key: source}, _mesh_still_there(mesh.id, tenant)):
+        return row
+    release(store, [key])
+    return None
+
+
+def _store_poses(upload: Upload, mesh: Mesh, store: Store, tenant: str, fps: float,
+                 animation: str | None) -> PosesRecord:
+    """Validate, store the blob and add the row; 404 if the mesh was deleted meanwhile."""
+    out, frames, meta = _validated(upload, mesh, store, fps, animation)
     try:
-        return store.blobs.put_file(Path(out)), frames, meta
+        row = commit_poses(store, store.blobs.put_file(out), out, tenant, mesh, frames, meta)
     finally:
-        Path(out).unlink(missing_ok=True)
+        out.unlink(missing_ok=True)
+    if row is None:
+        raise ApiError(404, "not_found", f"mesh {mesh.id!r} not found (it was deleted while the poses were "
+                                         "uploaded)")
+    return row
 
 
 @router.post("/v1/meshes/{mesh_id}/poses", status_code=201, operation_id="uploadPoses",
              response_model=PosesOut, openapi_extra=UPLOAD_BODY,
-             responses={**responses(400, 401, 404, 413, 415, 422, 503),
+             responses={**responses(400, 401, 404, 408, 413, 415, 422, 429, 503),
                         **created(201, "poses", {"GetPoses": ("getPoses", "poses_id")})})
 async def upload_poses(mesh_id: str, request: Request, response: Response, tenant: TenantDep,
                        store: StoreDep,
@@ -63,15 +103,13 @@ async def upload_poses(mesh_id: str, request: Request, response: Response, tenan
     animated GLB (morph targets or several meshes); V must equal the mesh's vertex count."""
     mesh = await run_in_threadpool(_owned_mesh, store, mesh_id, tenant)
     settings = store.settings
-    with request.app.state.upload_slots.hold():
-        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes)
+    with request.app.state.upload_slots.hold(tenant):
+        upload = await receive_file(request, settings.tmp_dir(), settings.max_upload_bytes,
+                                    settings.upload_pace())
         try:
-            key, frames, meta = await run_in_threadpool(_store_poses, upload, mesh, store, fps, animation)
+            row = await run_in_threadpool(_store_poses, upload, mesh, store, tenant, fps, animation)
         finally:
             upload.path.unlink(missing_ok=True)
-    row = PosesRecord(tenant_id=tenant, mesh_id=mesh_id, source="upload", blob_key=key, n_frames=frames,
-                      n_vertices=mesh.n_vertices, meta=meta)
-    await run_in_threadpool(store.save, row)  # a database wait must not stall the event loop
     response.headers["Location"] = f"/v1/poses/{row.id}"
     return poses_out(row)
 
