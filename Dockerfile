@@ -4,7 +4,7 @@ FROM python:3.11-slim-bookworm
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PIP_NO_CACHE_DIR=1 PDEANIM_DATA_DIR=/data
 RUN apt-get update && apt-get install -y --no-install-recommends libgomp1 && rm -rf /var/lib/apt/lists/*
 WORKDIR /app
-COPY pyproject.toml README.md alembic.ini requirements.lock requirements-service.lock ./
+COPY pyproject.toml setup.py README.md alembic.ini requirements.lock requirements-service.lock ./
 RUN pip install -r requirements-service.lock
 COPY pdeanim ./pdeanim
 COPY service ./service

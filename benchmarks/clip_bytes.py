@@ -34,9 +34,9 @@ sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
 from service_frames import SPOT, check, wait_job  # noqa: E402
 
-from service.demo import FIT, SCENE, DemoServices  # noqa: E402
-from service.settings import Settings  # noqa: E402
-from service.store.tenants import issue_key  # noqa: E402
+from pdeanim_service.demo import FIT, SCENE, DemoServices  # noqa: E402
+from pdeanim_service.settings import Settings  # noqa: E402
+from pdeanim_service.store.tenants import issue_key  # noqa: E402
 
 SEQUENCES = next((p / "shared" / "data" / "sequences" for p in (ROOT.parent, ROOT.parent.parent)
                   if (p / "shared" / "data" / "sequences").is_dir()), Path("/work/shared/data/sequences"))

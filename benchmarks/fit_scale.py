@@ -45,7 +45,7 @@ from benchmarks.fit_scale_inputs import (  # noqa: E402
 )
 from benchmarks.fit_scale_report import goal_lines, markdown_table, service_table  # noqa: E402
 
-CONSOLE = [sys.executable, "-m", "service.cli"]
+CONSOLE = [sys.executable, "-m", "pdeanim_service.cli"]
 LONG_INPUTS = "spot-sim:1000,elephant-gallop:250,elephant-gallop:500,elephant-gallop:1000,samba:1000"
 QUICK_SEQUENCES = "AnimatedMorphSphere,horse-collapse"
 

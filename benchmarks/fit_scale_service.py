@@ -16,7 +16,7 @@ import httpx
 import numpy as np
 
 from benchmarks.fit_scale_inputs import input_shape
-from service.launcher import Launcher
+from pdeanim_service.launcher import Launcher
 
 PRIORITY = {"PDEANIM_JOB_SCHED_IDLE": "false", "PDEANIM_JOB_NICE": "0"}
 """Jobs run at the priority of the CLI's fit (documented settings; the defaults, SCHED_IDLE and nice 10, make
@@ -30,7 +30,7 @@ def raised_settings(poses: Path, frames: int, vertices: int) -> dict[str, str]:
     from pdeanim.fit import FitOptions
     from pdeanim.fit.budget import fit_memory_bytes, window_task_memory_bytes
     from pdeanim.fit.windowed import windowed_applies
-    from service.settings import Settings
+    from pdeanim_service.settings import Settings
 
     defaults = Settings(data_dir=Path(tempfile.gettempdir()))
     tol = defaults.fit_tolerances()
@@ -138,8 +138,8 @@ def upload(api: httpx.Client, poses: Path) -> tuple[dict, dict | None, str | Non
 
 def start(data_dir: Path, env: dict[str, str], workers: int) -> tuple[Launcher, str]:
     """``pdeanim serve --with-workers N`` on ``data_dir``; (launcher, API key)."""
-    from service.settings import Settings
-    from service.store.tenants import issue_key
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.tenants import issue_key
 
     key = issue_key(Settings(data_dir=data_dir), "bench")
     launcher = Launcher(data_dir / "logs", {**os.environ, "PDEANIM_DATA_DIR": str(data_dir), **env})

@@ -102,7 +102,7 @@ def demo_case(fps: float) -> Case:
     from pdeanim.mesh.io import load_mesh
     from pdeanim.sim.scene import SceneParams
     from pdeanim.sim.simulate import simulate_mesh
-    from service.demo import FIT, SAMPLE_MESH, SCENE
+    from pdeanim_service.demo import FIT, SAMPLE_MESH, SCENE
 
     with tempfile.TemporaryDirectory() as tmp:
         poses = simulate_mesh(load_mesh(SAMPLE_MESH), SceneParams.from_dict(SCENE), workdir=Path(tmp),

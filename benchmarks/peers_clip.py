@@ -23,7 +23,7 @@ FIT_LABELS: dict[str, str] = {}
 FIXED_DESTS = {"command", "func", "poses", "out", "target_rel_rms"}
 """What every fit sets itself: the sub-command, input, output and the target being measured."""
 
-CHILD = ("import re, resource, sys, time; from service.cli import main; t = time.perf_counter(); "
+CHILD = ("import re, resource, sys, time; from pdeanim_service.cli import main; t = time.perf_counter(); "
          "rc = main(sys.argv[1:]); s = time.perf_counter() - t; "
          "m = re.search(r'VmHWM:\\s*(\\d+)', open('/proc/self/status').read()); "
          "kb = int(m.group(1)) if m else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; "

@@ -45,9 +45,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from service.cli import CONSOLE  # noqa: E402
-from service.settings import Settings  # noqa: E402
-from service.store.tenants import issue_key  # noqa: E402
+from pdeanim_service.cli import CONSOLE  # noqa: E402
+from pdeanim_service.settings import Settings  # noqa: E402
+from pdeanim_service.store.tenants import issue_key  # noqa: E402
 
 SPOT = ROOT / "tests" / "data" / "spot.obj"
 SEQUENCES = Path("/work/shared/data/sequences")  # research sequences: never shipped with the project
@@ -366,11 +366,11 @@ def in_process_ms(data_dir: Path, clip_id: str, which: str, n: int = 5) -> dict:
     from pdeanim.gltf.clipexport import clip_animation_glb
     from pdeanim.gltf.normals import FaceNormals
     from pdeanim.gltf.write import FrameGlb
-    from service.api import encoding
-    from service.api.threads import single_threaded_blas
-    from service.settings import Settings
-    from service.store.context import Store
-    from service.store.models import ClipRecord
+    from pdeanim_service.api import encoding
+    from pdeanim_service.api.threads import single_threaded_blas
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.context import Store
+    from pdeanim_service.store.models import ClipRecord
 
     single_threaded_blas()  # as in the API process
     store = Store.open(Settings(data_dir=data_dir))

@@ -29,9 +29,9 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.fit_scale_inputs import CACHE, ensure_input, parse_long_input  # noqa: E402
 from benchmarks.fit_scale_service import descendants, rest_obj  # noqa: E402
-from service.launcher import Launcher  # noqa: E402
+from pdeanim_service.launcher import Launcher  # noqa: E402
 
-CONSOLE = [sys.executable, "-m", "service.cli"]
+CONSOLE = [sys.executable, "-m", "pdeanim_service.cli"]
 MiB = 1024**2
 
 
@@ -103,9 +103,9 @@ def make_clip(poses: Path, target: float) -> Path:
 def store_clip(data_dir: Path, mesh_id: str, clip: Path) -> str:
     """Store the CLIP file's parts as a fit job stores a clip (blobs and a row) for ``mesh_id``; its id."""
     from pdeanim.clip import read_clip_file
-    from service.settings import Settings
-    from service.store.context import Store
-    from service.store.models import ClipRecord, Mesh
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.context import Store
+    from pdeanim_service.store.models import ClipRecord, Mesh
 
     parts = read_clip_file(clip)
     store = Store.open(Settings(data_dir=data_dir))
@@ -169,8 +169,8 @@ def main() -> None:
     print(f"# start {time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime())} UTC, load {os.getloadavg()}")
     with tempfile.TemporaryDirectory(prefix="svc-memory-") as tmp:
         data_dir = Path(tmp)
-        from service.settings import Settings
-        from service.store.tenants import issue_key
+        from pdeanim_service.settings import Settings
+        from pdeanim_service.store.tenants import issue_key
 
         key = issue_key(Settings(data_dir=data_dir), "bench")
         launcher = Launcher(data_dir / "logs", {**os.environ, "PDEANIM_DATA_DIR": str(data_dir),

@@ -31,9 +31,9 @@ sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
 from service_frames import SPOT, check, wait_job  # noqa: E402
 
-from service.demo import FIT, DemoServices  # noqa: E402
-from service.settings import Settings  # noqa: E402
-from service.store.tenants import issue_key  # noqa: E402
+from pdeanim_service.demo import FIT, DemoServices  # noqa: E402
+from pdeanim_service.settings import Settings  # noqa: E402
+from pdeanim_service.store.tenants import issue_key  # noqa: E402
 
 
 def spot_refined(target: int) -> bytes:

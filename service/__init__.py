@@ -1,2 +1,2 @@
-"""The pdeanim web service: FastAPI API (``service.api``), storage shared with the worker
-(``service.store``)."""
+"""The pdeanim web service: FastAPI API (``pdeanim_service.api``), storage shared with the worker
+(``pdeanim_service.store``)."""

@@ -6,4 +6,4 @@ from __future__ import annotations
 
 import sys
 
-CONSOLE = [sys.executable, "-m", "service.cli"]
+CONSOLE = [sys.executable, "-m", "pdeanim_service.cli"]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import httpx
 
-from service.console import CONSOLE
+from pdeanim_service.console import CONSOLE
 
 
 def free_port() -> int:

@@ -134,9 +134,9 @@ class Settings(BaseSettings):
     fit_window_values: int = Field(0, ge=0, description="frame-vertex values per window of frames (the "
                                    "unit of a window task); 0 = the library's (4,194,304)")
 
-    def upload_pace(self):  # noqa: ANN201 - service.api.uploadslots.BodyPace (imported when needed)
+    def upload_pace(self):  # noqa: ANN201 - pdeanim_service.api.uploadslots.BodyPace (imported when needed)
         """The slowest an upload body may arrive, from these settings."""
-        from service.api.uploadslots import BodyPace
+        from pdeanim_service.api.uploadslots import BodyPace
 
         return BodyPace(self.upload_min_bytes_per_second, self.upload_body_grace_seconds)
 

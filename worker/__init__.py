@@ -1,1 +1,1 @@
-"""The pdeanim worker: claims jobs from ``service.store``, runs each attempt in a child process."""
+"""The pdeanim worker: claims jobs from ``pdeanim_service.store``, runs each attempt in a child process."""

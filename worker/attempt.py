@@ -8,8 +8,8 @@ import threading
 import time
 from collections.abc import Callable
 
-from service.store.queue import Claimed, JobQueue
-from service.store.windows import task_progress
+from pdeanim_service.store.queue import Claimed, JobQueue
+from pdeanim_service.store.windows import task_progress
 
 from .child import Outcome, child_main
 

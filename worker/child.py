@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from pdeanim.outofmemory import out_of_memory
-from service.store.scratch import alive, die_with_parent
+from pdeanim_service.store.scratch import alive, die_with_parent
 
-PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "trimesh", "worker.stages"]
+PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "trimesh", "pdeanim_worker.stages"]
 
 
 def child_context() -> multiprocessing.context.BaseContext:
@@ -109,8 +109,8 @@ def child_main(conn, job: dict[str, Any], settings_json: str, parent_pid: int) -
 
 def _run(conn, job: dict[str, Any], settings_json: str) -> None:  # noqa: ANN001
     from pdeanim.errors import InputError
-    from service.settings import Settings
-    from service.store.blobs import open_blob_store
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.blobs import open_blob_store
 
     from .stages import STAGES
 

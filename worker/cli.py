@@ -17,7 +17,7 @@ def run(args: argparse.Namespace) -> int:
     """Start the worker loop; returns 0 after a clean stop."""
     import logging
 
-    from worker.loop import main
+    from pdeanim_worker.loop import main
 
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
     return main()

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pdeanim.clipparts import ClipParts
 from pdeanim.container import unpack
 from pdeanim.records import jsonable
-from service.store.blobs import BlobStore
+from pdeanim_service.store.blobs import BlobStore
 
 
 def store_clip(parts: ClipParts, blobs: BlobStore, n_frames: int, n_vertices: int) -> dict:

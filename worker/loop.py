@@ -14,13 +14,13 @@ import threading
 import time
 
 from pdeanim.records import library_versions
-from service.settings import Settings
-from service.store import windows
-from service.store.blobrefs import BlobGone, sweep
-from service.store.context import Store
-from service.store.models import ClipRecord, Mesh, PosesRecord
-from service.store.queue import Claimed
-from service.store.scratch import clean_stale, prefix, remove
+from pdeanim_service.settings import Settings
+from pdeanim_service.store import windows
+from pdeanim_service.store.blobrefs import BlobGone, sweep
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import ClipRecord, Mesh, PosesRecord
+from pdeanim_service.store.queue import Claimed
+from pdeanim_service.store.scratch import clean_stale, prefix, remove
 
 from .attempt import run_attempt
 from .child import Outcome, child_context
@@ -195,7 +195,7 @@ class Worker:
 
     def _state(self, job_id: str) -> str | None:
         """The job's state now (None once its row is deleted)."""
-        from service.store.models import Job
+        from pdeanim_service.store.models import Job
 
         with self.store.sessions() as session:
             job = session.get(Job, job_id)

@@ -8,10 +8,10 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from service.store.blobrefs import hold
-from service.store.blobs import BlobStore
-from service.store.models import ClipRecord, Job, PosesRecord
-from service.store.queue import Claimed
+from pdeanim_service.store.blobrefs import hold
+from pdeanim_service.store.blobs import BlobStore
+from pdeanim_service.store.models import ClipRecord, Job, PosesRecord
+from pdeanim_service.store.queue import Claimed
 
 
 def _upsert_poses(session: Session, job: Claimed, p: dict[str, Any]) -> str:
@@ -41,7 +41,7 @@ def result_writer(job: Claimed, result: dict[str, Any],
                   blobs: BlobStore) -> Callable[[Session], dict[str, Any]]:
     """A ``write(session)`` for :meth:`JobQueue.finish` or ``store_partial``: adds poses/clip rows, returns
     their ids (and the tet cache key of a simulation). Their blobs are checked under their locks first
-    (:func:`service.store.blobrefs.hold`: BlobGone if a concurrent delete took a shared one)."""
+    (:func:`pdeanim_service.store.blobrefs.hold`: BlobGone if a concurrent delete took a shared one)."""
 
     def write(session: Session) -> dict[str, Any]:
         # the job's row first, then the blobs' locks: the order of every transaction taking both

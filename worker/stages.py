@@ -10,8 +10,8 @@ from typing import Any
 from pdeanim.poses import poses_to_bytes
 from pdeanim.progress import Progress, sub_progress
 from pdeanim.records import jsonable
-from service.settings import Settings
-from service.store.blobs import BlobStore
+from pdeanim_service.settings import Settings
+from pdeanim_service.store.blobs import BlobStore
 
 from .clipstore import store_clip
 
@@ -163,7 +163,7 @@ def run_export(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
 
 def run_window(job: dict, blobs: BlobStore, settings: Settings, progress: Progress, workdir: Path,
                partial: Partial | None = None) -> dict:
-    """One window task of a fit in window tasks (worker.windowtasks)."""
+    """One window task of a fit in window tasks (pdeanim_worker.windowtasks)."""
     from .windowtasks import run_window as run
 
     return run(job, blobs, settings, progress, workdir, partial)

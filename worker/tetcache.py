@@ -14,7 +14,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from service.store.blobs import BlobNotFound, BlobStore
+from pdeanim_service.store.blobs import BlobNotFound, BlobStore
 
 log = logging.getLogger("pdeanim.worker")
 BLOB_PREFIX = "tets-"

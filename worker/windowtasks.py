@@ -1,4 +1,5 @@
-"""The steps of a fit in window tasks, run in the job's child process like any stage (service.store.windows
+"""The steps of a fit in window tasks, run in the job's child process like any stage
+(pdeanim_service.store.windows
 says how the queue chains them): the fit job's attempt plans the fit and stores the raw frames; each task
 then reads the plan, its window's frames (a ranged read of the raw float32 poses) or the intermediates of
 the phase before it, and stores its own under ``windowed/<fit job>/``. Every step is deterministic, so the
@@ -12,9 +13,9 @@ import numpy as np
 
 from pdeanim.fit import windowed
 from pdeanim.progress import Progress, sub_progress
-from service.settings import Settings
-from service.store import windows as keys
-from service.store.blobs import BlobStore
+from pdeanim_service.settings import Settings
+from pdeanim_service.store import windows as keys
+from pdeanim_service.store.blobs import BlobStore
 
 from .clipstore import store_clip
 

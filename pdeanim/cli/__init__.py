@@ -1,7 +1,7 @@
 """The library's commands of the ``pdeanim`` console script. Each sub-command lives in its own module and
 exposes ``register(subparsers)``, which adds its parser and sets ``func`` (args -> exit code). The
 service-side commands (serve, worker, keys, demo) live with the service and are added by
-:func:`service.cli.main`, the installed console script; this package never imports them."""
+:func:`pdeanim_service.cli.main`, the installed console script; this package never imports them."""
 
 from __future__ import annotations
 

@@ -66,8 +66,8 @@ class ClipCache:
     the least recently used are evicted before a clip is inserted, and a clip larger than ``max_bytes`` alone
     is served to the requests that loaded it but never kept. A clip is loaded once however many requests ask
     for it meanwhile (they wait for that load; other clips' requests go on), outside the lock. Ids marked gone
-    (deleted, seen by this process or by :class:`service.api.invalidation.DeletionWatch`) are never kept
-    again."""
+    (deleted, seen by this process or by :class:`pdeanim_service.api.invalidation.DeletionWatch`) are never
+    kept again."""
 
     def __init__(self, max_entries: int, max_bytes: int = 0, max_gone: int = 100_000):
         self.max_entries = max(1, int(max_entries))

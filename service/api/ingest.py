@@ -1,4 +1,5 @@
-"""What validating an upload does, run in the validator's child process (:mod:`service.api.validator`): read
+"""What validating an upload does, run in the validator's child process
+(:mod:`pdeanim_service.api.validator`): read
 the file from disk with the library's readers under the configured limits, and hand back only small results
 (stats, or the path of the canonical POSES.npz written next to the upload), never the arrays."""
 

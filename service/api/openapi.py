@@ -1,4 +1,4 @@
-"""Write the app's OpenAPI document to ``openapi/openapi.json`` (``python -m service.api.openapi``);
+"""Write the app's OpenAPI document to ``openapi/openapi.json`` (``python -m pdeanim_service.api.openapi``);
 a test fails when the checked-in file drifts from the app."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     text = openapi_text()
     if check:
         same = path.exists() and path.read_text() == text
-        print(f"{path}: {'up to date' if same else 'DRIFTED: run python -m service.api.openapi'}")
+        print(f"{path}: {'up to date' if same else 'DRIFTED: run python -m pdeanim_service.api.openapi'}")
         return 0 if same else 1
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)

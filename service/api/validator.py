@@ -1,10 +1,11 @@
 """Uploads are validated in a child process, so the API process's memory stays the same whatever the file:
 decoding a legal upload can take gigabytes (a 1 GiB poses .npz, a morph-target GLB) and glibc keeps the API's
-freed heap (:mod:`service.api.memory`). The child forks from a forkserver that preloaded the readers (a few
+freed heap (:mod:`pdeanim_service.api.memory`). The child forks from a forkserver that preloaded the readers
+(a few
 milliseconds per upload), runs under an address-space limit (``PDEANIM_UPLOAD_MEMORY_BYTES`` over what the
 preloaded libraries map) and a time limit, and sends back only small results. At most
 ``PDEANIM_MAX_CONCURRENT_UPLOADS`` uploads are received and validated at once per API process
-(:mod:`service.api.uploadslots`)."""
+(:mod:`pdeanim_service.api.uploadslots`)."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from .errors import ApiError
 log = logging.getLogger("pdeanim.api")
 
 PRELOAD = ["numpy", "scipy.sparse", "trimesh", "pdeanim.mesh.io", "pdeanim.gltf.read", "pdeanim.poses",
-           "service.api.ingest"]
+           "pdeanim_service.api.ingest"]
 RETRY_AFTER_SECONDS = 2
 _context: multiprocessing.context.BaseContext | None = None
 _lock = threading.Lock()
@@ -63,7 +64,8 @@ def _address_space() -> int:
 
 
 def _child(conn, target: str, args: tuple, budget: int) -> None:  # noqa: ANN001 - a Connection
-    """Entry of the child: limit memory, run ``service.api.ingest.<target>(*args)``, send one message."""
+    """Entry of the child: limit memory, run ``pdeanim_service.api.ingest.<target>(*args)``, send one
+    message."""
     from pdeanim.errors import InputError
 
     from . import ingest
@@ -123,8 +125,9 @@ def _died(proc: multiprocessing.process.BaseProcess, settings: Settings) -> ApiE
 
 
 def run_checked(target: str, args: tuple, settings: Settings) -> Any:
-    """``service.api.ingest.<target>(*args)`` in a fresh child under the memory and time limits (blocking:
-    call it from a thread). Its InputErrors come back as ApiErrors with their status and message."""
+    """``pdeanim_service.api.ingest.<target>(*args)`` in a fresh child under the memory and time limits
+    (blocking: call it from a thread). Its InputErrors come back as ApiErrors with their status and
+    message."""
     ctx = context()
     receiver, sender = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(sender, target, args, settings.upload_memory_bytes), daemon=True)

@@ -1,6 +1,6 @@
 """The installed ``pdeanim`` console script: the library's commands (:mod:`pdeanim.cli`) plus the
-service-side ones (``serve``, ``keys``, ``demo`` here and ``worker`` from :mod:`worker.cli`), so the domain
-library never imports the service or the worker. The service commands need the ``service`` extra
+service-side ones (``serve``, ``keys``, ``demo`` here and ``worker`` from :mod:`pdeanim_worker.cli`), so the
+domain library never imports the service or the worker. The service commands need the ``service`` extra
 (``pip install 'pdeanim[service]'``); without it they say so (exit code 2) instead of failing with a
 traceback."""
 
@@ -19,7 +19,7 @@ EXTRA_MODULES = frozenset({"fastapi", "starlette", "uvicorn", "sqlalchemy", "ale
 
 def service_commands() -> tuple:
     """The service-side sub-command modules (plain imports; they import the service's packages lazily)."""
-    from worker import cli as worker_cli
+    from pdeanim_worker import cli as worker_cli
 
     from . import blobs, demo, keys, serve
 

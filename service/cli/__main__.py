@@ -1,7 +1,7 @@
-"""``python -m service.cli``: the ``pdeanim`` console script."""
+"""``python -m pdeanim_service.cli``: the ``pdeanim`` console script."""
 
 import sys
 
-from service.cli import main
+from pdeanim_service.cli import main
 
 sys.exit(main())

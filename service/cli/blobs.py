@@ -20,9 +20,9 @@ def register(subparsers) -> None:  # noqa: ANN001
 
 def run(args: argparse.Namespace) -> int:
     """Sweep once and print what was removed as JSON."""
-    from service.settings import Settings
-    from service.store.blobrefs import sweep
-    from service.store.context import Store
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.blobrefs import sweep
+    from pdeanim_service.store.context import Store
 
     settings = Settings()
     if args.grace is not None and args.grace < 0:

@@ -20,6 +20,6 @@ def register(subparsers) -> None:  # noqa: ANN001
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo; returns 0 on success."""
-    from service.demo import run_demo
+    from pdeanim_service.demo import run_demo
 
     return run_demo(args.mesh, args.out, args.data_dir, args.keep)

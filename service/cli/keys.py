@@ -33,7 +33,7 @@ def _when(ts: float | None) -> str:
 def _list(session, args: argparse.Namespace) -> int:  # noqa: ANN001
     from sqlalchemy import select
 
-    from service.store.models import ApiKey, Tenant
+    from pdeanim_service.store.models import ApiKey, Tenant
 
     query = (select(ApiKey, Tenant.name).join(Tenant, Tenant.id == ApiKey.tenant_id)
              .order_by(ApiKey.created_at))
@@ -54,8 +54,8 @@ def _list(session, args: argparse.Namespace) -> int:  # noqa: ANN001
 def _revoke(session, args: argparse.Namespace) -> int:  # noqa: ANN001
     from sqlalchemy import or_, select
 
-    from service.store.models import ApiKey
-    from service.store.tenants import hash_key
+    from pdeanim_service.store.models import ApiKey
+    from pdeanim_service.store.tenants import hash_key
 
     needle = args.key.strip()
     if len(needle) < MIN_PREFIX:
@@ -85,9 +85,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the keys sub-command on the configured database (migrating it first)."""
     from sqlalchemy.orm import Session
 
-    from service.settings import Settings
-    from service.store.context import Store
-    from service.store.tenants import issue_key
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.context import Store
+    from pdeanim_service.store.tenants import issue_key
 
     if args.keys_command == "create":
         print(issue_key(Settings(), args.tenant))

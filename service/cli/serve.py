@@ -9,8 +9,8 @@ import signal
 import subprocess
 import sys
 
-from service.console import CONSOLE
-from service.store.scratch import die_with_parent
+from pdeanim_service.console import CONSOLE
+from pdeanim_service.store.scratch import die_with_parent
 
 WORKER_CMD = [*CONSOLE, "worker"]
 
@@ -49,7 +49,7 @@ def http_app():  # noqa: ANN201 - a FastAPI app
     a SIGKILLed ``pdeanim serve`` leaves no HTTP process holding its port."""
     import multiprocessing
 
-    from service.api.app import app_from_environment
+    from pdeanim_service.api.app import app_from_environment
 
     supervisor = multiprocessing.parent_process()
     if supervisor is not None and supervisor.pid is not None:
@@ -95,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
     """Migrate (unless --no-migrate), start the job workers asked for, then serve until interrupted."""
     import uvicorn
 
-    from service.settings import Settings
-    from service.store.db import migrate
+    from pdeanim_service.settings import Settings
+    from pdeanim_service.store.db import migrate
 
     settings = Settings()
     if not args.no_migrate:
@@ -124,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
 def uvicorn_options(args: argparse.Namespace, settings, http_workers: int) -> dict:  # noqa: ANN001 - Settings
     """The keyword arguments of ``uvicorn.run`` (and ``uvicorn.Config``) for these arguments and settings,
     the supervisor's health-check timeout included (``PDEANIM_HTTP_WORKER_HEALTHCHECK_SECONDS``)."""
-    return {"app": "service.cli.serve:http_app", "factory": True, "host": args.host, "port": args.port,
+    return {"app": "pdeanim_service.cli.serve:http_app", "factory": True, "host": args.host,
+            "port": args.port,
             "workers": http_workers, "log_level": args.log_level, "access_log": False,
             "log_config": log_config(args.log_level),
             "timeout_worker_healthcheck": settings.http_worker_healthcheck_seconds}

@@ -32,8 +32,9 @@ from .context import Store
 from .models import ClipRecord, Job, Mesh, PosesRecord
 
 log = logging.getLogger("pdeanim.api")
-TETS_PREFIX = "tets-"  # blob key prefix of shared tets (worker.tetcache.BLOB_PREFIX)
-INTERMEDIATES_PREFIX = "windowed/"  # a windowed fit's own blobs (service.store.windows.blob_prefix), no row
+TETS_PREFIX = "tets-"  # blob key prefix of shared tets (pdeanim_worker.tetcache.BLOB_PREFIX)
+# a windowed fit's own blobs (pdeanim_service.store.windows.blob_prefix), no row
+INTERMEDIATES_PREFIX = "windowed/"
 SWEEP_BATCH = 500
 TEMP_FILE_SECONDS = 600.0  # a temporary file of a write is removed only this long after, whatever the grace
 

@@ -4,7 +4,7 @@ nothing references any more (an export job's GLB goes with its clip or mesh, row
 Blobs are content-addressed and shared between rows and tenants (the same file uploaded twice is one blob;
 tets are shared by mesh hash), so a blob is removed only when no row of any tenant still names it. Rows go
 first, in one transaction; blobs after the commit, each under its lock after a reference check
-(:mod:`service.store.blobrefs`).
+(:mod:`pdeanim_service.store.blobrefs`).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def delete_mesh(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
 
 def delete_mesh_rows(store: Store, mesh_id: str, tenant_id: str) -> Deleted | None:
     """The rows of :func:`delete_mesh` (and a windowed fit's intermediates), in one transaction; the blobs
-    they named are in ``keys``, for :func:`service.store.blobrefs.release`."""
+    they named are in ``keys``, for :func:`pdeanim_service.store.blobrefs.release`."""
     out = Deleted()
     with store.sessions() as session:
         mesh = session.get(Mesh, mesh_id)

@@ -108,7 +108,7 @@ class ClipRecord(Base):
 
 
 class Job(Base):
-    """A queued unit of work and its attempts (see service.store.queue)."""
+    """A queued unit of work and its attempts (see pdeanim_service.store.queue)."""
 
     __tablename__ = "jobs"
     id: Mapped[str] = mapped_column(String(40), primary_key=True, default=lambda: new_id("job"))
@@ -135,7 +135,7 @@ class Job(Base):
     created_at: Mapped[float] = mapped_column(Float, default=time.time)
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
-    # a window task of a fit in windows (service.store.windows): its fit job, window and phase
+    # a window task of a fit in windows (pdeanim_service.store.windows): its fit job, window and phase
     parent_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
     window_index: Mapped[int | None] = mapped_column(Integer, nullable=True)
     phase: Mapped[str | None] = mapped_column(String(20), nullable=True)  # gram|space|encode|join

@@ -1,4 +1,5 @@
-"""The fit job above a window task (service.store.windows): the order in which writers lock the two rows, and
+"""The fit job above a window task (pdeanim_service.store.windows): the order in which writers lock the two
+rows, and
 failing the fit when a task fails for good. Below both the queue and the window tasks, so that neither imports
 the other."""
 
@@ -11,7 +12,8 @@ from sqlalchemy.orm import Session
 
 from .models import Job
 
-ACTIVE = ("queued", "running", "waiting")  # waiting: a fit whose window tasks run (service.store.windows)
+# waiting: a fit whose window tasks run (pdeanim_service.store.windows)
+ACTIVE = ("queued", "running", "waiting")
 
 
 def locked(session: Session, job_id: str) -> Job | None:

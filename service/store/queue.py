@@ -48,7 +48,7 @@ class Claimed:
     mesh_id: str | None
     poses_id: str | None
     params: dict[str, Any]
-    parent_id: str | None = None  # a window task's fit job (service.store.windows)
+    parent_id: str | None = None  # a window task's fit job (pdeanim_service.store.windows)
     phase: str | None = None
     window_index: int | None = None
 

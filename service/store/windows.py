@@ -9,7 +9,8 @@ of the last task of a phase enqueues the next phase (:func:`task_done`, under a 
 all ``gram`` -> one ``space`` (joins the space model) -> one ``encode`` per window -> one ``join``, whose
 finish writes the clip row and marks the fit job succeeded. The intermediates live in the blob store under
 ``windowed/<fit job>/``. A task that fails for good fails its fit job and cancels the other tasks
-(:func:`service.store.parents.fail_parent`); cancelling the fit job cancels every task (``JobQueue.cancel``).
+(:func:`pdeanim_service.store.parents.fail_parent`); cancelling the fit job cancels every task
+(``JobQueue.cancel``).
 """
 
 from __future__ import annotations

@@ -18,7 +18,8 @@ import peers_clip  # noqa: E402
 def test_the_fit_the_benchmark_runs_is_the_cli_default_or_labelled() -> None:
     cmd = peers_clip.fit_command("seq.npz", "seq.clip", 1e-3)
     assert cmd[:3] == [sys.executable, "-c", peers_clip.CHILD]
-    assert "from service.cli import main" in peers_clip.CHILD  # the installed `pdeanim` console script
+    # the installed `pdeanim` console script
+    assert "from pdeanim_service.cli import main" in peers_clip.CHILD
     argv = cmd[3:]
     assert argv[:4] == ["fit", "seq.npz", "--out", "seq.clip"]
     assert float(argv[argv.index("--target-rel-rms") + 1]) == 1e-3

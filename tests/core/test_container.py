@@ -217,7 +217,8 @@ def test_cli_frame_of_a_forged_clip_exits_2_without_a_traceback(tmp_path):
     path = tmp_path / "forged.clip"
     write_clip_file(path, ClipParts(real.topology, forged_part(4 << 30), {}))
     assert path.stat().st_size < 200 << 10  # the file: 131 KB declaring 4 GiB
-    run = subprocess.run([sys.executable, "-m", "service.cli", "frame", str(path), "--t", "0.5", "--out",
+    run = subprocess.run([sys.executable, "-m", "pdeanim_service.cli", "frame", str(path), "--t", "0.5",
+                          "--out",
                           str(tmp_path / "f.npz")], capture_output=True, text=True, cwd=root, timeout=300,
                          env={**os.environ, "PYTHONPATH": str(root)})
     assert run.returncode == 2, run.stderr

@@ -61,7 +61,7 @@ sys.meta_path.insert(0, Refuse())
 
 
 def _without_service_extra(code: str, *argv: str) -> subprocess.CompletedProcess:
-    from service.cli import EXTRA_MODULES
+    from pdeanim_service.cli import EXTRA_MODULES
 
     prelude = WITHOUT_SERVICE_EXTRA.format(blocked=sorted(EXTRA_MODULES))
     return subprocess.run([sys.executable, "-c", prelude + code, *argv], cwd=ROOT, capture_output=True,
@@ -73,7 +73,7 @@ def test_the_library_and_its_commands_need_no_service_extra(tmp_path):
     uvicorn, pydantic or httpx: the core dependencies are the library's."""
     code = ("import pkgutil, importlib, pdeanim\n"
             "for m in pkgutil.walk_packages(pdeanim.__path__, 'pdeanim.'): importlib.import_module(m.name)\n"
-            "from service.cli import main\n"
+            "from pdeanim_service.cli import main\n"
             "sys.exit(main(sys.argv[1:]))\n")
     clip = ROOT / "clients" / "js" / "test" / "fixtures" / "fit-displacement-chord.clip"
     out = _without_service_extra(code, "frame", str(clip), "--t", "0.5", "--out", str(tmp_path / "f.npz"))
@@ -82,8 +82,25 @@ def test_the_library_and_its_commands_need_no_service_extra(tmp_path):
 
 
 def test_a_service_command_without_the_extra_names_it():
-    out = _without_service_extra("from service.cli import main\nsys.exit(main(sys.argv[1:]))\n",
+    out = _without_service_extra("from pdeanim_service.cli import main\nsys.exit(main(sys.argv[1:]))\n",
                                  "keys", "list")
     assert out.returncode == 2, out.stderr
     assert "needs the 'service' extra" in out.stderr and "pip install 'pdeanim[service]'" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_a_wheel_installs_only_names_of_the_project(tmp_path):
+    """What pip installs is named after the project (service/ and worker/ become pdeanim_service and
+    pdeanim_worker), the viewer's static files come along as package data, and the build warns about nothing."""
+    import zipfile
+
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                            "-w", str(tmp_path), str(ROOT)], capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stderr
+    assert "warning" not in (build.stdout + build.stderr).lower(), build.stdout + build.stderr
+    (wheel,) = tmp_path.glob("pdeanim-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    top = {name.split("/")[0] for name in names}
+    assert {t for t in top if not t.endswith(".dist-info")} == {"pdeanim", "pdeanim_service", "pdeanim_worker"}
+    assert "pdeanim_service/api/static/viewer/index.html" in names
+    assert any(n.startswith("pdeanim_service/store/migrations/versions/") for n in names)

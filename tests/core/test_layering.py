@@ -35,7 +35,7 @@ def test_pdeanim_imports_without_service_or_worker() -> None:
 
 def test_library_cli_has_no_service_commands() -> None:
     from pdeanim.cli import build_parser
-    from service.cli import service_commands
+    from pdeanim_service.cli import service_commands
 
     library = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
     full = build_parser(service_commands())._subparsers._group_actions[0].choices  # noqa: SLF001

@@ -46,7 +46,8 @@ def test_cli_fit_out_of_memory_exits_4_naming_the_allocation_the_limit_and_the_a
     poses = tmp_path / "big.npz"
     zero_poses_npz(poses, 1000, 100_000)  # 1.2 GB of float32 once inflated, more than the whole limit
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PDEANIM_PROGRESS_EVERY": "60"}
-    command = [sys.executable, "-m", "service.cli", "fit", str(poses), "--out", str(tmp_path / "out.clip"),
+    command = [sys.executable, "-m", "pdeanim_service.cli", "fit", str(poses), "--out",
+               str(tmp_path / "out.clip"),
                "--segments", "1", "-q"]
     run = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600,
                          preexec_fn=limited(LIMIT))
@@ -63,7 +64,8 @@ def test_cli_fit_whose_estimate_is_over_the_limit_is_refused_before_fitting(tmp_
     zero_poses_npz(poses, 2000, 1000)  # 24 MB inflated, loads under the limit; the fit's estimate: 1.39 GiB
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1",
            "PDEANIM_PROGRESS_EVERY": "0.01"}
-    command = [sys.executable, "-m", "service.cli", "fit", str(poses), "--out", str(tmp_path / "out.clip")]
+    command = [sys.executable, "-m", "pdeanim_service.cli", "fit", str(poses), "--out",
+               str(tmp_path / "out.clip")]
     run = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600,
                          preexec_fn=limited(LIMIT))
     assert run.returncode == EXIT_OUT_OF_MEMORY == 4, run.stderr[-3000:]

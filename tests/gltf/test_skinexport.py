@@ -88,7 +88,7 @@ def test_a_source_look_keeps_the_morph_target_export(exports):
 
 
 def test_cli_export_of_a_clip_with_bones_says_it_is_skinned(tmp_path, capsys):
-    from service.cli import main
+    from pdeanim_service.cli import main
 
     out = tmp_path / "bones.glb"
     assert main(["export", str(FIXTURES / "bones-fit-k2-zero.clip"), "--out", str(out), "--fps", "24",

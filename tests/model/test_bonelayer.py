@@ -290,7 +290,7 @@ def test_bones_go_only_on_displacement_clips():
 
 def test_cli_frame_evaluates_a_clip_with_bones(tmp_path):
     from pdeanim.gltf.validate import assert_clean, validate_many
-    from service.cli import main
+    from pdeanim_service.cli import main
 
     parts, path = _bone_clip(tmp_path, residual=False)
     clip = load_clip(parts.topology, parts.coefficients)
@@ -303,7 +303,7 @@ def test_cli_frame_evaluates_a_clip_with_bones(tmp_path):
 
 
 def test_cli_refuses_a_clip_that_requires_an_unknown_feature(tmp_path, capsys):
-    from service.cli import main
+    from pdeanim_service.cli import main
     from tests.conformance.bonecases import UNKNOWN_FEATURE, unknown_feature_case
 
     write_clip_file(tmp_path / "future.clip", unknown_feature_case())

@@ -76,7 +76,7 @@ def test_demo_mesh_ships_in_the_wheel(tmp_path):
     import zipfile
     from pathlib import Path
 
-    from service.demo import SAMPLE_MESH
+    from pdeanim_service.demo import SAMPLE_MESH
 
     root = Path(__file__).resolve().parents[2]
     assert SAMPLE_MESH.is_file() and "tests" not in SAMPLE_MESH.relative_to(root).parts

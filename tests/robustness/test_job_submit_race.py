@@ -8,11 +8,11 @@ import sqlite3
 import pytest
 from fastapi.testclient import TestClient
 
-from service.api import app as app_module
-from service.api.routes import jobs as jobs_route
-from service.settings import Settings
-from service.store.context import Store
-from service.store.tenants import create_key
+from pdeanim_service.api import app as app_module
+from pdeanim_service.api.routes import jobs as jobs_route
+from pdeanim_service.settings import Settings
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.tenants import create_key
 
 SPHERE_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 

@@ -6,10 +6,10 @@ import sqlite3
 
 from sqlalchemy import text
 
-import service.store.tenants as tenants
-from service.cli import main
-from service.settings import Settings
-from service.store.context import Store
+import pdeanim_service.store.tenants as tenants
+from pdeanim_service.cli import main
+from pdeanim_service.settings import Settings
+from pdeanim_service.store.context import Store
 
 
 def _inject_concurrent_write(tmp_path, monkeypatch) -> None:  # noqa: ANN001

@@ -1,4 +1,5 @@
-"""The upload validator's child process (service.api.validator), called directly: results come back, input
+"""The upload validator's child process (pdeanim_service.api.validator), called directly: results come back,
+input
 errors keep their status and message, and its memory and time limits answer 413 naming their settings."""
 
 from __future__ import annotations
@@ -7,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from service.api.errors import ApiError
-from service.api.validator import run_checked
-from service.settings import Settings
+from pdeanim_service.api.errors import ApiError
+from pdeanim_service.api.validator import run_checked
+from pdeanim_service.settings import Settings
 
 from . import bombs
 

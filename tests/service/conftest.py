@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from service.launcher import free_port
-from service.settings import Settings
+from pdeanim_service.launcher import free_port
+from pdeanim_service.settings import Settings
 
 from ..ci import missing
 from .pgserver import PgServer, start_or_find

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import httpx
 
-from service.launcher import Launcher
+from pdeanim_service.launcher import Launcher
 
 from .conftest import Backend
 
 ROOT = Path(__file__).resolve().parents[2]
-PDEANIM = [sys.executable, "-m", "service.cli"]
+PDEANIM = [sys.executable, "-m", "pdeanim_service.cli"]
 
 
 def process_env(backend: Backend, **extra: str) -> dict[str, str]:
@@ -29,7 +29,8 @@ def process_env(backend: Backend, **extra: str) -> dict[str, str]:
 
 
 class Services(Launcher):
-    """A running API server and its workers on ``backend`` (the shared :class:`service.launcher.Launcher`);
+    """A running API server and its workers on ``backend`` (the shared
+    :class:`pdeanim_service.launcher.Launcher`);
     ``env_extra`` may change between starts and applies to the processes started after it."""
 
     def __init__(self, backend: Backend, log_dir: Path, env_extra: dict[str, str] | None = None) -> None:
@@ -48,7 +49,7 @@ class Services(Launcher):
 
 def make_key(backend: Backend, tenant: str) -> str:
     """A new API key for ``tenant`` (in-process, on the backend's database)."""
-    from service.store.tenants import issue_key
+    from pdeanim_service.store.tenants import issue_key
 
     return issue_key(backend.settings(), tenant)
 

@@ -13,7 +13,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from service.launcher import free_port
+from pdeanim_service.launcher import free_port
 
 DEFAULT = "127.0.0.1:5432"
 

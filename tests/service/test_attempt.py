@@ -8,10 +8,10 @@ import multiprocessing
 import threading
 import time
 
-from service.store.context import Store
-from service.store.models import Mesh
-from service.store.tenants import create_key
-from worker.attempt import run_attempt
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import Mesh
+from pdeanim_service.store.tenants import create_key
+from pdeanim_worker.attempt import run_attempt
 
 LEASE = 3.0
 

@@ -12,7 +12,7 @@ from tests.ci import missing
 
 CHECK = r"""
 import ctypes, json
-from service.api.threads import _loaded_openblas, single_threaded_blas
+from pdeanim_service.api.threads import _loaded_openblas, single_threaded_blas
 
 limited = single_threaded_blas()
 counts = {}

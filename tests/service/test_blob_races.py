@@ -30,12 +30,12 @@ from pathlib import Path
 
 import pytest
 
-from service.api.routes.poses import commit_poses
-from service.store import lifecycle
-from service.store.blobrefs import add_row, named, release, sweep
-from service.store.context import Store
-from service.store.models import Mesh
-from service.store.tenants import create_key
+from pdeanim_service.api.routes.poses import commit_poses
+from pdeanim_service.store import lifecycle
+from pdeanim_service.store.blobrefs import add_row, named, release, sweep
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import Mesh
+from pdeanim_service.store.tenants import create_key
 
 CONTENTS = [f"shared content {i}\n".encode() * (i + 1) for i in range(3)]
 TENANTS = ["ann", "bob", "cyd"]
@@ -265,7 +265,7 @@ def test_the_sweeper_keeps_named_young_and_intermediate_blobs(world, monkeypatch
     monkeypatch.setenv("PDEANIM_DATA_DIR", str(store.settings.data_dir))
     for name, value in world_env(store).items():
         monkeypatch.setenv(name, value)
-    from service.cli import main
+    from pdeanim_service.cli import main
 
     assert main(["blobs", "sweep", "--grace", "0"]) == 0  # the command: same settings, one sweep, JSON
     assert '"removed"' in capsys.readouterr().out

@@ -12,7 +12,7 @@ import pytest
 from pdeanim.clip import ClipParts, load_clip, read_clip_file
 from pdeanim.gltf.glb import unpack_glb
 from pdeanim.gltf.validate import assert_clean, validate_many
-from service.store.context import Store
+from pdeanim_service.store.context import Store
 from tests.conformance.bonecases import UNKNOWN_FEATURE, unknown_feature_case
 
 from .conftest import running_services
@@ -36,7 +36,7 @@ def store(services):
 
 def _stored_clip(api, store: Store, clip_id: str, parts: ClipParts) -> None:
     """A clip row for ``parts`` on a mesh of the calling tenant (as a fit job would leave it)."""
-    from service.store.models import ClipRecord, Mesh
+    from pdeanim_service.store.models import ClipRecord, Mesh
 
     r = api.post("/v1/meshes", files={"file": ("m.obj", OBJ, "application/octet-stream")})
     assert r.status_code in (200, 201), r.text

@@ -9,7 +9,7 @@ import numpy as np
 
 from pdeanim.clip import load_clip_file
 from pdeanim.gltf.write import FrameGlb
-from service.api.cache import CachedClip, ClipCache, array_bytes
+from pdeanim_service.api.cache import CachedClip, ClipCache, array_bytes
 
 FIXTURES = Path(__file__).resolve().parents[2] / "clients" / "js" / "test" / "fixtures"
 

@@ -16,7 +16,7 @@ import pytest
 
 from pdeanim.clip import load_clip_file
 from pdeanim.gltf.write import FrameGlb
-from service.api.cache import CachedClip, ClipCache
+from pdeanim_service.api.cache import CachedClip, ClipCache
 
 from .harness import Services, make_key, wait_job
 
@@ -162,7 +162,7 @@ def test_the_clip_cache_loads_a_clip_once_for_all_waiters_and_never_keeps_a_gone
 
 
 def test_the_bundled_warm_up_clips_load_and_warm_without_a_warning(caplog):
-    from service.api.warmup import warm_clip_routes, warmup_clips
+    from pdeanim_service.api.warmup import warm_clip_routes, warmup_clips
 
     assert len(warmup_clips()) >= 6
     for path in warmup_clips():

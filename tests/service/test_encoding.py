@@ -7,7 +7,7 @@ import gzip
 import pytest
 import zstandard
 
-from service.api.encoding import accepted_coding, encode
+from pdeanim_service.api.encoding import accepted_coding, encode
 
 
 @pytest.mark.parametrize("header, expected", [

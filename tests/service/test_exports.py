@@ -14,8 +14,8 @@ import pytest
 from pdeanim.gltf.glb import unpack_glb
 from pdeanim.gltf.read import read_animated_poses, read_static_mesh
 from pdeanim.gltf.validate import assert_clean, validate_many
-from service.store.context import Store
-from service.store.models import Job
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import Job
 
 from ..gltf.builders import textured_scene_glb
 from .conftest import running_services

@@ -12,9 +12,9 @@ import httpx
 import pytest
 from sqlalchemy import update
 
-from service.api.cache import BodyCache
+from pdeanim_service.api.cache import BodyCache
+from pdeanim_worker.child import lower_priority
 from tests.ci import missing
-from worker.child import lower_priority
 
 from .conftest import running_services
 from .harness import Services, client, make_key, wait_job
@@ -77,9 +77,9 @@ def test_cached_and_uncached_frames_are_byte_identical(api, clip, services):
 
 def revoke(services: Services, key: str) -> None:
     """Revoke ``key`` the way the store records it: set ``revoked_at`` on its row."""
-    from service.store.context import Store
-    from service.store.models import ApiKey
-    from service.store.tenants import hash_key
+    from pdeanim_service.store.context import Store
+    from pdeanim_service.store.models import ApiKey
+    from pdeanim_service.store.tenants import hash_key
 
     store = Store.open(services.backend.settings())
     try:

@@ -10,11 +10,11 @@ import time
 import pytest
 from sqlalchemy import update
 
-from service.api.deps import KeyCache
-from service.settings import Settings
-from service.store.context import Store
-from service.store.models import ApiKey
-from service.store.tenants import hash_key, issue_key
+from pdeanim_service.api.deps import KeyCache
+from pdeanim_service.settings import Settings
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import ApiKey
+from pdeanim_service.store.tenants import hash_key, issue_key
 
 
 @pytest.fixture

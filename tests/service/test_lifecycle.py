@@ -15,7 +15,7 @@ import httpx
 import numpy as np
 import pytest
 
-from service.store.context import Store
+from pdeanim_service.store.context import Store
 
 from .conftest import running_services
 from .harness import PDEANIM, ROOT, Services, client, make_key, process_env, wait_job
@@ -117,7 +117,7 @@ def test_delete_mesh_cascades_and_removes_only_unreferenced_blobs(api, other, se
     job = cyclic_clip(api, services, a["id"], frames=10)  # a clip no other test makes (blobs are shared)
     clip_id = job["result"]["clip_id"]
     with store.sessions() as s:
-        from service.store.models import ClipRecord, Mesh
+        from pdeanim_service.store.models import ClipRecord, Mesh
 
         mesh_key = s.get(Mesh, a["id"]).blob_key
         clip = s.get(ClipRecord, clip_id)
@@ -143,7 +143,7 @@ def test_delete_clip_keeps_blobs_another_clip_uses(api, services, store, data_di
     mesh = upload(api, "fish.obj", (data_dir / "fish_eel.obj").read_bytes()).json()
     one, two = (cyclic_clip(api, services, mesh["id"], frames=8)["result"]["clip_id"] for _ in range(2))
     with store.sessions() as s:
-        from service.store.models import ClipRecord
+        from pdeanim_service.store.models import ClipRecord
 
         keys = {s.get(ClipRecord, one).coefficients_key, s.get(ClipRecord, two).coefficients_key}
     assert len(keys) == 1  # same input, deterministic output: one shared coefficients blob
@@ -316,7 +316,7 @@ def test_clip_list_answers_json_for_old_clips_with_non_finite_errors(api, store)
     non-finite floats as null), not a 500."""
     from sqlalchemy.exc import DBAPIError
 
-    from service.store.models import ClipRecord, Mesh
+    from pdeanim_service.store.models import ClipRecord, Mesh
 
     mesh = upload(api, "old.obj", OBJ + b"# old clip\n").json()
     with store.sessions() as s:

@@ -9,8 +9,8 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import Column, Integer, MetaData, Table
 
-from service.store.db import make_engine, migrate
-from service.store.models import Base
+from pdeanim_service.store.db import make_engine, migrate
+from pdeanim_service.store.models import Base
 
 
 def drift(url: str, metadata: MetaData) -> list:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import httpx
 
-from service.store.scratch import alive
+from pdeanim_service.store.scratch import alive
 
 from .harness import ROOT, Services, client, make_key
 from .test_worker import HEAVY, children, job_processes, submit, wait_state
@@ -64,7 +64,7 @@ def test_a_zombie_is_not_alive_and_die_with_parent_kills_the_child():
     assert not alive(proc.pid) and Path(f"/proc/{proc.pid}").exists()
     proc.wait()
     script = ("import os, subprocess, sys\n"
-              "from service.store.scratch import die_with_parent\n"
+              "from pdeanim_service.store.scratch import die_with_parent\n"
               "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'], "
               "stdout=subprocess.DEVNULL, "
               "preexec_fn=lambda: die_with_parent(os.getppid()))\n"

@@ -11,8 +11,8 @@ import time
 import pytest
 import uvicorn
 
-from service.api.app import create_app
-from service.settings import Settings
+from pdeanim_service.api.app import create_app
+from pdeanim_service.settings import Settings
 
 from .conftest import free_port
 

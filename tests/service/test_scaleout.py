@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from pdeanim.errors import ParameterError
-from service.jobspec import normalize_request
-from service.settings import Settings
-from service.store.context import Store
-from service.store.models import Job, Mesh, PosesRecord
-from service.store.tenants import create_key
-from worker.loop import Worker
-from worker.tetcache import tet_blob_key
+from pdeanim_service.jobspec import normalize_request
+from pdeanim_service.settings import Settings
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import Job, Mesh, PosesRecord
+from pdeanim_service.store.tenants import create_key
+from pdeanim_worker.loop import Worker
+from pdeanim_worker.tetcache import tet_blob_key
 
 SCENE = {"frames": 4, "target_tets": 300}
 
@@ -95,12 +95,13 @@ def test_two_workers_on_two_machines_give_bit_identical_poses(backend, shared, t
 
 
 def test_a_failing_fit_keeps_the_simulated_poses(backend, shared, tmp_path, monkeypatch):
-    import worker.stages
+    import pdeanim_worker.stages
 
     def bad_fit(*_, **__):
         raise ParameterError("injected: this fit option cannot fit these poses")
 
-    monkeypatch.setattr(worker.stages, "_fit", bad_fit)  # fault injection, inherited by the forked child
+    # fault injection, inherited by the forked child
+    monkeypatch.setattr(pdeanim_worker.stages, "_fit", bad_fit)
     job_id = _submit(shared, then_fit=True)
     _run_one(_machine(backend, shared.settings, tmp_path / "machine-c"), multiprocessing.get_context("fork"))
     with shared.sessions() as s:

@@ -13,8 +13,8 @@ import time
 import pytest
 import uvicorn
 
-from service.cli.serve import default_http_workers, uvicorn_options
-from service.settings import Settings
+from pdeanim_service.cli.serve import default_http_workers, uvicorn_options
+from pdeanim_service.settings import Settings
 
 from .harness import Services
 from .test_worker import children

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from service.api.cache import CachedClip, ClipCache
-from service.api.openapi import DEFAULT_PATH, openapi_text
-from service.settings import Settings
-from service.store.queue import QueuePolicy
+from pdeanim_service.api.cache import CachedClip, ClipCache
+from pdeanim_service.api.openapi import DEFAULT_PATH, openapi_text
+from pdeanim_service.settings import Settings
+from pdeanim_service.store.queue import QueuePolicy
 
 from ..ci import missing
 
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_openapi_file_matches_the_app():
     assert DEFAULT_PATH.read_text() == openapi_text(), (
-        "openapi/openapi.json drifted: python -m service.api.openapi"
+        "openapi/openapi.json drifted: python -m pdeanim_service.api.openapi"
     )
 
 
@@ -110,7 +110,7 @@ def test_clip_cache_is_a_bounded_lru():
 def test_etag_matching():
     from starlette.requests import Request
 
-    from service.api.httpcache import etag_matches
+    from pdeanim_service.api.httpcache import etag_matches
 
     def req(value):
         return Request({"type": "http", "headers": [(b"if-none-match", value.encode())]})
@@ -126,8 +126,8 @@ def test_healthz_503_has_the_error_shape(tmp_path):
 
     from fastapi.testclient import TestClient
 
-    from service.api.app import create_app
-    from service.store.context import Store
+    from pdeanim_service.api.app import create_app
+    from pdeanim_service.store.context import Store
 
     settings = Settings(data_dir=tmp_path)
     store = Store.open(settings, run_migrations=True)

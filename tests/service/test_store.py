@@ -8,10 +8,10 @@ import time
 import pytest
 from sqlalchemy import select
 
-from service.store.blobs import BlobNotFound, LocalBlobStore
-from service.store.context import Store
-from service.store.models import Job, Mesh
-from service.store.tenants import create_key, tenant_for_key
+from pdeanim_service.store.blobs import BlobNotFound, LocalBlobStore
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import Job, Mesh
+from pdeanim_service.store.tenants import create_key, tenant_for_key
 
 
 @pytest.fixture
@@ -47,7 +47,7 @@ def _enqueue(store, tenant, n=1) -> list[str]:
 
 
 def test_migrations_are_idempotent(backend, store):
-    from service.store.db import migrate
+    from pdeanim_service.store.db import migrate
 
     migrate(backend.settings().resolved_database_url())
     assert store.check() == {"database": "ok", "blobs": "ok"}
@@ -165,7 +165,7 @@ def test_local_blob_store_leaves_no_temp_files(tmp_path):
 
 
 def test_fenced_out_finish_writes_no_result_rows(store, tenant):
-    from service.store.models import ClipRecord
+    from pdeanim_service.store.models import ClipRecord
 
     (job_id,) = _enqueue(store, tenant)
     store.queue.claim("w1")

@@ -11,8 +11,8 @@ import time
 import httpx
 import pytest
 
-from service.api.errors import ApiError
-from service.api.uploadslots import BodyPace, UploadSlots
+from pdeanim_service.api.errors import ApiError
+from pdeanim_service.api.uploadslots import BodyPace, UploadSlots
 
 from .harness import Services, client, make_key
 

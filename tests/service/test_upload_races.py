@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from service.api import app as app_module
-from service.api.routes import poses as poses_route
-from service.store import lifecycle
-from service.store.blobrefs import named
-from service.store.context import Store
-from service.store.models import Mesh
-from service.store.tenants import create_key
+from pdeanim_service.api import app as app_module
+from pdeanim_service.api.routes import poses as poses_route
+from pdeanim_service.store import lifecycle
+from pdeanim_service.store.blobrefs import named
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import Mesh
+from pdeanim_service.store.tenants import create_key
 
 TET_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 

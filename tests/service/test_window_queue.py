@@ -1,4 +1,5 @@
-"""Store-level tests of window tasks (service.store.windows): the phases in order, concurrent finishes that
+"""Store-level tests of window tasks (pdeanim_service.store.windows): the phases in order, concurrent
+finishes that
 enqueue the next phase exactly once, a task failing for good failing its fit job, cancel reaching every
 task, and ranged blob reads."""
 
@@ -9,10 +10,10 @@ import threading
 import pytest
 from sqlalchemy import select
 
-from service.store import windows
-from service.store.context import Store
-from service.store.models import ClipRecord, Job, Mesh
-from service.store.tenants import create_key
+from pdeanim_service.store import windows
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import ClipRecord, Job, Mesh
+from pdeanim_service.store.tenants import create_key
 
 W = 3
 CLIP = {"kind": "dynamic-pde", "topology_key": "t", "coefficients_key": "c", "topology_id": "x", "report": {}}
@@ -82,7 +83,7 @@ def test_phases_in_order_and_progress_counts_windows(store, fit_job):
 def test_progress_never_goes_back_from_submission_to_the_clip(store):
     """The fit job's progress as its planning attempt (retried once), its window tasks (one retried) and the
     join report it, recorded at every write: never lower than before, ending at 1.0 with the clip."""
-    from worker.windowtasks import READ_SHARE, STORE_AT
+    from pdeanim_worker.windowtasks import READ_SHARE, STORE_AT
 
     with store.sessions() as s:
         _, t = create_key(s, "acme")
@@ -97,7 +98,7 @@ def test_progress_never_goes_back_from_submission_to_the_clip(store):
     def record() -> None:
         seen.append(_row(store, job_id).progress)
 
-    def plan(claimed) -> None:  # noqa: ANN001 - the planning attempt's share (worker.windowtasks.plan_fit)
+    def plan(claimed) -> None:  # noqa: ANN001 - the planning attempt's share (pdeanim_worker.windowtasks.plan_fit)
         for f in (0.0, 0.4, 0.85, 1.0):
             assert store.queue.report(claimed.id, claimed.attempt, windows.PLAN_SHARE * f, "fit: plan")
             record()

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from sqlalchemy import func, select
 
-from service.store.context import Store
-from service.store.models import ClipRecord, Job
+from pdeanim_service.store.context import Store
+from pdeanim_service.store.models import ClipRecord, Job
 
 from .harness import Services, client, make_key, wait_job
 

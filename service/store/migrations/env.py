@@ -6,8 +6,8 @@ import os
 
 from alembic import context
 
-from service.store.db import make_engine
-from service.store.models import Base
+from pdeanim_service.store.db import make_engine
+from pdeanim_service.store.models import Base
 
 target_metadata = Base.metadata
 
