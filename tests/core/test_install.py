@@ -91,7 +91,8 @@ def test_a_service_command_without_the_extra_names_it():
 
 def test_a_wheel_installs_only_names_of_the_project(tmp_path):
     """What pip installs is named after the project (service/ and worker/ become pdeanim_service and
-    pdeanim_worker), the viewer's static files come along as package data, and the build warns about nothing."""
+    pdeanim_worker), the viewer's static files come along as package data, and the build warns about
+    nothing."""
     import zipfile
 
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
@@ -101,6 +102,7 @@ def test_a_wheel_installs_only_names_of_the_project(tmp_path):
     (wheel,) = tmp_path.glob("pdeanim-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     top = {name.split("/")[0] for name in names}
-    assert {t for t in top if not t.endswith(".dist-info")} == {"pdeanim", "pdeanim_service", "pdeanim_worker"}
+    packages = {t for t in top if not t.endswith(".dist-info")}
+    assert packages == {"pdeanim", "pdeanim_service", "pdeanim_worker"}
     assert "pdeanim_service/api/static/viewer/index.html" in names
     assert any(n.startswith("pdeanim_service/store/migrations/versions/") for n in names)
