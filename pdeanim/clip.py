@@ -77,19 +77,7 @@ def load_clip(topology: bytes, coefficients: bytes) -> Clip:
     """Decode the two parts into an evaluable Clip; raises ClipFormatError on any mismatch."""
     th, ta = container.unpack(topology)
     ch, ca = container.unpack(coefficients)
-    if th.get("part") != "topology":
-        raise ClipFormatError(f"expected a topology part, got {th.get('part')!r}")
-    if ch.get("part") != "coefficients":
-        raise ClipFormatError(f"expected a coefficients part, got {ch.get('part')!r}")
-    check_format_version(th, "topology")
-    check_format_version(ch, "coefficients")
-    want = ch.get("topology_id")
-    if want and want != topology_id(topology):
-        raise ClipFormatError("the coefficients were made for another topology part (topology_id mismatch)")
-    kind = ch.get("kind")
-    if kind not in DECODERS:
-        raise ClipFormatError(f"unknown clip kind {kind!r} (known: {', '.join(sorted(DECODERS))})")
-    clip = DECODERS[kind](th, ta, ch, ca)
+    clip = DECODERS[_check_parts(th, ch, topology)](th, ta, ch, ca)
     with np.errstate(all="ignore"):
         probe = clip.evaluate(np.array([0.0, 0.5, 1.0]))
     if not np.all(np.isfinite(probe)):  # a damaged or hand-made part whose numbers overflow the evaluator
