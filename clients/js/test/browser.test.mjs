@@ -4,14 +4,8 @@
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { spawn, spawnSync } from 'node:child_process';
-import { createServer } from 'node:http';
-import { mkdtempSync, readFileSync, rmSync, statSync } from 'node:fs';
-import { tmpdir } from 'node:os';
-import { dirname, extname, join, normalize } from 'node:path';
-import { fileURLToPath } from 'node:url';
+import { findChromium, pageResult } from './pagerun.mjs';
 
-const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..');
 // the paper's time pairs (rigid), spline items in the vertex shader, the paper's time pairs and spline items
 // (rigid) in the evaluation pass, a cyclic clip
 const CASES = [
@@ -21,49 +15,8 @@ const CASES = [
   'synthetic-rigid-paper-spline',
   'cyclic-trout-travelling-rotate-vertical',
 ];
-const TYPES = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.html': 'text/html' };
 
-function findChromium() {
-  const names = [process.env.PDEANIM_CHROMIUM, 'chromium', 'chromium-browser', 'google-chrome'].filter(
-    Boolean,
-  );
-  for (const name of names) {
-    const r = spawnSync(name, ['--version'], { encoding: 'utf8', timeout: 60_000 });
-    if (r.status === 0) return name;
-  }
-  return null;
-}
 
-/** Serve clients/js read-only on 127.0.0.1 and resolve with the page's POSTed result. */
-function serve() {
-  let deliver;
-  const result = new Promise((resolve) => {
-    deliver = resolve;
-  });
-  const server = createServer((req, res) => {
-    if (req.method === 'POST' && req.url === '/result') {
-      let body = '';
-      req.on('data', (c) => {
-        body += c;
-      });
-      req.on('end', () => {
-        res.end('ok');
-        const r = JSON.parse(body);
-        if (r.done || r.errors.length) deliver(r);
-      });
-      return;
-    }
-    const path = normalize(join(ROOT, decodeURIComponent(new URL(req.url, 'http://x').pathname)));
-    try {
-      if (!path.startsWith(ROOT) || !statSync(path).isFile()) throw new Error('not found');
-      res.writeHead(200, { 'Content-Type': TYPES[extname(path)] ?? 'application/octet-stream' });
-      res.end(readFileSync(path));
-    } catch {
-      res.writeHead(404).end();
-    }
-  });
-  return new Promise((resolve) => server.listen(0, '127.0.0.1', () => resolve({ server, result })));
-}
 
 const chromium = findChromium();
 
@@ -79,71 +32,33 @@ test(
     timeout: 300_000,
   },
   async () => {
-    const { server, result } = await serve();
-    const profile = mkdtempSync(join(tmpdir(), 'pdeanim-chromium-'));
-    const url = `http://127.0.0.1:${server.address().port}/test/browser/gpu.html?cases=${CASES.join(',')}`;
-    const browser = spawn(
-      chromium,
-      [
-        '--headless=new',
-        '--no-sandbox',
-        '--use-angle=swiftshader',
-        '--enable-unsafe-swiftshader',
-        '--disable-gpu-sandbox',
-        '--no-first-run',
-        `--user-data-dir=${profile}`,
-        url,
-      ],
-      { stdio: 'ignore', detached: true }, // its own process group: renderer and GPU processes go with it
+    const r = await pageResult(chromium, `/test/browser/gpu.html?cases=${CASES.join(',')}`);
+    assert.deepEqual(r.errors, []);
+    assert.deepEqual(r.passes, [false, false, true, true, true]); // both GPU variants ran
+    assert.equal(r.cases.length, CASES.length + 1); // + one transformed multi-mesh scene
+    // the spline shader ran: in the vertex shader (the second case) and in the evaluation pass (the fourth)
+    assert.deepEqual(
+      r.cases.slice(0, CASES.length).map((c) => c.spline),
+      [false, true, false, true, false],
     );
-    let timer;
-    try {
-      const r = await Promise.race([
-        result,
-        new Promise((_, reject) => {
-          timer = setTimeout(() => reject(new Error('no result from the page within 240 s')), 240_000);
-        }),
-      ]);
-      assert.deepEqual(r.errors, []);
-      assert.deepEqual(r.passes, [false, false, true, true, true]); // both GPU variants ran
-      assert.equal(r.cases.length, CASES.length + 1); // + one transformed multi-mesh scene
-      // the spline shader ran: in the vertex shader (the second case) and in the evaluation pass (the fourth)
-      assert.deepEqual(
-        r.cases.slice(0, CASES.length).map((c) => c.spline),
-        [false, true, false, true, false],
-      );
-      for (const c of r.cases) {
-        // same mesh, same lighting: only rasterisation at silhouettes may differ (positions agree to ~1e-7
-        // of the diagonal); the runs show 0 to 0.05 % of the pixels, 0.5 % leaves room for other drivers
-        for (const k of ['gpuVsCpu02', 'gpuVsCpu07']) {
-          assert.ok(c[k].covered > 0.05, `${c.name}: the mesh covers ${c[k].covered} of the image`);
-          assert.ok(c[k].differ < 0.005, `${c.name} ${k}: ${c[k].differ} of the pixels differ`);
-        }
-        // float32 sums of values up to ~0.3 of the diagonal on the GPU (time pairs and rotations come from
-        // the CPU in float64): worst seen 5.9e-8 of the diagonal
-        assert.ok(c.gpuError < 3e-7, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
-        assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
-        // frame normals: three.js's own drawing of the same positions (computeVertexNormals), lit alike
-        if (c.normals === 'frame') {
-          for (const k of ['gpuVsThree02', 'gpuVsThree07']) {
-            console.log(`${c.name} ${k}: ${c[k].differ} of the pixels differ from three.js's own`);
-            assert.ok(c[k].differ < 0.005, `${c.name} ${k}: ${c[k].differ} of the pixels differ from three.js's`);
-          }
+    for (const c of r.cases) {
+      // same mesh, same lighting: only rasterisation at silhouettes may differ (positions agree to ~1e-7
+      // of the diagonal); the runs show 0 to 0.05 % of the pixels, 0.5 % leaves room for other drivers
+      for (const k of ['gpuVsCpu02', 'gpuVsCpu07']) {
+        assert.ok(c[k].covered > 0.05, `${c.name}: the mesh covers ${c[k].covered} of the image`);
+        assert.ok(c[k].differ < 0.005, `${c.name} ${k}: ${c[k].differ} of the pixels differ`);
+      }
+      // float32 sums of values up to ~0.3 of the diagonal on the GPU (time pairs and rotations come from
+      // the CPU in float64): worst seen 5.9e-8 of the diagonal
+      assert.ok(c.gpuError < 3e-7, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
+      assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
+      // frame normals: three.js's own drawing of the same positions (computeVertexNormals), lit alike
+      if (c.normals === 'frame') {
+        for (const k of ['gpuVsThree02', 'gpuVsThree07']) {
+          console.log(`${c.name} ${k}: ${c[k].differ} of the pixels differ from three.js's own`);
+          assert.ok(c[k].differ < 0.005, `${c.name} ${k}: ${c[k].differ} of the pixels differ from three.js's`);
         }
       }
-    } finally {
-      clearTimeout(timer);
-      const exited = new Promise((resolve) => browser.once('exit', resolve));
-      if (browser.exitCode === null) {
-        try {
-          process.kill(-browser.pid, 'SIGKILL'); // the whole group, so none still writes to the profile
-        } catch {
-          browser.kill('SIGKILL');
-        }
-      }
-      await exited;
-      server.close();
-      rmSync(profile, { recursive: true, force: true, maxRetries: 5, retryDelay: 200 });
     }
   },
 );
