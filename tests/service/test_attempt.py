@@ -90,7 +90,7 @@ def test_a_deterministic_error_fails_the_attempt_without_retry(backend):
             job = store.queue.enqueue(s, tenant_id=tenant.id, kind="fit", params={})
             s.commit()
         claimed = store.queue.claim("w1")
-        payload = {"id": job.id, "kind": "fit", "params": {}}
+        payload = {"id": job.id, "kind": "fit", "params": {"params": {}}}
         outcome = run_attempt(multiprocessing.get_context("fork"), store.queue, claimed, payload,
                               settings.model_dump_json(), lambda: False, timeout=600)
         assert (outcome.status, outcome.code, outcome.retry) == ("error", "computation_error", False), outcome

@@ -154,7 +154,10 @@ def test_gzip_when_accepted_with_weak_etag_and_304(services, key, sphere, route)
     zipped, wire = raw_get(svc.url, path, {**auth, "Accept-Encoding": "gzip, deflate"})
     assert zipped.status_code == 200 and zipped.headers["content-encoding"] == "gzip"
     assert gzip.decompress(wire) == plain_body and len(wire) < len(plain_body)
-    assert int(zipped.headers["content-length"]) == len(wire)
+    if route == "coefficients-json":  # streamed as it is written (memory bounded by a piece): chunked
+        assert "content-length" not in zipped.headers and zipped.headers["transfer-encoding"] == "chunked"
+    else:
+        assert int(zipped.headers["content-length"]) == len(wire)
     assert "accept-encoding" in zipped.headers["vary"].lower()
     assert zipped.headers["cache-control"] == PRIVATE
     strong = plain.headers["etag"]
