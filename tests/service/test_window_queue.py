@@ -27,9 +27,8 @@ def store(backend):
     st.close()
 
 
-@pytest.fixture
-def fit_job(store) -> str:
-    """A fit job claimed and split into W gram tasks."""
+def _enqueued_fit(store) -> str:  # noqa: ANN001 - the store fixture
+    """A queued fit job of tenant acme on a mesh of its own: its id."""
     with store.sessions() as s:
         _, t = create_key(s, "acme")
         s.add(Mesh(id="mesh_1", tenant_id=t.id, filename="a.obj", blob_key="k", n_vertices=3, n_faces=1,
@@ -38,6 +37,13 @@ def fit_job(store) -> str:
         job = store.queue.enqueue(s, tenant_id=t.id, kind="fit", params={}, mesh_id="mesh_1")
         s.commit()
         job_id = job.id
+    return job_id
+
+
+@pytest.fixture
+def fit_job(store) -> str:
+    """A fit job claimed and split into W gram tasks."""
+    job_id = _enqueued_fit(store)
     claimed = store.queue.claim("w0")
     assert claimed.id == job_id and windows.split(store.queue, claimed, W)
     assert not windows.split(store.queue, claimed, W)  # fenced: the job waits already
@@ -85,14 +91,7 @@ def test_progress_never_goes_back_from_submission_to_the_clip(store):
     join report it, recorded at every write: never lower than before, ending at 1.0 with the clip."""
     from pdeanim_worker.windowtasks import READ_SHARE, STORE_AT
 
-    with store.sessions() as s:
-        _, t = create_key(s, "acme")
-        s.add(Mesh(id="mesh_1", tenant_id=t.id, filename="a.obj", blob_key="k", n_vertices=3, n_faces=1,
-                   stats={}))
-        s.commit()
-        job = store.queue.enqueue(s, tenant_id=t.id, kind="fit", params={}, mesh_id="mesh_1")
-        s.commit()
-        job_id = job.id
+    job_id = _enqueued_fit(store)
     seen = [_row(store, job_id).progress]
 
     def record() -> None:
