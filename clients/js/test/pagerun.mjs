@@ -64,14 +64,14 @@ function serve(files) {
 /**
  * Open page (a path under clients/js with its query, e.g. '/test/browser/gpu.html?cases=a,b') in headless
  * chromium and resolve with its result (rejects after timeoutMs); files: paths served from memory (path ->
- * bytes). The browser's whole process group, the server and the profile are gone when it settles.
+ * bytes); flags: more Chromium flags (e.g. WEBGPU_FLAGS). The browser's whole process group, the server and the profile are gone when it settles.
  */
-export async function pageResult(chromium, page, { files = {}, timeoutMs = 240_000 } = {}) {
+export async function pageResult(chromium, page, { files = {}, timeoutMs = 240_000, flags: extra = [] } = {}) {
   const { server, result } = await serve(files);
   const profile = mkdtempSync(join(tmpdir(), 'pdeanim-chromium-'));
   const url = `http://127.0.0.1:${server.address().port}${page}`;
   const flags = ['--headless=new', '--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
-    '--disable-gpu-sandbox', '--no-first-run', `--user-data-dir=${profile}`];
+    '--disable-gpu-sandbox', '--no-first-run', `--user-data-dir=${profile}`, ...extra];
   // its own process group: renderer and GPU processes go with it
   const browser = spawn(chromium, [...flags, url], { stdio: 'ignore', detached: true });
   let timer;
