@@ -11,6 +11,9 @@ import { fileURLToPath } from 'node:url';
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..');
 const TYPES = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.html': 'text/html' };
 
+/** Chromium flags that expose WebGPU (SwiftShader's adapter where there is no GPU) to an http://127.0.0.1 page. */
+export const WEBGPU_FLAGS = ['--enable-unsafe-webgpu'];
+
 /** The Chromium to run ($PDEANIM_CHROMIUM or one on the PATH), or null. */
 export function findChromium() {
   const names = [process.env.PDEANIM_CHROMIUM, 'chromium', 'chromium-browser', 'google-chrome'].filter(Boolean);
