@@ -3,7 +3,24 @@
 // vertex evaluated from the vertex texture and the per-frame table, the mesh vertex placed and its normal
 // turned (area-weighted ring normals, or the frame of a triangle). Each function mirrors its GLSL namesake.
 
-import {
+import * as TSL from 'three/tsl';
+
+/** The TSL functions this module uses (three.js r187's three/tsl; checkTSL names any that is missing). */
+const NEEDED = [
+  'Fn', 'If', 'Loop', 'attribute', 'cross', 'dot', 'float', 'int', 'ivec2', 'mix', 'normalGeometry',
+  'normalLocal', 'normalize', 'positionLocal', 'reference', 'referenceAttribute', 'select', 'sqrt', 'texture',
+  'transformNormal', 'uniform', 'vec2', 'vec3', 'vec4',
+];
+
+/** Throw naming what three/tsl lacks when the installed three.js is older than the node materials need. */
+export function checkTSL() {
+  const missing = NEEDED.filter((k) => typeof TSL[k] !== 'function' && typeof TSL[k] !== 'object');
+  if (missing.length) {
+    throw new Error(`pdeanim/webgpu needs three.js's node materials as in r187: three/tsl has no ${missing.join(', ')}`);
+  }
+}
+
+const {
   Fn,
   If,
   Loop,
@@ -28,7 +45,7 @@ import {
   vec2,
   vec3,
   vec4,
-} from 'three/tsl';
+} = TSL;
 
 const XYZW = ['x', 'y', 'z', 'w'];
 
@@ -44,25 +61,36 @@ function evaluation(layout, nodes) {
   // texel i of a data texture (rows of layout.width texels)
   const fetch = (tex, i) => tex.load(ivec2(i.bitAnd(mask), i.shiftRight(shift))).setUpdateMatrix(false);
   const frame = (i) => fetch(nodes.frame, i.add(nodes.frameBase));
-  if (layout.kind === 'cyclic-spine') {
-    const evaluate = (v) => {
-      const a = fetch(nodes.vertex, v.mul(3)).toVar();
-      const w = fetch(nodes.vertex, v.mul(3).add(1)).toVar();
-      const rl = fetch(nodes.vertex, v.mul(3).add(2)).x;
-      const phase = nodes.slots ? frame(int(0)).xy.toVar() : vec2(nodes.sinWt, nodes.cosWt).toVar();
-      const ca = float(0).toVar();
-      const cl = w.x.mul(phase.x).add(w.y.mul(phase.y)).toVar();
-      if (layout.rotate) {
-        const g = w.z.mul(phase.x).add(w.w.mul(phase.y)).toVar();
-        const c = float(1).div(sqrt(g.mul(g).add(1))).toVar();
-        const sn = g.mul(c).toVar();
-        ca.assign(c.sub(1).mul(a.w).sub(sn.mul(rl)));
-        cl.addAssign(sn.mul(a.w).add(c.sub(1).mul(rl)));
-      }
-      return a.xyz.add(ca.mul(vec3(...layout.axis))).add(cl.mul(vec3(...layout.bend)));
-    };
-    return { evaluate, fetch, frame };
-  }
+  const make = layout.kind === 'cyclic-spine' ? cyclicEvaluate : dynamicEvaluate;
+  return { evaluate: make(layout, nodes, fetch, frame), fetch, frame };
+}
+
+/** glsl.js's CYCLIC_EVAL: the swim of a cyclic-spine clip's vertex v at the phase (sin, cos) of its time. */
+function cyclicEvaluate(layout, nodes, fetch, frame) {
+  return (v) => {
+    const a = fetch(nodes.vertex, v.mul(3)).toVar();
+    const w = fetch(nodes.vertex, v.mul(3).add(1)).toVar();
+    const rl = fetch(nodes.vertex, v.mul(3).add(2)).x;
+    const phase = nodes.slots ? frame(int(0)).xy.toVar() : vec2(nodes.sinWt, nodes.cosWt).toVar();
+    const ca = float(0).toVar();
+    const cl = w.x.mul(phase.x).add(w.y.mul(phase.y)).toVar();
+    if (layout.rotate) {
+      const g = w.z.mul(phase.x).add(w.w.mul(phase.y)).toVar();
+      const c = float(1).div(sqrt(g.mul(g).add(1))).toVar();
+      const sn = g.mul(c).toVar();
+      ca.assign(c.sub(1).mul(a.w).sub(sn.mul(rl)));
+      cl.addAssign(sn.mul(a.w).add(c.sub(1).mul(rl)));
+    }
+    return a.xyz.add(ca.mul(vec3(...layout.axis))).add(cl.mul(vec3(...layout.bend)));
+  };
+}
+
+/**
+ * glsl.js's DYNAMIC_EVAL: a direct vertex's position from the per-frame table, else base (bones: the rest
+ * position skinned) + the curve's frame coefficients . the vertex's basis rows, then the curve's rigid
+ * motion; with bones, the vertices from skinOnly on are their skinned rest position alone.
+ */
+function dynamicEvaluate(layout, nodes, fetch, frame) {
   const VT = layout.vertexTexels ?? 4;
   const CT = layout.curveTexels;
   const nDirect = layout.nDirect;
@@ -81,8 +109,6 @@ function evaluation(layout, nodes) {
     }
     return acc;
   };
-  // base (or the skinned rest position) + per coordinate the curve's frame coefficients . the basis row,
-  // then the curve's rigid motion
   const residual = (v, p) => {
     const r = v.sub(nDirect).mul(VT).toVar();
     const head = fetch(nodes.vertex, r).toVar();
@@ -105,7 +131,7 @@ function evaluation(layout, nodes) {
     }
     p.assign(q);
   };
-  const evaluate = (v) => {
+  return (v) => {
     const p = vec3(0).toVar();
     If(v.lessThan(nDirect), () => {
       p.assign(frame(v).xyz);
@@ -121,7 +147,6 @@ function evaluation(layout, nodes) {
     });
     return p;
   };
-  return { evaluate, fetch, frame };
 }
 
 /** Value i of the ring table (four a texel). */

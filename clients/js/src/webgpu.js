@@ -4,21 +4,10 @@
 // of gpu.js). Same API as pdeanim/three: ClipPlayer, ScenePlayer, the Loader and the AnimationMixer link.
 
 import './zstd.js';
-import {
-  LineBasicNodeMaterial,
-  MeshBasicNodeMaterial,
-  MeshLambertNodeMaterial,
-  MeshMatcapNodeMaterial,
-  MeshNormalNodeMaterial,
-  MeshPhongNodeMaterial,
-  MeshPhysicalNodeMaterial,
-  MeshStandardNodeMaterial,
-  MeshToonNodeMaterial,
-  PointsNodeMaterial,
-} from 'three/webgpu';
-import { ClipPlayer as BasePlayer, PLAYER_OPTIONS } from './player.js';
+import * as WEBGPU from 'three/webgpu';
+import { ClipPlayer as BasePlayer } from './player.js';
 import { ScenePlayer as BaseScene } from './scene.js';
-import { playClip, shadowPositionNode } from './tsl.js';
+import { checkTSL, playClip, shadowPositionNode } from './tsl.js';
 import { isWebGPURenderer } from './webgl.js';
 
 export { PLAYER_OPTIONS } from './player.js';
@@ -31,19 +20,32 @@ export const WEBGL_REFUSAL =
   'pdeanim/webgpu plays clips with node materials, which only WebGPURenderer draws (on either backend): ' +
   "play the clip on a WebGLRenderer with pdeanim/three's player";
 
-/** The node material class of each built-in material type (what WebGPURenderer's NodeLibrary maps). */
-const NODE_MATERIALS = {
-  MeshBasicMaterial: MeshBasicNodeMaterial,
-  MeshLambertMaterial: MeshLambertNodeMaterial,
-  MeshPhongMaterial: MeshPhongNodeMaterial,
-  MeshStandardMaterial: MeshStandardNodeMaterial,
-  MeshPhysicalMaterial: MeshPhysicalNodeMaterial,
-  MeshToonMaterial: MeshToonNodeMaterial,
-  MeshMatcapMaterial: MeshMatcapNodeMaterial,
-  MeshNormalMaterial: MeshNormalNodeMaterial,
-  PointsMaterial: PointsNodeMaterial,
-  LineBasicMaterial: LineBasicNodeMaterial,
-};
+/** The built-in material types with a node counterpart (WebGPURenderer's NodeLibrary maps the same). */
+const NODE_TYPES = [
+  'MeshBasicMaterial',
+  'MeshLambertMaterial',
+  'MeshPhongMaterial',
+  'MeshStandardMaterial',
+  'MeshPhysicalMaterial',
+  'MeshToonMaterial',
+  'MeshMatcapMaterial',
+  'MeshNormalMaterial',
+  'PointsMaterial',
+  'LineBasicMaterial',
+];
+
+/** The node material class of a built-in material type (MeshStandardMaterial: MeshStandardNodeMaterial). */
+function nodeClass(type) {
+  return NODE_TYPES.includes(type) ? (WEBGPU[type.replace(/Material$/, 'NodeMaterial')] ?? null) : null;
+}
+
+/** Throw naming what is missing when the installed three.js lacks the node materials this module drives. */
+function checkThree() {
+  checkTSL();
+  if (typeof WEBGPU.NodeMaterial?.prototype?.setupPosition !== 'function') {
+    throw new Error("pdeanim/webgpu needs three.js's node materials as in r187: NodeMaterial has no setupPosition");
+  }
+}
 
 /** The material each node material was made from (a mesh.clone() shares the player's one: use its original). */
 const ORIGINAL = new WeakMap();
@@ -58,7 +60,7 @@ function nodeMaterial(material) {
   let m;
   if (material.isNodeMaterial) m = material.clone();
   else {
-    const NodeClass = NODE_MATERIALS[material.type];
+    const NodeClass = nodeClass(material.type);
     if (!NodeClass) {
       throw new Error(
         `pdeanim/webgpu: a ${material.type} has no node material to play the clip in (use a built-in ` +
@@ -99,6 +101,7 @@ function withLimit(options) {
 export const webgpuBackend = {
   name: 'webgpu',
   check(renderer) {
+    checkThree();
     if (renderer && !isWebGPURenderer(renderer)) throw new Error(WEBGL_REFUSAL);
   },
   usePass(options) {

@@ -12,11 +12,12 @@ import { fileURLToPath } from 'node:url';
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..');
 const pkg = JSON.parse(readFileSync(join(ROOT, 'package.json'), 'utf8'));
 
-test('sources import only each other, three and fzstd (they run in browsers)', () => {
+test('sources import only each other, three (three/webgpu, three/tsl) and fzstd (they run in browsers)', () => {
   for (const name of readdirSync(join(ROOT, 'src'))) {
     const text = readFileSync(join(ROOT, 'src', name), 'utf8');
     for (const [, spec] of text.matchAll(/^\s*(?:import|export)\s[^'"]*?from\s+'([^']+)'/gms)) {
-      assert.ok(spec.startsWith('./') || spec === 'three' || spec === 'fzstd', `${name} imports ${spec}`);
+      const three = spec === 'three' || spec === 'three/webgpu' || spec === 'three/tsl';
+      assert.ok(spec.startsWith('./') || three || spec === 'fzstd', `${name} imports ${spec}`);
     }
     assert.doesNotMatch(text, /\brequire\(|\bprocess\.|\bBuffer\./, name);
   }
