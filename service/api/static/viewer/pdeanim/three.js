@@ -1,6 +1,6 @@
 // pdeanim/three: play pdeanim clips with three.js's WebGLRenderer, keeping the meshes' own materials: the
 // player (one mesh, or every mesh of a scene such as a glTF), the Loader, and the AnimationMixer link.
-// WebGPURenderer: see pdeanim/webgpu.
+// WebGPURenderer (either backend): pdeanim/webgpu, the same API on node materials.
 
 import './zstd.js';
 

@@ -17,8 +17,8 @@ import {
 import { glslHeader, glslPassMain, patchVertexShader } from './glsl.js';
 
 export const WEBGPU_REFUSAL =
-  'pdeanim/three patches WebGL shaders (onBeforeCompile), which WebGPURenderer does not run, and this ' +
-  'package has no WebGPU (node material) player yet: play the clip with a WebGLRenderer';
+  'pdeanim/three patches WebGL shaders (onBeforeCompile), which WebGPURenderer does not run: play the clip ' +
+  "with pdeanim/webgpu's player (the same API on node materials: import { attachClip } from 'pdeanim/webgpu')";
 
 /** The material each patched clone was made from (a mesh.clone() shares the patched one: patch its original). */
 const ORIGINAL = new WeakMap();
