@@ -60,6 +60,10 @@ function checkBackend(r, backend) {
     // float32 evaluation of positions up to ~the diagonal (bones: skinning too): 1e-7 of the diagonal seen
     assert.ok(c.gpuError < 3e-7, `${at}: node shader positions deviate by ${c.gpuError} of the diagonal`);
     assert.ok(c.gpu02vs07.differ > 0.01, `${at}: the image does not change between t = 0.2 and 0.7`);
+    // the influence (the mixer's weight) reaches the node shader: 0 draws the mesh as without the clip
+    assert.ok(c.influence0VsRest.differ < 0.001, `${at}: influence 0 differs from the rest pose`);
+    const half = c.influenceHalf;
+    assert.ok(half.rest.differ > 0.005 && half.clip.differ > 0.005, `${at}: influence 0.5 is not a mix`);
     if (c.normals === 'frame') {
       // the look: three.js's own drawing (computeVertexNormals) of the CPU positions on the same renderer
       for (const k of ['gpuVsThree02', 'gpuVsThree07']) {
