@@ -50,8 +50,8 @@ const {
 const XYZW = ['x', 'y', 'z', 'w'];
 
 /**
- * The evaluation functions of a layout (GPU numbering and texel layout of gpu.js): {evaluate(v), fetch,
- * frame}, building TSL nodes inside a Fn. nodes: {vertex, frame, ring} TextureNodes (frame null for cyclic
+ * The evaluation functions of a layout (GPU numbering and texel layout of gpu.js): {evaluate(v), fetch},
+ * building TSL nodes inside a Fn (evaluate calls one shader function). nodes: {vertex, frame, ring} TextureNodes (frame null for cyclic
  * clips without slots), sinWt / cosWt float nodes (cyclic), frameBase an int node (a crowd instance's slot's
  * first texel; 0 otherwise). The clip's constants (numbering, texel counts, axis, bend) are baked in.
  */
@@ -60,9 +60,27 @@ function evaluation(layout, nodes) {
   const mask = layout.width - 1;
   // texel i of a data texture (rows of layout.width texels)
   const fetch = (tex, i) => tex.load(ivec2(i.bitAnd(mask), i.shiftRight(shift))).setUpdateMatrix(false);
-  const frame = (i) => fetch(nodes.frame, i.add(nodes.frameBase));
+  let base = null; // the function's frame-base parameter while its body is built
+  const frame = (i) => fetch(nodes.frame, i.add(base));
   const make = layout.kind === 'cyclic-spine' ? cyclicEvaluate : dynamicEvaluate;
-  return { evaluate: make(layout, nodes, fetch, frame), fetch, frame };
+  const body = make(layout, nodes, fetch, frame);
+  // one shader function (called for the vertex and each ring neighbour), not the body inlined at every call
+  const fn = Fn(
+    ([v, b]) => {
+      base = b;
+      return body(v);
+    },
+    // a fixed name: players of one clip generate the same shader code (three.js shares its pipelines)
+    {
+      name: 'pdeanimEval',
+      type: 'vec3',
+      inputs: [
+        { name: 'v', type: 'int' },
+        { name: 'frameBase', type: 'int' },
+      ],
+    },
+  );
+  return { evaluate: (v) => fn(v, nodes.frameBase), fetch };
 }
 
 /** glsl.js's CYCLIC_EVAL: the swim of a cyclic-spine clip's vertex v at the phase (sin, cos) of its time. */

@@ -20,15 +20,13 @@ const HALF = boneClipParts(man.cases.find((c) => c.name === 'synthetic-displacem
   zeroCurve: (c) => c % 2 === 0,
 }).file;
 
-// rest normals (first case), frame normals: time pairs, rigid spline items, a cyclic clip, bones with a
-// residual, bones alone, bones with a residual on half the curves
+// rest normals (first case: rigid, the paper's time pairs), frame normals: spline items, a cyclic clip, bones
+// with a residual, bones with a residual on half the curves (both branches of the skinning shader)
 const CASES = [
   'fit-rigid-paper-loop',
-  'fit-displacement-chord',
-  'synthetic-rigid-paper-spline',
+  'fit-displacement-chord-smooth-spline',
   'cyclic-trout-travelling-rotate-vertical',
   'bones-fit-k4-residual',
-  'bones-synthetic-k3-zero-loop',
   'bones-spline-half',
 ];
 

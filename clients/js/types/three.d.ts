@@ -26,7 +26,7 @@ export interface AttachOptions {
   /**
    * The renderer: its capabilities.maxTextureSize bounds the data textures (else 4096 is assumed), and with
    * float render targets (EXT_color_buffer_float) the clip is evaluated in a pass before drawing. A
-   * WebGPURenderer is refused (use pdeanim/webgpu's refusal message: WEBGPU_REFUSAL).
+   * WebGPURenderer is refused (WEBGPU_REFUSAL): play it with pdeanim/webgpu's player.
    */
   renderer?: WebGLRenderer;
   /** Evaluate in a pass (one evaluation per clip vertex); default: when the renderer is given and supports
