@@ -167,7 +167,8 @@ function patchMaterial(material, player) {
     if (previous && previous !== inherited) previous.call(m, shader, renderer);
     Object.assign(shader.uniforms, player.uniforms);
     const { normals, pass, slots } = player;
-    const header = glslHeader(player.layout, { normals, pass, cpu: !player.gpu, slots });
+    const knotWidth = player.crowd ? player.resources.crowd.table.width : 0;
+    const header = glslHeader(player.layout, { normals, pass, cpu: !player.gpu, slots, knotWidth });
     shader.vertexShader = patchVertexShader(shader.vertexShader, header);
   };
   const prevKey = material.customProgramCacheKey?.bind(material);

@@ -44,9 +44,11 @@ function dot4(a, b) {
 
 /**
  * The shader's pdeEval(v) in float32 for a dynamic clip without bones, reading the player's textures as the
- * GPU does: the shared vertex texture, and the per-frame texture from texel base (slot * pdeSlotTexels).
+ * GPU does: the shared vertex texture, and the per-frame texture from texel base (slot * pdeSlotTexels); in
+ * the clip's crowd form (players at distinct times) the shared knot table and the player's time row (slot).
  */
 function emulate(player, v, base = 0) {
+  if (player.crowd) return emulateCrowd(player, v, base / player.uniforms.pdeSlotTexels.value);
   const L = player.layout;
   const vertex = player.textures.vertex.image;
   const frame = player.textures.frame.image;
@@ -64,6 +66,43 @@ function emulate(player, v, base = 0) {
   return p;
 }
 
+/** pdeEval(v) of the crowd form (glsl.js PDEANIM_KNOTS) in float32: time row of slot `slot`. */
+function emulateCrowd(player, v, slot) {
+  const L = player.layout;
+  const { table, row } = player.resources.crowd;
+  const vertex = player.textures.vertex.image;
+  const atlas = player.textures.frame.image;
+  const base = player.uniforms.pdeFrameOffset.value + slot * row.texels;
+  const fr = (i) => fetch(atlas.data, atlas.width, i + base);
+  const knot = (i) => fetch(table.data, table.width, i);
+  const g = L.gpuIndex[v];
+  if (g < L.nDirect) return fr(g).slice(0, 3);
+  const r = (g - L.nDirect) * 4;
+  const head = fetch(vertex.data, vertex.width, r);
+  const cg = Math.round(head[0]);
+  const seg = Math.round(fr(row.timeTexel)[0]);
+  const cw = fr(row.timeTexel + 1);
+  const mu = knot(table.muTexel + seg * table.curves + cg);
+  const mad = (ws, rows) => [0, 1, 2, 3].map((k) => rows.reduce((acc, x, i) => f(acc + f(ws[i] * x[k])), 0));
+  const coefficients = (w) => {
+    const a = (seg * table.curves + cg) * 3 + w;
+    const b = a + table.curves * 3;
+    if (mu[w] < -0.5) {
+      const rows = [knot(table.tangentTexel + a), knot(a), knot(b), knot(table.tangentTexel + b)];
+      return mad(cw, rows);
+    }
+    const j = Math.round(mu[w]);
+    const pair = fr(row.timeTexel + 2 + (j >> 1));
+    return mad(j % 2 === 0 ? pair.slice(0, 2) : pair.slice(2, 4), [knot(a), knot(b)]);
+  };
+  let p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(coefficients(w), fetch(vertex.data, vertex.width, r + 1 + w))));
+  if (L.rigid) {
+    const rows = [0, 1, 2].map((i) => fr(row.rigidTexel + cg * 3 + i));
+    p = rows.map((q) => f(dot4([q[0], q[1], q[2], 0], [...p, 0]) + q[3]));
+  }
+  return p;
+}
+
 /** The largest deviation of the emulated shader (slot base) from the CPU evaluator at t. */
 function deviation(player, clip, t, base = 0) {
   const cpu = createEvaluator(clip).evaluate(t);
@@ -75,16 +114,23 @@ function deviation(player, clip, t, base = 0) {
   return worst;
 }
 
-test('players of one clip share its data texture; each has its own per-frame table and time', () => {
+test('players of one clip share its data texture; each has its own time row and time', () => {
   const c = byName('fit-rigid-chord-smooth-spline');
   const clip = loadCase(c);
   const a = attachClip(meshOf(clip), clip);
+  assert.equal(a.crowd, false, 'one player alone: its own per-frame table');
+  const alone = a.frames.bytes;
   const b = attachClip(meshOf(clip), clip);
   assert.equal(a.resources, b.resources);
+  assert.ok(a.crowd && b.crowd, "a second player at another time turns the clip into its crowd form");
   assert.equal(a.textures.vertex, b.textures.vertex);
-  assert.notEqual(a.textures.frame, b.textures.frame);
-  assert.notEqual(a.uniforms.pdeFrameTex, b.uniforms.pdeFrameTex);
+  // one atlas of time rows for both; each its own row (and uniforms)
+  assert.equal(a.textures.frame, b.textures.frame);
+  assert.notEqual(a.uniforms.pdeFrameOffset, b.uniforms.pdeFrameOffset);
+  assert.notEqual(a.uniforms.pdeFrameOffset.value, b.uniforms.pdeFrameOffset.value);
   assert.equal(a.uniforms.pdeVertexTex, b.uniforms.pdeVertexTex);
+  assert.equal(a.uniforms.pdeKnotTex, b.uniforms.pdeKnotTex);
+  assert.ok(b.frames.bytes < alone, `a time row (${b.frames.bytes} bytes) is smaller than a table (${alone})`);
   a.setTime(0.2);
   b.setTime(0.9);
   assert.ok(deviation(a, clip, 0.2) <= 1e-6 * c.diagonal);
@@ -211,7 +257,7 @@ test('ScenePlayer.clone(): another root with its own time; one per-frame table p
   assert.equal(b.resources.users, 0);
 });
 
-test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, each instance reads its own', () => {
+test('InstancedMesh with timeOffsets: one time row per distinct offset, each instance reads its own', () => {
   for (const name of ['fit-rigid-paper-loop', 'fit-displacement-chord']) {
     const c = byName(name);
     const clip = loadCase(c);
@@ -220,6 +266,7 @@ test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, e
     const offsets = [0, 0.25, 0.5, 0.25, 0.75, 0];
     const player = attachClip(mesh, clip, { timeOffsets: offsets });
     assert.equal(player.frames.offsets.length, 4);
+    assert.ok(player.crowd, 'offsets: the crowd form');
     assert.equal(player.pass, false);
     assert.match(player.programKey, /:slots:/);
     const slot = mesh.geometry.getAttribute('pdeSlot');
@@ -233,12 +280,10 @@ test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, e
       ti = clip.looping ? ti - Math.floor(ti) : Math.min(ti, 1);
       const dev = deviation(player, clip, ti, slot.array[i] * stride);
       assert.ok(dev <= 1e-6 * c.diagonal, `${name} instance ${i}: ${dev / c.diagonal}`);
-      // the slot's table is the one a single player shows at that time
-      const fresh = gpuLayout(clip, { width: player.layout.width });
-      timeUniforms(fresh, ti);
-      const k = slot.array[i] * stride * 4;
-      const atlas = player.textures.frame.image.data;
-      assert.deepEqual(atlas.subarray(k, k + stride * 4), fresh.textures.frame.data.subarray(0, stride * 4));
+      // the slot's time row holds the segment of its time
+      const { row } = player.resources.crowd;
+      const k = (player.uniforms.pdeFrameOffset.value + slot.array[i] * stride + row.timeTexel) * 4;
+      assert.equal(player.textures.frame.image.data[k], createEvaluator(clip).locate(ti)[0]);
     }
     const s = { uniforms: {}, vertexShader: THREE.ShaderLib.standard.vertexShader };
     mesh.material.onBeforeCompile(s);
