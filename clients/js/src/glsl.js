@@ -52,7 +52,7 @@ int pdeFrameBase;
 #ifdef PDEANIM_KNOTS
 uniform highp sampler2D pdeKnotTex;
 uniform int pdeKnotCurves;
-uniform int pdeTangentTexel;
+uniform int pdeKnotTangents;
 uniform int pdeMuTexel;
 uniform int pdeTimeTexel;
 uniform int pdeRigidTexel;
@@ -126,8 +126,8 @@ vec4 pdeCoefficients(int c, int w, int seg, vec4 mu, vec4 cw) {
   int b = a + pdeKnotCurves * 3;
   float k = mu[w];
   if (k < -0.5) {
-    return cw.x * pdeKnot(pdeTangentTexel + a) + cw.y * pdeKnot(a) + cw.z * pdeKnot(b)
-      + cw.w * pdeKnot(pdeTangentTexel + b);
+    return cw.x * pdeKnot(pdeKnotTangents + a) + cw.y * pdeKnot(a) + cw.z * pdeKnot(b)
+      + cw.w * pdeKnot(pdeKnotTangents + b);
   }
   int j = int(k + 0.5);
   vec4 pair = pdeFrame(pdeTimeTexel + 2 + (j >> 1));

@@ -154,7 +154,7 @@ export class ClipPlayer {
       throw e;
     }
     const { evaluator, gpuReason } = this.resources;
-    Object.assign(this, { layout: this.resources.layout, evaluator });
+    this.evaluator = evaluator;
     /** Why the GPU path is unavailable (null when it is available). */
     this.gpuUnavailableReason = gpuReason;
     this.slots = offsets !== null;
@@ -191,6 +191,14 @@ export class ClipPlayer {
    */
   get textures() {
     return { vertex: this.resources.textures.vertex, frame: this.frames.texture ?? undefined };
+  }
+
+  /**
+   * The clip's GPU layout as this player shows it (a view whose per-frame table is this player's, or slot 0's
+   * of an instanced crowd; in the clip's crowd form a view with its own record of the time written).
+   */
+  get layout() {
+    return this.frames.views[0] ?? this.resources.layout;
   }
 
   /** Whether the evaluation pass runs (not in the clip's crowd form: the vertex shader evaluates then). */

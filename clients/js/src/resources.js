@@ -73,7 +73,7 @@ export class ClipResources {
       // the crowd form's (set by toCrowd)
       pdeKnotTex: { value: null },
       pdeKnotCurves: { value: 0 },
-      pdeTangentTexel: { value: 0 },
+      pdeKnotTangents: { value: 0 },
       pdeMuTexel: { value: 0 },
       pdeTimeTexel: { value: 0 },
       pdeRigidTexel: { value: 0 },
@@ -116,7 +116,7 @@ export class ClipResources {
     const u = this.uniforms;
     u.pdeKnotTex.value = this.crowd.texture;
     u.pdeKnotCurves.value = table.curves;
-    u.pdeTangentTexel.value = table.tangentTexel;
+    u.pdeKnotTangents.value = table.tangentTexel;
     u.pdeMuTexel.value = table.muTexel;
     u.pdeTimeTexel.value = row.timeTexel;
     u.pdeRigidTexel.value = row.rigidTexel;
