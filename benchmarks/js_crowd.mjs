@@ -24,7 +24,7 @@ const FRAMES = Number(process.env.FRAMES ?? 10);
 const RUNS = Number(process.env.RUNS ?? 3);
 // 'rest': one evaluation per vertex (SwiftShader draws 100 x 15k vertices per frame on the CPU)
 const NORMALS = process.env.NORMALS ?? 'rest';
-const VARIANTS = ['single', 'meshes', 'meshesSame', `instanced${N}`, 'instanced10'];
+const VARIANTS = ['single', 'meshes', 'meshesSame', `instanced${N}`, 'instanced10', 'plainShared', 'plainOwn'];
 const GOAL_BYTES = 1; // % of the first player's bytes per extra player
 const GOAL_MS = 2; // main-thread ms per frame for all N
 
@@ -124,4 +124,8 @@ for (const k of [N, 10]) {
       mainThread(`instanced${k}`),
   );
 }
+console.log(
+  `  peers, ${N} meshes of three.js alone (no clip): one shared material ${m('plainShared.renderMs')} ms, ` +
+    `a material each (as ${N} players have) ${m('plainOwn.renderMs')} ms per render call`,
+);
 console.log(`after: ${uptime()}`);

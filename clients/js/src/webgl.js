@@ -120,16 +120,17 @@ export const webglBackend = {
     }
     const before = original.onBeforeRender;
     // a WebGPURenderer skips onBeforeCompile: refuse at the first frame rather than draw a still mesh
-    mesh.onBeforeRender = function (renderer, ...rest) {
+    // (named parameters, no rest array: this runs for every mesh of a crowd every frame)
+    mesh.onBeforeRender = function (renderer, scene, camera, geometry, material, group) {
       if (isWebGPURenderer(renderer)) throw new Error(WEBGPU_REFUSAL);
       if (player.pass && player.gpu && uniforms.pdeEnabled.value) frames.pass.run(renderer);
-      return before.call(this, renderer, ...rest);
+      return before.call(this, renderer, scene, camera, geometry, material, group);
     };
     if (original.onBeforeShadow) {
       const shadow = original.onBeforeShadow;
-      mesh.onBeforeShadow = function (renderer, ...rest) {
+      mesh.onBeforeShadow = function (renderer, object, camera, shadowCamera, geometry, material, group) {
         if (player.pass && player.gpu && uniforms.pdeEnabled.value) frames.pass.run(renderer);
-        return shadow.call(this, renderer, ...rest);
+        return shadow.call(this, renderer, object, camera, shadowCamera, geometry, material, group);
       };
     }
     const materials = [patched, mesh.customDepthMaterial, mesh.customDistanceMaterial].flat();

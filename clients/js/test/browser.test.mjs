@@ -51,6 +51,8 @@ test(
       // float32 sums of values up to ~0.3 of the diagonal on the GPU (time pairs and rotations come from
       // the CPU in float64): worst seen 5.9e-8 of the diagonal
       assert.ok(c.gpuError < 3e-7, `${c.name}: GPU positions deviate by ${c.gpuError} of the diagonal`);
+      // alone, then beside the mesh's player (dynamic clips: the crowd form)
+      assert.deepEqual(c.forms, [false, !c.name.startsWith('cyclic')], `${c.name}: ${c.forms}`);
       assert.ok(c.gpu02vs07.differ > 0.01, `${c.name}: the image does not change between t = 0.2 and 0.7`);
       // frame normals: three.js's own drawing of the same positions (computeVertexNormals), lit alike
       if (c.normals === 'frame') {

@@ -7,8 +7,13 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { findChromium, pageResult } from './pagerun.mjs';
 
-// the paper's time pairs (rigid, looping), spline items, a cyclic clip
-const CASES = ['fit-rigid-paper-loop', 'fit-displacement-chord-smooth-spline', 'cyclic-trout-travelling-rotate-vertical'];
+// the paper's time pairs (rigid, looping), spline items, a bone clip with a residual, a cyclic clip
+const CASES = [
+  'fit-rigid-paper-loop',
+  'fit-displacement-chord-smooth-spline',
+  'bones-fit-k4-residual',
+  'cyclic-trout-travelling-rotate-vertical',
+];
 
 
 

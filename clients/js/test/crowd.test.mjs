@@ -323,3 +323,113 @@ test('timeOffsets are refused with a reason where they cannot play', () => {
   assert.throws(() => attachClip(big, clip, { timeOffsets: many, maxTextureSize: 16 }), /300 distinct time offsets/);
   assert.equal(ClipResources.acquire(clip, { maxTextureSize: 16 }).users, 1, 'the refused attach left no user');
 });
+
+test('players at distinct times: the clip tables once, each extra player a time row, freed with the last', () => {
+  const c = byName('fit-displacement-chord-smooth-pde'); // 12 segments of the paper's time pairs
+  const clip = loadCase(c);
+  const first = attachClip(meshOf(clip), clip);
+  const alone = { bytes: first.gpuBytes, table: first.frames.bytes };
+  const players = [first, ...Array.from({ length: 39 }, () => first.clone())];
+  const res = first.resources;
+  const { row, table } = res.crowd;
+  assert.equal(res.tables.size, 40);
+  // one vertex texture, one knot table, one atlas of time rows for all; a row each
+  assert.equal(new Set(players.map((p) => p.textures.vertex)).size, 1);
+  assert.equal(new Set(players.map((p) => p.textures.frame)).size, 1);
+  assert.equal(new Set(players.map((p) => p.uniforms.pdeKnotTex.value)).size, 1);
+  assert.equal(new Set(players.map((p) => p.uniforms.pdeFrameOffset.value)).size, 40);
+  assert.equal(new Set(players.map((p) => p.programKey)).size, 1, 'one program for every player');
+  for (const p of players) assert.equal(p.frames.bytes, row.texels * 16);
+  assert.ok(row.texels * 16 < alone.table, `a time row ${row.texels * 16} bytes, a table ${alone.table}`);
+  // the knot table is the clip's (its knots, once): (S + 1) knots and S segments per GPU curve
+  assert.equal(table.texels, (clip.nSegments + 1) * table.curves * 3 + clip.nSegments * table.curves);
+  assert.equal(res.sharedBytes, alone.bytes - alone.table - first.attributeBytes + table.data.byteLength);
+  // the atlas grows by doubling: at most twice the rows in use, plus a row of padding
+  assert.ok(res.atlasBytes <= 2 * 40 * row.texels * 16 + first.layout.width * 16);
+  players.forEach((p, i) => p.setTime(i / 39));
+  for (let i = 0; i < 40; i += 3) {
+    const dev = deviation(players[i], clip, i / 39);
+    assert.ok(dev <= 1e-6 * c.diagonal, `player ${i}: ${dev / c.diagonal}`);
+  }
+  // a t with the same segment and local time writes nothing: the atlas is uploaded once per frame at most
+  const version = first.textures.frame.version;
+  players.forEach((p, i) => p.setTime(i / 39));
+  assert.equal(first.textures.frame.version, version);
+  let disposed = 0;
+  for (const tex of [first.textures.vertex, res.crowd.texture, first.textures.frame]) {
+    tex.addEventListener('dispose', () => disposed++);
+  }
+  for (const p of players.slice(1)) p.detach();
+  assert.equal(disposed, 0);
+  assert.equal(res.crowd.atlas.slots.filter((o) => o !== null).length, 1, 'the detached players freed their rows');
+  first.setTime(0.55);
+  assert.ok(deviation(first, clip, 0.55) <= 1e-6 * c.diagonal);
+  first.detach();
+  assert.equal(disposed, 3);
+});
+
+test('a second player turns the first into the crowd form: its materials recompile, the pass goes, its time stays', () => {
+  const c = byName('fit-displacement-chord');
+  const clip = loadCase(c);
+  const mesh = meshOf(clip);
+  const a = attachClip(mesh, clip, { pass: true });
+  assert.equal(a.pass, true);
+  assert.equal(a.crowd, false);
+  a.setTime(0.35);
+  const shaderOf = (m) => {
+    const s = { uniforms: {}, vertexShader: THREE.ShaderLib.standard.vertexShader };
+    m.onBeforeCompile(s);
+    return s;
+  };
+  assert.doesNotMatch(shaderOf(mesh.material).vertexShader, /#define PDEANIM_KNOTS/);
+  const versions = [mesh.material.version, mesh.customDepthMaterial.version];
+  const b = a.clone();
+  assert.ok(a.crowd && b.crowd);
+  assert.equal(a.pass, false, 'the vertex shader evaluates in the crowd form (no per-player pass texture)');
+  assert.equal(a.frames.pass, null);
+  assert.ok(mesh.material.version > versions[0] && mesh.customDepthMaterial.version > versions[1]);
+  assert.match(a.programKey, /:crowd\d+:/);
+  const s = shaderOf(mesh.material);
+  assert.match(s.vertexShader, /#define PDEANIM_KNOTS/);
+  assert.doesNotMatch(s.vertexShader, /#define PDEANIM_PASS/);
+  assert.equal(s.uniforms.pdeKnotTex.value, a.resources.crowd.texture);
+  assert.equal(s.uniforms.pdeFrameTex.value, a.resources.crowd.atlas.texture);
+  // the first player's time was written into its row when it switched
+  assert.ok(deviation(a, clip, 0.35) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(b, clip, 0.35) <= 1e-6 * c.diagonal, 'the clone starts at its original time');
+  b.setTime(0.9);
+  assert.ok(deviation(a, clip, 0.35) <= 1e-6 * c.diagonal, "the clone's time does not move the original");
+  a.detach();
+  assert.equal(b.resources.tables.size, 1);
+  b.setTime(0.1);
+  assert.ok(deviation(b, clip, 0.1) <= 1e-6 * c.diagonal, 'the clone plays on after the original detached');
+  b.detach();
+});
+
+test('the crowd form keeps the per-frame state of bone clips and rigid clips in each player\'s row', () => {
+  for (const name of ['bones-fit-k4-residual', 'bones-synthetic-k3-zero-loop', 'fit-rigid-paper-loop']) {
+    const clip = decodeClipFile(readBytes(join(FIXTURES, `${name}.clip`)));
+    const a = attachClip(meshOf(clip), clip);
+    const b = a.clone();
+    assert.ok(a.crowd && b.crowd, name);
+    const { row } = a.resources.crowd;
+    a.setTime(0.2);
+    b.setTime(0.8);
+    const atlas = a.textures.frame.image.data;
+    if (clip.bones) {
+      assert.equal(a.uniforms.pdeBones.value, row.boneTexel);
+      for (const [p, t] of [[a, 0.2], [b, 0.8]]) {
+        const ev = createEvaluator(clip);
+        ev.prepare(t);
+        const rows = ev.bones.affine();
+        const o = (p.uniforms.pdeFrameOffset.value + row.boneTexel) * 4;
+        for (let i = 0; i < rows.length; i++) assert.equal(atlas[o + i], f(rows[i]), `${name} bone value ${i}`);
+      }
+    } else {
+      // direct vertices (every vertex of this clip): positions at each player's time
+      for (const [p, t] of [[a, 0.2], [b, 0.8]]) assert.ok(deviation(p, clip, t) <= 1e-6 * byName(name).diagonal, name);
+    }
+    a.detach();
+    b.detach();
+  }
+});
