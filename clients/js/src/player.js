@@ -148,7 +148,8 @@ export class ClipPlayer {
     this.resources = options.resources ? options.resources.retain() : ClipResources.acquire(clip, options);
     try {
       if (offsets && this.resources.gpuReason) throw new Error(`timeOffsets play on the GPU only: ${this.resources.gpuReason}`);
-      this.frames = (options.frames ?? new FrameTables(this.resources, { offsets: offsets?.offsets ?? null })).retain();
+      const crowd = backend.crowd === true; // whether the backend's shaders read the crowd form
+      this.frames = (options.frames ?? new FrameTables(this.resources, { offsets: offsets?.offsets ?? null, crowd })).retain();
     } catch (e) {
       this.resources.release();
       throw e;

@@ -235,11 +235,12 @@ export class ClipResources {
  * the meshes of a scene (retain/release). Two forms: a per-frame table of every curve's coefficients (one
  * player alone; the evaluation pass, when a player uses one, is made here, as it shows this time), or, in
  * the clip's crowd form (ClipResources.toCrowd: when a second FrameTables of the clip is made, or offsets are
- * given), a time row per slot in the clip's shared atlas. onChange(fn): fn() runs when the form changes (the
- * players recompile their materials).
+ * given), a time row per slot in the clip's shared atlas. crowd: false keeps the per-frame table (a backend
+ * whose shaders do not read the crowd form). onChange(fn): fn() runs when the form changes (the players
+ * recompile their materials).
  */
 export class FrameTables {
-  constructor(resources, { offsets = null } = {}) {
+  constructor(resources, { offsets = null, crowd = true } = {}) {
     const L = resources.layout;
     this.resources = resources;
     this.offsets = offsets ? Float64Array.from(offsets) : Float64Array.of(0);
@@ -247,6 +248,8 @@ export class FrameTables {
     this.stride = frameTexels(L);
     this.cyclic = L.kind === 'cyclic-spine';
     this.crowd = false;
+    /** Whether the players' backend reads the crowd form (else this keeps its per-frame table). */
+    this.crowdCapable = crowd;
     this._texture = null;
     this.views = [];
     this.uniforms = {
@@ -267,7 +270,8 @@ export class FrameTables {
     this.first = -1; // the crowd form's first atlas row
     resources.tables.add(this);
     try {
-      const crowd = !this.cyclic && (this.slots || resources.crowd !== null || resources.tables.size >= 2);
+      const others = [...resources.tables].filter((x) => x.crowdCapable).length;
+      const crowd = this.crowdCapable && !this.cyclic && (this.slots || resources.crowd !== null || others >= 2);
       // (toCrowd switches every registered table, this one included)
       if (crowd && resources.toCrowd()) this._toCrowd();
       else this._ownTable();
@@ -298,7 +302,7 @@ export class FrameTables {
 
   /** Move to the clip's crowd form (ClipResources.toCrowd): time rows in the shared atlas. */
   _toCrowd() {
-    if (this.crowd) return;
+    if (this.crowd || !this.crowdCapable || this.cyclic) return;
     const res = this.resources;
     const L = res.layout;
     this.first = res._allocate(this, this.offsets.length);

@@ -91,6 +91,8 @@ export function isWebGPURenderer(renderer) {
  */
 export const webglBackend = {
   name: 'webgl',
+  /** Its shaders read the clip's crowd form (glsl.js PDEANIM_KNOTS): players at distinct times share the knots. */
+  crowd: true,
   check(renderer) {
     if (isWebGPURenderer(renderer)) throw new Error(WEBGPU_REFUSAL);
   },

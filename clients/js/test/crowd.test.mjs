@@ -10,7 +10,8 @@ import { join } from 'node:path';
 import * as THREE from 'three';
 import { createEvaluator, decodeClipFile } from '../src/index.js';
 import { gpuLayout, timeUniforms } from '../src/gpu.js';
-import { ClipResources, attachClip, attachClipToScene } from '../src/three.js';
+import { ClipPlayer, ClipResources, attachClip, attachClipToScene } from '../src/three.js';
+import { webglBackend } from '../src/webgl.js';
 import { FIXTURES, manifest, readBytes } from './helpers.mjs';
 
 const man = manifest();
@@ -432,4 +433,24 @@ test('the crowd form keeps the per-frame state of bone clips and rigid clips in 
     a.detach();
     b.detach();
   }
+});
+
+test("a backend whose shaders do not read the crowd form keeps per-frame tables beside a crowd", () => {
+  const c = byName('fit-displacement-chord-loop');
+  const clip = loadCase(c);
+  const plain = { ...webglBackend, crowd: false };
+  const a = new ClipPlayer(meshOf(clip), clip, {}, plain);
+  const b = new ClipPlayer(meshOf(clip), clip, {}, plain);
+  assert.equal(a.resources, b.resources);
+  assert.ok(!a.crowd && !b.crowd && a.resources.crowd === null);
+  const x = attachClip(meshOf(clip), clip);
+  const y = x.clone();
+  assert.ok(x.crowd && y.crowd, 'the WebGL players take the crowd form');
+  assert.ok(!a.crowd && !b.crowd, 'the others keep their tables');
+  assert.doesNotMatch(a.programKey, /:crowd/);
+  for (const [p, t] of [[a, 0.1], [b, 0.6], [x, 0.3], [y, 0.85]]) {
+    p.setTime(t);
+    assert.ok(deviation(p, clip, t) <= 1e-6 * c.diagonal, `${t}`);
+  }
+  for (const p of [a, b, x, y]) p.detach();
 });

@@ -3,12 +3,17 @@
 // the evaluation pass's fragment shader. The math is docs/format.md's; gpu.js's CPU helpers mirror it.
 
 /** The #defines of a layout and the shader variant. */
-function defines(layout, { normals, stage, pass, cpu, slots }) {
+function defines(layout, { normals, stage, pass, cpu, slots, knotWidth }) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
   if (stage === 'vertex') defs.push('#define PDEANIM_VERTEX_STAGE');
   if (pass) defs.push('#define PDEANIM_PASS');
   if (cpu) defs.push('#define PDEANIM_CPU');
   if (slots && stage === 'vertex') defs.push('#define PDEANIM_SLOTS');
+  if (knotWidth && stage === 'vertex') {
+    defs.push('#define PDEANIM_KNOTS');
+    defs.push(`#define PDEANIM_KNOT_SHIFT ${Math.log2(knotWidth)}`);
+    defs.push(`#define PDEANIM_KNOT_MASK ${knotWidth - 1}`);
+  }
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.bones) defs.push('#define PDEANIM_BONES');
@@ -36,10 +41,21 @@ in vec3 pdeCpuNormal;
 #endif
 #ifdef PDEANIM_SLOTS
 in float pdeSlot;
+#endif
+#if defined(PDEANIM_SLOTS) || defined(PDEANIM_KNOTS)
 uniform int pdeSlotTexels;
+uniform int pdeFrameOffset;
 int pdeFrameBase;
 #else
 #define pdeFrameBase 0
+#endif
+#ifdef PDEANIM_KNOTS
+uniform highp sampler2D pdeKnotTex;
+uniform int pdeKnotCurves;
+uniform int pdeKnotTangents;
+uniform int pdeMuTexel;
+uniform int pdeTimeTexel;
+uniform int pdeRigidTexel;
 #endif
 #ifdef PDEANIM_PASS
 uniform highp sampler2D pdePosTex;
@@ -99,6 +115,26 @@ vec3 pdeSkin(int r, vec3 rest) {
   return acc;
 }
 #endif
+#ifdef PDEANIM_KNOTS
+vec4 pdeKnot(int i) {
+  return texelFetch(pdeKnotTex, ivec2(i & PDEANIM_KNOT_MASK, i >> PDEANIM_KNOT_SHIFT), 0);
+}
+// a crowd (gpu.js knotTables, crowdRow): coordinate w's coefficients of GPU curve c at this player's time,
+// its time pair (or the spline's cubic weights cw) applied to the shared knots of segment seg
+vec4 pdeCoefficients(int c, int w, int seg, vec4 mu, vec4 cw) {
+  int a = (seg * pdeKnotCurves + c) * 3 + w;
+  int b = a + pdeKnotCurves * 3;
+  float k = mu[w];
+  if (k < -0.5) {
+    return cw.x * pdeKnot(pdeKnotTangents + a) + cw.y * pdeKnot(a) + cw.z * pdeKnot(b)
+      + cw.w * pdeKnot(pdeKnotTangents + b);
+  }
+  int j = int(k + 0.5);
+  vec4 pair = pdeFrame(pdeTimeTexel + 2 + (j >> 1));
+  vec2 phi = (j & 1) == 0 ? pair.xy : pair.zw;
+  return phi.x * pdeKnot(a) + phi.y * pdeKnot(b);
+}
+#endif
 vec3 pdeEval(int v) {
   if (v < pdeDirect) return pdeFrame(v).xyz;
 #ifdef PDEANIM_BONES
@@ -113,8 +149,17 @@ vec3 pdeEval(int v) {
 #ifdef PDEANIM_BONES
   p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p);
 #endif
+#ifdef PDEANIM_KNOTS
+  int cg = int(head.x + 0.5);
+  int seg = int(pdeFrame(pdeTimeTexel).x + 0.5);
+  vec4 cw = pdeFrame(pdeTimeTexel + 1);
+  vec4 mu = pdeKnot(pdeMuTexel + seg * pdeKnotCurves + cg);
+  for (int w = 0; w < 3; w++) p[w] += dot(pdeCoefficients(cg, w, seg, mu, cw), pdeFetch(pdeVertexTex, r + 1 + w));
+  int c = pdeRigidTexel + cg * 3 - PDEANIM_COEFFICIENT_TEXELS;
+#else
   int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   for (int w = 0; w < 3; w++) p[w] += dot(pdeFrame(c + w), pdeFetch(pdeVertexTex, r + 1 + w));
+#endif
 #ifdef PDEANIM_RIGID
   vec4 r0 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS);
   vec4 r1 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 1);
@@ -195,8 +240,10 @@ void pdeCompute() {
   pdePosition = pdeCpuPosition;
   pdeNormal = pdeCpuNormal;
 #else
-#ifdef PDEANIM_SLOTS
-  pdeFrameBase = int(pdeSlot + 0.5) * pdeSlotTexels;
+#if defined(PDEANIM_SLOTS)
+  pdeFrameBase = pdeFrameOffset + int(pdeSlot + 0.5) * pdeSlotTexels;
+#elif defined(PDEANIM_KNOTS)
+  pdeFrameBase = pdeFrameOffset;
 #endif
   int v = int(pdeVertex.x + 0.5);
   int va = int(pdeVertex.y + 0.5);
@@ -222,12 +269,16 @@ void pdeCompute() {
 #endif
 `;
 
-/** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
+/**
+ * GLSL declarations and functions (inserted after three.js's `#include <common>`). knotWidth (vertex stage):
+ * the crowd variant, reading the shared knot table (gpu.js knotTables, rows of knotWidth) and a time row
+ * (crowdRow) from texel pdeFrameOffset of the per-frame texture.
+ */
 export function glslHeader(
   layout,
-  { normals = 'frame', stage = 'vertex', pass = false, cpu = false, slots = false } = {},
+  { normals = 'frame', stage = 'vertex', pass = false, cpu = false, slots = false, knotWidth = 0 } = {},
 ) {
-  return `${defines(layout, { normals, stage, pass, cpu, slots })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
+  return `${defines(layout, { normals, stage, pass, cpu, slots, knotWidth })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
 }
 
 /**
