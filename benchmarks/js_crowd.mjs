@@ -6,7 +6,7 @@
 // setTime and of renderer.render (goal: their sum at most 2 ms for all 100), medians of FRAMES frames, the
 // median of RUNS runs; with the load (uptime, os.loadavg) before and after.
 // Clips come from benchmarks/js_eval_clips.py (made when missing).
-// Run: node benchmarks/js_crowd.mjs [DIR]
+// Run: [RUNS=3] [FRAMES=10] [CLIP=torus15k-loop.clip] node benchmarks/js_crowd.mjs [DIR]
 
 import { execFileSync } from 'node:child_process';
 import { createServer } from 'node:http';
@@ -18,13 +18,13 @@ import { launchChromium } from '../tests/browser/chromium.mjs';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..');
 const dir = process.argv[2] ?? join(tmpdir(), 'pdeanim-js-bench');
-const CLIP = 'torus15k-loop.clip';
+const CLIP = process.env.CLIP ?? 'torus15k-loop.clip'; // CLIP=torus15k-rigid.clip etc. (js_eval_clips.py)
 const N = 100;
 const FRAMES = Number(process.env.FRAMES ?? 10);
 const RUNS = Number(process.env.RUNS ?? 3);
 // 'rest': one evaluation per vertex (SwiftShader draws 100 x 15k vertices per frame on the CPU)
 const NORMALS = process.env.NORMALS ?? 'rest';
-const VARIANTS = ['single', 'meshes', 'meshesSame', `instanced${N}`, 'instanced10', 'plainShared', 'plainOwn'];
+const VARIANTS = ['single', 'meshes', 'meshesSame', 'meshesOneTable', `instanced${N}`, 'instanced10', 'plainShared', 'plainOwn'];
 const GOAL_BYTES = 1; // % of the first player's bytes per extra player
 const GOAL_MS = 2; // main-thread ms per frame for all N
 
@@ -124,6 +124,10 @@ for (const k of [N, 10]) {
       mainThread(`instanced${k}`),
   );
 }
+console.log(
+  `  ${N} meshes at one time sharing one FrameTables (crowd form ${first.meshesOneTable.crowd}: the per-frame ` +
+    `table): ${m('meshesOneTable.setTimeMs')} / ${m('meshesOneTable.renderMs')} / ${m('meshesOneTable.frameMs')} ms`,
+);
 console.log(
   `  peers, ${N} meshes of three.js alone (no clip): one shared material ${m('plainShared.renderMs')} ms, ` +
     `a material each (as ${N} players have) ${m('plainOwn.renderMs')} ms per render call`,
