@@ -77,6 +77,8 @@ export class ClipResources {
       pdeMuTexel: { value: 0 },
       pdeTimeTexel: { value: 0 },
       pdeRigidTexel: { value: 0 },
+      pdeRigidKnots: { value: 0 },
+      pdeRigidMu: { value: 0 },
     };
     this.users = 0;
     this._key = null;
@@ -120,6 +122,8 @@ export class ClipResources {
     u.pdeMuTexel.value = table.muTexel;
     u.pdeTimeTexel.value = row.timeTexel;
     u.pdeRigidTexel.value = row.rigidTexel;
+    u.pdeRigidKnots.value = table.rigidKnotTexel;
+    u.pdeRigidMu.value = table.rigidMuTexel;
     this._growAtlas(this.tables.size);
     for (const t of [...this.tables]) t._toCrowd();
     return true;

@@ -9,7 +9,9 @@ import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import * as THREE from 'three';
 import { createEvaluator, decodeClipFile } from '../src/index.js';
-import { gpuLayout, timeUniforms } from '../src/gpu.js';
+import { gpuLayout, gpuTables, timeUniforms } from '../src/gpu.js';
+import { rigidTimePair } from '../src/basis.js';
+import { rodrigues } from '../src/dynamic.js';
 import { ClipPlayer, ClipResources, attachClip, attachClipToScene } from '../src/three.js';
 import { webglBackend } from '../src/webgl.js';
 import { FIXTURES, manifest, readBytes } from './helpers.mjs';
@@ -96,12 +98,23 @@ function emulateCrowd(player, v, slot) {
     const pair = fr(row.timeTexel + 2 + (j >> 1));
     return mad(j % 2 === 0 ? pair.slice(0, 2) : pair.slice(2, 4), [knot(a), knot(b)]);
   };
-  let p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(coefficients(w), fetch(vertex.data, vertex.width, r + 1 + w))));
-  if (L.rigid) {
-    const rows = [0, 1, 2].map((i) => fr(row.rigidTexel + cg * 3 + i));
-    p = rows.map((q) => f(dot4([q[0], q[1], q[2], 0], [...p, 0]) + q[3]));
-  }
-  return p;
+  const p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(coefficients(w), fetch(vertex.data, vertex.width, r + 1 + w))));
+  return L.rigid ? rigidMotion(table, fr(row.rigidTexel), knot, cg, p) : p;
+}
+
+/** glsl.js pdeRigid (float64 here): p moved by GPU curve c's rigid motion at the row's rigid segment and time. */
+function rigidMotion(table, at, knot, c, p) {
+  const s = Math.round(at[0]);
+  const tau = at[1];
+  const mu = knot(table.rigidMuTexel + s * table.curves + c);
+  const pr = rigidTimePair(tau, mu[0], [0, 0]);
+  const pt = rigidTimePair(tau, mu[1], [0, 0]);
+  const k0 = table.rigidKnotTexel + (s * table.curves + c) * 2;
+  const k1 = k0 + table.curves * 2;
+  const r = [0, 1, 2].map((w) => pr[0] * knot(k0)[w] + pr[1] * knot(k1)[w]);
+  const t = [0, 1, 2].map((w) => pt[0] * knot(k0 + 1)[w] + pt[1] * knot(k1 + 1)[w]);
+  const R = rodrigues(r[0], r[1], r[2], new Float64Array(9));
+  return [0, 1, 2].map((i) => R[i * 3] * p[0] + R[i * 3 + 1] * p[1] + R[i * 3 + 2] * p[2] + t[i]);
 }
 
 /** The largest deviation of the emulated shader (slot base) from the CPU evaluator at t. */
@@ -453,4 +466,29 @@ test("a backend whose shaders do not read the crowd form keeps per-frame tables 
     assert.ok(deviation(p, clip, t) <= 1e-6 * c.diagonal, `${t}`);
   }
   for (const p of [a, b, x, y]) p.detach();
+});
+
+test('rigid clips with GPU curves: the crowd form moves each curve in the shader; a row of a few texels', () => {
+  for (const name of ['fit-rigid-paper-loop', 'fit-rigid-chord-smooth-spline', 'synthetic-blend-rigid-chord-loop-basis']) {
+    const c = byName(name);
+    const clip = loadCase(c);
+    // no direct curves (the fixtures' curves are short): every curve's rigid motion is the shader's
+    const tables = gpuTables(clip, { directMax: 0 });
+    assert.equal(tables.nDirect, 0);
+    const a = attachClip(meshOf(clip), clip, { tables });
+    a.setTime(0.3);
+    assert.ok(deviation(a, clip, 0.3) <= 1e-6 * c.diagonal, `${name} alone`);
+    const b = a.clone();
+    assert.ok(a.crowd && b.crowd);
+    const { row } = a.resources.crowd;
+    assert.equal(row.boneTexel - row.rigidTexel, 1, 'one rigid texel (segment, time) per row, not 3 per curve');
+    for (const [p, t] of [[a, 0.3], [b, 0.3], [b, 0.77], [a, 0.05], [a, 1]]) {
+      if (t === 1 && clip.looping) continue;
+      p.setTime(t);
+      const dev = deviation(p, clip, t);
+      assert.ok(dev <= 1e-6 * c.diagonal, `${name} at ${t}: ${dev / c.diagonal}`);
+    }
+    a.detach();
+    b.detach();
+  }
 });

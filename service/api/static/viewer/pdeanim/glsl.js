@@ -56,6 +56,8 @@ uniform int pdeKnotTangents;
 uniform int pdeMuTexel;
 uniform int pdeTimeTexel;
 uniform int pdeRigidTexel;
+uniform int pdeRigidKnots;
+uniform int pdeRigidMu;
 #endif
 #ifdef PDEANIM_PASS
 uniform highp sampler2D pdePosTex;
@@ -134,6 +136,57 @@ vec4 pdeCoefficients(int c, int w, int seg, vec4 mu, vec4 cw) {
   vec2 phi = (j & 1) == 0 ? pair.xy : pair.zw;
   return phi.x * pdeKnot(a) + phi.y * pdeKnot(b);
 }
+#ifdef PDEANIM_RIGID
+// e^x - 1 without cancellation (a series below |x| 0.5)
+float pdeExpm1(float x) {
+  if (abs(x) < 0.5) {
+    return x * (1.0 + x * (0.5 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0 + x * (1.0 / 720.0
+      + x * (1.0 / 5040.0 + x / 40320.0)))))));
+  }
+  return exp(x) - 1.0;
+}
+// the rigid tracks' time pair (basis.js rigidTimePair: mu < 0 trig, tiny mu linear, else exponential)
+vec2 pdeRigidPair(float tau, float mu) {
+  if (mu < 0.0) {
+    float m = min(-mu, 2.984513020910303); // basis.js MU_TRIG_MAX, 0.95 pi
+    float u = 1.0 - tau;
+    if (m < 1e-2) return vec2(u * (1.0 + m * m * (1.0 - u * u) / 6.0), tau * (1.0 + m * m * (1.0 - tau * tau) / 6.0));
+    float inv = 1.0 / sin(m);
+    return vec2(sin(m * u) * inv, sin(m * tau) * inv);
+  }
+  if (mu < 1e-12) return vec2(1.0 - tau, tau);
+  float inv = 1.0 / pdeExpm1(-2.0 * mu);
+  return vec2(exp(-mu * tau) * pdeExpm1(-2.0 * mu * (1.0 - tau)) * inv,
+    exp(mu * (tau - 1.0)) * pdeExpm1(-2.0 * mu * tau) * inv);
+}
+// p moved by GPU curve c's rigid motion at this player's rigid segment and time (the row's texel
+// pdeRigidTexel): R p + centroid, R the Rodrigues rotation of the rotation vector (dynamic.js rodrigues)
+vec3 pdeRigid(int c, vec3 p) {
+  vec4 at = pdeFrame(pdeRigidTexel);
+  int s = int(at.x + 0.5);
+  vec4 mu = pdeKnot(pdeRigidMu + s * pdeKnotCurves + c);
+  vec2 pr = pdeRigidPair(at.y, mu.x);
+  vec2 pt = pdeRigidPair(at.y, mu.y);
+  int k0 = pdeRigidKnots + (s * pdeKnotCurves + c) * 2;
+  int k1 = k0 + pdeKnotCurves * 2;
+  vec3 r = pr.x * pdeKnot(k0).xyz + pr.y * pdeKnot(k1).xyz;
+  vec3 t = pt.x * pdeKnot(k0 + 1).xyz + pt.y * pdeKnot(k1 + 1).xyz;
+  float th2 = dot(r, r);
+  float th = sqrt(th2);
+  float a;
+  float b;
+  if (th < 1e-2) {
+    a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0;
+    b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0;
+  } else {
+    float h = sin(0.5 * th);
+    a = sin(th) / th;
+    b = 2.0 * h * h / th2;
+  }
+  vec3 k = cross(r, p);
+  return p + a * k + b * cross(r, k) + t;
+}
+#endif
 #endif
 vec3 pdeEval(int v) {
   if (v < pdeDirect) return pdeFrame(v).xyz;
@@ -155,16 +208,18 @@ vec3 pdeEval(int v) {
   vec4 cw = pdeFrame(pdeTimeTexel + 1);
   vec4 mu = pdeKnot(pdeMuTexel + seg * pdeKnotCurves + cg);
   for (int w = 0; w < 3; w++) p[w] += dot(pdeCoefficients(cg, w, seg, mu, cw), pdeFetch(pdeVertexTex, r + 1 + w));
-  int c = pdeRigidTexel + cg * 3 - PDEANIM_COEFFICIENT_TEXELS;
+#ifdef PDEANIM_RIGID
+  p = pdeRigid(cg, p);
+#endif
 #else
   int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   for (int w = 0; w < 3; w++) p[w] += dot(pdeFrame(c + w), pdeFetch(pdeVertexTex, r + 1 + w));
-#endif
 #ifdef PDEANIM_RIGID
   vec4 r0 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS);
   vec4 r1 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 1);
   vec4 r2 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 2);
   p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
+#endif
 #endif
   return p;
 }

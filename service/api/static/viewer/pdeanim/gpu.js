@@ -59,7 +59,7 @@ function texture(nTexels, width) {
  * coefficients and no direct positions. A clip whose residual is zero everywhere (residual false) has only
  * those.
  */
-export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
+export function gpuTables(clip, { width = TEXTURE_WIDTH, directMax = null } = {}) {
   if (clip.kind === 'cyclic-spine') {
     const rings = vertexRings(clip.faces, clip.rest);
     const ring = ringTable(rings);
@@ -72,7 +72,8 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   const coefficientTexels = 3;
   const curveTexels = coefficientTexels + (rigid ? 3 : 0);
   const zero = bones ? zeroCurves(clip.knots, C) : null; // curves without residual (bone clips only)
-  const numbering = gpuNumbering(curveOf, offsets, curveTexels, zero);
+  // directMax (tests): the most vertices of a direct curve (default: curveTexels, where they cost no more)
+  const numbering = gpuNumbering(curveOf, offsets, directMax ?? curveTexels, zero);
   const { gpuIndex, gpuCurve, nDirect, nGpuCurves, skinOnly } = numbering;
   const vertexTexels = 4 + (bones ? 2 : 0);
   const skinTexel = (skinOnly - nDirect) * vertexTexels;
@@ -350,8 +351,11 @@ function gpuCurveCount(layout) {
  * orthonormal bases (R k, texel (j * curves + c) * 3 + w), for clips with spline items the same for the
  * spline tangents from tangentTexel, then per segment s and GPU curve c a texel giving each coordinate's time
  * pair: the index of its constant among the segment's distinct ones (the per-player time row holds their
- * pairs), -1 for spline items (the row's cubic weights). {data, width, height, curves, tangentTexel,
- * muTexel, texels} (width: fittedWidth at most maxWidth). A frame's coefficients are then phi0 a + phi1 b
+ * pairs), -1 for spline items (the row's cubic weights); rigid clips then have per rigid knot and GPU curve
+ * two texels (rotation vector, centroid) from rigidKnotTexel and per rigid segment and GPU curve (rotation
+ * constant, centroid constant) from rigidMuTexel: the shader forms each curve's rigid motion (docs/format.md
+ * §3.6). {data, width, height, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, texels} (width:
+ * fittedWidth at most maxWidth). A frame's coefficients are then phi0 a + phi1 b
  * (or the cubic's four terms) in float32 on the GPU, where the per-player table has them in float64.
  */
 export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
@@ -361,7 +365,12 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
   const knotTexels = (S + 1) * curves * 3;
   const tangentTexel = knotTexels;
   const muTexel = knotTexels * (spline ? 2 : 1);
-  const texels = Math.max(1, muTexel + S * curves);
+  // rigid clips: per rigid knot and GPU curve its rotation vector and centroid, per rigid segment their constants
+  const rg = layout.rigid ? layout.clip.rigid : null;
+  const Sr = rg ? rg.segmentT.length - 1 : 0;
+  const rigidKnotTexel = muTexel + S * curves;
+  const rigidMuTexel = rigidKnotTexel + (rg ? (Sr + 1) * curves * 2 : 0);
+  const texels = Math.max(1, rigidMuTexel + Sr * curves);
   const tex = texture(texels, fittedWidth(texels, maxWidth));
   const d = tex.data;
   if (curves > 0) {
@@ -390,21 +399,37 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
         }
       }
     }
+    for (let c = 0; rg && c < C; c++) {
+      const cg = gpuCurve[c];
+      if (cg < 0) continue;
+      for (let j = 0; j <= Sr; j++) {
+        const o = (rigidKnotTexel + (j * curves + cg) * 2) * 4;
+        for (let w = 0; w < 3; w++) {
+          d[o + w] = rg.rotKnots[(j * C + c) * 3 + w];
+          d[o + 4 + w] = rg.transKnots[(j * C + c) * 3 + w];
+        }
+      }
+      for (let j = 0; j < Sr; j++) {
+        const o = (rigidMuTexel + j * curves + cg) * 4;
+        d[o] = rg.rotMu[j * C + c];
+        d[o + 1] = rg.transMu[j * C + c];
+      }
+    }
   }
-  return { ...tex, curves, tangentTexel, muTexel, texels };
+  return { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, texels };
 }
 
 /**
  * The per-player time row of a dynamic layout in a crowd (players at distinct times sharing knotTables()):
- * nDirect direct positions from texel 0, rigid clips each GPU curve's rigid rows (3 texels) from rigidTexel,
- * bone clips the bones' rows (3 texels each) from boneTexel, then at timeTexel (segment, 0, 0, 0), the
+ * nDirect direct positions from texel 0, rigid clips (with GPU curves) at rigidTexel (rigid segment, its
+ * local time, 0, 0), bone clips the bones' rows (3 texels each) from boneTexel, then at timeTexel (segment, 0, 0, 0), the
  * spline's cubic weights, and the segment's distinct time pairs, two a texel. {rigidTexel, boneTexel,
  * timeTexel, texels}.
  */
 export function crowdRow(layout) {
   const curves = layout.residual ? gpuCurveCount(layout) : 0;
   const rigidTexel = layout.nDirect;
-  const boneTexel = rigidTexel + (layout.rigid ? curves * 3 : 0);
+  const boneTexel = rigidTexel + (layout.rigid && curves > 0 ? 1 : 0);
   const timeTexel = boneTexel + (layout.nBones ?? 0) * 3;
   const widest = layout.residual ? layout.evaluator.uPhi0.length : 0;
   return { rigidTexel, boneTexel, timeTexel, texels: timeTexel + 2 + Math.ceil(widest / 2) };
@@ -430,7 +455,8 @@ export function timeRow(layout, t, row, d, o) {
   last[0] = seg;
   last[1] = loc[1];
   last[2] = loc[2];
-  ev.segmentState();
+  // rigid clips: the CPU forms the rigid motion of the direct curves only (the shader the others')
+  ev.segmentState(layout.rigid ? directCurves(layout) : null);
   if (layout.bones) writeBones(layout, ev, d, o / 4 + row.boneTexel);
   if (!layout.residual) return true;
   const T = o + row.timeTexel * 4;
@@ -445,20 +471,9 @@ export function timeRow(layout, t, row, d, o) {
     const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg), directCurves(layout));
     writeDirect(layout, ev, y, d, o);
   }
-  if (layout.rigid) {
-    const { rot, trans } = ev;
-    const { gpuCurve } = layout;
-    for (let c = 0; c < layout.nCurves; c++) {
-      const cg = gpuCurve[c];
-      if (cg < 0) continue;
-      const r = o + (row.rigidTexel + cg * 3) * 4;
-      for (let i = 0; i < 3; i++) {
-        d[r + i * 4] = rot[c * 9 + i * 3];
-        d[r + i * 4 + 1] = rot[c * 9 + i * 3 + 1];
-        d[r + i * 4 + 2] = rot[c * 9 + i * 3 + 2];
-        d[r + i * 4 + 3] = trans[c * 3 + i];
-      }
-    }
+  if (layout.rigid && row.boneTexel > row.rigidTexel) {
+    d[o + row.rigidTexel * 4] = ev.rigidLoc[0];
+    d[o + row.rigidTexel * 4 + 1] = ev.rigidLoc[1];
   }
   return true;
 }
