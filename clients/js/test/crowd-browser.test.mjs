@@ -7,11 +7,11 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { findChromium, pageResult } from './pagerun.mjs';
 
-// the paper's time pairs (rigid, looping; +curves: every curve's rigid motion on the GPU, none direct), spline
+// the paper's time pairs (rigid, looping; :curves: every curve's rigid motion on the GPU, none direct), spline
 // items, a bone clip with a residual, a cyclic clip
 const CASES = [
   'fit-rigid-paper-loop',
-  'fit-rigid-paper-loop+curves',
+  'fit-rigid-paper-loop:curves',
   'fit-displacement-chord-smooth-spline',
   'bones-fit-k4-residual',
   'cyclic-trout-travelling-rotate-vertical',
