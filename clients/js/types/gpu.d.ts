@@ -114,7 +114,11 @@ export interface MeshAttributes {
 }
 
 /** The data textures and constants of a clip as plain typed arrays (a Web Worker can make and transfer them). */
-export declare function gpuTables(clip: Clip, options?: { width?: number }): GpuLayout;
+export declare function gpuTables(
+  clip: Clip,
+  /** directMax: the most vertices of a direct curve (default: as many as a curve's table texels; 0: none). */
+  options?: { width?: number; directMax?: number | null },
+): GpuLayout;
 /** gpuTables (or the given tables) with the clip and its CPU evaluator: what timeUniforms() needs. */
 export declare function gpuLayout(
   clip: Clip,
@@ -134,9 +138,12 @@ export interface KnotTables {
   curves: number;
   tangentTexel: number;
   muTexel: number;
+  /** Rigid clips: per rigid knot and GPU curve (rotation vector, centroid), per rigid segment their constants. */
+  rigidKnotTexel: number;
+  rigidMuTexel: number;
   texels: number;
 }
-/** The per-player time row of a crowd: direct positions, rigid rows, bone rows, then segment, cubic weights, time pairs. */
+/** The per-player time row of a crowd: direct positions, rigid segment and time, bone rows, then segment, cubic weights, time pairs. */
 export interface CrowdRow {
   rigidTexel: number;
   boneTexel: number;

@@ -145,14 +145,26 @@ float pdeExpm1(float x) {
   }
   return exp(x) - 1.0;
 }
+// sin to float32 precision (GPUs' own sin can be off by 1e-5): x folded into [-pi/2, pi/2] with a two-part
+// pi, then its Taylor polynomial to x^15 (remainder < 1e-9)
+float pdeSin(float x) {
+  const float PI_HI = 3.1415927;
+  const float PI_LO = -8.742278e-8; // pi - PI_HI
+  x -= 6.2831855 * floor(x / 6.2831855 + 0.5);
+  if (x > 1.5707964) x = (PI_HI - x) + PI_LO;
+  else if (x < -1.5707964) x = (-PI_HI - x) - PI_LO;
+  float x2 = x * x;
+  return x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0
+    + x2 * (-1.0 / 39916800.0 + x2 * (1.0 / 6227020800.0 + x2 * (-1.0 / 1307674368000.0))))))));
+}
 // the rigid tracks' time pair (basis.js rigidTimePair: mu < 0 trig, tiny mu linear, else exponential)
 vec2 pdeRigidPair(float tau, float mu) {
   if (mu < 0.0) {
     float m = min(-mu, 2.984513020910303); // basis.js MU_TRIG_MAX, 0.95 pi
     float u = 1.0 - tau;
     if (m < 1e-2) return vec2(u * (1.0 + m * m * (1.0 - u * u) / 6.0), tau * (1.0 + m * m * (1.0 - tau * tau) / 6.0));
-    float inv = 1.0 / sin(m);
-    return vec2(sin(m * u) * inv, sin(m * tau) * inv);
+    float inv = 1.0 / pdeSin(m);
+    return vec2(pdeSin(m * u) * inv, pdeSin(m * tau) * inv);
   }
   if (mu < 1e-12) return vec2(1.0 - tau, tau);
   float inv = 1.0 / pdeExpm1(-2.0 * mu);
@@ -179,8 +191,8 @@ vec3 pdeRigid(int c, vec3 p) {
     a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0;
     b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0;
   } else {
-    float h = sin(0.5 * th);
-    a = sin(th) / th;
+    float h = pdeSin(0.5 * th);
+    a = pdeSin(th) / th;
     b = 2.0 * h * h / th2;
   }
   vec3 k = cross(r, p);
