@@ -323,7 +323,8 @@ export function frameTexels(layout) {
  * sharing everything else, the CPU evaluator and the segment rows included.
  */
 export function frameView(layout, data = null) {
-  if (layout.kind !== 'cyclic-spine') {
+  // (a crowd's view, without a table, reads no knot rows on the CPU)
+  if (layout.kind !== 'cyclic-spine' && data !== null) {
     // made once on the layout, so that views read them instead of making their own
     if (layout.residual) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
     // a second view (another player's time): make every knot's row once rather than two per table switch
@@ -354,23 +355,30 @@ function gpuCurveCount(layout) {
  * pairs), -1 for spline items (the row's cubic weights); rigid clips then have per rigid knot and GPU curve
  * two texels (rotation vector, centroid) from rigidKnotTexel and per rigid segment and GPU curve (rotation
  * constant, centroid constant) from rigidMuTexel: the shader forms each curve's rigid motion (docs/format.md
- * §3.6). {data, width, height, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, texels} (width:
- * fittedWidth at most maxWidth). A frame's coefficients are then phi0 a + phi1 b
+ * §3.6). The direct vertices (whose per-frame table holds positions) are evaluated like the others in a
+ * crowd: their curves follow the GPU curves, and their records (as the vertex texture's) start at
+ * directTexel. {data, width, height, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel,
+ * directTexel, texels} (width: fittedWidth at most maxWidth). A frame's coefficients are then phi0 a + phi1 b
  * (or the cubic's four terms) in float32 on the GPU, where the per-player table has them in float64.
  */
 export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
-  const { nCurves: C, nSegments: S, gpuCurve } = layout;
-  const curves = layout.residual ? gpuCurveCount(layout) : 0;
+  const { nCurves: C, nSegments: S, nDirect } = layout;
+  // the crowd's curve numbers: the GPU curves', then the direct curves' (their vertices read records here)
+  const crowdCurve = crowdCurves(layout);
+  const curves = layout.residual ? gpuCurveCount(layout) + directCurves(layout).length : 0;
   const spline = layout.residual && layout.tangents !== null;
   const knotTexels = (S + 1) * curves * 3;
   const tangentTexel = knotTexels;
   const muTexel = knotTexels * (spline ? 2 : 1);
-  // rigid clips: per rigid knot and GPU curve its rotation vector and centroid, per rigid segment their constants
+  // rigid clips: per rigid knot and curve its rotation vector and centroid, per rigid segment their constants
   const rg = layout.rigid ? layout.clip.rigid : null;
   const Sr = rg ? rg.segmentT.length - 1 : 0;
   const rigidKnotTexel = muTexel + S * curves;
   const rigidMuTexel = rigidKnotTexel + (rg ? (Sr + 1) * curves * 2 : 0);
-  const texels = Math.max(1, rigidMuTexel + Sr * curves);
+  // the direct vertices' records, as the vertex texture's (vertexTexels each: curve and base, basis rows, bones)
+  const directTexel = rigidMuTexel + Sr * curves;
+  const VT = layout.vertexTexels ?? 4;
+  const texels = Math.max(1, directTexel + (curves > 0 ? nDirect * VT : 0));
   const tex = texture(texels, fittedWidth(texels, maxWidth));
   const d = tex.data;
   if (curves > 0) {
@@ -379,7 +387,7 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
     for (let j = 0; j <= S; j++) {
       orthonormalRow(layout.r, knots, j * C * 12, row);
       for (let c = 0; c < C; c++) {
-        const cg = gpuCurve[c];
+        const cg = crowdCurve[c];
         if (cg < 0) continue;
         const o = (j * curves + cg) * 12;
         for (let k = 0; k < 12; k++) d[o + k] = row[c * 12 + k];
@@ -390,7 +398,7 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
     const items = spline ? layout.evaluator.spline : null;
     for (let s = 0; s < S; s++) {
       for (let c = 0; c < C; c++) {
-        const cg = gpuCurve[c];
+        const cg = crowdCurve[c];
         if (cg < 0) continue;
         const o = (muTexel + s * curves + cg) * 4;
         for (let w = 0; w < 3; w++) {
@@ -400,7 +408,7 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
       }
     }
     for (let c = 0; rg && c < C; c++) {
-      const cg = gpuCurve[c];
+      const cg = crowdCurve[c];
       if (cg < 0) continue;
       for (let j = 0; j <= Sr; j++) {
         const o = (rigidKnotTexel + (j * curves + cg) * 2) * 4;
@@ -415,27 +423,46 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
         d[o + 1] = rg.transMu[j * C + c];
       }
     }
+    const { q, base, curve, vertex } = layout.direct;
+    const bones = layout.bones ? layout.clip.bones : null;
+    for (let g = 0; g < nDirect; g++) {
+      const o = (directTexel + g * VT) * 4;
+      d[o] = crowdCurve[curve[g]];
+      for (let w = 0; w < 3; w++) d[o + 1 + w] = base[g * 3 + w];
+      for (let k = 0; k < 12; k++) d[o + 4 + k] = q[g * 12 + k];
+      if (bones) boneTexels(bones, vertex[g], d, o + (VT - 2) * 4);
+    }
   }
-  return { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, texels };
+  return { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel, texels };
+}
+
+/** Per clip curve its number in a crowd's knot table: GPU curves keep theirs, direct curves follow, others -1. */
+function crowdCurves(layout) {
+  const out = Int32Array.from(layout.gpuCurve);
+  const first = gpuCurveCount(layout);
+  directCurves(layout).forEach((c, k) => {
+    out[c] = first + k;
+  });
+  return out;
 }
 
 /**
  * The per-player time row of a dynamic layout in a crowd (players at distinct times sharing knotTables()):
- * nDirect direct positions from texel 0, rigid clips (with GPU curves) at rigidTexel (rigid segment, its
- * local time, 0, 0), bone clips the bones' rows (3 texels each) from boneTexel, then at timeTexel (segment, 0, 0, 0), the
+ * rigid clips at rigidTexel (rigid segment, its local time, 0, 0), bone clips the bones' rows (3 texels each) from boneTexel, then at timeTexel (segment, 0, 0, 0), the
  * spline's cubic weights, and the segment's distinct time pairs, two a texel. {rigidTexel, boneTexel,
  * timeTexel, texels}.
  */
 export function crowdRow(layout) {
-  const curves = layout.residual ? gpuCurveCount(layout) : 0;
-  const rigidTexel = layout.nDirect;
-  const boneTexel = rigidTexel + (layout.rigid && curves > 0 ? 1 : 0);
+  const rigidTexel = 0;
+  const boneTexel = rigidTexel + (layout.rigid && layout.residual ? 1 : 0);
   const timeTexel = boneTexel + (layout.nBones ?? 0) * 3;
   const widest = layout.residual ? layout.evaluator.uPhi0.length : 0;
   return { rigidTexel, boneTexel, timeTexel, texels: timeTexel + 2 + Math.ceil(widest / 2) };
 }
 
-/** The distinct direct curves of a layout (cached): the curves whose coefficients a crowd's row needs. */
+const NO_CURVES = new Int32Array(0);
+
+/** The distinct direct curves of a layout (cached), in GPU order: a crowd numbers them after the GPU curves. */
 function directCurves(layout) {
   if (!layout.directCurves) layout.directCurves = Int32Array.from(new Set(layout.direct.curve));
   return layout.directCurves;
@@ -455,8 +482,8 @@ export function timeRow(layout, t, row, d, o) {
   last[0] = seg;
   last[1] = loc[1];
   last[2] = loc[2];
-  // rigid clips: the CPU forms the rigid motion of the direct curves only (the shader the others')
-  ev.segmentState(layout.rigid ? directCurves(layout) : null);
+  // rigid clips: the shader forms every curve's rigid motion (the CPU only locates the rigid segment)
+  ev.segmentState(layout.rigid ? NO_CURVES : null);
   if (layout.bones) writeBones(layout, ev, d, o / 4 + row.boneTexel);
   if (!layout.residual) return true;
   const T = o + row.timeTexel * 4;
@@ -467,11 +494,7 @@ export function timeRow(layout, t, row, d, o) {
     d[T + 8 + k * 2] = ev.uPhi0[k];
     d[T + 9 + k * 2] = ev.uPhi1[k];
   }
-  if (layout.nDirect > 0) {
-    const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg), directCurves(layout));
-    writeDirect(layout, ev, y, d, o);
-  }
-  if (layout.rigid && row.boneTexel > row.rigidTexel) {
+  if (layout.rigid) {
     d[o + row.rigidTexel * 4] = ev.rigidLoc[0];
     d[o + row.rigidTexel * 4 + 1] = ev.rigidLoc[1];
   }
@@ -638,10 +661,8 @@ function allKnotRows(layout) {
  * Every item's coefficients of the frame in its orthonormal basis into rows.y (float64): phi0, phi1 on the
  * segment's knots; spline items w_0..w_3 on T_s, P_s, P_s+1, T_s+1.
  */
-function frameCoefficients(layout, ev, seg, rows, curves = null) {
+function frameCoefficients(layout, ev, seg, rows) {
   const n = layout.nCurves * 3;
-  // only the items of these curves (a crowd's direct vertices), else every item
-  const count = curves === null ? n : curves.length * 3;
   const { uPhi0, uPhi1, muIndex } = ev;
   const spline = layout.spline ? ev.spline : null;
   const cw = ev.cubicWeights;
@@ -651,9 +672,7 @@ function frameCoefficients(layout, ev, seg, rows, curves = null) {
   const w1 = spline !== null ? cw[2] : 0;
   const wh = spline !== null ? cw[3] : 0;
   const { a, b, tl, th, y } = rows;
-  const mu = seg * n;
-  for (let ii = 0; ii < count; ii++) {
-    const i = curves === null ? ii : curves[(ii / 3) | 0] * 3 + (ii % 3);
+  for (let i = 0, mu = seg * n; i < n; i++) {
     const j = i * 4;
     if (spline !== null && spline[i] === 1) {
       y[j] = wl * tl[j] + w0 * a[j] + w1 * b[j] + wh * th[j];

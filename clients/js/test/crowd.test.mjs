@@ -79,9 +79,11 @@ function emulateCrowd(player, v, slot) {
   const fr = (i) => fetch(atlas.data, atlas.width, i + base);
   const knot = (i) => fetch(table.data, table.width, i);
   const g = L.gpuIndex[v];
-  if (g < L.nDirect) return fr(g).slice(0, 3);
-  const r = (g - L.nDirect) * 4;
-  const head = fetch(vertex.data, vertex.width, r);
+  // direct vertices: their records in the knot table
+  const direct = g < L.nDirect;
+  const record = (i) => (direct ? knot(i) : fetch(vertex.data, vertex.width, i));
+  const r = direct ? table.directTexel + g * 4 : (g - L.nDirect) * 4;
+  const head = record(r);
   const cg = Math.round(head[0]);
   const seg = Math.round(fr(row.timeTexel)[0]);
   const cw = fr(row.timeTexel + 1);
@@ -98,7 +100,7 @@ function emulateCrowd(player, v, slot) {
     const pair = fr(row.timeTexel + 2 + (j >> 1));
     return mad(j % 2 === 0 ? pair.slice(0, 2) : pair.slice(2, 4), [knot(a), knot(b)]);
   };
-  const p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(coefficients(w), fetch(vertex.data, vertex.width, r + 1 + w))));
+  const p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(coefficients(w), record(r + 1 + w))));
   return L.rigid ? rigidMotion(table, fr(row.rigidTexel), knot, cg, p) : p;
 }
 
@@ -355,8 +357,13 @@ test('players at distinct times: the clip tables once, each extra player a time 
   assert.equal(new Set(players.map((p) => p.programKey)).size, 1, 'one program for every player');
   for (const p of players) assert.equal(p.frames.bytes, row.texels * 16);
   assert.ok(row.texels * 16 < alone.table, `a time row ${row.texels * 16} bytes, a table ${alone.table}`);
-  // the knot table is the clip's (its knots, once): (S + 1) knots and S segments per GPU curve
-  assert.equal(table.texels, (clip.nSegments + 1) * table.curves * 3 + clip.nSegments * table.curves);
+  // the knot table is the clip's (its knots, once): (S + 1) knots and S segments per curve (the GPU curves
+  // and the direct ones), then the direct vertices' records
+  const L = first.layout;
+  assert.equal(table.curves, new Set(L.direct.curve).size + L.gpuCurve.filter((x) => x >= 0).length);
+  const S = clip.nSegments;
+  assert.equal(table.texels, (S + 1) * table.curves * 3 + S * table.curves + L.nDirect * 4);
+  assert.equal(row.texels, 2 + Math.ceil(L.evaluator.uPhi0.length / 2), 'a row: segment, weights, time pairs');
   assert.equal(res.sharedBytes, alone.bytes - alone.table - first.attributeBytes + table.data.byteLength);
   // the atlas grows by doubling: at most twice the rows in use, plus a row of padding
   assert.ok(res.atlasBytes <= 2 * 40 * row.texels * 16 + first.layout.width * 16);

@@ -141,9 +141,11 @@ export interface KnotTables {
   /** Rigid clips: per rigid knot and GPU curve (rotation vector, centroid), per rigid segment their constants. */
   rigidKnotTexel: number;
   rigidMuTexel: number;
+  /** The direct vertices' records (as the vertex texture's): a crowd evaluates them like the others. */
+  directTexel: number;
   texels: number;
 }
-/** The per-player time row of a crowd: direct positions, rigid segment and time, bone rows, then segment, cubic weights, time pairs. */
+/** The per-player time row of a crowd: rigid segment and time, bone rows, then segment, cubic weights, time pairs. */
 export interface CrowdRow {
   rigidTexel: number;
   boneTexel: number;

@@ -58,6 +58,7 @@ uniform int pdeTimeTexel;
 uniform int pdeRigidTexel;
 uniform int pdeRigidKnots;
 uniform int pdeRigidMu;
+uniform int pdeDirectTexel;
 #endif
 #ifdef PDEANIM_PASS
 uniform highp sampler2D pdePosTex;
@@ -102,10 +103,22 @@ vec4 pdeFrame(int i) {
 // pdeSkinOnly on (curves without residual) are their skinned rest position alone
 const DYNAMIC_EVAL = `
 #ifdef PDEANIM_DYNAMIC
+#ifdef PDEANIM_KNOTS
+vec4 pdeKnot(int i) {
+  return texelFetch(pdeKnotTex, ivec2(i & PDEANIM_KNOT_MASK, i >> PDEANIM_KNOT_SHIFT), 0);
+}
+#endif
+// texel i of a vertex record: the vertex texture's, or in a crowd a direct vertex's in the knot table
+vec4 pdeRecord(bool direct, int i) {
+#ifdef PDEANIM_KNOTS
+  if (direct) return pdeKnot(i);
+#endif
+  return pdeFetch(pdeVertexTex, i);
+}
 #ifdef PDEANIM_BONES
-vec3 pdeSkin(int r, vec3 rest) {
-  vec4 index = pdeFetch(pdeVertexTex, r);
-  vec4 weight = pdeFetch(pdeVertexTex, r + 1);
+vec3 pdeSkin(int r, vec3 rest, bool direct) {
+  vec4 index = pdeRecord(direct, r);
+  vec4 weight = pdeRecord(direct, r + 1);
   vec4 x = vec4(rest, 1.0);
   vec3 acc = vec3(0.0);
   for (int k = 0; k < 4; k++) {
@@ -118,9 +131,6 @@ vec3 pdeSkin(int r, vec3 rest) {
 }
 #endif
 #ifdef PDEANIM_KNOTS
-vec4 pdeKnot(int i) {
-  return texelFetch(pdeKnotTex, ivec2(i & PDEANIM_KNOT_MASK, i >> PDEANIM_KNOT_SHIFT), 0);
-}
 // a crowd (gpu.js knotTables, crowdRow): coordinate w's coefficients of GPU curve c at this player's time,
 // its time pair (or the spline's cubic weights cw) applied to the shared knots of segment seg
 vec4 pdeCoefficients(int c, int w, int seg, vec4 mu, vec4 cw) {
@@ -201,25 +211,35 @@ vec3 pdeRigid(int c, vec3 p) {
 #endif
 #endif
 vec3 pdeEval(int v) {
+#ifdef PDEANIM_KNOTS
+  // a crowd: the direct vertices too (their records and curves in the knot table)
+  bool direct = v < pdeDirect;
+#else
   if (v < pdeDirect) return pdeFrame(v).xyz;
+  bool direct = false;
+#endif
 #ifdef PDEANIM_BONES
   if (v >= pdeSkinOnly) {
     int s = pdeSkinTexel + (v - pdeSkinOnly) * 3;
-    return pdeSkin(s + 1, pdeFetch(pdeVertexTex, s).yzw);
+    return pdeSkin(s + 1, pdeFetch(pdeVertexTex, s).yzw, false);
   }
 #endif
+#ifdef PDEANIM_KNOTS
+  int r = direct ? pdeDirectTexel + v * PDEANIM_VERTEX_TEXELS : (v - pdeDirect) * PDEANIM_VERTEX_TEXELS;
+#else
   int r = (v - pdeDirect) * PDEANIM_VERTEX_TEXELS;
-  vec4 head = pdeFetch(pdeVertexTex, r);
+#endif
+  vec4 head = pdeRecord(direct, r);
   vec3 p = head.yzw;
 #ifdef PDEANIM_BONES
-  p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p);
+  p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p, direct);
 #endif
 #ifdef PDEANIM_KNOTS
   int cg = int(head.x + 0.5);
   int seg = int(pdeFrame(pdeTimeTexel).x + 0.5);
   vec4 cw = pdeFrame(pdeTimeTexel + 1);
   vec4 mu = pdeKnot(pdeMuTexel + seg * pdeKnotCurves + cg);
-  for (int w = 0; w < 3; w++) p[w] += dot(pdeCoefficients(cg, w, seg, mu, cw), pdeFetch(pdeVertexTex, r + 1 + w));
+  for (int w = 0; w < 3; w++) p[w] += dot(pdeCoefficients(cg, w, seg, mu, cw), pdeRecord(direct, r + 1 + w));
 #ifdef PDEANIM_RIGID
   p = pdeRigid(cg, p);
 #endif

@@ -79,6 +79,7 @@ export class ClipResources {
       pdeRigidTexel: { value: 0 },
       pdeRigidKnots: { value: 0 },
       pdeRigidMu: { value: 0 },
+      pdeDirectTexel: { value: 0 },
     };
     this.users = 0;
     this._key = null;
@@ -124,6 +125,7 @@ export class ClipResources {
     u.pdeRigidTexel.value = row.rigidTexel;
     u.pdeRigidKnots.value = table.rigidKnotTexel;
     u.pdeRigidMu.value = table.rigidMuTexel;
+    u.pdeDirectTexel.value = table.directTexel;
     this._growAtlas(this.tables.size);
     for (const t of [...this.tables]) t._toCrowd();
     return true;
