@@ -105,7 +105,8 @@ for (const [v, what] of [['meshes', 'distinct times'], ['meshesSame', 'one time'
   );
   console.log(
     `    each extra player adds ${extra.toFixed(0)} bytes = ${pct(extra, M.firstBytes)}% of the first's ` +
-      `(goal <= ${GOAL_BYTES}%: ${verdict((100 * extra) / M.firstBytes <= GOAL_BYTES)})`,
+      `(goal <= ${GOAL_BYTES}%: ${verdict((100 * extra) / M.firstBytes <= GOAL_BYTES)}); the 100th alone adds ` +
+      `its row, ${M.rowBytes} bytes (${pct(M.rowBytes, M.firstBytes)}%)`,
   );
   console.log(`    per frame: ${m(`${v}.setTimeMs`)} / ${m(`${v}.renderMs`)} / ${m(`${v}.frameMs`)} ms; ${mainThread(v)}`);
 }
