@@ -362,7 +362,7 @@ function gpuCurveCount(layout) {
  * (or the cubic's four terms) in float32 on the GPU, where the per-player table has them in float64.
  */
 export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
-  const { nCurves: C, nSegments: S, nDirect } = layout;
+  const { nSegments: S, nDirect } = layout;
   // the crowd's curve numbers: the GPU curves', then the direct curves' (their vertices read records here)
   const crowdCurve = crowdCurves(layout);
   const curves = layout.residual ? gpuCurveCount(layout) + directCurves(layout).length : 0;
@@ -380,60 +380,69 @@ export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
   const VT = layout.vertexTexels ?? 4;
   const texels = Math.max(1, directTexel + (curves > 0 ? nDirect * VT : 0));
   const tex = texture(texels, fittedWidth(texels, maxWidth));
-  const d = tex.data;
-  if (curves > 0) {
-    const { knots } = layout.clip;
-    const row = new Float64Array(C * 12);
-    for (let j = 0; j <= S; j++) {
-      orthonormalRow(layout.r, knots, j * C * 12, row);
-      for (let c = 0; c < C; c++) {
-        const cg = crowdCurve[c];
-        if (cg < 0) continue;
-        const o = (j * curves + cg) * 12;
-        for (let k = 0; k < 12; k++) d[o + k] = row[c * 12 + k];
-        if (spline) d.set(layout.tangents.subarray((j * C + c) * 12, (j * C + c + 1) * 12), tangentTexel * 4 + o);
-      }
-    }
-    const { muIndex } = layout.evaluator;
-    const items = spline ? layout.evaluator.spline : null;
-    for (let s = 0; s < S; s++) {
-      for (let c = 0; c < C; c++) {
-        const cg = crowdCurve[c];
-        if (cg < 0) continue;
-        const o = (muTexel + s * curves + cg) * 4;
-        for (let w = 0; w < 3; w++) {
-          const i = c * 3 + w;
-          d[o + w] = items !== null && items[i] === 1 ? -1 : muIndex[s * C * 3 + i];
-        }
-      }
-    }
-    for (let c = 0; rg && c < C; c++) {
+  const table = { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel, texels };
+  if (curves > 0) writeKnotTable(layout, table, crowdCurve);
+  return table;
+}
+
+/** The values of knotTables() into table.data (crowdCurve: each clip curve's number in the table). */
+function writeKnotTable(layout, table, crowdCurve) {
+  const { nCurves: C, nSegments: S, nDirect } = layout;
+  const { data: d, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel } = table;
+  const spline = layout.tangents !== null;
+  const rg = layout.rigid ? layout.clip.rigid : null;
+  const Sr = rg ? rg.segmentT.length - 1 : 0;
+  const VT = layout.vertexTexels ?? 4;
+  const { knots } = layout.clip;
+  const row = new Float64Array(C * 12);
+  for (let j = 0; j <= S; j++) {
+    orthonormalRow(layout.r, knots, j * C * 12, row);
+    for (let c = 0; c < C; c++) {
       const cg = crowdCurve[c];
       if (cg < 0) continue;
-      for (let j = 0; j <= Sr; j++) {
-        const o = (rigidKnotTexel + (j * curves + cg) * 2) * 4;
-        for (let w = 0; w < 3; w++) {
-          d[o + w] = rg.rotKnots[(j * C + c) * 3 + w];
-          d[o + 4 + w] = rg.transKnots[(j * C + c) * 3 + w];
-        }
-      }
-      for (let j = 0; j < Sr; j++) {
-        const o = (rigidMuTexel + j * curves + cg) * 4;
-        d[o] = rg.rotMu[j * C + c];
-        d[o + 1] = rg.transMu[j * C + c];
-      }
-    }
-    const { q, base, curve, vertex } = layout.direct;
-    const bones = layout.bones ? layout.clip.bones : null;
-    for (let g = 0; g < nDirect; g++) {
-      const o = (directTexel + g * VT) * 4;
-      d[o] = crowdCurve[curve[g]];
-      for (let w = 0; w < 3; w++) d[o + 1 + w] = base[g * 3 + w];
-      for (let k = 0; k < 12; k++) d[o + 4 + k] = q[g * 12 + k];
-      if (bones) boneTexels(bones, vertex[g], d, o + (VT - 2) * 4);
+      const o = (j * curves + cg) * 12;
+      for (let k = 0; k < 12; k++) d[o + k] = row[c * 12 + k];
+      if (spline) d.set(layout.tangents.subarray((j * C + c) * 12, (j * C + c + 1) * 12), tangentTexel * 4 + o);
     }
   }
-  return { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel, texels };
+  const { muIndex } = layout.evaluator;
+  const items = spline ? layout.evaluator.spline : null;
+  for (let s = 0; s < S; s++) {
+    for (let c = 0; c < C; c++) {
+      const cg = crowdCurve[c];
+      if (cg < 0) continue;
+      const o = (muTexel + s * curves + cg) * 4;
+      for (let w = 0; w < 3; w++) {
+        const i = c * 3 + w;
+        d[o + w] = items !== null && items[i] === 1 ? -1 : muIndex[s * C * 3 + i];
+      }
+    }
+  }
+  for (let c = 0; rg && c < C; c++) {
+    const cg = crowdCurve[c];
+    if (cg < 0) continue;
+    for (let j = 0; j <= Sr; j++) {
+      const o = (rigidKnotTexel + (j * curves + cg) * 2) * 4;
+      for (let w = 0; w < 3; w++) {
+        d[o + w] = rg.rotKnots[(j * C + c) * 3 + w];
+        d[o + 4 + w] = rg.transKnots[(j * C + c) * 3 + w];
+      }
+    }
+    for (let j = 0; j < Sr; j++) {
+      const o = (rigidMuTexel + j * curves + cg) * 4;
+      d[o] = rg.rotMu[j * C + c];
+      d[o + 1] = rg.transMu[j * C + c];
+    }
+  }
+  const { q, base, curve, vertex } = layout.direct;
+  const bones = layout.bones ? layout.clip.bones : null;
+  for (let g = 0; g < nDirect; g++) {
+    const o = (directTexel + g * VT) * 4;
+    d[o] = crowdCurve[curve[g]];
+    for (let w = 0; w < 3; w++) d[o + 1 + w] = base[g * 3 + w];
+    for (let k = 0; k < 12; k++) d[o + 4 + k] = q[g * 12 + k];
+    if (bones) boneTexels(bones, vertex[g], d, o + (VT - 2) * 4);
+  }
 }
 
 /** Per clip curve its number in a crowd's knot table: GPU curves keep theirs, direct curves follow, others -1. */
