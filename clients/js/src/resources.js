@@ -334,7 +334,7 @@ export class FrameTables {
 
   /** The texture the shaders read: this table, or in the crowd form the clip's atlas (null: cyclic, one player). */
   get texture() {
-    return this.crowd ? this.resources.crowd.atlas.texture : this._texture;
+    return this.crowd ? (this.resources.crowd?.atlas.texture ?? null) : this._texture;
   }
 
   /** Run fn() when the form changes (returns a function that stops it). */
@@ -367,7 +367,8 @@ export class FrameTables {
     const L = this.resources.layout;
     const looping = L.clip.looping || this.cyclic;
     let changed = false;
-    const atlas = this.crowd ? this.resources.crowd.atlas : null;
+    const atlas = this.crowd ? (this.resources.crowd?.atlas ?? null) : null;
+    if (this.crowd && atlas === null) return; // the clip's resources were freed (its players detached)
     for (let k = 0; k < this.offsets.length; k++) {
       let tk = t + this.offsets[k];
       if (this.slots && !looping) tk = Math.min(Math.max(tk, 0), 1);

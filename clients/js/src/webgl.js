@@ -170,7 +170,7 @@ function patchMaterial(material, player) {
     if (previous && previous !== inherited) previous.call(m, shader, renderer);
     Object.assign(shader.uniforms, player.uniforms);
     const { normals, pass, slots } = player;
-    const knotWidth = player.crowd ? player.resources.crowd.table.width : 0;
+    const knotWidth = player.crowd ? (player.resources.crowd?.table.width ?? 0) : 0;
     const header = glslHeader(player.layout, { normals, pass, cpu: !player.gpu, slots, knotWidth });
     shader.vertexShader = patchVertexShader(shader.vertexShader, header);
   };

@@ -499,3 +499,14 @@ test('rigid clips with GPU curves: the crowd form moves each curve in the shader
     b.detach();
   }
 });
+
+test('setTime after detach does not throw in the crowd form (the clip resources are freed)', () => {
+  const clip = loadCase(byName('fit-displacement-chord'));
+  const a = attachClip(meshOf(clip), clip);
+  const b = a.clone();
+  a.detach();
+  b.detach();
+  assert.equal(b.resources.crowd, null);
+  assert.doesNotThrow(() => b.setTime(0.4));
+  assert.equal(b.textures.frame, undefined);
+});

@@ -294,7 +294,7 @@ export class ClipPlayer {
     const mode = this._onGPU ? (this.pass ? 'pass' : 'gpu') : 'cpu';
     const bones = L.bones ? ':bones' : '';
     const slots = this.slots ? ':slots' : '';
-    const crowd = this.frames.crowd ? `:crowd${this.resources.crowd.table.width}` : '';
+    const crowd = this.frames.crowd ? `:crowd${this.resources.crowd?.table.width ?? 0}` : '';
     return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}${slots}${crowd}:${this.normals}:${L.width}:${mode}`;
   }
 
