@@ -790,9 +790,10 @@ export class DynamicEvaluator {
    * The state of this.loc that does not depend on the item: the distinct time pairs of the segment
    * (uPhi0/uPhi1, indexed by muIndex[s * C * 3 + item]), for clips with spline items the spline's four
    * weights (cubicWeights: splineWeights, computed in float64 and rounded to float32 as the reference
-   * evaluator does) and, for rigid clips, rot and trans.
+   * evaluator does) and, for rigid clips, rot and trans (of the curves rigidCurves lists when given: a GPU
+   * crowd evaluates the others' rigid motion in the shader; this.rigidLoc has the rigid segment and time).
    */
-  segmentState() {
+  segmentState(rigidCurves = null) {
     const s = this.loc[0];
     const tau = this.loc[1];
     const { pair, muUnique, uPhi0, uPhi1 } = this;
@@ -805,7 +806,7 @@ export class DynamicEvaluator {
       const cw = splineWeights(this.clip.segmentT, s, tau, this.cubicWeights);
       for (let i = 0; i < 4; i++) cw[i] = Math.fround(cw[i]);
     }
-    if (this.clip.rigid) this._rigidAt(this.loc[2]);
+    if (this.clip.rigid) this._rigidAt(this.loc[2], rigidCurves);
     if (this.bones !== null) this.bones.at(this.loc[2]);
   }
 
@@ -882,8 +883,8 @@ export class DynamicEvaluator {
     return out;
   }
 
-  /** Per-curve rotation (C, 3, 3) and centroid (C, 3) of the rigid tracks at wrapped time tw. */
-  _rigidAt(tw) {
+  /** Per-curve rotation (C, 3, 3) and centroid (C, 3) of the rigid tracks at wrapped time tw (curves: only those). */
+  _rigidAt(tw, curves = null) {
     const rg = this.clip.rigid;
     const C = this.clip.nCurves;
     const rl = locate(rg.segmentT, tw, false, this.rigidLoc);
@@ -891,7 +892,9 @@ export class DynamicEvaluator {
     const tau = rl[1];
     const pr = this.pair;
     const pt = this.pair2;
-    for (let c = 0; c < C; c++) {
+    const n = curves === null ? C : curves.length;
+    for (let i = 0; i < n; i++) {
+      const c = curves === null ? i : curves[i];
       rigidTimePair(tau, rg.rotMu[s * C + c], pr);
       rigidTimePair(tau, rg.transMu[s * C + c], pt);
       const k0 = (s * C + c) * 3;

@@ -148,15 +148,14 @@ export class ClipPlayer {
     this.resources = options.resources ? options.resources.retain() : ClipResources.acquire(clip, options);
     try {
       if (offsets && this.resources.gpuReason) throw new Error(`timeOffsets play on the GPU only: ${this.resources.gpuReason}`);
-      this.frames = (options.frames ?? new FrameTables(this.resources, { offsets: offsets?.offsets ?? null })).retain();
+      const crowd = backend.crowd === true; // whether the backend's shaders read the crowd form
+      this.frames = (options.frames ?? new FrameTables(this.resources, { offsets: offsets?.offsets ?? null, crowd })).retain();
     } catch (e) {
       this.resources.release();
       throw e;
     }
     const { evaluator, gpuReason } = this.resources;
-    // the layout with this player's per-frame table (slot 0's for a crowd)
-    Object.assign(this, { layout: this.frames.views[0] ?? this.resources.layout, evaluator });
-    this.textures = { vertex: this.resources.textures.vertex, frame: this.frames.texture ?? undefined };
+    this.evaluator = evaluator;
     /** Why the GPU path is unavailable (null when it is available). */
     this.gpuUnavailableReason = gpuReason;
     this.slots = offsets !== null;
@@ -165,7 +164,7 @@ export class ClipPlayer {
     this._originalGeometry = mesh.geometry;
     this._use = { resources: this.resources, vertexMap: this.vertexMap, placement: this.clipToLocal.elements, slots: offsets?.slot ?? null };
     this.attributes = this._frameAttributes(offsets);
-    this.pass = !this.slots && backend.usePass(options, normals);
+    this._pass = !this.slots && backend.usePass(options, normals);
     this.uniforms = {
       ...this.resources.uniforms,
       ...this.frames.uniforms,
@@ -182,7 +181,35 @@ export class ClipPlayer {
     this._originalCulled = mesh.frustumCulled;
     mesh.frustumCulled = frustumCulled;
     this._installed = backend.install(this, { shadows });
+    // the clip's crowd form (another player at another time): the materials recompile
+    this._unlisten = this.frames.onChange(() => this._installed.refresh());
     this.useGPU(this._onGPU);
+  }
+
+  /**
+   * The data textures the shaders read: the clip's vertex records (shared) and the per-frame table (this
+   * player's, or in the clip's crowd form the shared atlas of time rows).
+   */
+  get textures() {
+    return { vertex: this.resources.textures.vertex, frame: this.frames.texture ?? undefined };
+  }
+
+  /**
+   * The clip's GPU layout as this player shows it (a view whose per-frame table is this player's, or slot 0's
+   * of an instanced crowd; in the clip's crowd form a view with its own record of the time written).
+   */
+  get layout() {
+    return this.frames.views[0] ?? this.resources.layout;
+  }
+
+  /** Whether the evaluation pass runs (not in the clip's crowd form: the vertex shader evaluates then). */
+  get pass() {
+    return this._pass && !this.frames.crowd;
+  }
+
+  /** Whether the clip is in its crowd form (players at distinct times: shared knot table, a time row each). */
+  get crowd() {
+    return this.frames.crowd;
   }
 
   /**
@@ -267,7 +294,8 @@ export class ClipPlayer {
     const mode = this._onGPU ? (this.pass ? 'pass' : 'gpu') : 'cpu';
     const bones = L.bones ? ':bones' : '';
     const slots = this.slots ? ':slots' : '';
-    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}${slots}:${this.normals}:${L.width}:${mode}`;
+    const crowd = this.frames.crowd ? `:crowd${this.resources.crowd?.table.width ?? 0}` : '';
+    return `pdeanim:${L.kind}:${L.rigid}:${L.spline}${bones}${slots}${crowd}:${this.normals}:${L.width}:${mode}`;
   }
 
   /**
@@ -389,6 +417,7 @@ export class ClipPlayer {
     this._attached = false;
     this.uniforms.pdeEnabled.value = false;
     this._installed.uninstall();
+    this._unlisten();
     this.mesh.frustumCulled = this._originalCulled;
     const geometry = this.mesh.geometry;
     const use = GEOMETRY_USERS.get(geometry); // none when the caller replaced the geometry meanwhile

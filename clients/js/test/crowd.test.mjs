@@ -9,8 +9,11 @@ import assert from 'node:assert/strict';
 import { join } from 'node:path';
 import * as THREE from 'three';
 import { createEvaluator, decodeClipFile } from '../src/index.js';
-import { gpuLayout, timeUniforms } from '../src/gpu.js';
-import { ClipResources, attachClip, attachClipToScene } from '../src/three.js';
+import { gpuLayout, gpuTables, timeUniforms } from '../src/gpu.js';
+import { rigidTimePair } from '../src/basis.js';
+import { rodrigues } from '../src/dynamic.js';
+import { ClipPlayer, ClipResources, attachClip, attachClipToScene } from '../src/three.js';
+import { webglBackend } from '../src/webgl.js';
 import { FIXTURES, manifest, readBytes } from './helpers.mjs';
 
 const man = manifest();
@@ -44,9 +47,11 @@ function dot4(a, b) {
 
 /**
  * The shader's pdeEval(v) in float32 for a dynamic clip without bones, reading the player's textures as the
- * GPU does: the shared vertex texture, and the per-frame texture from texel base (slot * pdeSlotTexels).
+ * GPU does: the shared vertex texture, and the per-frame texture from texel base (slot * pdeSlotTexels); in
+ * the clip's crowd form (players at distinct times) the shared knot table and the player's time row (slot).
  */
 function emulate(player, v, base = 0) {
+  if (player.crowd) return emulateCrowd(player, v, base / player.uniforms.pdeSlotTexels.value);
   const L = player.layout;
   const vertex = player.textures.vertex.image;
   const frame = player.textures.frame.image;
@@ -64,6 +69,56 @@ function emulate(player, v, base = 0) {
   return p;
 }
 
+/** pdeEval(v) of the crowd form (glsl.js PDEANIM_KNOTS) in float32: time row of slot `slot`. */
+function emulateCrowd(player, v, slot) {
+  const L = player.layout;
+  const { table, row } = player.resources.crowd;
+  const vertex = player.textures.vertex.image;
+  const atlas = player.textures.frame.image;
+  const base = player.uniforms.pdeFrameOffset.value + slot * row.texels;
+  const fr = (i) => fetch(atlas.data, atlas.width, i + base);
+  const knot = (i) => fetch(table.data, table.width, i);
+  const g = L.gpuIndex[v];
+  // direct vertices: their records in the knot table
+  const direct = g < L.nDirect;
+  const record = (i) => (direct ? knot(i) : fetch(vertex.data, vertex.width, i));
+  const r = direct ? table.directTexel + g * 4 : (g - L.nDirect) * 4;
+  const head = record(r);
+  const cg = Math.round(head[0]);
+  const seg = Math.round(fr(row.timeTexel)[0]);
+  const cw = fr(row.timeTexel + 1);
+  const mu = knot(table.muTexel + seg * table.curves + cg);
+  const mad = (ws, rows) => [0, 1, 2, 3].map((k) => rows.reduce((acc, x, i) => f(acc + f(ws[i] * x[k])), 0));
+  const coefficients = (w) => {
+    const a = (seg * table.curves + cg) * 3 + w;
+    const b = a + table.curves * 3;
+    if (mu[w] < -0.5) {
+      const rows = [knot(table.tangentTexel + a), knot(a), knot(b), knot(table.tangentTexel + b)];
+      return mad(cw, rows);
+    }
+    const j = Math.round(mu[w]);
+    const pair = fr(row.timeTexel + 2 + (j >> 1));
+    return mad(j % 2 === 0 ? pair.slice(0, 2) : pair.slice(2, 4), [knot(a), knot(b)]);
+  };
+  const p = [0, 1, 2].map((w) => f(head[1 + w] + dot4(coefficients(w), record(r + 1 + w))));
+  return L.rigid ? rigidMotion(table, fr(row.rigidTexel), knot, cg, p) : p;
+}
+
+/** glsl.js pdeRigid (float64 here): p moved by GPU curve c's rigid motion at the row's rigid segment and time. */
+function rigidMotion(table, at, knot, c, p) {
+  const s = Math.round(at[0]);
+  const tau = at[1];
+  const mu = knot(table.rigidMuTexel + s * table.curves + c);
+  const pr = rigidTimePair(tau, mu[0], [0, 0]);
+  const pt = rigidTimePair(tau, mu[1], [0, 0]);
+  const k0 = table.rigidKnotTexel + (s * table.curves + c) * 2;
+  const k1 = k0 + table.curves * 2;
+  const r = [0, 1, 2].map((w) => pr[0] * knot(k0)[w] + pr[1] * knot(k1)[w]);
+  const t = [0, 1, 2].map((w) => pt[0] * knot(k0 + 1)[w] + pt[1] * knot(k1 + 1)[w]);
+  const R = rodrigues(r[0], r[1], r[2], new Float64Array(9));
+  return [0, 1, 2].map((i) => R[i * 3] * p[0] + R[i * 3 + 1] * p[1] + R[i * 3 + 2] * p[2] + t[i]);
+}
+
 /** The largest deviation of the emulated shader (slot base) from the CPU evaluator at t. */
 function deviation(player, clip, t, base = 0) {
   const cpu = createEvaluator(clip).evaluate(t);
@@ -75,16 +130,23 @@ function deviation(player, clip, t, base = 0) {
   return worst;
 }
 
-test('players of one clip share its data texture; each has its own per-frame table and time', () => {
+test('players of one clip share its data texture; each has its own time row and time', () => {
   const c = byName('fit-rigid-chord-smooth-spline');
   const clip = loadCase(c);
   const a = attachClip(meshOf(clip), clip);
+  assert.equal(a.crowd, false, 'one player alone: its own per-frame table');
+  const alone = a.frames.bytes;
   const b = attachClip(meshOf(clip), clip);
   assert.equal(a.resources, b.resources);
+  assert.ok(a.crowd && b.crowd, "a second player at another time turns the clip into its crowd form");
   assert.equal(a.textures.vertex, b.textures.vertex);
-  assert.notEqual(a.textures.frame, b.textures.frame);
-  assert.notEqual(a.uniforms.pdeFrameTex, b.uniforms.pdeFrameTex);
+  // one atlas of time rows for both; each its own row (and uniforms)
+  assert.equal(a.textures.frame, b.textures.frame);
+  assert.notEqual(a.uniforms.pdeFrameOffset, b.uniforms.pdeFrameOffset);
+  assert.notEqual(a.uniforms.pdeFrameOffset.value, b.uniforms.pdeFrameOffset.value);
   assert.equal(a.uniforms.pdeVertexTex, b.uniforms.pdeVertexTex);
+  assert.equal(a.uniforms.pdeKnotTex, b.uniforms.pdeKnotTex);
+  assert.ok(b.frames.bytes < alone, `a time row (${b.frames.bytes} bytes) is smaller than a table (${alone})`);
   a.setTime(0.2);
   b.setTime(0.9);
   assert.ok(deviation(a, clip, 0.2) <= 1e-6 * c.diagonal);
@@ -211,7 +273,7 @@ test('ScenePlayer.clone(): another root with its own time; one per-frame table p
   assert.equal(b.resources.users, 0);
 });
 
-test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, each instance reads its own', () => {
+test('InstancedMesh with timeOffsets: one time row per distinct offset, each instance reads its own', () => {
   for (const name of ['fit-rigid-paper-loop', 'fit-displacement-chord']) {
     const c = byName(name);
     const clip = loadCase(c);
@@ -220,6 +282,7 @@ test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, e
     const offsets = [0, 0.25, 0.5, 0.25, 0.75, 0];
     const player = attachClip(mesh, clip, { timeOffsets: offsets });
     assert.equal(player.frames.offsets.length, 4);
+    assert.ok(player.crowd, 'offsets: the crowd form');
     assert.equal(player.pass, false);
     assert.match(player.programKey, /:slots:/);
     const slot = mesh.geometry.getAttribute('pdeSlot');
@@ -233,12 +296,10 @@ test('InstancedMesh with timeOffsets: one per-frame table per distinct offset, e
       ti = clip.looping ? ti - Math.floor(ti) : Math.min(ti, 1);
       const dev = deviation(player, clip, ti, slot.array[i] * stride);
       assert.ok(dev <= 1e-6 * c.diagonal, `${name} instance ${i}: ${dev / c.diagonal}`);
-      // the slot's table is the one a single player shows at that time
-      const fresh = gpuLayout(clip, { width: player.layout.width });
-      timeUniforms(fresh, ti);
-      const k = slot.array[i] * stride * 4;
-      const atlas = player.textures.frame.image.data;
-      assert.deepEqual(atlas.subarray(k, k + stride * 4), fresh.textures.frame.data.subarray(0, stride * 4));
+      // the slot's time row holds the segment of its time
+      const { row } = player.resources.crowd;
+      const k = (player.uniforms.pdeFrameOffset.value + slot.array[i] * stride + row.timeTexel) * 4;
+      assert.equal(player.textures.frame.image.data[k], createEvaluator(clip).locate(ti)[0]);
     }
     const s = { uniforms: {}, vertexShader: THREE.ShaderLib.standard.vertexShader };
     mesh.material.onBeforeCompile(s);
@@ -277,4 +338,175 @@ test('timeOffsets are refused with a reason where they cannot play', () => {
   const big = new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshBasicMaterial(), 300);
   assert.throws(() => attachClip(big, clip, { timeOffsets: many, maxTextureSize: 16 }), /300 distinct time offsets/);
   assert.equal(ClipResources.acquire(clip, { maxTextureSize: 16 }).users, 1, 'the refused attach left no user');
+});
+
+test('players at distinct times: the clip tables once, each extra player a time row, freed with the last', () => {
+  const c = byName('fit-displacement-chord-smooth-pde'); // 12 segments of the paper's time pairs
+  const clip = loadCase(c);
+  const first = attachClip(meshOf(clip), clip);
+  const alone = { bytes: first.gpuBytes, table: first.frames.bytes };
+  const players = [first, ...Array.from({ length: 39 }, () => first.clone())];
+  const res = first.resources;
+  const { row, table } = res.crowd;
+  assert.equal(res.tables.size, 40);
+  // one vertex texture, one knot table, one atlas of time rows for all; a row each
+  assert.equal(new Set(players.map((p) => p.textures.vertex)).size, 1);
+  assert.equal(new Set(players.map((p) => p.textures.frame)).size, 1);
+  assert.equal(new Set(players.map((p) => p.uniforms.pdeKnotTex.value)).size, 1);
+  assert.equal(new Set(players.map((p) => p.uniforms.pdeFrameOffset.value)).size, 40);
+  assert.equal(new Set(players.map((p) => p.programKey)).size, 1, 'one program for every player');
+  for (const p of players) assert.equal(p.frames.bytes, row.texels * 16);
+  assert.ok(row.texels * 16 < alone.table, `a time row ${row.texels * 16} bytes, a table ${alone.table}`);
+  // the knot table is the clip's (its knots, once): (S + 1) knots and S segments per curve (the GPU curves
+  // and the direct ones), then the direct vertices' records
+  const L = first.layout;
+  assert.equal(table.curves, new Set(L.direct.curve).size + L.gpuCurve.filter((x) => x >= 0).length);
+  const S = clip.nSegments;
+  assert.equal(table.texels, (S + 1) * table.curves * 3 + S * table.curves + L.nDirect * 4);
+  assert.equal(row.texels, 2 + Math.ceil(L.evaluator.uPhi0.length / 2), 'a row: segment, weights, time pairs');
+  assert.equal(res.sharedBytes, alone.bytes - alone.table - first.attributeBytes + table.data.byteLength);
+  // the atlas grows by doubling: at most twice the rows in use, plus a row of padding
+  assert.ok(res.atlasBytes <= 2 * 40 * row.texels * 16 + first.layout.width * 16);
+  players.forEach((p, i) => p.setTime(i / 39));
+  for (let i = 0; i < 40; i += 3) {
+    const dev = deviation(players[i], clip, i / 39);
+    assert.ok(dev <= 1e-6 * c.diagonal, `player ${i}: ${dev / c.diagonal}`);
+  }
+  // a t with the same segment and local time writes nothing: the atlas is uploaded once per frame at most
+  const version = first.textures.frame.version;
+  players.forEach((p, i) => p.setTime(i / 39));
+  assert.equal(first.textures.frame.version, version);
+  let disposed = 0;
+  for (const tex of [first.textures.vertex, res.crowd.texture, first.textures.frame]) {
+    tex.addEventListener('dispose', () => disposed++);
+  }
+  for (const p of players.slice(1)) p.detach();
+  assert.equal(disposed, 0);
+  assert.equal(res.crowd.atlas.slots.filter((o) => o !== null).length, 1, 'the detached players freed their rows');
+  first.setTime(0.55);
+  assert.ok(deviation(first, clip, 0.55) <= 1e-6 * c.diagonal);
+  first.detach();
+  assert.equal(disposed, 3);
+});
+
+test('a second player turns the first into the crowd form: its materials recompile, the pass goes, its time stays', () => {
+  const c = byName('fit-displacement-chord');
+  const clip = loadCase(c);
+  const mesh = meshOf(clip);
+  const a = attachClip(mesh, clip, { pass: true });
+  assert.equal(a.pass, true);
+  assert.equal(a.crowd, false);
+  a.setTime(0.35);
+  const shaderOf = (m) => {
+    const s = { uniforms: {}, vertexShader: THREE.ShaderLib.standard.vertexShader };
+    m.onBeforeCompile(s);
+    return s;
+  };
+  assert.doesNotMatch(shaderOf(mesh.material).vertexShader, /#define PDEANIM_KNOTS/);
+  const versions = [mesh.material.version, mesh.customDepthMaterial.version];
+  const b = a.clone();
+  assert.ok(a.crowd && b.crowd);
+  assert.equal(a.pass, false, 'the vertex shader evaluates in the crowd form (no per-player pass texture)');
+  assert.equal(a.frames.pass, null);
+  assert.ok(mesh.material.version > versions[0] && mesh.customDepthMaterial.version > versions[1]);
+  assert.match(a.programKey, /:crowd\d+:/);
+  const s = shaderOf(mesh.material);
+  assert.match(s.vertexShader, /#define PDEANIM_KNOTS/);
+  assert.doesNotMatch(s.vertexShader, /#define PDEANIM_PASS/);
+  assert.equal(s.uniforms.pdeKnotTex.value, a.resources.crowd.texture);
+  assert.equal(s.uniforms.pdeFrameTex.value, a.resources.crowd.atlas.texture);
+  // the first player's time was written into its row when it switched
+  assert.ok(deviation(a, clip, 0.35) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(b, clip, 0.35) <= 1e-6 * c.diagonal, 'the clone starts at its original time');
+  b.setTime(0.9);
+  assert.ok(deviation(a, clip, 0.35) <= 1e-6 * c.diagonal, "the clone's time does not move the original");
+  a.detach();
+  assert.equal(b.resources.tables.size, 1);
+  b.setTime(0.1);
+  assert.ok(deviation(b, clip, 0.1) <= 1e-6 * c.diagonal, 'the clone plays on after the original detached');
+  b.detach();
+});
+
+test('the crowd form keeps the per-frame state of bone clips and rigid clips in each player\'s row', () => {
+  for (const name of ['bones-fit-k4-residual', 'bones-synthetic-k3-zero-loop', 'fit-rigid-paper-loop']) {
+    const clip = decodeClipFile(readBytes(join(FIXTURES, `${name}.clip`)));
+    const a = attachClip(meshOf(clip), clip);
+    const b = a.clone();
+    assert.ok(a.crowd && b.crowd, name);
+    const { row } = a.resources.crowd;
+    a.setTime(0.2);
+    b.setTime(0.8);
+    const atlas = a.textures.frame.image.data;
+    if (clip.bones) {
+      assert.equal(a.uniforms.pdeBones.value, row.boneTexel);
+      for (const [p, t] of [[a, 0.2], [b, 0.8]]) {
+        const ev = createEvaluator(clip);
+        ev.prepare(t);
+        const rows = ev.bones.affine();
+        const o = (p.uniforms.pdeFrameOffset.value + row.boneTexel) * 4;
+        for (let i = 0; i < rows.length; i++) assert.equal(atlas[o + i], f(rows[i]), `${name} bone value ${i}`);
+      }
+    } else {
+      // direct vertices (every vertex of this clip): positions at each player's time
+      for (const [p, t] of [[a, 0.2], [b, 0.8]]) assert.ok(deviation(p, clip, t) <= 1e-6 * byName(name).diagonal, name);
+    }
+    a.detach();
+    b.detach();
+  }
+});
+
+test("a backend whose shaders do not read the crowd form keeps per-frame tables beside a crowd", () => {
+  const c = byName('fit-displacement-chord-loop');
+  const clip = loadCase(c);
+  const plain = { ...webglBackend, crowd: false };
+  const a = new ClipPlayer(meshOf(clip), clip, {}, plain);
+  const b = new ClipPlayer(meshOf(clip), clip, {}, plain);
+  assert.equal(a.resources, b.resources);
+  assert.ok(!a.crowd && !b.crowd && a.resources.crowd === null);
+  const x = attachClip(meshOf(clip), clip);
+  const y = x.clone();
+  assert.ok(x.crowd && y.crowd, 'the WebGL players take the crowd form');
+  assert.ok(!a.crowd && !b.crowd, 'the others keep their tables');
+  assert.doesNotMatch(a.programKey, /:crowd/);
+  for (const [p, t] of [[a, 0.1], [b, 0.6], [x, 0.3], [y, 0.85]]) {
+    p.setTime(t);
+    assert.ok(deviation(p, clip, t) <= 1e-6 * c.diagonal, `${t}`);
+  }
+  for (const p of [a, b, x, y]) p.detach();
+});
+
+test('rigid clips with GPU curves: the crowd form moves each curve in the shader; a row of a few texels', () => {
+  for (const name of ['fit-rigid-paper-loop', 'fit-rigid-chord-smooth-spline', 'synthetic-blend-rigid-chord-loop-basis']) {
+    const c = byName(name);
+    const clip = loadCase(c);
+    // no direct curves (the fixtures' curves are short): every curve's rigid motion is the shader's
+    const tables = gpuTables(clip, { directMax: 0 });
+    assert.equal(tables.nDirect, 0);
+    const a = attachClip(meshOf(clip), clip, { tables });
+    a.setTime(0.3);
+    assert.ok(deviation(a, clip, 0.3) <= 1e-6 * c.diagonal, `${name} alone`);
+    const b = a.clone();
+    assert.ok(a.crowd && b.crowd);
+    const { row } = a.resources.crowd;
+    assert.equal(row.boneTexel - row.rigidTexel, 1, 'one rigid texel (segment, time) per row, not 3 per curve');
+    for (const [p, t] of [[a, 0.3], [b, 0.3], [b, 0.77], [a, 0.05], [a, 1]]) {
+      if (t === 1 && clip.looping) continue;
+      p.setTime(t);
+      const dev = deviation(p, clip, t);
+      assert.ok(dev <= 1e-6 * c.diagonal, `${name} at ${t}: ${dev / c.diagonal}`);
+    }
+    a.detach();
+    b.detach();
+  }
+});
+
+test('setTime after detach does not throw in the crowd form (the clip resources are freed)', () => {
+  const clip = loadCase(byName('fit-displacement-chord'));
+  const a = attachClip(meshOf(clip), clip);
+  const b = a.clone();
+  a.detach();
+  b.detach();
+  assert.equal(b.resources.crowd, null);
+  assert.doesNotThrow(() => b.setTime(0.4));
+  assert.equal(b.textures.frame, undefined);
 });

@@ -728,15 +728,16 @@ test('spline clips: one shader for every time model (the CPU forms the coefficie
     assert.equal(header, plain);
     assert.match(header, new RegExp(`#define PDEANIM_CURVE_TEXELS ${rigid ? 6 : 3}\\n`));
     assert.match(header, /#define PDEANIM_COEFFICIENT_TEXELS 3\n/);
-    // no knot or tangent textures, no define of the time model
-    assert.doesNotMatch(header, /pdeKnotTex|pdeTangentTex|PDEANIM_SPLINE|PDEANIM_TANGENTS|pdeSegments/);
+    // one player alone: no knot table (the crowd form's), no tangent textures, no define of the time model
+    assert.doesNotMatch(header, /#define PDEANIM_KNOTS|pdeTangentTex|PDEANIM_SPLINE|PDEANIM_TANGENTS|pdeSegments/);
     assert.equal(plainLayout.spline, false);
     const mesh = meshOf(clip, THREE.MeshStandardMaterial);
     const player = attachClip(mesh, clip);
     const shader = { vertexShader: THREE.ShaderLib.standard.vertexShader, fragmentShader: '', uniforms: {} };
     mesh.material.onBeforeCompile(shader, null);
     assert.equal(shader.uniforms.pdeFrameTex.value, player.textures.frame);
-    assert.equal(shader.uniforms.pdeKnotTex, undefined);
+    assert.equal(shader.uniforms.pdeKnotTex.value, null);
+    assert.doesNotMatch(shader.vertexShader, /#define PDEANIM_KNOTS/);
     const key = mesh.material.customProgramCacheKey();
     assert.match(key, /pdeanim:dynamic-pde:\w+:true:frame:\d+:gpu$/);
     const other = attachClip(meshOf(plainClip, THREE.MeshStandardMaterial), plainClip);
@@ -752,8 +753,9 @@ test('spline clips: one shader for every time model (the CPU forms the coefficie
         scene = x;
       },
     };
+    // (another decoded copy: one player alone, not in the crowd form of clip's two players)
     const passMesh = meshOf(clip, THREE.MeshStandardMaterial);
-    const passed = attachClip(passMesh, clip, { renderer });
+    const passed = attachClip(passMesh, loadCase(c), { renderer });
     assert.equal(passed.pass, true);
     passed.setTime(0.2);
     passMesh.onBeforeRender(renderer, null, null, passMesh.geometry, passMesh.material, null);

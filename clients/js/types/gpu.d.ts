@@ -114,7 +114,11 @@ export interface MeshAttributes {
 }
 
 /** The data textures and constants of a clip as plain typed arrays (a Web Worker can make and transfer them). */
-export declare function gpuTables(clip: Clip, options?: { width?: number }): GpuLayout;
+export declare function gpuTables(
+  clip: Clip,
+  /** directMax: the most vertices of a direct curve (default: as many as a curve's table texels; 0: none). */
+  options?: { width?: number; directMax?: number | null },
+): GpuLayout;
 /** gpuTables (or the given tables) with the clip and its CPU evaluator: what timeUniforms() needs. */
 export declare function gpuLayout(
   clip: Clip,
@@ -122,6 +126,38 @@ export declare function gpuLayout(
 ): GpuLayout;
 /** Bytes of the data textures. */
 export declare function textureBytes(tables: GpuLayout): number;
+/**
+ * A crowd's shared knot table: per knot and GPU curve the coordinates' knot coefficients in the orthonormal
+ * bases (3 texels), spline tangents likewise from tangentTexel, per segment and GPU curve each coordinate's
+ * time-pair index (-1: spline item) from muTexel.
+ */
+export interface KnotTables {
+  data: Float32Array;
+  width: number;
+  height: number;
+  curves: number;
+  tangentTexel: number;
+  muTexel: number;
+  /** Rigid clips: per rigid knot and GPU curve (rotation vector, centroid), per rigid segment their constants. */
+  rigidKnotTexel: number;
+  rigidMuTexel: number;
+  /** The direct vertices' records (as the vertex texture's): a crowd evaluates them like the others. */
+  directTexel: number;
+  texels: number;
+}
+/** The per-player time row of a crowd: rigid segment and time, bone rows, then segment, cubic weights, time pairs. */
+export interface CrowdRow {
+  rigidTexel: number;
+  boneTexel: number;
+  timeTexel: number;
+  texels: number;
+}
+/** The crowd's shared knot table of a dynamic layout (rows of at most maxWidth texels). */
+export declare function knotTables(layout: GpuLayout, maxWidth?: number): KnotTables;
+/** The texels of a dynamic layout's per-player time row. */
+export declare function crowdRow(layout: GpuLayout): CrowdRow;
+/** Write layout's time row at t into data from value offset; returns whether it was rewritten. */
+export declare function timeRow(layout: GpuLayout, t: number, row: CrowdRow, data: Float32Array, offset: number): boolean;
 /** The uniforms at t; also rewrites layout.textures.frame.data when it changes (upload it then). */
 export declare function timeUniforms(layout: GpuLayout, t: number): TimeUniforms;
 export declare function meshAttributes(mesh: {
@@ -166,7 +202,15 @@ export declare function frameNormals(
 /** GLSL ES 3.00 declarations and functions (pdeCompute() sets pdePosition and pdeNormal). */
 export declare function glslHeader(
   layout: GpuLayout,
-  options?: { normals?: 'frame' | 'rest'; stage?: 'vertex' | 'fragment'; pass?: boolean; cpu?: boolean },
+  options?: {
+    normals?: 'frame' | 'rest';
+    stage?: 'vertex' | 'fragment';
+    pass?: boolean;
+    cpu?: boolean;
+    slots?: boolean;
+    /** The crowd variant: the knot table's row length (0: a per-frame table). */
+    knotWidth?: number;
+  },
 ): string;
 /** A built-in material's vertex shader with the clip evaluation patched in (mixed by pdeInfluence). */
 export declare function patchVertexShader(vertexShader: string, header: string): string;

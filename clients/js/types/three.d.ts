@@ -4,7 +4,7 @@ import type {
   AnimationClip, DataTexture, Loader, LoadingManager, Matrix4, Mesh, Object3D, WebGLRenderer,
 } from 'three';
 import type { Clip, Evaluator } from './index.js';
-import type { GpuLayout, MeshAttributes } from './gpu.js';
+import type { CrowdRow, GpuLayout, KnotTables, MeshAttributes } from './gpu.js';
 
 export interface AttachOptions {
   /** Evaluate on the GPU (default true); false starts with the CPU fallback. */
@@ -62,25 +62,52 @@ export declare class ClipResources {
   readonly evaluator: Evaluator;
   readonly uniforms: Record<string, { value: unknown }>;
   readonly users: number;
-  /** Bytes of the shared data texture (once per clip). */
+  /** Bytes of the shared data textures (once per clip): vertex records, normal rings and, in the crowd form,
+   * the knot table. */
   readonly sharedBytes: number;
-  /** Bytes of the data textures for one player: the shared texture and one per-frame table. */
+  /** Bytes of the data textures for one player: the shared textures and one per-frame table (or time row). */
   readonly textureBytes: number;
+  /** The per-time tables made on these resources (one per player time; ScenePlayer's meshes share one). */
+  readonly tables: Set<FrameTables>;
+  /**
+   * The crowd form, taken once players show distinct times (a second FrameTables, or timeOffsets): the
+   * shared knot table and the atlas of per-player time rows; null before.
+   */
+  readonly crowd: {
+    table: KnotTables;
+    texture: DataTexture;
+    row: CrowdRow;
+    atlas: { slots: (FrameTables | null)[]; data: Float32Array; texture: DataTexture };
+  } | null;
+  /** Why the clip cannot take the crowd form (cyclic clips, no GPU path, too large a knot table), or null. */
+  readonly crowdReason: string | null;
+  /** Bytes of the crowd form's atlas of time rows (free rows included; 0 before). */
+  readonly atlasBytes: number;
+  /** Take the crowd form (every registered FrameTables switches); returns whether the clip is in it. */
+  toCrowd(): boolean;
   retain(): this;
   release(): void;
   dispose(): void;
 }
 
-/** The per-frame table(s) of a player's time (one per distinct offset of an instanced crowd). */
+/**
+ * A player's time (one slot per distinct offset of an instanced crowd): a per-frame table of every curve's
+ * coefficients while the clip has one time, or in the clip's crowd form a time row per slot in the shared atlas.
+ */
 export declare class FrameTables {
   constructor(resources: ClipResources, options?: { offsets?: ArrayLike<number> | null });
   readonly resources: ClipResources;
   readonly offsets: Float64Array;
+  /** Whether this time is in the clip's crowd form (time rows in the shared atlas). */
+  readonly crowd: boolean;
+  /** The texture the shaders read: this table, or the crowd form's atlas (null: a cyclic clip's player alone). */
   readonly texture: DataTexture | null;
   readonly uniforms: Record<string, { value: unknown }>;
-  /** Bytes of the table texture and of the evaluation pass's texture. */
+  /** Bytes of the table texture and of the evaluation pass's texture, or of this time's rows in the atlas. */
   readonly bytes: number;
   frame(t: number): void;
+  /** Run fn when the form changes (the players recompile their materials); returns an unsubscribe function. */
+  onChange(fn: () => void): () => void;
   retain(): this;
   release(): void;
 }
@@ -99,8 +126,12 @@ export declare class ClipPlayer {
   readonly gpuUnavailableReason: string | null;
   readonly gpu: boolean;
   readonly time: number;
-  /** Whether the clip is evaluated in a pass before drawing (else in the vertex shader). */
+  /** Whether the clip is evaluated in a pass before drawing (else in the vertex shader; never in the crowd form). */
   readonly pass: boolean;
+  /** Whether the clip is in its crowd form (players at distinct times: a shared knot table, a time row each). */
+  readonly crowd: boolean;
+  /** A key of the shader variant (materials' program cache key): one for every player of a crowd. */
+  readonly programKey: string;
   readonly resources: ClipResources;
   readonly frames: FrameTables;
   /** Whether the mesh is an InstancedMesh played with timeOffsets. */

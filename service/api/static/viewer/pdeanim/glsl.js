@@ -3,12 +3,17 @@
 // the evaluation pass's fragment shader. The math is docs/format.md's; gpu.js's CPU helpers mirror it.
 
 /** The #defines of a layout and the shader variant. */
-function defines(layout, { normals, stage, pass, cpu, slots }) {
+function defines(layout, { normals, stage, pass, cpu, slots, knotWidth }) {
   const defs = [layout.kind === 'cyclic-spine' ? '#define PDEANIM_CYCLIC' : '#define PDEANIM_DYNAMIC'];
   if (stage === 'vertex') defs.push('#define PDEANIM_VERTEX_STAGE');
   if (pass) defs.push('#define PDEANIM_PASS');
   if (cpu) defs.push('#define PDEANIM_CPU');
   if (slots && stage === 'vertex') defs.push('#define PDEANIM_SLOTS');
+  if (knotWidth && stage === 'vertex') {
+    defs.push('#define PDEANIM_KNOTS');
+    defs.push(`#define PDEANIM_KNOT_SHIFT ${Math.log2(knotWidth)}`);
+    defs.push(`#define PDEANIM_KNOT_MASK ${knotWidth - 1}`);
+  }
   if (normals === 'rest') defs.push('#define PDEANIM_REST_NORMALS');
   if (layout.rigid) defs.push('#define PDEANIM_RIGID');
   if (layout.bones) defs.push('#define PDEANIM_BONES');
@@ -36,10 +41,24 @@ in vec3 pdeCpuNormal;
 #endif
 #ifdef PDEANIM_SLOTS
 in float pdeSlot;
+#endif
+#if defined(PDEANIM_SLOTS) || defined(PDEANIM_KNOTS)
 uniform int pdeSlotTexels;
+uniform int pdeFrameOffset;
 int pdeFrameBase;
 #else
 #define pdeFrameBase 0
+#endif
+#ifdef PDEANIM_KNOTS
+uniform highp sampler2D pdeKnotTex;
+uniform int pdeKnotCurves;
+uniform int pdeKnotTangents;
+uniform int pdeMuTexel;
+uniform int pdeTimeTexel;
+uniform int pdeRigidTexel;
+uniform int pdeRigidKnots;
+uniform int pdeRigidMu;
+uniform int pdeDirectTexel;
 #endif
 #ifdef PDEANIM_PASS
 uniform highp sampler2D pdePosTex;
@@ -84,10 +103,22 @@ vec4 pdeFrame(int i) {
 // pdeSkinOnly on (curves without residual) are their skinned rest position alone
 const DYNAMIC_EVAL = `
 #ifdef PDEANIM_DYNAMIC
+#ifdef PDEANIM_KNOTS
+vec4 pdeKnot(int i) {
+  return texelFetch(pdeKnotTex, ivec2(i & PDEANIM_KNOT_MASK, i >> PDEANIM_KNOT_SHIFT), 0);
+}
+#endif
+// texel i of a vertex record: the vertex texture's, or in a crowd a direct vertex's in the knot table
+vec4 pdeRecord(bool direct, int i) {
+#ifdef PDEANIM_KNOTS
+  if (direct) return pdeKnot(i);
+#endif
+  return pdeFetch(pdeVertexTex, i);
+}
 #ifdef PDEANIM_BONES
-vec3 pdeSkin(int r, vec3 rest) {
-  vec4 index = pdeFetch(pdeVertexTex, r);
-  vec4 weight = pdeFetch(pdeVertexTex, r + 1);
+vec3 pdeSkin(int r, vec3 rest, bool direct) {
+  vec4 index = pdeRecord(direct, r);
+  vec4 weight = pdeRecord(direct, r + 1);
   vec4 x = vec4(rest, 1.0);
   vec3 acc = vec3(0.0);
   for (int k = 0; k < 4; k++) {
@@ -99,20 +130,120 @@ vec3 pdeSkin(int r, vec3 rest) {
   return acc;
 }
 #endif
+#ifdef PDEANIM_KNOTS
+// a crowd (gpu.js knotTables, crowdRow): coordinate w's coefficients of GPU curve c at this player's time,
+// its time pair (or the spline's cubic weights cw) applied to the shared knots of segment seg
+vec4 pdeCoefficients(int c, int w, int seg, vec4 mu, vec4 cw) {
+  int a = (seg * pdeKnotCurves + c) * 3 + w;
+  int b = a + pdeKnotCurves * 3;
+  float k = mu[w];
+  if (k < -0.5) {
+    return cw.x * pdeKnot(pdeKnotTangents + a) + cw.y * pdeKnot(a) + cw.z * pdeKnot(b)
+      + cw.w * pdeKnot(pdeKnotTangents + b);
+  }
+  int j = int(k + 0.5);
+  vec4 pair = pdeFrame(pdeTimeTexel + 2 + (j >> 1));
+  vec2 phi = (j & 1) == 0 ? pair.xy : pair.zw;
+  return phi.x * pdeKnot(a) + phi.y * pdeKnot(b);
+}
+#ifdef PDEANIM_RIGID
+// e^x - 1 without cancellation (a series below |x| 0.5)
+float pdeExpm1(float x) {
+  if (abs(x) < 0.5) {
+    return x * (1.0 + x * (0.5 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0 + x * (1.0 / 720.0
+      + x * (1.0 / 5040.0 + x / 40320.0)))))));
+  }
+  return exp(x) - 1.0;
+}
+// sin to float32 precision (GPUs' own sin can be off by 1e-5): x folded into [-pi/2, pi/2] with a two-part
+// pi, then its Taylor polynomial to x^15 (remainder < 1e-9)
+float pdeSin(float x) {
+  const float PI_HI = 3.1415927;
+  const float PI_LO = -8.742278e-8; // pi - PI_HI
+  x -= 6.2831855 * floor(x / 6.2831855 + 0.5);
+  if (x > 1.5707964) x = (PI_HI - x) + PI_LO;
+  else if (x < -1.5707964) x = (-PI_HI - x) - PI_LO;
+  float x2 = x * x;
+  return x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0
+    + x2 * (-1.0 / 39916800.0 + x2 * (1.0 / 6227020800.0 + x2 * (-1.0 / 1307674368000.0))))))));
+}
+// the rigid tracks' time pair (basis.js rigidTimePair: mu < 0 trig, tiny mu linear, else exponential)
+vec2 pdeRigidPair(float tau, float mu) {
+  if (mu < 0.0) {
+    float m = min(-mu, 2.984513020910303); // basis.js MU_TRIG_MAX, 0.95 pi
+    float u = 1.0 - tau;
+    if (m < 1e-2) return vec2(u * (1.0 + m * m * (1.0 - u * u) / 6.0), tau * (1.0 + m * m * (1.0 - tau * tau) / 6.0));
+    float inv = 1.0 / pdeSin(m);
+    return vec2(pdeSin(m * u) * inv, pdeSin(m * tau) * inv);
+  }
+  if (mu < 1e-12) return vec2(1.0 - tau, tau);
+  float inv = 1.0 / pdeExpm1(-2.0 * mu);
+  return vec2(exp(-mu * tau) * pdeExpm1(-2.0 * mu * (1.0 - tau)) * inv,
+    exp(mu * (tau - 1.0)) * pdeExpm1(-2.0 * mu * tau) * inv);
+}
+// p moved by GPU curve c's rigid motion at this player's rigid segment and time (the row's texel
+// pdeRigidTexel): R p + centroid, R the Rodrigues rotation of the rotation vector (dynamic.js rodrigues)
+vec3 pdeRigid(int c, vec3 p) {
+  vec4 at = pdeFrame(pdeRigidTexel);
+  int s = int(at.x + 0.5);
+  vec4 mu = pdeKnot(pdeRigidMu + s * pdeKnotCurves + c);
+  vec2 pr = pdeRigidPair(at.y, mu.x);
+  vec2 pt = pdeRigidPair(at.y, mu.y);
+  int k0 = pdeRigidKnots + (s * pdeKnotCurves + c) * 2;
+  int k1 = k0 + pdeKnotCurves * 2;
+  vec3 r = pr.x * pdeKnot(k0).xyz + pr.y * pdeKnot(k1).xyz;
+  vec3 t = pt.x * pdeKnot(k0 + 1).xyz + pt.y * pdeKnot(k1 + 1).xyz;
+  float th2 = dot(r, r);
+  float th = sqrt(th2);
+  float a;
+  float b;
+  if (th < 1e-2) {
+    a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0;
+    b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0;
+  } else {
+    float h = pdeSin(0.5 * th);
+    a = pdeSin(th) / th;
+    b = 2.0 * h * h / th2;
+  }
+  vec3 k = cross(r, p);
+  return p + a * k + b * cross(r, k) + t;
+}
+#endif
+#endif
 vec3 pdeEval(int v) {
+#ifdef PDEANIM_KNOTS
+  // a crowd: the direct vertices too (their records and curves in the knot table)
+  bool direct = v < pdeDirect;
+#else
   if (v < pdeDirect) return pdeFrame(v).xyz;
+  bool direct = false;
+#endif
 #ifdef PDEANIM_BONES
   if (v >= pdeSkinOnly) {
     int s = pdeSkinTexel + (v - pdeSkinOnly) * 3;
-    return pdeSkin(s + 1, pdeFetch(pdeVertexTex, s).yzw);
+    return pdeSkin(s + 1, pdeFetch(pdeVertexTex, s).yzw, false);
   }
 #endif
+#ifdef PDEANIM_KNOTS
+  int r = direct ? pdeDirectTexel + v * PDEANIM_VERTEX_TEXELS : (v - pdeDirect) * PDEANIM_VERTEX_TEXELS;
+#else
   int r = (v - pdeDirect) * PDEANIM_VERTEX_TEXELS;
-  vec4 head = pdeFetch(pdeVertexTex, r);
+#endif
+  vec4 head = pdeRecord(direct, r);
   vec3 p = head.yzw;
 #ifdef PDEANIM_BONES
-  p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p);
+  p = pdeSkin(r + PDEANIM_VERTEX_TEXELS - 2, p, direct);
 #endif
+#ifdef PDEANIM_KNOTS
+  int cg = int(head.x + 0.5);
+  int seg = int(pdeFrame(pdeTimeTexel).x + 0.5);
+  vec4 cw = pdeFrame(pdeTimeTexel + 1);
+  vec4 mu = pdeKnot(pdeMuTexel + seg * pdeKnotCurves + cg);
+  for (int w = 0; w < 3; w++) p[w] += dot(pdeCoefficients(cg, w, seg, mu, cw), pdeRecord(direct, r + 1 + w));
+#ifdef PDEANIM_RIGID
+  p = pdeRigid(cg, p);
+#endif
+#else
   int c = pdeDirect + int(head.x + 0.5) * PDEANIM_CURVE_TEXELS;
   for (int w = 0; w < 3; w++) p[w] += dot(pdeFrame(c + w), pdeFetch(pdeVertexTex, r + 1 + w));
 #ifdef PDEANIM_RIGID
@@ -120,6 +251,7 @@ vec3 pdeEval(int v) {
   vec4 r1 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 1);
   vec4 r2 = pdeFrame(c + PDEANIM_COEFFICIENT_TEXELS + 2);
   p = vec3(dot(r0.xyz, p) + r0.w, dot(r1.xyz, p) + r1.w, dot(r2.xyz, p) + r2.w);
+#endif
 #endif
   return p;
 }
@@ -195,8 +327,10 @@ void pdeCompute() {
   pdePosition = pdeCpuPosition;
   pdeNormal = pdeCpuNormal;
 #else
-#ifdef PDEANIM_SLOTS
-  pdeFrameBase = int(pdeSlot + 0.5) * pdeSlotTexels;
+#if defined(PDEANIM_SLOTS)
+  pdeFrameBase = pdeFrameOffset + int(pdeSlot + 0.5) * pdeSlotTexels;
+#elif defined(PDEANIM_KNOTS)
+  pdeFrameBase = pdeFrameOffset;
 #endif
   int v = int(pdeVertex.x + 0.5);
   int va = int(pdeVertex.y + 0.5);
@@ -222,12 +356,16 @@ void pdeCompute() {
 #endif
 `;
 
-/** GLSL declarations and functions (inserted after three.js's `#include <common>`). */
+/**
+ * GLSL declarations and functions (inserted after three.js's `#include <common>`). knotWidth (vertex stage):
+ * the crowd variant, reading the shared knot table (gpu.js knotTables, rows of knotWidth) and a time row
+ * (crowdRow) from texel pdeFrameOffset of the per-frame texture.
+ */
 export function glslHeader(
   layout,
-  { normals = 'frame', stage = 'vertex', pass = false, cpu = false, slots = false } = {},
+  { normals = 'frame', stage = 'vertex', pass = false, cpu = false, slots = false, knotWidth = 0 } = {},
 ) {
-  return `${defines(layout, { normals, stage, pass, cpu, slots })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
+  return `${defines(layout, { normals, stage, pass, cpu, slots, knotWidth })}\n${DECLARATIONS}${DYNAMIC_EVAL}${CYCLIC_EVAL}${VERTEX_STAGE}`;
 }
 
 /**

@@ -59,7 +59,7 @@ function texture(nTexels, width) {
  * coefficients and no direct positions. A clip whose residual is zero everywhere (residual false) has only
  * those.
  */
-export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
+export function gpuTables(clip, { width = TEXTURE_WIDTH, directMax = null } = {}) {
   if (clip.kind === 'cyclic-spine') {
     const rings = vertexRings(clip.faces, clip.rest);
     const ring = ringTable(rings);
@@ -72,7 +72,8 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH } = {}) {
   const coefficientTexels = 3;
   const curveTexels = coefficientTexels + (rigid ? 3 : 0);
   const zero = bones ? zeroCurves(clip.knots, C) : null; // curves without residual (bone clips only)
-  const numbering = gpuNumbering(curveOf, offsets, curveTexels, zero);
+  // directMax (tests): the most vertices of a direct curve (default: curveTexels, where they cost no more)
+  const numbering = gpuNumbering(curveOf, offsets, directMax ?? curveTexels, zero);
   const { gpuIndex, gpuCurve, nDirect, nGpuCurves, skinOnly } = numbering;
   const vertexTexels = 4 + (bones ? 2 : 0);
   const skinTexel = (skinOnly - nDirect) * vertexTexels;
@@ -321,8 +322,9 @@ export function frameTexels(layout) {
  * timeUniforms() needs to keep one more table at its own time (a player, or a slot of an instanced crowd),
  * sharing everything else, the CPU evaluator and the segment rows included.
  */
-export function frameView(layout, data) {
-  if (layout.kind !== 'cyclic-spine') {
+export function frameView(layout, data = null) {
+  // (a crowd's view, without a table, reads no knot rows on the CPU)
+  if (layout.kind !== 'cyclic-spine' && data !== null) {
     // made once on the layout, so that views read them instead of making their own
     if (layout.residual) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
     // a second view (another player's time): make every knot's row once rather than two per table switch
@@ -333,8 +335,179 @@ export function frameView(layout, data) {
   }
   const view = Object.create(layout);
   view.tableAt = [-1, NaN, NaN];
-  view.textures = { ...layout.textures, frame: { data, width: layout.width, height: data.length / 4 / layout.width } };
+  if (data !== null) {
+    view.textures = { ...layout.textures, frame: { data, width: layout.width, height: data.length / 4 / layout.width } };
+  }
   return view;
+}
+
+/** GPU curves of a dynamic layout (curves with coefficients in the per-frame table: neither direct nor skin-only). */
+function gpuCurveCount(layout) {
+  return layout.curveTexels > 0 ? (layout.boneTexel - layout.nDirect) / layout.curveTexels : 0;
+}
+
+/**
+ * The crowd's shared knot table of a dynamic layout, so that players at distinct times need no per-curve
+ * table each: per knot j and GPU curve c the three texels of its coordinates' knot coefficients in the items'
+ * orthonormal bases (R k, texel (j * curves + c) * 3 + w), for clips with spline items the same for the
+ * spline tangents from tangentTexel, then per segment s and GPU curve c a texel giving each coordinate's time
+ * pair: the index of its constant among the segment's distinct ones (the per-player time row holds their
+ * pairs), -1 for spline items (the row's cubic weights); rigid clips then have per rigid knot and GPU curve
+ * two texels (rotation vector, centroid) from rigidKnotTexel and per rigid segment and GPU curve (rotation
+ * constant, centroid constant) from rigidMuTexel: the shader forms each curve's rigid motion (docs/format.md
+ * §3.6). The direct vertices (whose per-frame table holds positions) are evaluated like the others in a
+ * crowd: their curves follow the GPU curves, and their records (as the vertex texture's) start at
+ * directTexel. {data, width, height, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel,
+ * directTexel, texels} (width: fittedWidth at most maxWidth). A frame's coefficients are then phi0 a + phi1 b
+ * (or the cubic's four terms) in float32 on the GPU, where the per-player table has them in float64.
+ */
+export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
+  const { nSegments: S, nDirect } = layout;
+  // the crowd's curve numbers: the GPU curves', then the direct curves' (their vertices read records here)
+  const crowdCurve = crowdCurves(layout);
+  const curves = layout.residual ? gpuCurveCount(layout) + directCurves(layout).length : 0;
+  const spline = layout.residual && layout.tangents !== null;
+  const knotTexels = (S + 1) * curves * 3;
+  const tangentTexel = knotTexels;
+  const muTexel = knotTexels * (spline ? 2 : 1);
+  // rigid clips: per rigid knot and curve its rotation vector and centroid, per rigid segment their constants
+  const rg = layout.rigid ? layout.clip.rigid : null;
+  const Sr = rg ? rg.segmentT.length - 1 : 0;
+  const rigidKnotTexel = muTexel + S * curves;
+  const rigidMuTexel = rigidKnotTexel + (rg ? (Sr + 1) * curves * 2 : 0);
+  // the direct vertices' records, as the vertex texture's (vertexTexels each: curve and base, basis rows, bones)
+  const directTexel = rigidMuTexel + Sr * curves;
+  const VT = layout.vertexTexels ?? 4;
+  const texels = Math.max(1, directTexel + (curves > 0 ? nDirect * VT : 0));
+  const tex = texture(texels, fittedWidth(texels, maxWidth));
+  const table = { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel, texels };
+  if (curves > 0) writeKnotTable(layout, table, crowdCurve);
+  return table;
+}
+
+/** The values of knotTables() into table.data (crowdCurve: each clip curve's number in the table). */
+function writeKnotTable(layout, table, crowdCurve) {
+  const { nCurves: C, nSegments: S, nDirect } = layout;
+  const { data: d, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel } = table;
+  const spline = layout.tangents !== null;
+  const rg = layout.rigid ? layout.clip.rigid : null;
+  const Sr = rg ? rg.segmentT.length - 1 : 0;
+  const VT = layout.vertexTexels ?? 4;
+  const { knots } = layout.clip;
+  const row = new Float64Array(C * 12);
+  for (let j = 0; j <= S; j++) {
+    orthonormalRow(layout.r, knots, j * C * 12, row);
+    for (let c = 0; c < C; c++) {
+      const cg = crowdCurve[c];
+      if (cg < 0) continue;
+      const o = (j * curves + cg) * 12;
+      for (let k = 0; k < 12; k++) d[o + k] = row[c * 12 + k];
+      if (spline) d.set(layout.tangents.subarray((j * C + c) * 12, (j * C + c + 1) * 12), tangentTexel * 4 + o);
+    }
+  }
+  const { muIndex } = layout.evaluator;
+  const items = spline ? layout.evaluator.spline : null;
+  for (let s = 0; s < S; s++) {
+    for (let c = 0; c < C; c++) {
+      const cg = crowdCurve[c];
+      if (cg < 0) continue;
+      const o = (muTexel + s * curves + cg) * 4;
+      for (let w = 0; w < 3; w++) {
+        const i = c * 3 + w;
+        d[o + w] = items !== null && items[i] === 1 ? -1 : muIndex[s * C * 3 + i];
+      }
+    }
+  }
+  for (let c = 0; rg && c < C; c++) {
+    const cg = crowdCurve[c];
+    if (cg < 0) continue;
+    for (let j = 0; j <= Sr; j++) {
+      const o = (rigidKnotTexel + (j * curves + cg) * 2) * 4;
+      for (let w = 0; w < 3; w++) {
+        d[o + w] = rg.rotKnots[(j * C + c) * 3 + w];
+        d[o + 4 + w] = rg.transKnots[(j * C + c) * 3 + w];
+      }
+    }
+    for (let j = 0; j < Sr; j++) {
+      const o = (rigidMuTexel + j * curves + cg) * 4;
+      d[o] = rg.rotMu[j * C + c];
+      d[o + 1] = rg.transMu[j * C + c];
+    }
+  }
+  const { q, base, curve, vertex } = layout.direct;
+  const bones = layout.bones ? layout.clip.bones : null;
+  for (let g = 0; g < nDirect; g++) {
+    const o = (directTexel + g * VT) * 4;
+    d[o] = crowdCurve[curve[g]];
+    for (let w = 0; w < 3; w++) d[o + 1 + w] = base[g * 3 + w];
+    for (let k = 0; k < 12; k++) d[o + 4 + k] = q[g * 12 + k];
+    if (bones) boneTexels(bones, vertex[g], d, o + (VT - 2) * 4);
+  }
+}
+
+/** Per clip curve its number in a crowd's knot table: GPU curves keep theirs, direct curves follow, others -1. */
+function crowdCurves(layout) {
+  const out = Int32Array.from(layout.gpuCurve);
+  const first = gpuCurveCount(layout);
+  directCurves(layout).forEach((c, k) => {
+    out[c] = first + k;
+  });
+  return out;
+}
+
+/**
+ * The per-player time row of a dynamic layout in a crowd (players at distinct times sharing knotTables()):
+ * rigid clips at rigidTexel (rigid segment, its local time, 0, 0), bone clips the bones' rows (3 texels each) from boneTexel, then at timeTexel (segment, 0, 0, 0), the
+ * spline's cubic weights, and the segment's distinct time pairs, two a texel. {rigidTexel, boneTexel,
+ * timeTexel, texels}.
+ */
+export function crowdRow(layout) {
+  const rigidTexel = 0;
+  const boneTexel = rigidTexel + (layout.rigid && layout.residual ? 1 : 0);
+  const timeTexel = boneTexel + (layout.nBones ?? 0) * 3;
+  const widest = layout.residual ? layout.evaluator.uPhi0.length : 0;
+  return { rigidTexel, boneTexel, timeTexel, texels: timeTexel + 2 + Math.ceil(widest / 2) };
+}
+
+const NO_CURVES = new Int32Array(0);
+
+/** The distinct direct curves of a layout (cached), in GPU order: a crowd numbers them after the GPU curves. */
+function directCurves(layout) {
+  if (!layout.directCurves) layout.directCurves = Int32Array.from(new Set(layout.direct.curve));
+  return layout.directCurves;
+}
+
+/**
+ * Write the time row (crowdRow() row) of layout (a frameView: its own tableAt) at t into d from value o;
+ * returns whether it was rewritten (as timeUniforms: not when t maps to the state already written).
+ */
+export function timeRow(layout, t, row, d, o) {
+  if (!Number.isFinite(t)) throw new RangeError(`clip time must be a finite number, got ${t}`);
+  const ev = layout.evaluator;
+  const loc = ev.locate(t);
+  const seg = loc[0];
+  const last = layout.tableAt;
+  if (seg === last[0] && loc[1] === last[1] && ((!layout.rigid && !layout.bones) || loc[2] === last[2])) return false;
+  last[0] = seg;
+  last[1] = loc[1];
+  last[2] = loc[2];
+  // rigid clips: the shader forms every curve's rigid motion (the CPU only locates the rigid segment)
+  ev.segmentState(layout.rigid ? NO_CURVES : null);
+  if (layout.bones) writeBones(layout, ev, d, o / 4 + row.boneTexel);
+  if (!layout.residual) return true;
+  const T = o + row.timeTexel * 4;
+  d[T] = seg;
+  if (layout.spline) for (let i = 0; i < 4; i++) d[T + 4 + i] = ev.cubicWeights[i];
+  const n = ev.muStart[seg + 1] - ev.muStart[seg];
+  for (let k = 0; k < n; k++) {
+    d[T + 8 + k * 2] = ev.uPhi0[k];
+    d[T + 9 + k * 2] = ev.uPhi1[k];
+  }
+  if (layout.rigid) {
+    d[o + row.rigidTexel * 4] = ev.rigidLoc[0];
+    d[o + row.rigidTexel * 4 + 1] = ev.rigidLoc[1];
+  }
+  return true;
 }
 
 /** Bytes of the data textures of gpuTables() (what the GPU holds for the clip, whatever the mesh). */
@@ -534,37 +707,13 @@ function frameCoefficients(layout, ev, seg, rows) {
  * three coefficient texels and, for rigid clips, its rigid rows.
  */
 function writeFrame(layout, ev, seg, d) {
-  if (layout.bones) writeBones(layout, ev, d);
+  if (layout.bones) writeBones(layout, ev, d, layout.boneTexel);
   if (!layout.residual) return;
   const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg));
-  const { nDirect, gpuCurve, direct } = layout;
-  const { q, base, curve } = direct;
+  writeDirect(layout, ev, y, d, 0);
+  const { nDirect, gpuCurve } = layout;
   const rot = layout.rigid ? ev.rot : null;
   const trans = layout.rigid ? ev.trans : null;
-  const skinned = layout.bones ? (layout.skinScratch ??= new Float64Array(3)) : null;
-  for (let g = 0; g < nDirect; g++) {
-    const c = curve[g];
-    const Q = g * 12;
-    const Y = c * 12;
-    const o = g * 4;
-    // bones: the vertex's skinned rest position (float64) in place of its base
-    const b = skinned === null ? base : ev.bones.skinVertex(layout.clip.rest, direct.vertex[g], skinned);
-    const bo = skinned === null ? g * 3 : 0;
-    for (let w = 0; w < 3; w++) {
-      const k = Q + w * 4;
-      const j = Y + w * 4;
-      d[o + w] = b[bo + w] + (q[k] * y[j] + q[k + 1] * y[j + 1] + q[k + 2] * y[j + 2] + q[k + 3] * y[j + 3]);
-    }
-    if (rot !== null) {
-      const x = d[o];
-      const yy = d[o + 1];
-      const z = d[o + 2];
-      const R = c * 9;
-      for (let i = 0; i < 3; i++) {
-        d[o + i] = rot[R + i * 3] * x + rot[R + i * 3 + 1] * yy + rot[R + i * 3 + 2] * z + trans[c * 3 + i];
-      }
-    }
-  }
   const K = layout.curveTexels * 4;
   for (let c = 0; c < layout.nCurves; c++) {
     const cg = gpuCurve[c];
@@ -581,10 +730,45 @@ function writeFrame(layout, ev, seg, d) {
   }
 }
 
-/** The bones' rows [R_b | c_b + T_b - R_b c_b] at the evaluator's time into d from texel layout.boneTexel. */
-function writeBones(layout, ev, d) {
+/**
+ * Each direct vertex's position (basis row . its curve's coefficients y + base, then its curve's rigid motion,
+ * in float64) into d from value o (a texel per vertex).
+ */
+function writeDirect(layout, ev, y, d, o) {
+  const { nDirect, direct } = layout;
+  const { q, base, curve } = direct;
+  const rot = layout.rigid ? ev.rot : null;
+  const trans = layout.rigid ? ev.trans : null;
+  const skinned = layout.bones ? (layout.skinScratch ??= new Float64Array(3)) : null;
+  for (let g = 0; g < nDirect; g++) {
+    const c = curve[g];
+    const Q = g * 12;
+    const Y = c * 12;
+    const p = o + g * 4;
+    // bones: the vertex's skinned rest position (float64) in place of its base
+    const b = skinned === null ? base : ev.bones.skinVertex(layout.clip.rest, direct.vertex[g], skinned);
+    const bo = skinned === null ? g * 3 : 0;
+    for (let w = 0; w < 3; w++) {
+      const k = Q + w * 4;
+      const j = Y + w * 4;
+      d[p + w] = b[bo + w] + (q[k] * y[j] + q[k + 1] * y[j + 1] + q[k + 2] * y[j + 2] + q[k + 3] * y[j + 3]);
+    }
+    if (rot !== null) {
+      const x = d[p];
+      const yy = d[p + 1];
+      const z = d[p + 2];
+      const R = c * 9;
+      for (let i = 0; i < 3; i++) {
+        d[p + i] = rot[R + i * 3] * x + rot[R + i * 3 + 1] * yy + rot[R + i * 3 + 2] * z + trans[c * 3 + i];
+      }
+    }
+  }
+}
+
+/** The bones' rows [R_b | c_b + T_b - R_b c_b] at the evaluator's time into d from texel `texel`. */
+function writeBones(layout, ev, d, texel) {
   const rows = ev.bones.affine((layout.boneRows ??= new Float64Array(layout.nBones * 12)));
-  d.set(rows, layout.boneTexel * 4);
+  d.set(rows, texel * 4);
 }
 
 /** A mesh normal within this angle (cos) of its clip vertex's area-weighted rest normal is smooth-shaded. */

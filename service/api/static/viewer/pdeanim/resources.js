@@ -1,11 +1,23 @@
 // The GPU state of a clip in three.js. ClipResources: what does not depend on time (the vertex data texture,
 // constant uniforms, the CPU evaluator), one per clip (and texture width) whatever the number of players,
-// reference-counted and freed with its last player. FrameTables: the per-frame table at one player's time
-// (or, for an instanced crowd, one table per distinct time offset in one texture).
+// reference-counted and freed with its last player. FrameTables: the clip at one player's time (or, for an
+// instanced crowd, at each distinct time offset). One player alone has a per-frame table (every curve's
+// coefficients at its time, evaluated on the CPU); once players show distinct times (a second FrameTables,
+// or an instanced crowd), the clip turns into its crowd form: one shared knot table (gpu.js knotTables) and
+// per time a row of a few texels (segment, time pairs: gpu.js crowdRow) in one shared texture, the atlas.
 
 import { DataTexture, FloatType, NearestFilter, RGBAFormat } from 'three';
 import { createEvaluator } from './clip.js';
-import { TEXTURE_WIDTH, frameTexels, frameView, gpuLayout, timeUniforms } from './gpu.js';
+import {
+  TEXTURE_WIDTH,
+  crowdRow,
+  frameTexels,
+  frameView,
+  gpuLayout,
+  knotTables,
+  timeRow,
+  timeUniforms,
+} from './gpu.js';
 
 function dataTexture(t) {
   const tex = new DataTexture(t.data, t.width, t.height, RGBAFormat, FloatType);
@@ -58,9 +70,114 @@ export class ClipResources {
       pdeAxis: { value: L.axis ? [...L.axis] : [1, 0, 0] },
       pdeBend: { value: L.bend ? [...L.bend] : [0, 1, 0] },
       pdeRotate: { value: Boolean(L.rotate) },
+      // the crowd form's (set by toCrowd)
+      pdeKnotTex: { value: null },
+      pdeKnotCurves: { value: 0 },
+      pdeKnotTangents: { value: 0 },
+      pdeMuTexel: { value: 0 },
+      pdeTimeTexel: { value: 0 },
+      pdeRigidTexel: { value: 0 },
+      pdeRigidKnots: { value: 0 },
+      pdeRigidMu: { value: 0 },
+      pdeDirectTexel: { value: 0 },
     };
     this.users = 0;
     this._key = null;
+    /** The per-time tables made on these resources (FrameTables register and unregister). */
+    this.tables = new Set();
+    /** The crowd form once players show distinct times: {table, texture, row, atlas}; null before. */
+    this.crowd = null;
+    this._crowdReason = undefined;
+  }
+
+  /** Why the clip cannot take its crowd form (null when it can): cyclic clips, no GPU, too large a table. */
+  get crowdReason() {
+    if (this._crowdReason !== undefined) return this._crowdReason;
+    const L = this.layout;
+    if (this.gpuReason) this._crowdReason = this.gpuReason;
+    else if (L.kind === 'cyclic-spine') this._crowdReason = 'cyclic clips keep their per-player uniforms';
+    else {
+      const table = knotTables(L, this.limit);
+      this._crowdReason =
+        table.height > this.limit ? `the clip's knot table needs ${table.height} rows (limit ${this.limit})` : null;
+      if (this._crowdReason === null) this._knots = table;
+    }
+    return this._crowdReason;
+  }
+
+  /**
+   * Take the crowd form (once; the tables registered so far switch to it): the shared knot table and the
+   * atlas of time rows. Returns whether the clip is in it.
+   */
+  toCrowd() {
+    if (this.crowd) return true;
+    if (this.crowdReason !== null) return false;
+    const table = this._knots;
+    this._knots = null;
+    const row = crowdRow(this.layout);
+    this.crowd = { table, texture: dataTexture(table), row, atlas: { slots: [], data: null, texture: null } };
+    const u = this.uniforms;
+    u.pdeKnotTex.value = this.crowd.texture;
+    u.pdeKnotCurves.value = table.curves;
+    u.pdeKnotTangents.value = table.tangentTexel;
+    u.pdeMuTexel.value = table.muTexel;
+    u.pdeTimeTexel.value = row.timeTexel;
+    u.pdeRigidTexel.value = row.rigidTexel;
+    u.pdeRigidKnots.value = table.rigidKnotTexel;
+    u.pdeRigidMu.value = table.rigidMuTexel;
+    u.pdeDirectTexel.value = table.directTexel;
+    this._growAtlas(this.tables.size);
+    for (const t of [...this.tables]) t._toCrowd();
+    return true;
+  }
+
+  /** The atlas with room for `slots` time rows (doubling; rows of the layout's width); adding: the rows asked for. */
+  _growAtlas(slots, adding = slots) {
+    const { atlas, row } = this.crowd;
+    const width = this.layout.width;
+    let capacity = Math.max(4, atlas.slots.length);
+    while (capacity < slots) capacity *= 2;
+    // the last doubling may not fit where the rows needed do
+    const rows = (n) => Math.ceil((n * row.texels) / width);
+    if (rows(capacity) > this.limit) capacity = Math.max(slots, Math.floor((this.limit * width) / row.texels));
+    const height = rows(capacity);
+    if (height > this.limit) {
+      throw new RangeError(
+        `${adding} distinct time offsets need a ${rows(slots)}-row table with the clip's other players' ` +
+          `${slots - adding} (limit ${this.limit})`,
+      );
+    }
+    if (capacity === atlas.slots.length && atlas.texture) return;
+    const data = new Float32Array(width * height * 4);
+    if (atlas.data) data.set(atlas.data);
+    const old = atlas.texture;
+    atlas.data = data;
+    atlas.texture = dataTexture({ data, width, height });
+    while (atlas.slots.length < capacity) atlas.slots.push(null);
+    for (const t of this.tables) if (t.crowd) t.uniforms.pdeFrameTex.value = atlas.texture;
+    old?.dispose();
+  }
+
+  /** count consecutive free time rows of the atlas for owner; returns the first. */
+  _allocate(owner, count) {
+    const { atlas } = this.crowd;
+    for (;;) {
+      for (let i = 0, run = 0; i < atlas.slots.length; i++) {
+        run = atlas.slots[i] === null ? run + 1 : 0;
+        if (run === count) {
+          const first = i - count + 1;
+          atlas.slots.fill(owner, first, i + 1);
+          return first;
+        }
+      }
+      this._growAtlas(atlas.slots.filter((o) => o !== null).length + count, count);
+    }
+  }
+
+  /** Free the time rows of owner. */
+  _free(owner) {
+    const { slots } = this.crowd.atlas;
+    for (let i = 0; i < slots.length; i++) if (slots[i] === owner) slots[i] = null;
   }
 
   /** The clip's shared resources for these options (made on first use), retained for the caller. */
@@ -90,62 +207,140 @@ export class ClipResources {
     if (this._key !== null && CACHE.get(this.clip)?.get(this._key) === this) CACHE.get(this.clip).delete(this._key);
   }
 
-  /** Bytes of the shared data textures (counted once per clip, whatever the players). */
+  /**
+   * Bytes of the shared data textures (counted once per clip, whatever the players): the vertex records, the
+   * normal rings and, in the crowd form, the knot table.
+   */
   get sharedBytes() {
-    return this.layout.textures.vertex.data.byteLength + (this.layout.textures.ring?.data.byteLength ?? 0);
+    const knots = this.crowd ? this.crowd.table.data.byteLength : 0;
+    return this.layout.textures.vertex.data.byteLength + (this.layout.textures.ring?.data.byteLength ?? 0) + knots;
   }
 
-  /** Bytes of the clip's data textures for one player: the shared texture and one per-frame table. */
+  /** Bytes of the crowd form's atlas of time rows (all of it, free rows included; 0 before the crowd form). */
+  get atlasBytes() {
+    return this.crowd ? this.crowd.atlas.data.byteLength : 0;
+  }
+
+  /** Bytes of the clip's data textures for one player: the shared textures and one per-frame table (or time row). */
   get textureBytes() {
+    if (this.crowd) return this.sharedBytes + this.crowd.row.texels * 16;
     return this.sharedBytes + (this.layout.textures.frame?.data.byteLength ?? 0);
   }
 
   dispose() {
     for (const tex of Object.values(this.textures)) tex.dispose();
+    this.crowd?.texture.dispose();
+    this.crowd?.atlas.texture?.dispose();
+    this.crowd = null;
   }
 }
 
 /**
- * The per-frame table(s) of a clip at a player's time, with their uniforms. offsets (optional): time offsets
- * of the slots of an instanced crowd (one table per distinct offset, in one texture: slot k shows t +
- * offsets[k], wrapped for looping clips, clamped to [0, 1] for the others). Shared by the meshes of a scene
- * (retain/release); the evaluation pass, when a player uses one, is made here (pass) as it shows this time.
+ * A clip at a player's time, with its uniforms. offsets (optional): time offsets of the slots of an instanced
+ * crowd (slot k shows t + offsets[k], wrapped for looping clips, clamped to [0, 1] for the others). Shared by
+ * the meshes of a scene (retain/release). Two forms: a per-frame table of every curve's coefficients (one
+ * player alone; the evaluation pass, when a player uses one, is made here, as it shows this time), or, in
+ * the clip's crowd form (ClipResources.toCrowd: when a second FrameTables of the clip is made, or offsets are
+ * given), a time row per slot in the clip's shared atlas. crowd: false keeps the per-frame table (a backend
+ * whose shaders do not read the crowd form). onChange(fn): fn() runs when the form changes (the players
+ * recompile their materials).
  */
 export class FrameTables {
-  constructor(resources, { offsets = null } = {}) {
+  constructor(resources, { offsets = null, crowd = true } = {}) {
     const L = resources.layout;
     this.resources = resources;
     this.offsets = offsets ? Float64Array.from(offsets) : Float64Array.of(0);
     this.slots = offsets !== null;
     this.stride = frameTexels(L);
-    const cyclic = L.kind === 'cyclic-spine';
-    this.texture = null;
+    this.cyclic = L.kind === 'cyclic-spine';
+    this.crowd = false;
+    /** Whether the players' backend reads the crowd form (else this keeps its per-frame table). */
+    this.crowdCapable = crowd;
+    this._texture = null;
     this.views = [];
-    if (!cyclic || this.slots) {
-      const texels = this.stride * this.offsets.length;
-      const height = Math.max(1, Math.ceil(texels / L.width));
-      if (height > resources.limit) {
-        throw new RangeError(
-          `${this.offsets.length} distinct time offsets need a ${height}-row table (limit ${resources.limit})`,
-        );
-      }
-      const data = new Float32Array(L.width * height * 4);
-      this.texture = dataTexture({ data, width: L.width, height });
-      const n = this.stride * 4;
-      if (!cyclic) this.views = [...this.offsets].map((_, k) => frameView(L, data.subarray(k * n, (k + 1) * n)));
-    }
     this.uniforms = {
       pdeSeg: { value: 0 },
       pdeSinWt: { value: 0 },
       pdeCosWt: { value: 1 },
-      pdeFrameTex: { value: this.texture },
+      pdeFrameTex: { value: null },
       pdeSlotTexels: { value: this.stride },
+      pdeFrameOffset: { value: 0 },
+      pdeBones: { value: L.boneTexel ?? 0 },
     };
     /** Bumped whenever the tables change (an evaluation pass reruns then). */
     this.version = 0;
     this.users = 0;
     this.pass = null;
     this._lastT = null;
+    this._listeners = new Set();
+    this.first = -1; // the crowd form's first atlas row
+    resources.tables.add(this);
+    try {
+      const others = [...resources.tables].filter((x) => x.crowdCapable).length;
+      const crowd = this.crowdCapable && !this.cyclic && (this.slots || resources.crowd !== null || others >= 2);
+      // (toCrowd switches every registered table, this one included)
+      if (crowd && resources.toCrowd()) this._toCrowd();
+      else this._ownTable();
+    } catch (e) {
+      resources.tables.delete(this);
+      if (this.crowd) resources._free(this);
+      throw e;
+    }
+  }
+
+  /** The per-frame table of one player alone (every curve's coefficients; cyclic: a slot's sine and cosine). */
+  _ownTable() {
+    const L = this.resources.layout;
+    if (this.cyclic && !this.slots) return;
+    const texels = this.stride * this.offsets.length;
+    const height = Math.max(1, Math.ceil(texels / L.width));
+    if (height > this.resources.limit) {
+      throw new RangeError(
+        `${this.offsets.length} distinct time offsets need a ${height}-row table (limit ${this.resources.limit})`,
+      );
+    }
+    const data = new Float32Array(L.width * height * 4);
+    this._texture = dataTexture({ data, width: L.width, height });
+    this.uniforms.pdeFrameTex.value = this._texture;
+    const n = this.stride * 4;
+    if (!this.cyclic) this.views = [...this.offsets].map((_, k) => frameView(L, data.subarray(k * n, (k + 1) * n)));
+  }
+
+  /** Move to the clip's crowd form (ClipResources.toCrowd): time rows in the shared atlas. */
+  _toCrowd() {
+    if (this.crowd || !this.crowdCapable || this.cyclic) return;
+    const res = this.resources;
+    const L = res.layout;
+    this.first = res._allocate(this, this.offsets.length);
+    this.crowd = true;
+    this._texture?.dispose();
+    this._texture = null;
+    this.pass?.dispose();
+    this.pass = null;
+    // a view per slot: its own record of the time written (the CPU evaluator and knot rows are shared)
+    this.views = [...this.offsets].map(() => frameView(L));
+    const { row, atlas } = res.crowd;
+    Object.assign(this, { row });
+    this.uniforms.pdeFrameTex.value = atlas.texture;
+    this.uniforms.pdeSlotTexels.value = row.texels;
+    this.uniforms.pdeFrameOffset.value = this.first * row.texels;
+    this.uniforms.pdeBones.value = row.boneTexel;
+    const t = this._lastT;
+    this._lastT = null;
+    if (t !== null) this.frame(t);
+    this.version++;
+    for (const fn of [...this._listeners]) fn();
+  }
+
+  /** The texture the shaders read: this table, or in the crowd form the clip's atlas (null: cyclic, one player). */
+  get texture() {
+    return this.crowd ? (this.resources.crowd?.atlas.texture ?? null) : this._texture;
+  }
+
+  /** Run fn() when the form changes (returns a function that stops it). */
+  onChange(fn) {
+    this._listeners.add(fn);
+    return () => this._listeners.delete(fn);
   }
 
   retain() {
@@ -157,36 +352,47 @@ export class FrameTables {
     if (--this.users === 0) this.dispose();
   }
 
-  /** Bytes of the table texture and of the evaluation pass's texture (what this time costs on the GPU). */
+  /**
+   * Bytes this time costs on the GPU: the per-frame table and the evaluation pass's texture, or in the crowd
+   * form this table's time rows in the atlas.
+   */
   get bytes() {
-    return (this.texture?.image.data.byteLength ?? 0) + (this.pass?.bytes ?? 0);
+    if (this.crowd) return this.offsets.length * this.row.texels * 16;
+    return (this._texture?.image.data.byteLength ?? 0) + (this.pass?.bytes ?? 0);
   }
 
   /** Show normalised time t (slots: t + their offsets); a table is rewritten only when its state moved. */
   frame(t) {
     if (t === this._lastT) return;
     const L = this.resources.layout;
-    const looping = L.clip.looping || L.kind === 'cyclic-spine';
+    const looping = L.clip.looping || this.cyclic;
     let changed = false;
+    const atlas = this.crowd ? (this.resources.crowd?.atlas ?? null) : null;
+    if (this.crowd && atlas === null) return; // the clip's resources were freed (its players detached)
     for (let k = 0; k < this.offsets.length; k++) {
       let tk = t + this.offsets[k];
       if (this.slots && !looping) tk = Math.min(Math.max(tk, 0), 1);
+      if (atlas !== null) {
+        changed = timeRow(this.views[k], tk, this.row, atlas.data, (this.first + k) * this.row.texels * 4) || changed;
+        continue;
+      }
       const u = timeUniforms(this.views[k] ?? L, tk);
       if (k === 0) {
         this.uniforms.pdeSeg.value = u.seg;
         this.uniforms.pdeSinWt.value = u.sw;
         this.uniforms.pdeCosWt.value = u.cw;
       }
-      if (this.slots && L.kind === 'cyclic-spine') {
-        this.texture.image.data[k * 4] = u.sw;
-        this.texture.image.data[k * 4 + 1] = u.cw;
+      if (this.slots && this.cyclic) {
+        this._texture.image.data[k * 4] = u.sw;
+        this._texture.image.data[k * 4 + 1] = u.cw;
       }
       changed ||= u.changed;
     }
     this._lastT = t;
     if (changed) {
       this.version++;
-      if (this.texture) this.texture.needsUpdate = true;
+      if (atlas !== null) atlas.texture.needsUpdate = true;
+      else if (this._texture) this._texture.needsUpdate = true;
     }
   }
 
@@ -197,8 +403,12 @@ export class FrameTables {
   }
 
   dispose() {
-    this.texture?.dispose();
+    this._texture?.dispose();
+    this._texture = null;
     this.pass?.dispose();
     this.pass = null;
+    if (this.crowd && this.resources.crowd) this.resources._free(this);
+    this.resources.tables.delete(this);
+    this._listeners.clear();
   }
 }

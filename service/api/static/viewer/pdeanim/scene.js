@@ -18,7 +18,7 @@ const SCENE_OPTIONS = Object.freeze([
  * place of their skinning (mixed by influence); meshes sharing one geometry get their own copy of it.
  * options: as ClipPlayer's (without vertexMap, clipToLocal, resources, frames, timeOffsets), plus
  * filter(mesh) to skip meshes. Scene players of one clip share its data texture (ClipResources.acquire);
- * each has its own time (one per-frame table for its meshes).
+ * each has its own time for its meshes (one per-frame table, or in the clip's crowd form one time row).
  */
 export class ScenePlayer {
   constructor(root, clip, options = {}, backend = webglBackend) {
@@ -44,7 +44,7 @@ export class ScenePlayer {
     this.clip = clip;
     this._options = { ...options };
     this.resources = ClipResources.acquire(clip, rest);
-    this.frames = new FrameTables(this.resources).retain();
+    this.frames = new FrameTables(this.resources, { crowd: backend.crowd === true }).retain();
     const shared = { resources: this.resources, frames: this.frames };
     const seen = new Set();
     let offset = 0;

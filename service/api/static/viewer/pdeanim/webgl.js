@@ -91,6 +91,8 @@ export function isWebGPURenderer(renderer) {
  */
 export const webglBackend = {
   name: 'webgl',
+  /** Its shaders read the clip's crowd form (glsl.js PDEANIM_KNOTS): players at distinct times share the knots. */
+  crowd: true,
   check(renderer) {
     if (isWebGPURenderer(renderer)) throw new Error(WEBGPU_REFUSAL);
   },
@@ -120,16 +122,17 @@ export const webglBackend = {
     }
     const before = original.onBeforeRender;
     // a WebGPURenderer skips onBeforeCompile: refuse at the first frame rather than draw a still mesh
-    mesh.onBeforeRender = function (renderer, ...rest) {
+    // (named parameters, no rest array: this runs for every mesh of a crowd every frame)
+    mesh.onBeforeRender = function (renderer, scene, camera, geometry, material, group) {
       if (isWebGPURenderer(renderer)) throw new Error(WEBGPU_REFUSAL);
       if (player.pass && player.gpu && uniforms.pdeEnabled.value) frames.pass.run(renderer);
-      return before.call(this, renderer, ...rest);
+      return before.call(this, renderer, scene, camera, geometry, material, group);
     };
     if (original.onBeforeShadow) {
       const shadow = original.onBeforeShadow;
-      mesh.onBeforeShadow = function (renderer, ...rest) {
+      mesh.onBeforeShadow = function (renderer, object, camera, shadowCamera, geometry, material, group) {
         if (player.pass && player.gpu && uniforms.pdeEnabled.value) frames.pass.run(renderer);
-        return shadow.call(this, renderer, ...rest);
+        return shadow.call(this, renderer, object, camera, shadowCamera, geometry, material, group);
       };
     }
     const materials = [patched, mesh.customDepthMaterial, mesh.customDistanceMaterial].flat();
@@ -167,7 +170,8 @@ function patchMaterial(material, player) {
     if (previous && previous !== inherited) previous.call(m, shader, renderer);
     Object.assign(shader.uniforms, player.uniforms);
     const { normals, pass, slots } = player;
-    const header = glslHeader(player.layout, { normals, pass, cpu: !player.gpu, slots });
+    const knotWidth = player.crowd ? (player.resources.crowd?.table.width ?? 0) : 0;
+    const header = glslHeader(player.layout, { normals, pass, cpu: !player.gpu, slots, knotWidth });
     shader.vertexShader = patchVertexShader(shader.vertexShader, header);
   };
   const prevKey = material.customProgramCacheKey?.bind(material);
