@@ -110,6 +110,42 @@ def natural_tangents(P: np.ndarray, segment_t: np.ndarray) -> np.ndarray:
     return out
 
 
+def clamped_tangents(P: np.ndarray, segment_t: np.ndarray, first: np.ndarray, last: np.ndarray
+                     ) -> np.ndarray:
+    """Knot tangents (S + 1, ...) float64 of the cubic spline through P (S + 1, ...) at strictly increasing
+    times segment_t whose end tangents are given (``first``, ``last``: float64 like P[0]): rows 1..S-1 of
+    the natural spline's system (docs/format.md §3.5.2) with T_0 and T_S moved to the right-hand side,
+    solved by the Thomas algorithm. A window of a streamable clip (§3.10) given the whole clip's tangents at
+    its ends gets the whole clip's tangents inside, to rounding."""
+    t = np.asarray(segment_t, np.float64)
+    S = len(t) - 1
+    P = np.asarray(P, np.float64)
+    if S < 1 or not np.all(np.diff(t) > 0):
+        raise PdeanimError("spline tangents need at least two strictly increasing knot times")
+    out = np.empty_like(P)
+    out[0], out[S] = first, last
+    if S == 1:
+        return out
+    dx = np.diff(t)
+    d = np.diff(P, axis=0) / dx.reshape(-1, *([1] * (P.ndim - 1)))
+    for j in range(1, S):
+        out[j] = 3.0 * (dx[j] * d[j - 1] + dx[j - 1] * d[j])
+    out[1] -= dx[1] * out[0]  # the known end tangents, on the right-hand side
+    out[S - 1] -= dx[S - 2] * out[S]
+    c = np.empty(S)
+    diag = 2.0 * (dx[0] + dx[1])
+    c[1] = dx[0] / diag  # upper coefficient of row j is dx[j - 1], lower dx[j]
+    out[1] /= diag
+    for j in range(2, S):  # forward elimination over the interior rows
+        piv = 2.0 * (dx[j - 1] + dx[j]) - dx[j] * c[j - 1]
+        c[j] = dx[j - 1] / piv
+        out[j] -= dx[j] * out[j - 1]
+        out[j] /= piv
+    for j in range(S - 2, 0, -1):  # back substitution
+        out[j] -= c[j] * out[j + 1]
+    return out
+
+
 def spline_design(segment_t: np.ndarray, seg: np.ndarray, tau: np.ndarray) -> np.ndarray:
     """(n, S + 1) float64 weights of every knot on the natural-spline cubic at local times tau (n,) in
     segments seg (n,): value = h00 P_s + h01 P_s+1 + delta (h10 T_s + h11 T_s+1), with T = M P."""
