@@ -152,7 +152,7 @@ def window_bounds(segment_t: np.ndarray, frame_times: np.ndarray, knot_windows: 
     forced = set() if knot_windows is None else {int(k) for k in np.asarray(knot_windows)[1:-1]}
     bounds, a = [0], 0
     for k in range(1, S):
-        longer = seconds[k] - seconds[a] >= window_seconds or (
+        longer = seconds[k] - seconds[a] >= window_seconds * (1.0 - 1e-9) or (  # frame times' rounding
             max_window_segments is not None and k - a >= max_window_segments)
         if (k in forced or longer) and seg_t[k] > seg_t[a] and seg_t[S] > seg_t[k]:
             bounds.append(k)
