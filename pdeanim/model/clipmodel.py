@@ -43,11 +43,12 @@ class DynamicClip:
     kind = "dynamic-pde"
 
     def __init__(self, topo: TopologyData, coef: CoefficientData, lazy_segments: bool = False,
-                 end_tangents: np.ndarray | None = None, bone_end_tangents: np.ndarray | None = None):
+                 end_tangents: tuple[np.ndarray | None, np.ndarray | None] | None = None,
+                 bone_end_tangents: np.ndarray | None = None):
         """``lazy_segments``: build each segment's time tables on its first use instead of at load (a block
-        of curves evaluated at a few times, :mod:`pdeanim.model.clipblocks`). ``end_tangents`` (2, C, 3, 4)
-        float64: the spline items' tangent coefficients at the first and last knot, which then clamp the
-        spline instead of the natural end conditions (a window of a streamable clip, docs/format.md §3.10);
+        of curves evaluated at a few times, :mod:`pdeanim.model.clipblocks`). ``end_tangents``: the spline
+        items' tangent coefficients (C, 3, 4) float64 at the first and last knot (None: that end's natural
+        condition), which clamp the spline (a window of a streamable clip, docs/format.md §3.10);
         ``bone_end_tangents`` (2, B, 6) the same for the bone layer's spline channels."""
         self.topo, self.coef = topo, coef
         self._lazy = lazy_segments
@@ -77,10 +78,10 @@ class DynamicClip:
         self._base_flat = self._base.ravel()
         self._init_gather(self._precompute(fam[0] % 2))
         self._tangent_fields = None  # (S+1, V*3) float32 natural-spline tangents of the knot fields (§3.5)
-        if spline.any() and end_tangents is None:
+        if spline.any() and (end_tangents is None or all(e is None for e in end_tangents)):
             self._tangent_fields = _spline_tangent_fields(self._knot_fields, self.segment_t)
         elif spline.any():
-            ends = self._end_fields(fam[0] % 2, np.asarray(end_tangents, np.float64))
+            ends = self._end_fields(fam[0] % 2, end_tangents)
             self._tangent_fields = _clamped_tangent_fields(self._knot_fields, self.segment_t, ends)
 
     def _init_gather(self, knot_fields: np.ndarray) -> None:
@@ -114,11 +115,13 @@ class DynamicClip:
                 B[sel] = space_basis(u[sel][:, None], D[sel], kind)[:, 0, :]
         return B
 
-    def _end_fields(self, space_i: np.ndarray, coefs: np.ndarray) -> np.ndarray:
-        """(2, V * 3) float64 fields of per-item coefficients (2, C, 3, 4) (the end tangents of a window),
-        in float64 and not rounded (docs/format.md §3.10)."""
+    def _end_fields(self, space_i: np.ndarray, coefs: tuple[np.ndarray | None, np.ndarray | None]
+                    ) -> list[np.ndarray | None]:
+        """(V * 3,) float64 fields of per-item coefficients (C, 3, 4) (the end tangents of a window; None
+        stays None), in float64 and not rounded (docs/format.md §3.10)."""
         B = self._vertex_basis(space_i)
-        return np.stack([np.einsum("vwk,vwk->vw", B, c[self._cid]).reshape(-1) for c in coefs])
+        return [None if c is None else np.einsum("vwk,vwk->vw", B, np.asarray(c, np.float64)[self._cid]
+                                                 ).reshape(-1) for c in coefs]
 
     def _precompute(self, space_i: np.ndarray) -> np.ndarray:
         """(S+1, V, 3) float32 per-vertex contribution of every knot."""
@@ -431,13 +434,15 @@ def _spline_tangent_fields(fields: np.ndarray, segment_t: np.ndarray) -> np.ndar
     return out
 
 
-def _clamped_tangent_fields(fields: np.ndarray, segment_t: np.ndarray, ends: np.ndarray) -> np.ndarray:
+def _clamped_tangent_fields(fields: np.ndarray, segment_t: np.ndarray, ends: list[np.ndarray | None]
+                            ) -> np.ndarray:
     """(S+1, V*3) float32 tangents of the float32 knot fields with the given float64 end tangent fields
-    (2, V*3), solved in float64 (docs/format.md §3.10)."""
+    (V*3,) (None: natural end), solved in float64 (docs/format.md §3.10)."""
     out = np.empty_like(fields)
     for a in range(0, fields.shape[1], SPLINE_CHUNK):
         cols = slice(a, a + SPLINE_CHUNK)
-        out[:, cols] = clamped_tangents(fields[:, cols], segment_t, ends[0, cols], ends[1, cols])
+        first, last = (None if e is None else e[cols] for e in ends)
+        out[:, cols] = clamped_tangents(fields[:, cols], segment_t, first, last)
     return out
 
 

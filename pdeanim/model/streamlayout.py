@@ -46,11 +46,12 @@ WINDOW_PART = "coefficients-window"
 DEFAULT_WINDOW_SECONDS = 2.0
 """Source seconds per window when the caller gives none: a 30 fps clip's window then holds 60 knots at most,
 so the window-bound overhead (one knot and two tangent rows) stays a few percent of its bytes."""
-DEFAULT_TANGENT_BITS = 16
-"""Bits below the knot step at which the spline's end tangents are stored: the rounding moves a value by at
-most 0.15 x 2^-17 of a knot step per unit of the space basis, near float32 rounding for usual steps and far
-below the knot's own rounding (half a step). 8 bits left differences of 1e-5 of a clip's size on a test clip
-whose knot steps are coarse (fit-absolute-chord-windows); 16 bits, 6e-8 (float32 rounding)."""
+DEFAULT_TANGENT_BITS = 4
+"""Bits below the knot step at which the spline's end tangents are stored at each inner window bound: the
+rounding moves a value by at most 0.15 x 2^-5 of a knot step per unit of the space basis (5% of the knot's own
+rounding, half a step), near the bound only. Measured on horse-collapse fitted at 3e-3 (windows of 26
+segments): 0 bits 2.6 KB a bound, max difference from the source 1.2e-3 of the diagonal; 4 bits 6.2 KB,
+7.8e-5 (RMS 1.7e-6, 0.07% of the clip's RMS error); 8 bits 11 KB, 6.8e-6; 16 bits 23 KB, 5e-8 (float32)."""
 MAX_TANGENT_BITS = 30
 DECODED_WINDOWS = 4
 """Windows a :class:`StreamClip` keeps decoded (least recently used evicted): memory stays flat however long
@@ -59,9 +60,10 @@ HEAD_ORDER = ("frame_times", "space_kind", "time_model", "D", "knot_weights", "r
               "rigid_centre", "rigid_rot_knots", "rigid_rot_mu", "rigid_trans_knots", "rigid_trans_mu",
               "bone_pivot", "bone_index", "bone_weight", "bone_time_model", "bone_step")
 """The head arrays of a streamable part, in the order they are written (those the clip has)."""
-PER_WINDOW = ("segment_t", "m", "knot_step", "knot_windows", "knots", "knot_basis", "bone_segment_t",
-              "bone_m", "bone_knots")
-"""Arrays of a 1.0/1.1 part that a streamable part holds per window instead."""
+PER_WINDOW = ("segment_t", "m", "knot_windows", "knots", "knot_basis", "bone_segment_t", "bone_m",
+              "bone_knots")
+"""Arrays of a 1.0/1.1 part that a streamable part holds per window instead (``knot_step`` is in the head
+when one step serves every knot, else per window)."""
 _PREFIX = struct.Struct("<8sII")
 
 
@@ -118,12 +120,17 @@ def stream_coefficients(topology: bytes, coefficients: bytes, window_seconds: fl
     order = int(header["knot_differences"])
     rank = int(header["knot_rank"])
     head = {name: arrays[name] for name in HEAD_ORDER if name in arrays}
+    if "knot_windows" not in arrays:  # one step for every knot: once, in the head
+        head["knot_step"] = arrays["knot_step"]
     out = {name: a for name, a in head.items()}
     encodings = {name: container.SMALLEST for name in head}
     index = []
+    tracks = quantise.knot_tracks(codes, order)  # the source's tracks: windows hold consecutive slices
+    last = len(bounds) - 2
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
-        blob, extra = _window(i, a, b, coef, steps, codes, order, rank, arrays, spline, tangents,
-                              tangent_bits, bones, bone_tangents, level)
+        end_tangent = None if tangents is None or i == last else tangents[i + 1]
+        blob, extra = _window(i, a, b, coef, None if "knot_step" in head else steps, tracks, rank, arrays,
+                              spline, end_tangent, tangent_bits, bones, bone_tangents, level, steps)
         out[f"window_{i}"] = np.frombuffer(blob, np.uint8)
         index.append({"array": f"window_{i}", "t": [float(coef.segment_t[a]), float(coef.segment_t[b])],
                       "knots": [int(a), int(b)], **extra})
@@ -204,29 +211,31 @@ def _tangent_codes(T: np.ndarray, h: np.ndarray, delta: float, bits: int) -> tup
     return g.astype(np.int64), bits
 
 
-def _window(i: int, a: int, b: int, coef: CoefficientData, steps: np.ndarray, codes: np.ndarray, order: int,
-            rank: int, arrays: dict[str, np.ndarray], spline: np.ndarray, tangents: np.ndarray | None,
-            tangent_bits: int, bones: EncodedBones | None, bone_tangents: np.ndarray | None, level: int
-            ) -> tuple[bytes, dict[str, Any]]:
-    """(inner container bytes, index keys) of window i over knots a..b."""
+def _window(i: int, a: int, b: int, coef: CoefficientData, window_steps: np.ndarray | None,
+            tracks: np.ndarray, rank: int, arrays: dict[str, np.ndarray], spline: np.ndarray,
+            end_tangent: np.ndarray | None, tangent_bits: int, bones: EncodedBones | None,
+            bone_tangents: np.ndarray | None, level: int, steps: np.ndarray) -> tuple[bytes, dict[str, Any]]:
+    """(inner container bytes, index keys) of window i over knots a..b: the knots after a (window 0: from
+    0) as the next slice of the source's tracks, their steps (``window_steps``; None: the head holds the one
+    step), the tangent at b unless this is the last window."""
     header: dict[str, Any] = {"part": WINDOW_PART, "format_version": STREAM_VERSION, "window": i,
                               "first_knot": int(a), "last_knot": int(b)}
+    first = 0 if i == 0 else a + 1  # the first knot this window stores (knot a is carried in)
     seg_t = np.asarray(coef.segment_t, np.float64)[a:b + 1]
-    m = np.asarray(arrays["m"], np.float32)[a:b]
     out: dict[str, np.ndarray] = {
-        "segment_t": seg_t, "m": m,
-        "knot_step": np.stack([steps[a], steps[b]]).astype(np.float32),
-        "knots": quantise.knot_tracks(codes[a:b + 1], order),
+        "segment_t": seg_t, "m": np.asarray(arrays["m"], np.float32)[a:b],
+        "knots": np.ascontiguousarray(tracks[..., first:b + 1]),
     }
+    if window_steps is not None:  # row 0: knots first..b-1 (unused when there are none), row 1: knot b
+        out["knot_step"] = np.stack([window_steps[first if first < b else b], window_steps[b]]).astype(
+            np.float32)
     if rank:
-        out["knot_basis"] = np.asarray(arrays["knot_basis"], np.float32)[:, a:b + 1]
-    if tangents is not None:  # rows i and i + 1: the tangents at this window's bounds
-        ends = [(np.where(spline[..., None], tangents[i + e], 0.0), steps[(a, b)[e]],
-                 float(seg_t[1] - seg_t[0]) if e == 0 else float(seg_t[-1] - seg_t[-2])) for e in (0, 1)]
-        bits = min(_tangent_codes(T, h, delta, tangent_bits)[1] for T, h, delta in ends)
-        header["tangent_bits"] = bits  # one precision for both ends (lowered only if a code would overflow)
-        out["tangents"] = quantise.zigzag(np.stack([_tangent_codes(T, h, delta, bits)[0]
-                                                    for T, h, delta in ends]))
+        out["knot_basis"] = np.ascontiguousarray(np.asarray(arrays["knot_basis"], np.float32)[:, first:b + 1])
+    if end_tangent is not None:
+        T = np.where(spline[..., None], end_tangent, 0.0)
+        g, bits = _tangent_codes(T, steps[b], float(seg_t[-1] - seg_t[-2]), tangent_bits)
+        header["tangent_bits"] = bits
+        out["tangents"] = quantise.zigzag(g)
     extra: dict[str, Any] = {}
     if bones is not None:
         bst = np.asarray(bones.segment_t, np.float64)
@@ -358,6 +367,33 @@ def _check_index(header: dict[str, Any], entries: dict[str, tuple], data_start: 
     return out
 
 
+@dataclass
+class WindowState:
+    """What a window hands on to the next (§3.10), at its last knot: the integer code p and, with second
+    differences, p - p_prev (the running sums go on), the float32 knot, the spline's tangent coefficients
+    (None: no spline items, or the clip's natural end)."""
+
+    codes: np.ndarray  # (C, 3, 4) int64
+    slopes: np.ndarray | None  # (C, 3, 4) int64, knot_differences 2 only
+    knot: np.ndarray  # (C, 3, 4) float32
+    tangent: np.ndarray | None  # (C, 3, 4) float64
+
+
+@dataclass
+class WindowData:
+    """A decoded window: its coefficients (knots a..b), the spline's end tangents (None: natural) and bone
+    tracks."""
+
+    coef: CoefficientData
+    ends: tuple[np.ndarray | None, np.ndarray | None]
+    bones: EncodedBones | None = None
+    bone_ends: np.ndarray | None = None
+
+    def clip(self, topo: TopologyData) -> DynamicClip:
+        """The window's evaluator."""
+        return DynamicClip(topo, self.coef, end_tangents=self.ends, bone_end_tangents=self.bone_ends)
+
+
 class StreamHead:
     """What a streamable part's windows decode against: the header, the head arrays and the topology."""
 
@@ -388,76 +424,120 @@ class StreamHead:
                      bone_knots=np.zeros((B, CHANNELS, 2), np.uint32))
         return decode_bones(self.header, probe, len(self.topo.rest))
 
-    def window(self, i: int, blob: bytes) -> DynamicClip:
-        """The evaluator of window i from its inner container bytes; raises ClipFormatError."""
+    def window(self, i: int, blob: bytes, state: WindowState | None = None) -> DynamicClip:
+        """The evaluator of window i from its inner container bytes and the state window i-1 hands on (None
+        for window 0, or a window that holds its own start state); raises ClipFormatError."""
+        return self.decode(i, blob, state)[0].clip(self.topo)
+
+    def decode(self, i: int, blob: bytes, state: WindowState | None = None) -> tuple[WindowData, WindowState]:
+        """(window i's decoded data, the state it hands on to window i+1) (§3.10)."""
         w = self.windows[i]
         wh, wa = container.unpack(blob)
         if wh.get("part") != WINDOW_PART:
             raise ClipFormatError(f"window {i} is not a '{WINDOW_PART}' container")
         if (wh.get("window"), wh.get("first_knot"), wh.get("last_knot")) != (i, w.first_knot, w.last_knot):
             raise ClipFormatError(f"damaged stream index: window {i}'s own header disagrees with the index")
-        S = w.last_knot - w.first_knot
+        C, S = self.C, w.last_knot - w.first_knot
+        first = 0 if i == 0 else 1  # local index of the first knot the window stores
+        if i:
+            state = self._own_state(i, wa) or state
+            if state is None:
+                raise ClipFormatError(f"window {i} continues window {i - 1}: decode that one first, or fetch "
+                                      f"window {i} with its start state (the per-window route)")
         header = {k: v for k, v in self.header.items() if k not in ("required", "stream")}
-        header["n_segments"] = S
-        arrays = {**{k: v for k, v in self.head.items() if not k.startswith("bone_")},
-                  **{k: wa[k] for k in ("segment_t", "m", "knots", "knot_basis") if k in wa}}
-        steps = wa.get("knot_step")
-        if steps is None or steps.ndim != 3 or steps.shape[0] != 2:
-            raise ClipFormatError(f"window {i} needs a knot_step array of shape (2, C, 3)")
-        if np.array_equal(steps[0], steps[1]):
-            arrays["knot_step"] = steps[0]
-        elif self.rank:
-            raise ClipFormatError(f"window {i}: knots on a shared basis have one knot step")
-        else:  # the last knot starts the next window of knots (§3.4)
-            arrays["knot_step"] = steps
-            arrays["knot_windows"] = np.array([0, S, S + 1], np.uint32)
-        basis = arrays.pop("knot_basis", None)
-        weights = arrays.pop("knot_weights", None)
-        header["knot_rank"] = 0  # the plain tracks first; the shared basis part below (§3.4)
-        coef = decode_coefficients(header, arrays, self.C)
-        if self.rank:
-            coef.knots = self._basis_knots(i, S, wa, basis, weights, steps[0])
+        header.update(n_segments=S, knot_rank=0)
+        if "knot_step" in wa:
+            steps = _win(wa, "knot_step", (2, C, 3), "<f4", i)
+        elif "knot_step" in self.head:
+            steps = np.broadcast_to(_win(self.head, "knot_step", (C, 3), "<f4", i), (2, C, 3))
+        else:
+            raise ClipFormatError(f"window {i} has no knot_step, nor has the head")
+        if np.any(steps <= 0):
+            raise ClipFormatError(f"window {i}'s knot steps must be positive")
+        tracks = _win(wa, "knots", (C, 3, 4, S + 1 - first), "<u4", i)
+        head = {k: v for k, v in self.head.items() if not k.startswith("bone_") and k != "knot_weights"}
+        arrays = {**head, "segment_t": wa.get("segment_t"), "m": wa.get("m"),
+                  "knot_step": np.ones((C, 3), np.float32),
+                  "knots": np.zeros((C, 3, 4, S + 1), np.uint32)}  # knots decoded below, with the state
+        arrays = {k: v for k, v in arrays.items() if v is not None}
+        coef = decode_coefficients(header, arrays, C)
         if not np.array_equal(coef.segment_t[[0, -1]], [w.t0, w.t1]):
             raise ClipFormatError(f"damaged stream index: window {i}'s segment times do not match its range")
-        ends = self._tangents(i, wh, wa, coef, steps)
-        bone_ends = None
+        order = int(self.header["knot_differences"])
+        codes = self._codes(tracks, order, state)  # (S + 1 - first, C, 3, 4) int64
+        knots = self._knot_values(i, S, first, wa, codes, steps)
+        if i:
+            knots = np.concatenate([state.knot[None], knots])
+        coef.knots = knots
+        spline = coef.spline_items().any()
+        start = state.tangent if (i and spline) else None
+        end = self._end_tangent(i, wh, wa, coef, steps[1]) if spline and i < len(self.windows) - 1 else None
+        data = WindowData(coef, (start, end))
         if self.bones_static is not None:
-            coef.bones, bone_ends = self._window_bones(i, w, wh, wa)
-        return DynamicClip(self.topo, coef, end_tangents=ends, bone_end_tangents=bone_ends)
+            data.bones, data.bone_ends = self._window_bones(i, w, wh, wa)
+            coef.bones = data.bones
+        all_codes = codes if not i else np.concatenate([state.codes[None], codes])
+        slope = None if order == 1 else all_codes[-1] - all_codes[-2]
+        return data, WindowState(all_codes[-1], slope, knots[-1], end)
 
-    def _basis_knots(self, i: int, S: int, wa: dict[str, np.ndarray], basis: np.ndarray | None,
-                     weights: np.ndarray | None, step: np.ndarray) -> np.ndarray:
-        """Window i's knots (S+1, C, 3, 4) on the shared time basis: the head's weights, the window's basis
-        columns and residual tracks (§3.4)."""
-        r, C = self.rank, self.C
-        if not isinstance(r, int) or isinstance(r, bool) or r < 0:
-            raise ClipFormatError(f"coefficients knot_rank must be a non-negative integer, got {r!r}")
-        if weights is None or weights.shape != (r, C, 3, 4) or weights.dtype.str != "<u4":
-            raise ClipFormatError(f"a streamable part of knot_rank {r} needs knot_weights ({r}, {C}, 3, 4)")
-        basis = _win({"knot_basis": basis} if basis is not None else {}, "knot_basis", (r, S + 1), "<f4", i)
-        codes = quantise.decode_knot_tracks(wa["knots"], int(self.header["knot_differences"]))
-        knots = knots_from_basis(quantise.unzigzag(weights), codes, step, basis)
-        if not np.all(np.isfinite(knots)) or (knots.size and not np.abs(knots).max() <= VALUE_LIMIT):
-            raise ClipFormatError(f"window {i}'s knots decode to non-finite values or values above 2^96")
-        return knots
-
-    def _tangents(self, i: int, wh: dict[str, Any], wa: dict[str, np.ndarray], coef: CoefficientData,
-                  steps: np.ndarray) -> np.ndarray | None:
-        """(2, C, 3, 4) float64 end tangent coefficients of window i's spline items (§3.10)."""
-        if not coef.spline_items().any():
+    def _own_state(self, i: int, wa: dict[str, np.ndarray]) -> WindowState | None:
+        """The start state window i holds itself (``start_*`` arrays, §3.10), or None."""
+        if "start_codes" not in wa:
             return None
-        g = wa.get("tangents")
-        if g is None or g.shape != (2, self.C, 3, 4) or g.dtype.str != "<u4":
-            raise ClipFormatError(f"window {i} has spline items and needs tangents (2, {self.C}, 3, 4) "
-                                  "uint32")
+        C = self.C
+        codes = quantise.unzigzag(_win(wa, "start_codes", (C, 3, 4), "<u4", i))
+        slope = None
+        if int(self.header["knot_differences"]) == 2:
+            slope = quantise.unzigzag(_win(wa, "start_slopes", (C, 3, 4), "<u4", i))
+        knot = _win(wa, "start_knot", (C, 3, 4), "<f4", i)
+        _bounded_knots(knot, i)
+        tangent = None
+        if np.any(np.asarray(self.head.get("time_model", 0)) == TIME_SPLINE):
+            tangent = _win(wa, "start_tangents", (C, 3, 4), "<f8", i)
+        return WindowState(codes, slope, np.array(knot), None if tangent is None else np.array(tangent))
+
+    @staticmethod
+    def _codes(tracks: np.ndarray, order: int, state: WindowState | None) -> np.ndarray:
+        """Integer knot codes (n, C, 3, 4) of a window's tracks, the running sums continuing from
+        ``state`` (None: from 0, §3.1)."""
+        d = np.moveaxis(quantise.unzigzag(tracks), -1, 0)  # (n, C, 3, 4) decoded differences
+        if order == 1:
+            return (0 if state is None else state.codes) + np.cumsum(d, axis=0)
+        slopes = (0 if state is None else state.slopes) + np.cumsum(d, axis=0)
+        return (0 if state is None else state.codes) + np.cumsum(slopes, axis=0)
+
+    def _knot_values(self, i: int, S: int, first: int, wa: dict[str, np.ndarray], codes: np.ndarray,
+                     steps: np.ndarray) -> np.ndarray:
+        """float32 knots (S + 1 - first, C, 3, 4) of a window's codes: float32(p x h), with h the step of
+        knot b for the last, or on the shared basis (§3.4)."""
+        r, C = self.rank, self.C
+        n = S + 1 - first
+        if not r:
+            per_knot = np.repeat(steps, [n - 1, 1], axis=0)  # (n, C, 3)
+            knots = quantise.dequantise(codes, per_knot[..., None])
+        else:
+            if not isinstance(r, int) or isinstance(r, bool) or r < 0:
+                raise ClipFormatError(f"coefficients knot_rank must be a non-negative integer, got {r!r}")
+            weights = self.head.get("knot_weights")
+            if weights is None or weights.shape != (r, C, 3, 4) or weights.dtype.str != "<u4":
+                raise ClipFormatError(f"a streamable part of knot_rank {r} needs knot_weights "
+                                      f"({r}, {C}, 3, 4)")
+            if not np.array_equal(steps[0], steps[1]):
+                raise ClipFormatError(f"window {i}: knots on a shared basis have one knot step")
+            basis = _win(wa, "knot_basis", (r, n), "<f4", i)
+            knots = knots_from_basis(quantise.unzigzag(weights), codes, steps[0], basis)
+        return _bounded_knots(knots, i)
+
+    def _end_tangent(self, i: int, wh: dict[str, Any], wa: dict[str, np.ndarray], coef: CoefficientData,
+                     step: np.ndarray) -> np.ndarray:
+        """(C, 3, 4) float64 tangent coefficients of the spline items at window i's last knot (§3.10)."""
+        g = _win(wa, "tangents", (self.C, 3, 4), "<u4", i)
         bits = wh.get("tangent_bits")
         if not isinstance(bits, int) or isinstance(bits, bool) or not 0 <= bits <= MAX_TANGENT_BITS:
             raise ClipFormatError(f"window {i}'s tangent_bits must be an integer in 0..{MAX_TANGENT_BITS}")
         seg = coef.segment_t
-        deltas = np.array([seg[1] - seg[0], seg[-1] - seg[-2]])
-        scale = 2.0 ** -bits
-        h = steps.astype(np.float64)[..., None]  # (2, C, 3, 1)
-        return ((quantise.unzigzag(g).astype(np.float64) * h) * scale) / deltas[:, None, None, None]
+        h = step.astype(np.float64)[..., None]
+        return ((quantise.unzigzag(g).astype(np.float64) * h) * 2.0**-bits) / float(seg[-1] - seg[-2])
 
     def _window_bones(self, i: int, w: WindowEntry, wh: dict[str, Any], wa: dict[str, np.ndarray]
                       ) -> tuple[EncodedBones, np.ndarray | None]:
@@ -483,6 +563,12 @@ class StreamHead:
         if np.any(np.asarray(enc.time_model) == TIME_SPLINE):
             ends = _win(wa, "bone_tangents", (2, B, CHANNELS), "<f8", i)
         return enc, ends
+
+
+def _bounded_knots(knots: np.ndarray, i: int) -> np.ndarray:
+    if not np.all(np.isfinite(knots)) or (knots.size and not np.abs(knots).max() <= VALUE_LIMIT):
+        raise ClipFormatError(f"window {i}'s knots decode to non-finite values or values above 2^96")
+    return knots
 
 
 def _win(arrays: dict[str, np.ndarray], name: str, shape: tuple[int, ...], dtype: str, i: int) -> np.ndarray:
@@ -525,6 +611,7 @@ class StreamClip:
         self.frame_times = self.head.frame_times
         self.looping = bool(header.get("looping", False))
         self._decoded: OrderedDict[int, DynamicClip] = OrderedDict()
+        self._states: dict[int, WindowState] = {}
 
     @classmethod
     def from_prefix(cls, topology: TopologyData, prefix: bytes, max_windows: int = DECODED_WINDOWS
@@ -536,21 +623,59 @@ class StreamClip:
         """How many windows, from window 0 on, have all their bytes."""
         return sum(1 for _ in _while(w.end <= len(self.blob) for w in self.windows))
 
+    def _bytes(self, i: int) -> bytes:
+        w = self.windows[i]
+        if w.end > len(self.blob):
+            raise ClipFormatError(f"window {i} (bytes {w.start}..{w.end}) is not in the {len(self.blob)} "
+                                  f"bytes given (truncated or still downloading)")
+        return bytes(self.blob[w.start:w.end])
+
+    def start_state(self, i: int) -> WindowState | None:
+        """The state window i starts from (None for window 0): handed on by window i - 1, whose own start
+        state is found the same way (states are kept: a few arrays of (C, 3, 4) per window)."""
+        if i == 0:
+            return None
+        j = i
+        while j > 0 and j not in self._states:
+            j -= 1
+        for k in range(j, i):  # decode the knots of the windows between (their fields are not built)
+            _, self._states[k + 1] = self.head.decode(k, self._bytes(k), self._states.get(k))
+        return self._states[i]
+
+    def window_data(self, i: int) -> WindowData:
+        """Window i decoded (knots, tangents, bone tracks), its hand-on state recorded."""
+        data, after = self.head.decode(i, self._bytes(i), self.start_state(i))
+        self._states.setdefault(i + 1, after)
+        return data
+
     def window_clip(self, i: int) -> DynamicClip:
         """The decoded evaluator of window i (decoded now if not held)."""
         clip = self._decoded.get(i)
         if clip is not None:
             self._decoded.move_to_end(i)
             return clip
-        w = self.windows[i]
-        if w.end > len(self.blob):
-            raise ClipFormatError(f"window {i} (bytes {w.start}..{w.end}) is not in the {len(self.blob)} "
-                                  f"bytes given (truncated or still downloading)")
-        clip = self.head.window(i, bytes(self.blob[w.start:w.end]))
+        clip = self.window_data(i).clip(self.head.topo)
         self._decoded[i] = clip
         while len(self._decoded) > self.max_windows:
             self._decoded.popitem(last=False)
         return clip
+
+    def self_contained(self, i: int) -> bytes:
+        """Window i's inner container with its start state added (``start_*`` arrays, §3.10): it then
+        decodes with the head alone (what the per-window HTTP route serves, for a player that seeks)."""
+        blob = self._bytes(i)
+        state = self.start_state(i)
+        if state is None:
+            return blob
+        header, arrays = container.unpack(blob)
+        extra = {"start_codes": quantise.zigzag(state.codes), "start_knot": state.knot.astype(np.float32)}
+        if state.slopes is not None:
+            extra["start_slopes"] = quantise.zigzag(state.slopes)
+        if state.tangent is not None:
+            extra["start_tangents"] = state.tangent.astype(np.float64)
+        encodings = container.array_encodings(blob)
+        encodings.update({name: container.SMALLEST for name in extra})
+        return container.pack(header, {**arrays, **extra}, encodings)
 
     def window_of(self, tw: np.ndarray) -> np.ndarray:
         """Window of every wrapped time (§3.10: the last window whose start is at most tw)."""
