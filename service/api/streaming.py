@@ -26,20 +26,28 @@ _converting: dict[str, threading.Lock] = {}
 _guard = threading.Lock()
 
 
+def stream_tag(coefficients_key: str, window_seconds: float) -> str:
+    """The ETag (unquoted) of a clip's streamable part: its coefficients, the conversion's version and
+    window length (a server with another PDEANIM_STREAM_WINDOW_SECONDS writes other bytes)."""
+    return f"{coefficients_key}-{STREAM_TAG}-{window_seconds:g}s"
+
+
 @dataclass(frozen=True)
 class StreamBody:
     """The streamable part of a clip and the byte range of each window in it."""
 
     body: bytes
     windows: tuple[tuple[int, int], ...]  # (start, end) of every window's inner container
+    window_seconds: float
 
 
 def stream_body(clip_id: str, coefficients_key: str, topology: Callable[[], bytes],
-                coefficients: Callable[[], bytes], cache: BodyCache) -> StreamBody:
-    """The clip's coefficients in the streamable layout: from ``cache`` (key ``("stream", clip_id, ...)``,
-    dropped with the clip), else converted from the stored parts once per process at a time. Raises ApiError
-    422 ``not_streamable`` for a clip kind without time windows."""
-    key = ("stream", clip_id, coefficients_key, STREAM_TAG)
+                coefficients: Callable[[], bytes], cache: BodyCache, window_seconds: float) -> StreamBody:
+    """The clip's coefficients in the streamable layout with windows of ``window_seconds`` (the setting
+    PDEANIM_STREAM_WINDOW_SECONDS): from ``cache`` (key ``("stream", clip_id, ...)``, dropped with the clip),
+    else converted from the stored parts once per process at a time. Raises ApiError 422 ``not_streamable``
+    for a clip kind without time windows."""
+    key = ("stream", clip_id, coefficients_key, STREAM_TAG, window_seconds)
     body = cache.get(key)
     if body is None:
         with _guard:
@@ -47,17 +55,34 @@ def stream_body(clip_id: str, coefficients_key: str, topology: Callable[[], byte
         with lock:
             body = cache.get(key)
             if body is None:
-                body = _convert(topology(), coefficients())
+                body = _convert(topology(), coefficients(), window_seconds)
                 cache.put(key, body)
         with _guard:
             _converting.pop(key[2], None)
     from pdeanim.model.streamlayout import read_index
 
     _, _, windows = read_index(body)
-    return StreamBody(body, tuple((w.start, w.end) for w in windows))
+    return StreamBody(body, tuple((w.start, w.end) for w in windows), window_seconds)
 
 
-def _convert(topology: bytes, coefficients: bytes) -> bytes:
+def window_body(clip_id: str, coefficients_key: str, topology: Callable[[], bytes], stream: StreamBody,
+                index: int, cache: BodyCache) -> bytes:
+    """Window ``index`` of the streamable part with its start state (docs/format.md §3.10): it decodes with
+    the part's head alone, for a player that seeks; kept in ``cache`` (dropped with the clip)."""
+    key = ("stream", clip_id, coefficients_key, STREAM_TAG, stream.window_seconds, "window", index)
+    body = cache.get(key)
+    if body is None:
+        from pdeanim.container import unpack
+        from pdeanim.model.clipformat import decode_topology
+        from pdeanim.model.streamlayout import StreamClip
+
+        clip = StreamClip(decode_topology(*unpack(topology())), stream.body)
+        body = clip.self_contained(index)
+        cache.put(key, body)
+    return body
+
+
+def _convert(topology: bytes, coefficients: bytes, window_seconds: float) -> bytes:
     from pdeanim.container import read_header
     from pdeanim.errors import ParameterError
     from pdeanim.model.streamlayout import stream_coefficients
@@ -67,7 +92,7 @@ def _convert(topology: bytes, coefficients: bytes) -> bytes:
         raise ApiError(422, "not_streamable", f"a {kind!r} clip has no streamable layout (only dynamic-pde "
                                               "clips are cut into windows of time)")
     try:
-        return stream_coefficients(topology, coefficients)
+        return stream_coefficients(topology, coefficients, window_seconds)
     except ParameterError as exc:
         raise ApiError(422, "not_streamable", str(exc)) from exc
 

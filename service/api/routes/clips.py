@@ -24,7 +24,7 @@ from ..exports import FrameWriter, check_fps, export_job_hint, source_layout_loa
 from ..httpcache import IMMUTABLE, NO_COMPRESSION, etag_matches, immutable_response
 from ..invalidation import not_found
 from ..schemas import ClipOut
-from ..streaming import STREAM_TAG, StreamBody, ranged_response, stream_body
+from ..streaming import StreamBody, ranged_response, stream_body, stream_tag, window_body
 
 router = APIRouter(tags=["clips"])
 GLB = "model/gltf-binary"
@@ -143,27 +143,44 @@ def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session:
     """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form);
     ``layout=stream`` for the streamable layout (dynamic-PDE clips; 422 ``not_streamable`` otherwise)."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    json_form = "application/json" in request.headers.get("accept", "")
+    if layout == "stream" and not json_form and _unchanged(request, row, store, ""):
+        return _not_modified(row, store, "", {"Vary": "Accept"})
     stream = _stream(row, store, request) if layout == "stream" else None
-    if "application/json" in request.headers.get("accept", ""):  # streamed: the text is never held whole
+    if json_form:  # streamed: the text is never held whole
         from pdeanim.container import iter_json
 
-        tag = row.coefficients_key + (f"-{STREAM_TAG}" if stream else "")
+        tag = stream_tag(row.coefficients_key, stream.window_seconds) if stream else row.coefficients_key
         headers = {"ETag": f'"{tag}-json"', "Cache-Control": IMMUTABLE, "Vary": "Accept"}
         if etag_matches(request, headers["ETag"]):
             return Response(status_code=304, headers=headers)
         body = iter_json(stream.body if stream else store.blobs.get(row.coefficients_key))
         return StreamingResponse(body, media_type="application/json", headers=headers)
     if stream is not None:
-        return ranged_response(request, f"{row.coefficients_key}-{STREAM_TAG}", stream.body,
+        return ranged_response(request, stream_tag(row.coefficients_key, stream.window_seconds), stream.body,
                                {"Vary": "Accept", "X-Pdeanim-Windows": str(len(stream.windows))})
     return immutable_response(request, row.coefficients_key, lambda: store.blobs.get(row.coefficients_key),
                               "application/octet-stream", {"Vary": "Accept"})
 
 
+def _unchanged(request: Request, row: ClipRecord, store: Store, suffix: str) -> bool:
+    """Whether If-None-Match names the streamable part's ETag (plus ``suffix``: a window's)."""
+    return etag_matches(request, f'"{stream_tag(row.coefficients_key, store.settings.stream_window_seconds)}'
+                                 f'{suffix}"')
+
+
+def _not_modified(row: ClipRecord, store: Store, suffix: str, headers: dict[str, str]) -> Response:
+    """304 for the streamable part (or a window of it), without converting anything."""
+    tag = stream_tag(row.coefficients_key, store.settings.stream_window_seconds) + suffix
+    return Response(status_code=304, headers={"ETag": f'"{tag}"', "Cache-Control": IMMUTABLE,
+                                              "Accept-Ranges": "bytes", **headers, **NO_COMPRESSION})
+
+
 def _stream(row: ClipRecord, store: Store, request: Request) -> StreamBody:
     """The clip's coefficients in the streamable layout (converted once, kept in the body LRU)."""
     return stream_body(row.id, row.coefficients_key, lambda: store.blobs.get(row.topology_key),
-                       lambda: store.blobs.get(row.coefficients_key), request.app.state.frame_cache)
+                       lambda: store.blobs.get(row.coefficients_key), request.app.state.frame_cache,
+                       store.settings.stream_window_seconds)
 
 
 @router.get("/v1/clips/{clip_id}/coefficients/windows/{index}", operation_id="getClipCoefficientsWindow",
@@ -173,17 +190,21 @@ def _stream(row: ClipRecord, store: Store, request: Request) -> StreamBody:
                        206: STREAM_RESPONSES[206], **responses(304, 401, 404, 416, 422)})
 def get_coefficients_window(clip_id: str, index: int, request: Request, tenant: TenantDep,
                             session: SessionDep, store: StoreDep) -> Response:
-    """One window of the streamable layout (``GET .../coefficients?layout=stream``): exactly the bytes its
-    index entry names, with its own ETag, for a player that seeks (it has the header and index already);
-    404 ``window_not_found`` past the last window."""
+    """One window of the streamable layout (``GET .../coefficients?layout=stream``) with its start state
+    (the ``start_*`` arrays of docs/format.md §3.10), so that it decodes with the part's head alone: for a
+    player that seeks (it has the header, index and head already). Own ETag; 404 ``window_not_found`` past
+    the last window."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    if _unchanged(request, row, store, f"-w{index}"):  # nothing to build for a client that has it
+        return _not_modified(row, store, f"-w{index}", {})
     stream = _stream(row, store, request)
     if not 0 <= index < len(stream.windows):
         raise ApiError(404, "window_not_found", f"clip {clip_id!r} has {len(stream.windows)} windows "
                                                f"(0..{len(stream.windows) - 1}), not {index}")
-    a, b = stream.windows[index]
-    return ranged_response(request, f"{row.coefficients_key}-{STREAM_TAG}-w{index}", stream.body[a:b],
-                           {"X-Pdeanim-Windows": str(len(stream.windows))})
+    tag = f"{stream_tag(row.coefficients_key, stream.window_seconds)}-w{index}"
+    body = window_body(row.id, row.coefficients_key, lambda: store.blobs.get(row.topology_key), stream, index,
+                       request.app.state.frame_cache)
+    return ranged_response(request, tag, body, {"X-Pdeanim-Windows": str(len(stream.windows))})
 
 
 @router.get("/v1/clips/{clip_id}/topology", operation_id="getClipTopology", response_class=Response,
