@@ -30,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def add_window_arguments(p: argparse.ArgumentParser) -> None:
     """The window options shared by ``stream`` and ``fit --layout stream``."""
-    from ..model.streamlayout import DEFAULT_WINDOW_SECONDS
+    from ..model.streamlayout import DEFAULT_TANGENT_BITS, DEFAULT_WINDOW_SECONDS, MAX_TANGENT_BITS
 
     p.add_argument("--window-seconds", type=float, default=DEFAULT_WINDOW_SECONDS, metavar="S",
                    help=f"source seconds per window of the streamable layout (default "
@@ -38,18 +38,26 @@ def add_window_arguments(p: argparse.ArgumentParser) -> None:
                         "bounds")
     p.add_argument("--max-window-segments", type=int, metavar="N",
                    help="at most N time segments per window of the streamable layout")
+    p.add_argument("--tangent-bits", type=int, default=DEFAULT_TANGENT_BITS, metavar="B",
+                   help=f"bits below the knot step of the spline's tangents stored at each window bound, "
+                        f"0..{MAX_TANGENT_BITS} (default {DEFAULT_TANGENT_BITS}: 6 KB a bound on a 8k-vertex "
+                        "clip, values within 1e-4 of the diagonal of the one-piece clip's; 16: float32 "
+                        "rounding, about 4x the bytes)")
 
 
 def streamed(parts, args: argparse.Namespace):  # noqa: ANN001, ANN201 - ClipParts in and out
     """``parts`` in the streamable layout with the window options of ``args``; ParameterError if bad."""
-    from ..model.streamlayout import to_stream
+    from ..model.streamlayout import MAX_TANGENT_BITS, to_stream
 
     seconds = args.window_seconds
     if not (isinstance(seconds, float) and math.isfinite(seconds) and seconds > 0):
         raise ParameterError(f"--window-seconds must be a positive number, got {seconds}")
     if args.max_window_segments is not None and args.max_window_segments < 1:
         raise ParameterError(f"--max-window-segments must be at least 1, got {args.max_window_segments}")
-    return to_stream(parts, window_seconds=seconds, max_window_segments=args.max_window_segments)
+    if not 0 <= args.tangent_bits <= MAX_TANGENT_BITS:
+        raise ParameterError(f"--tangent-bits must lie in 0..{MAX_TANGENT_BITS}, got {args.tangent_bits}")
+    return to_stream(parts, window_seconds=seconds, max_window_segments=args.max_window_segments,
+                     tangent_bits=args.tangent_bits)
 
 
 def run(args: argparse.Namespace) -> int:
