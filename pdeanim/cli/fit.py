@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from ..errors import ParameterError
-from .stream import LAYOUTS, add_window_arguments, streamed
+from .stream import LAYOUTS, add_window_arguments, check_window_arguments, streamed
 
 EXIT_TARGET_NOT_MET = 3
 
@@ -85,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.fps > 0:
         raise ParameterError(f"--fps must be > 0, got {args.fps}")
+    if args.layout == "stream":
+        check_window_arguments(args)
     options = FitOptions(
         target_rms=args.target_rms,
         target_rel_rms=args.target_rel_rms,

@@ -45,9 +45,9 @@ def add_window_arguments(p: argparse.ArgumentParser) -> None:
                         "rounding, about 4x the bytes)")
 
 
-def streamed(parts, args: argparse.Namespace):  # noqa: ANN001, ANN201 - ClipParts in and out
-    """``parts`` in the streamable layout with the window options of ``args``; ParameterError if bad."""
-    from ..model.streamlayout import MAX_TANGENT_BITS, to_stream
+def check_window_arguments(args: argparse.Namespace) -> None:
+    """Raise ParameterError for a bad window option (before any work: a long fit must not end in one)."""
+    from ..model.streamlayout import MAX_TANGENT_BITS
 
     seconds = args.window_seconds
     if not (isinstance(seconds, float) and math.isfinite(seconds) and seconds > 0):
@@ -56,7 +56,14 @@ def streamed(parts, args: argparse.Namespace):  # noqa: ANN001, ANN201 - ClipPar
         raise ParameterError(f"--max-window-segments must be at least 1, got {args.max_window_segments}")
     if not 0 <= args.tangent_bits <= MAX_TANGENT_BITS:
         raise ParameterError(f"--tangent-bits must lie in 0..{MAX_TANGENT_BITS}, got {args.tangent_bits}")
-    return to_stream(parts, window_seconds=seconds, max_window_segments=args.max_window_segments,
+
+
+def streamed(parts, args: argparse.Namespace):  # noqa: ANN001, ANN201 - ClipParts in and out
+    """``parts`` in the streamable layout with the window options of ``args``; ParameterError if bad."""
+    from ..model.streamlayout import to_stream
+
+    check_window_arguments(args)
+    return to_stream(parts, window_seconds=args.window_seconds, max_window_segments=args.max_window_segments,
                      tangent_bits=args.tangent_bits)
 
 
@@ -65,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from ..clip import read_clip_file, write_clip_file
     from ..model.streamlayout import read_index
 
+    check_window_arguments(args)
     parts = read_clip_file(args.clip)
     out = streamed(parts, args)
     write_clip_file(args.out, out)
