@@ -89,10 +89,11 @@ FORMAT_VERSION = "1.0"
 minor versions only add header keys or arrays that a reader may ignore; a new major version is refused."""
 
 
-SUPPORTED_FEATURES = ("bones",)
+SUPPORTED_FEATURES = ("bones", "stream")
 """Features of minor versions this reader implements; a part whose ``required`` lists another is refused
-(docs/format.md §2). "bones" (1.1, §3.9) is read by the dynamic-PDE kind only."""
-FEATURE_KINDS = {"bones": ("dynamic-pde",)}
+(docs/format.md §2). "bones" (1.1, §3.9) and "stream" (1.2, §3.10, the streamable layout) are read by the
+dynamic-PDE kind only."""
+FEATURE_KINDS = {"bones": ("dynamic-pde",), "stream": ("dynamic-pde",)}
 
 
 def check_format_version(header: dict[str, Any], part: str) -> None:

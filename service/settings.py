@@ -95,6 +95,10 @@ class Settings(BaseSettings):
                               "empty = CORS off")
     frame_cache_bytes: int = Field(128 * 1024 * 1024, ge=0, description="encoded frame and animation GLBs "
                                    "kept per API process (LRU by (clip, t) and (clip, fps)); 0 = off")
+    stream_window_seconds: float = Field(2.0, gt=0, le=3600, description="source seconds per window of the "
+                                         "streamable layout served by ``GET .../coefficients?layout=stream`` "
+                                         "(docs/format.md §3.10): shorter windows start playing sooner and "
+                                         "cost a few KB more each")
     key_cache_seconds: float = Field(10.0, ge=0, description="a verified API key is trusted this long "
                                      "without a database query (a revoked key stops working within it; a "
                                      "key in use is re-verified in the background in the second half); "

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..errors import InputError, OutOfMemoryError, ParameterError, PdeanimError
-from . import cyclic, export, fit, frame, simulate
+from . import cyclic, export, fit, frame, simulate, stream
 
 
 class Command(Protocol):
@@ -21,8 +21,8 @@ class Command(Protocol):
     def register(self, subparsers: Any) -> None: ...
 
 
-COMMANDS: tuple[Command, ...] = (simulate, fit, frame, export, cyclic)
-LIBRARY_COMMANDS = frozenset({"simulate", "fit", "frame", "export", "cyclic"})
+COMMANDS: tuple[Command, ...] = (simulate, fit, frame, export, cyclic, stream)
+LIBRARY_COMMANDS = frozenset({"simulate", "fit", "frame", "export", "cyclic", "stream"})
 """Names of the library's sub-commands (their ``--out`` is checked before any work starts)."""
 EXIT_OUT_OF_MEMORY = 4
 """Exit code of a command that ran out of memory (an allocation failed under the process's limit)."""
@@ -34,6 +34,7 @@ MEMORY_ADVICE = {
     "frame": f"ask for fewer times at once (--t), {RAISE_LIMIT}",
     "export": f"export at a lower --fps, {RAISE_LIMIT}",
     "cyclic": f"lower --frames, --curves or --points, {RAISE_LIMIT}",
+    "stream": f"lower --window-seconds, {RAISE_LIMIT}",
 }
 """What would help, per command, when it runs out of memory."""
 

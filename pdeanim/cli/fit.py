@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from ..errors import ParameterError
+from .stream import LAYOUTS, add_window_arguments, check_window_arguments, streamed
 
 EXIT_TARGET_NOT_MET = 3
 
@@ -66,6 +67,11 @@ def register(subparsers) -> None:  # noqa: ANN001
                    help=f"exit 0 even when the target is not met (default: exit {EXIT_TARGET_NOT_MET})")
     p.add_argument("--pictures", metavar="DIR",
                    help="also write PNGs: per-vertex error at the worst frame and RMS/max error per frame")
+    p.add_argument("--layout", choices=LAYOUTS, default="whole",
+                   help="'whole' (default): the one-piece coefficients part (format 1.0/1.1); 'stream': "
+                        "windows of time that decode on their own (format 1.2, docs/format.md §3.10), for "
+                        "players that start before the whole clip has downloaded")
+    add_window_arguments(p)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
@@ -79,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.fps > 0:
         raise ParameterError(f"--fps must be > 0, got {args.fps}")
+    if args.layout == "stream":
+        check_window_arguments(args)
     options = FitOptions(
         target_rms=args.target_rms,
         target_rel_rms=args.target_rel_rms,
@@ -111,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if progress is not None:
             progress.close()
+    if args.layout == "stream":
+        parts = streamed(parts, args)
     write_clip_file(args.out, parts)
     print(summary_text(parts.report, time.perf_counter() - start, args.out))
     if args.pictures:

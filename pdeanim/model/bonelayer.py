@@ -29,7 +29,7 @@ from .adaptive import Targets, _split_count, _splits
 from .families import time_pair
 from .rigid import rodrigues
 from .segments import Segmentation, normalised_times, uniform_segmentation
-from .spline import hermite_basis, natural_tangents, prefer_spline
+from .spline import clamped_tangents, hermite_basis, natural_tangents, prefer_spline
 from .timefit import fit_tracks_spline, predict, solve_knots
 
 BONES_FEATURE = "bones"
@@ -114,13 +114,20 @@ class EncodedBones:
 class BoneTracks:
     """The time tracks of an encoded bone layer (§3.9 steps 1-2): knots in float64, their spline tangents."""
 
-    def __init__(self, enc: EncodedBones, looping: bool = False):
+    def __init__(self, enc: EncodedBones, looping: bool = False, end_tangents: np.ndarray | None = None):
+        """``end_tangents`` (2, B, 6) float64: the spline channels' tangents at the first and last knot,
+        clamping the spline (a window of a streamable clip, docs/format.md §3.10); None: natural ends."""
         self.enc, self.looping = enc, bool(looping)
         self.seg_t = np.asarray(enc.segment_t, np.float64)
         B = enc.n_bones
         self.P = enc.knots().astype(np.float64).reshape(len(self.seg_t), B * CHANNELS)
         self.spline = (np.asarray(enc.time_model) == TIME_SPLINE).reshape(-1)
-        self.tangents = natural_tangents(self.P, self.seg_t) if self.spline.any() else None
+        self.tangents = None
+        if self.spline.any() and end_tangents is None:
+            self.tangents = natural_tangents(self.P, self.seg_t)
+        elif self.spline.any():
+            ends = np.asarray(end_tangents, np.float64).reshape(2, B * CHANNELS)
+            self.tangents = clamped_tangents(self.P, self.seg_t, ends[0], ends[1])
         self.mu = np.asarray(enc.mu, np.float32).astype(np.float64).reshape(-1, B * CHANNELS)
 
     def wrap(self, t: np.ndarray) -> np.ndarray:
@@ -155,8 +162,9 @@ class BonePlayer:
     """Evaluates an encoded bone layer on a rest pose, in the order docs/format.md §3.9 gives; the tracks,
     the weights and the rest pose in float64 are prepared once."""
 
-    def __init__(self, enc: EncodedBones, rest: np.ndarray, looping: bool = False):
-        self.enc, self.tracks = enc, BoneTracks(enc, looping)
+    def __init__(self, enc: EncodedBones, rest: np.ndarray, looping: bool = False,
+                 end_tangents: np.ndarray | None = None):
+        self.enc, self.tracks = enc, BoneTracks(enc, looping, end_tangents)
         self.rest = np.asarray(rest, np.float32).astype(np.float64)
         if self.rest.shape != (len(enc.index), 3):
             raise ClipFormatError(f"the bone layer has {len(enc.index)} vertices, the rest pose "

@@ -31,7 +31,7 @@ from .bonelayer import BonePlayer, has_bones
 from .clipformat import CoefficientData, TopologyData, decode_coefficients, decode_topology
 from .families import MU_TRIG_MAX, SPACE_KINDS, space_basis
 from .rigid import RigidTracks
-from .spline import natural_tangents, spline_frame_weights
+from .spline import clamped_tangents, natural_tangents, spline_frame_weights
 from .timefit import SIN_COEF
 
 _ODD = 2.0 * np.arange(len(SIN_COEF)) + 1.0  # (P,) odd powers of the sine series
@@ -42,9 +42,14 @@ class DynamicClip:
 
     kind = "dynamic-pde"
 
-    def __init__(self, topo: TopologyData, coef: CoefficientData, lazy_segments: bool = False):
+    def __init__(self, topo: TopologyData, coef: CoefficientData, lazy_segments: bool = False,
+                 end_tangents: tuple[np.ndarray | None, np.ndarray | None] | None = None,
+                 bone_end_tangents: np.ndarray | None = None):
         """``lazy_segments``: build each segment's time tables on its first use instead of at load (a block
-        of curves evaluated at a few times, :mod:`pdeanim.model.clipblocks`)."""
+        of curves evaluated at a few times, :mod:`pdeanim.model.clipblocks`). ``end_tangents``: the spline
+        items' tangent coefficients (C, 3, 4) float64 at the first and last knot (None: that end's natural
+        condition), which clamp the spline (a window of a streamable clip, docs/format.md §3.10);
+        ``bone_end_tangents`` (2, B, 6) the same for the bone layer's spline channels."""
         self.topo, self.coef = topo, coef
         self._lazy = lazy_segments
         self.n_vertices = int(len(topo.rest))
@@ -62,7 +67,8 @@ class DynamicClip:
         self._cubic_items = [spline] * len(self._mu)  # per segment, the items on the spline (§3.5): all
 
         self._rigid = RigidTracks.from_arrays(coef.extra) if coef.motion == "rigid" else None
-        self.bones = None if coef.bones is None else BonePlayer(coef.bones, topo.rest, self.looping)
+        self.bones = None if coef.bones is None else BonePlayer(coef.bones, topo.rest, self.looping,
+                                                                 bone_end_tangents)
         if coef.motion == "displacement":
             self._base = topo.rest.astype(np.float32)
         elif self._rigid is not None:
@@ -72,8 +78,11 @@ class DynamicClip:
         self._base_flat = self._base.ravel()
         self._init_gather(self._precompute(fam[0] % 2))
         self._tangent_fields = None  # (S+1, V*3) float32 natural-spline tangents of the knot fields (§3.5)
-        if spline.any():
+        if spline.any() and (end_tangents is None or all(e is None for e in end_tangents)):
             self._tangent_fields = _spline_tangent_fields(self._knot_fields, self.segment_t)
+        elif spline.any():
+            ends = self._end_fields(fam[0] % 2, end_tangents)
+            self._tangent_fields = _clamped_tangent_fields(self._knot_fields, self.segment_t, ends)
 
     def _init_gather(self, knot_fields: np.ndarray) -> None:
         """The flat (S+1, V * 3) knot fields and, per segment, the distinct time value of every value (its
@@ -94,8 +103,8 @@ class DynamicClip:
         self._value_code = [b[1] for b in built]
         self._cubic_values = [b[2] for b in built]
 
-    def _precompute(self, space_i: np.ndarray) -> np.ndarray:
-        """(S+1, V, 3) float32 per-vertex contribution of every knot."""
+    def _vertex_basis(self, space_i: np.ndarray) -> np.ndarray:
+        """(V, 3, 4) float64 space basis of every vertex and coordinate (§3.6)."""
         u = self.topo.u.astype(np.float64)  # (V, 3)
         D = self.coef.D.astype(np.float64)[self._cid]  # (V, 3)
         kind_v = space_i[self._cid]  # (V, 3)
@@ -104,6 +113,19 @@ class DynamicClip:
             sel = kind_v == i
             if np.any(sel):
                 B[sel] = space_basis(u[sel][:, None], D[sel], kind)[:, 0, :]
+        return B
+
+    def _end_fields(self, space_i: np.ndarray, coefs: tuple[np.ndarray | None, np.ndarray | None]
+                    ) -> list[np.ndarray | None]:
+        """(V * 3,) float64 fields of per-item coefficients (C, 3, 4) (the end tangents of a window; None
+        stays None), in float64 and not rounded (docs/format.md §3.10)."""
+        B = self._vertex_basis(space_i)
+        return [None if c is None else np.einsum("vwk,vwk->vw", B, np.asarray(c, np.float64)[self._cid]
+                                                 ).reshape(-1) for c in coefs]
+
+    def _precompute(self, space_i: np.ndarray) -> np.ndarray:
+        """(S+1, V, 3) float32 per-vertex contribution of every knot."""
+        B = self._vertex_basis(space_i)
         knots = self.coef.knots
         out = np.empty((len(knots), self.n_vertices, 3), np.float32)
         for s in range(len(knots)):  # one knot at a time keeps the peak memory at (V, 3, 4)
@@ -409,6 +431,18 @@ def _spline_tangent_fields(fields: np.ndarray, segment_t: np.ndarray) -> np.ndar
     out = np.empty_like(fields)
     for a in range(0, fields.shape[1], SPLINE_CHUNK):
         out[:, a:a + SPLINE_CHUNK] = natural_tangents(fields[:, a:a + SPLINE_CHUNK], segment_t)
+    return out
+
+
+def _clamped_tangent_fields(fields: np.ndarray, segment_t: np.ndarray, ends: list[np.ndarray | None]
+                            ) -> np.ndarray:
+    """(S+1, V*3) float32 tangents of the float32 knot fields with the given float64 end tangent fields
+    (V*3,) (None: natural end), solved in float64 (docs/format.md §3.10)."""
+    out = np.empty_like(fields)
+    for a in range(0, fields.shape[1], SPLINE_CHUNK):
+        cols = slice(a, a + SPLINE_CHUNK)
+        first, last = (None if e is None else e[cols] for e in ends)
+        out[:, cols] = clamped_tangents(fields[:, cols], segment_t, first, last)
     return out
 
 

@@ -110,6 +110,48 @@ def natural_tangents(P: np.ndarray, segment_t: np.ndarray) -> np.ndarray:
     return out
 
 
+def clamped_tangents(P: np.ndarray, segment_t: np.ndarray, first: np.ndarray | None,
+                     last: np.ndarray | None) -> np.ndarray:
+    """Knot tangents (S + 1, ...) float64 of the cubic spline through P (S + 1, ...) at strictly increasing
+    times segment_t with the given end tangents (``first``, ``last``: float64 like P[0]; None keeps that
+    end's natural condition, docs/format.md §3.5.2): the natural spline's system with a known end's row
+    replaced by T = value, solved by the Thomas algorithm. A window of a streamable clip (§3.10) given the
+    whole clip's tangents at its ends gets the whole clip's tangents inside, to rounding; with both ends
+    None this is :func:`natural_tangents`."""
+    if first is None and last is None:
+        return natural_tangents(P, segment_t)
+    t = np.asarray(segment_t, np.float64)
+    S = len(t) - 1
+    P = np.asarray(P, np.float64)
+    if S < 1 or not np.all(np.diff(t) > 0):
+        raise PdeanimError("spline tangents need at least two strictly increasing knot times")
+    dx = np.diff(t)
+    d = np.diff(P, axis=0) / dx.reshape(-1, *([1] * (P.ndim - 1)))
+    lower = np.r_[0.0, dx[1:], 1.0]  # coefficient of T_{j-1} in row j
+    diag = np.r_[2.0, 2.0 * (dx[:-1] + dx[1:]), 2.0]
+    upper = np.r_[1.0, dx[:-1], 0.0]  # coefficient of T_{j+1}
+    out = np.empty_like(P)
+    out[0] = 3.0 * d[0]
+    for j in range(1, S):
+        out[j] = 3.0 * (dx[j] * d[j - 1] + dx[j - 1] * d[j])
+    out[S] = 3.0 * d[S - 1]
+    if first is not None:  # row 0 becomes T_0 = first
+        diag[0], upper[0], out[0] = 1.0, 0.0, first
+    if last is not None:  # row S becomes T_S = last
+        diag[S], lower[S], out[S] = 1.0, 0.0, last
+    c = np.empty(S + 1)
+    c[0] = upper[0] / diag[0]
+    out[0] /= diag[0]
+    for j in range(1, S + 1):  # forward elimination
+        piv = diag[j] - lower[j] * c[j - 1]
+        c[j] = upper[j] / piv
+        out[j] -= lower[j] * out[j - 1]
+        out[j] /= piv
+    for j in range(S - 1, -1, -1):  # back substitution
+        out[j] -= c[j] * out[j + 1]
+    return out
+
+
 def spline_design(segment_t: np.ndarray, seg: np.ndarray, tau: np.ndarray) -> np.ndarray:
     """(n, S + 1) float64 weights of every knot on the natural-spline cubic at local times tau (n,) in
     segments seg (n,): value = h00 P_s + h01 P_s+1 + delta (h10 T_s + h11 T_s+1), with T = M P."""

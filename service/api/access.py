@@ -25,6 +25,7 @@ DESCRIPTIONS = {304: "not modified (If-None-Match matched the ETag)", 400: "malf
                 408: "the upload body arrived slower than PDEANIM_UPLOAD_MIN_BYTES_PER_SECOND",
                 409: "conflict with the resource's state (e.g. an export job still running, a finished job)",
                 413: "over a configured limit", 415: "wrong content type",
+                416: "the Range selects no byte of the body (Content-Range: bytes */size)",
                 422: "invalid input or parameters",
                 429: "too many uploads of this tenant or in all at once (Retry-After)",
                 501: "stage not available in this build",

@@ -16,8 +16,9 @@ from .errors import error_body
 GZIP_MINIMUM_BYTES = 1024  # below about a kilobyte the gzip header and the CPU cost outweigh the saving
 GZIP_LEVEL = 6  # zlib's default: most of level 9's ratio on float data at a fraction of its time
 CORS_METHODS = ["GET", "HEAD", "POST", "DELETE", "OPTIONS"]
-CORS_REQUEST_HEADERS = ["Authorization", "Content-Type", "Accept", "If-None-Match"]
-CORS_EXPOSED_HEADERS = ["ETag", "Content-Length", "Content-Encoding", "Location"]
+CORS_REQUEST_HEADERS = ["Authorization", "Content-Type", "Accept", "If-None-Match", "Range", "If-Range"]
+CORS_EXPOSED_HEADERS = ["ETag", "Content-Length", "Content-Encoding", "Location", "Content-Range",
+                        "Accept-Ranges", "X-Pdeanim-Windows"]  # the last three: the streamable layout
 
 
 class JsonErrorCORSMiddleware(CORSMiddleware):

@@ -169,9 +169,15 @@ def bone_manifest(parts: ClipParts) -> dict | None:
     if "bones" not in header.get("required", []):
         return None
     model = arrays["bone_time_model"]
-    curves_zero = not np.any(arrays["knots"])  # zigzag code 0 everywhere: every knot is 0
+    if "stream" in header.get("required", []):  # the streamable layout: knots and bone times per window
+        windows = [container.unpack(arrays[w["array"]].tobytes())[1] for w in header["stream"]["windows"]]
+        curves_zero = not any(np.any(w["knots"]) for w in windows)
+        segments = header["stream"]["windows"][-1]["bone_knots"][1]
+    else:
+        curves_zero = not np.any(arrays["knots"])  # zigzag code 0 everywhere: every knot is 0
+        segments = int(len(arrays["bone_segment_t"]) - 1)
     return {"n_bones": header["n_bones"], "influences": header["bone_influences"],
-            "bone_segments": int(len(arrays["bone_segment_t"]) - 1),
+            "bone_segments": segments,
             "spline_channels": int((model == TIME_SPLINE).sum()), "pair_channels": int((model == 0).sum()),
             "bone_knot_differences": header["bone_knot_differences"],
             "bone_weight_bits": header["bone_weight_bits"], "residual_zero": curves_zero}

@@ -11,8 +11,9 @@ optional features it covers: "-spline" cases have items on the natural-spline ti
 §3.5), "-basis" cases store their knots on a shared low-rank time basis (§3.4), "-pde" cases were fitted with
 the paper's time model alone, "-windows" cases were fitted in windows of frames and store a knot step per
 window (§3.4) (the generator checks that the writer did choose what each covers). "bones-" cases are format
-1.1 with a bone layer (§3.9, :mod:`tests.conformance.bonecases`); ``refused`` lists clips every reader must
-refuse (a ``required`` feature no reader implements).
+1.1 with a bone layer (§3.9, :mod:`tests.conformance.bonecases`); "stream-" cases are format 1.2 conversions
+of other cases to the streamable layout (§3.10). ``refused`` lists clips every reader must refuse (a
+``required`` feature no reader implements), ``damaged`` streamable clips whose index is damaged.
 """
 
 from __future__ import annotations
@@ -32,11 +33,12 @@ from pdeanim.cyclic.job import CyclicOptions, make_cyclic_clip
 from pdeanim.fit import FitOptions, FitTolerances, fit_poses
 from pdeanim.model.clipformat import TIME_SPLINE, CoefficientData, encode_coefficients, encode_topology
 from pdeanim.model.families import MU_TRIG_MAX
+from pdeanim.model.streamlayout import is_stream, to_stream
 from pdeanim.poses import make_poses
 
 from . import bonecases
 
-FIXTURE_VERSION = 11
+FIXTURE_VERSION = 12
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -316,10 +318,63 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "bones-fit-k4-residual": (bonecases.fitted_bone_case(4, 5, residual=True), {}),
 }
 
+def _stream(name: str, window_seconds: float = 0.1) -> Callable[[], ClipParts]:
+    """Case ``name`` in the streamable layout (format 1.2, §3.10), windows of ``window_seconds`` (the
+    sphere's 13 frames last half a second: several windows)."""
+    def make() -> ClipParts:
+        parts = to_stream(CASES[name][0](), window_seconds=window_seconds)
+        return parts
+    return make
+
+
+CASES.update({
+    "stream-fit-displacement-chord": (_stream("fit-displacement-chord", 2.0), {}),  # one window
+    "stream-fit-displacement-chord-windows": (_stream("fit-displacement-chord-windows"), {}),
+    "stream-fit-displacement-chord-smooth-pde": (_stream("fit-displacement-chord-smooth-pde"), {}),
+    "stream-fit-rigid-chord-smooth-spline": (_stream("fit-rigid-chord-smooth-spline"), {}),
+    "stream-synthetic-absolute-paper-loop-spline": (_stream("synthetic-absolute-paper-loop-spline", 0.5), {}),
+    "stream-synthetic-blend-absolute-chord-basis-spline": (
+        _stream("synthetic-blend-absolute-chord-basis-spline", 0.3), {}),
+    "stream-bones-synthetic-k2-residual": (_stream("bones-synthetic-k2-residual"), {}),
+    "stream-bones-synthetic-k3-zero-loop": (_stream("bones-synthetic-k3-zero-loop"), {}),
+})
+"""The "stream-" cases are format 1.2 (feature "stream", docs/format.md §3.10) conversions of other cases: the
+expected positions are the stream clip's (equal to the source's but near inner window bounds of spline
+items, §3.10); their manifest entry has a ``stream`` object."""
+
+
+def _future_stream() -> ClipParts:
+    """A streamable clip that also requires a feature no reader implements."""
+    parts = to_stream(_fit("displacement", "chord", False)(), window_seconds=0.1)
+    coefficients = container.with_header(parts.coefficients, {"required": ["stream", FUTURE_STREAM]})
+    return ClipParts(parts.topology, coefficients)
+
+
+FUTURE_STREAM = "x-future-stream"
+
 REFUSED: dict[str, tuple[Callable[[], ClipParts], str]] = {
     "refused-unknown-feature": (bonecases.unknown_feature_case, bonecases.UNKNOWN_FEATURE),
+    "refused-stream-unknown-feature": (_future_stream, FUTURE_STREAM),
 }
 """Clips every reader must refuse, with the text the refusal names (the feature it lacks)."""
+
+
+def _damaged_index(edit: Callable[[dict], None]) -> Callable[[], ClipParts]:
+    def make() -> ClipParts:
+        parts = to_stream(_fit("displacement", "chord", False)(), window_seconds=0.1)
+        stream = json.loads(json.dumps(container.read_header(parts.coefficients)["stream"]))
+        edit(stream)
+        return ClipParts(parts.topology, container.with_header(parts.coefficients, {"stream": stream}))
+    return make
+
+
+DAMAGED: dict[str, Callable[[], ClipParts]] = {
+    "damaged-stream-offset": _damaged_index(lambda s: s["windows"][1].update(
+        offset=s["windows"][1]["offset"] + 8)),
+    "damaged-stream-times": _damaged_index(lambda s: s["windows"][1]["t"].__setitem__(0, 0.01)),
+}
+"""Streamable clips whose index disagrees with their arrays (a window's byte offset; a window's start time):
+every reader must refuse them, naming a "damaged stream index"."""
 
 
 TOLERANCE_REL_COORDINATE = 2.0**-20
@@ -331,9 +386,14 @@ def case_times(parts: ClipParts) -> list[float]:
     """t = 0 and 1, every segment boundary (rigid ones too), midpoints, clamping or loop wrap."""
     ch, ca = container.unpack(parts.coefficients)
     ts = {0.0, 1.0, 0.37, 0.999}
+    if is_stream(ch):  # the windows' boundaries (each window holds its own)
+        for w in ch["stream"]["windows"]:
+            _, wa = container.unpack(ca[w["array"]].tobytes())
+            ca = {**ca, **{name: np.concatenate([ca.get(name, np.zeros(0)), wa[name]])
+                           for name in ("segment_t", "bone_segment_t") if name in wa}}
     for name in ("segment_t", "rigid_segment_t", "bone_segment_t"):
         if name in ca:
-            b = [float(x) for x in ca[name]]
+            b = sorted({float(x) for x in ca[name]})
             ts.update(b)
             ts.update(0.5 * (x + y) for x, y in zip(b, b[1:], strict=False))
     looping = bool(ch.get("looping", False)) or ch.get("kind") == "cyclic-spine"
@@ -366,14 +426,29 @@ def generate(out: Path, names: list[str] | None = None) -> dict:
             "spline_items": int((ca["time_model"] == TIME_SPLINE).sum()) if "time_model" in ca else None,
             "n_vertices": int(clip.n_vertices), "t": ts,
             "diagonal": float(np.linalg.norm(np.ptp(rest, axis=0))),
-            **({"bones": bones} if (bones := bonecases.bone_manifest(parts)) else {})})
+            **({"bones": bones} if (bones := bonecases.bone_manifest(parts)) else {}),
+            **({"stream": _stream_manifest(ch)} if is_stream(ch) else {})})
     for name, (make, feature) in REFUSED.items():
         if names and name not in names:
             continue
         write_clip_file(out / f"{name}.clip", make())
         manifest.setdefault("refused", []).append({"name": name, "clip": f"{name}.clip", "names": feature})
+    for name, make in DAMAGED.items():
+        if names and name not in names:
+            continue
+        write_clip_file(out / f"{name}.clip", make())
+        manifest.setdefault("damaged", []).append({"name": name, "clip": f"{name}.clip",
+                                                   "message": "damaged stream index"})
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
     return manifest
+
+
+def _stream_manifest(header: dict) -> dict:
+    """The manifest's summary of a streamable case: windows, their knots and times, the carried rules."""
+    windows = header["stream"]["windows"]
+    return {"n_windows": len(windows), "knots": [w["knots"] for w in windows],
+            "t": [w["t"] for w in windows], "knot_differences": header["knot_differences"],
+            "required": header["required"]}
 
 
 def main(argv: list[str] | None = None) -> int:

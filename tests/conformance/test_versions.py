@@ -104,3 +104,26 @@ def test_bones_are_refused_on_a_cyclic_clip():
     topo, coef = _parts("cyclic-eel-standing-rotate")
     with pytest.raises(ClipFormatError, match="kind 'cyclic-spine' requires feature 'bones'"):
         load_clip(topo, _edit(coef, required=["bones"], format_version="1.1"))
+
+
+def test_damaged_stream_indexes_are_refused():
+    import json
+
+    damaged = json.loads((FIXTURES / "manifest.json").read_text())["damaged"]
+    assert damaged, "the fixtures hold streamable clips with a damaged index"
+    for case in damaged:
+        parts = read_clip_file(FIXTURES / case["clip"])  # the CLIP file itself is sound
+        with pytest.raises(ClipFormatError, match=case["message"]):
+            load_clip(parts.topology, parts.coefficients)
+
+
+def test_a_reader_without_stream_refuses_a_stream_clip_by_name(monkeypatch):
+    from pdeanim import clipparts
+
+    topo, coef = _parts("stream-fit-displacement-chord-windows")
+    assert container.read_header(coef)["required"] == ["stream"]
+    monkeypatch.setattr(clipparts, "SUPPORTED_FEATURES", ("bones",))  # a 1.1 reader
+    with pytest.raises(ClipFormatError, match="requires feature.*'stream'.*supports: bones"):
+        load_clip(topo, coef)
+    with pytest.raises(ClipFormatError, match="requires feature.*'stream'"):
+        read_clip_file(FIXTURES / "stream-fit-displacement-chord-windows.clip")

@@ -122,3 +122,28 @@ def test_segment_cap_defaults_to_the_library_default(capsys):
     help_text = " ".join(capsys.readouterr().out.split())
     assert FitOptions().max_segments == DEFAULT_MAX_SEGMENTS
     assert f"(default {DEFAULT_MAX_SEGMENTS}, FitOptions.max_segments" in help_text
+
+
+def test_fit_in_the_streamable_layout(poses_file, tmp_path, monkeypatch, capsys):
+    """``--layout stream``: the clip of the same fit in the streamable layout (format 1.2, docs/format.md
+    §3.10), one window per --max-window-segments segments; it plays as the one-piece clip does."""
+    from pdeanim import container
+
+    whole, stream = tmp_path / "w.clip", tmp_path / "s.clip"
+    assert main(["fit", str(poses_file), "--out", str(whole), "--segments", "4", "--bones", "0"]) == 0
+    assert main(["fit", str(poses_file), "--out", str(stream), "--segments", "4", "--bones", "0",
+                 "--layout", "stream", "--max-window-segments", "2", "--tangent-bits", "16"]) == 0
+    header = container.read_header(read_clip_file(stream).coefficients)
+    assert header["required"] == ["stream"] and header["stream"]["n_windows"] == 2
+    a, b = load_clip_file(whole), load_clip_file(stream)
+    t = np.linspace(0.0, 1.0, 21)
+    np.testing.assert_allclose(b.evaluate(t), a.evaluate(t), rtol=0, atol=1e-5)
+    import pdeanim.fit
+
+    def no_fit(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        raise AssertionError("a bad window option must be refused before the fit starts")
+
+    monkeypatch.setattr(pdeanim.fit, "fit_poses", no_fit)
+    for bad in (["--tangent-bits", "31"], ["--window-seconds", "0"], ["--max-window-segments", "0"]):
+        assert main(["fit", str(poses_file), "--out", str(stream), "--layout", "stream", *bad]) == 2
+        assert bad[0] in capsys.readouterr().err

@@ -41,6 +41,7 @@ def test_openapi_operation_ids_are_stable_and_errors_share_one_shape():
         "getJob",
         "getClip",
         "getClipCoefficients",
+        "getClipCoefficientsWindow",
         "getClipTopology",
         "getClipFrame",
         "getClipAnimation",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from typing import Literal
 
 import numpy as np
 from fastapi import APIRouter, Query, Request, Response
@@ -23,6 +24,7 @@ from ..exports import FrameWriter, check_fps, export_job_hint, source_layout_loa
 from ..httpcache import IMMUTABLE, NO_COMPRESSION, etag_matches, immutable_response
 from ..invalidation import not_found
 from ..schemas import ClipOut
+from ..streaming import StreamBody, ranged_response, stream_body, stream_tag, window_body
 
 router = APIRouter(tags=["clips"])
 GLB = "model/gltf-binary"
@@ -120,24 +122,89 @@ def _info(row: ClipRecord, store: Store, cache) -> dict:  # noqa: ANN001 - a Cli
     return info
 
 
+STREAM_RESPONSES = {
+    200: {"content": {"application/octet-stream": {}, "application/json": {}},
+          "description": "the coefficients part: pdeanim container, or its JSON form"},
+    206: {"content": {"application/octet-stream": {}},
+          "description": "the bytes a single Range selects (layout=stream), with Content-Range"},
+}
+
+
 @router.get("/v1/clips/{clip_id}/coefficients", operation_id="getClipCoefficients", response_class=Response,
-            responses={200: {"content": {"application/octet-stream": {}, "application/json": {}},
-                             "description": "the coefficients part: pdeanim container, or its JSON form"},
-                       **responses(304, 401, 404, 422)})
+            responses={**STREAM_RESPONSES, **responses(304, 401, 404, 416, 422)})
 def get_coefficients(clip_id: str, request: Request, tenant: TenantDep, session: SessionDep,
-                     store: StoreDep) -> Response:
-    """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form)."""
+                     store: StoreDep,
+                     layout: Literal["whole", "stream"] = Query(
+                         "whole", description="'whole' (default): the part as stored (format 1.0/1.1); "
+                         "'stream': the streamable layout (format 1.2, feature 'stream'): windows of time "
+                         "that decode on their own, in time order after the header and index, served with "
+                         "byte ranges (Range, 206, 416) and per window at .../coefficients/windows/{index}"),
+                     ) -> Response:
+    """The compact coefficient set (binary container; ``Accept: application/json`` for the JSON form);
+    ``layout=stream`` for the streamable layout (dynamic-PDE clips; 422 ``not_streamable`` otherwise)."""
     row = owned(session, ClipRecord, clip_id, tenant, "clip")
-    if "application/json" in request.headers.get("accept", ""):  # streamed: the text is never held whole
+    json_form = "application/json" in request.headers.get("accept", "")
+    if layout == "stream" and not json_form and _unchanged(request, row, store, ""):
+        return _not_modified(row, store, "", {"Vary": "Accept"})
+    stream = _stream(row, store, request) if layout == "stream" else None
+    if json_form:  # streamed: the text is never held whole
         from pdeanim.container import iter_json
 
-        headers = {"ETag": f'"{row.coefficients_key}-json"', "Cache-Control": IMMUTABLE, "Vary": "Accept"}
+        tag = stream_tag(row.coefficients_key, stream.window_seconds) if stream else row.coefficients_key
+        headers = {"ETag": f'"{tag}-json"', "Cache-Control": IMMUTABLE, "Vary": "Accept"}
         if etag_matches(request, headers["ETag"]):
             return Response(status_code=304, headers=headers)
-        body = iter_json(store.blobs.get(row.coefficients_key))
+        body = iter_json(stream.body if stream else store.blobs.get(row.coefficients_key))
         return StreamingResponse(body, media_type="application/json", headers=headers)
+    if stream is not None:
+        return ranged_response(request, stream_tag(row.coefficients_key, stream.window_seconds), stream.body,
+                               {"Vary": "Accept", "X-Pdeanim-Windows": str(len(stream.windows))})
     return immutable_response(request, row.coefficients_key, lambda: store.blobs.get(row.coefficients_key),
                               "application/octet-stream", {"Vary": "Accept"})
+
+
+def _unchanged(request: Request, row: ClipRecord, store: Store, suffix: str) -> bool:
+    """Whether If-None-Match names the streamable part's ETag (plus ``suffix``: a window's)."""
+    return etag_matches(request, f'"{stream_tag(row.coefficients_key, store.settings.stream_window_seconds)}'
+                                 f'{suffix}"')
+
+
+def _not_modified(row: ClipRecord, store: Store, suffix: str, headers: dict[str, str]) -> Response:
+    """304 for the streamable part (or a window of it), without converting anything."""
+    tag = stream_tag(row.coefficients_key, store.settings.stream_window_seconds) + suffix
+    return Response(status_code=304, headers={"ETag": f'"{tag}"', "Cache-Control": IMMUTABLE,
+                                              "Accept-Ranges": "bytes", **headers, **NO_COMPRESSION})
+
+
+def _stream(row: ClipRecord, store: Store, request: Request) -> StreamBody:
+    """The clip's coefficients in the streamable layout (converted once, kept in the body LRU)."""
+    return stream_body(row.id, row.coefficients_key, lambda: store.blobs.get(row.topology_key),
+                       lambda: store.blobs.get(row.coefficients_key), request.app.state.frame_cache,
+                       store.settings.stream_window_seconds)
+
+
+@router.get("/v1/clips/{clip_id}/coefficients/windows/{index}", operation_id="getClipCoefficientsWindow",
+            response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}},
+                             "description": "window ``index`` of the streamable layout: its inner container"},
+                       206: STREAM_RESPONSES[206], **responses(304, 401, 404, 416, 422)})
+def get_coefficients_window(clip_id: str, index: int, request: Request, tenant: TenantDep,
+                            session: SessionDep, store: StoreDep) -> Response:
+    """One window of the streamable layout (``GET .../coefficients?layout=stream``) with its start state
+    (the ``start_*`` arrays of docs/format.md §3.10), so that it decodes with the part's head alone: for a
+    player that seeks (it has the header, index and head already). Own ETag; 404 ``window_not_found`` past
+    the last window."""
+    row = owned(session, ClipRecord, clip_id, tenant, "clip")
+    if _unchanged(request, row, store, f"-w{index}"):  # nothing to build for a client that has it
+        return _not_modified(row, store, f"-w{index}", {})
+    stream = _stream(row, store, request)
+    if not 0 <= index < len(stream.windows):
+        raise ApiError(404, "window_not_found", f"clip {clip_id!r} has {len(stream.windows)} windows "
+                                               f"(0..{len(stream.windows) - 1}), not {index}")
+    tag = f"{stream_tag(row.coefficients_key, stream.window_seconds)}-w{index}"
+    body = window_body(row.id, row.coefficients_key, lambda: store.blobs.get(row.topology_key), stream, index,
+                       request.app.state.frame_cache)
+    return ranged_response(request, tag, body, {"X-Pdeanim-Windows": str(len(stream.windows))})
 
 
 @router.get("/v1/clips/{clip_id}/topology", operation_id="getClipTopology", response_class=Response,
