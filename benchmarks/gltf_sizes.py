@@ -221,10 +221,12 @@ def rows(case: Case, args: argparse.Namespace) -> list[float]:
         shape = f"{case.frames.shape[0]} x {case.frames.shape[1]}"
         print(f"{case.label:<21} {kind:<5} {shape:>11} fit rms {fit_rms / extent:.1e} ({case.fit_s:.0f} s)  "
               f"ours {len(ours):>9,} / wire {wire(ours):>9,}  quant rms {ours_rms / extent:.1e} "
-              f"max {ours_max / extent:.1e} (x{ours_rms / fit_rms:.2f} of the fit's rms)  build {build:.2f} s",
+              f"max {ours_max / extent:.1e} (x{ours_rms / fit_rms:.2f} of the fit's rms)  "
+              f"build {build:.2f} s",
               flush=True)
         print(f"{'':<21} {'':<5} {'':>11} gltfpack -cc (default)  {len(default.glb):>9,} / wire "
-              f"{default.wire:>9,}  rms {default.rms / extent:.1e}  ours/gp wire {wire(ours) / default.wire:.2f}",
+              f"{default.wire:>9,}  rms {default.rms / extent:.1e}  "
+              f"ours/gp wire {wire(ours) / default.wire:.2f}",
               flush=True)
         if best is None:
             print(f"{'':<21} {'':<5} {'':>11} gltfpack: no setting meets our error", flush=True)
@@ -232,8 +234,8 @@ def rows(case: Case, args: argparse.Namespace) -> list[float]:
         ratio, file_ratio = wire(ours) / best.wire, len(ours) / len(best.glb)
         ratios.append(ratio)
         print(f"{'':<21} {'':<5} {'':>11} gltfpack best ({best.flags}) {len(best.glb):>9,} / wire "
-              f"{best.wire:>9,}  rms {best.rms / extent:.1e}  ours/gp wire {ratio:.2f} (file {file_ratio:.2f})"
-              f"  goal <= {GOAL}x: {verdict(ratio)}", flush=True)
+              f"{best.wire:>9,}  rms {best.rms / extent:.1e}  ours/gp wire {ratio:.2f} "
+              f"(file {file_ratio:.2f})  goal <= {GOAL}x: {verdict(ratio)}", flush=True)
         if khr is not None:
             print(f"{'':<21} {'':<5} {'':>11} gltfpack KHR ({khr.flags}) {len(khr.glb):>9,} / wire "
                   f"{khr.wire:>9,}  rms {khr.rms / extent:.1e}  ours/gp wire {wire(ours) / khr.wire:.2f} "
@@ -263,15 +265,16 @@ def main() -> int:
     loaders += [lambda n=name: sequence_case(n) for name in args.sequences]
     print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}  load average before: "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    print("rms/max relative to the frames' largest extent; quant = what our export adds to the clip's frames; "
-          f"wire = zstd -{WIRE_LEVEL}; gltfpack best = its smallest wire bytes with an RMS error <= ours")
+    print("rms/max relative to the frames' largest extent; quant = what our export adds to the clip's "
+          f"frames; wire = zstd -{WIRE_LEVEL}; gltfpack best = its smallest wire bytes with an RMS error "
+          "<= ours")
     ratios = []
     for load in loaders:
         ratios += rows(load(), args)
         print(f"  (load average {' '.join(f'{x:.2f}' for x in os.getloadavg())})", flush=True)
     met = sum(r <= GOAL for r in ratios)
-    print(f"goal: default animation GLB <= {GOAL}x gltfpack -cc (best settings, same frames and error, wire): "
-          f"{met}/{len(ratios)} cases, worst {max(ratios, default=float('nan')):.2f}: "
+    print(f"goal: default animation GLB <= {GOAL}x gltfpack -cc (best settings, same frames and error, "
+          f"wire): {met}/{len(ratios)} cases, worst {max(ratios, default=float('nan')):.2f}: "
           f"{'met' if ratios and met == len(ratios) else 'NOT met'}")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0

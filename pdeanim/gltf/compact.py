@@ -38,9 +38,10 @@ class PackOptions:
     axis over the frames' extent (max error half a step) or, with ``position_bits=None``, to the coarsest
     step whose rounding adds an RMS distance of at most ``position_error`` (world units; uniform rounding to
     a step s is s/2 RMS over three axes) while keeping 8..15 bits of the extent (14 bits when
-    ``position_error`` is None too), and normals to bytes, ``compress`` with EXT_meshopt_compression, ``normals`` as per-frame morph deltas (else every
-    frame is lit with the first frame's normals), ``weld`` vertices whose written data are all equal (see
-    :mod:`.weld`; off keeps one vertex per clip vertex, in clip order). A welded primitive's vertices come in
+    ``position_error`` is None too), and normals to bytes, ``compress`` with EXT_meshopt_compression,
+    ``normals`` as per-frame morph deltas (else every frame is lit with the first frame's normals), ``weld``
+    vertices whose written data are all equal (see :mod:`.weld`; off keeps one vertex per clip vertex, in
+    clip order). A welded primitive's vertices come in
     the triangles' fetch order with a ``_PDEANIM_VERTEX`` map to the clip's, also where nothing merged (the
     order alone takes a mesh in capture order to 0.62x, see docs/gltf.md)."""
 
