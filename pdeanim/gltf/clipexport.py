@@ -71,7 +71,7 @@ QUANT_SHARE = 0.25
 """The position grid of a clip export may add an RMS distance of this share of the clip's own RMS error (the
 fit's, stored in the clip): in quadrature that is at most 3% more RMS error than the clip has, and the
 grid's largest rounding (step * sqrt(3) / 2) is 0.43 of the clip's RMS error. On the benchmark's clips fitted
-at the default target that is a step of 0.7-1.6e-3 of the animation's extent (9-10 bits of it, against the
+at the default target that is a step of 0.66-1.6e-3 of the animation's extent (9-11 bits of it, against the
 14 bits every export had before)."""
 
 
