@@ -12,8 +12,15 @@ from pdeanim.cli import main
 from pdeanim.clip import Clip, load_clip, write_clip_file
 from pdeanim.cyclic import job
 from pdeanim.errors import LimitError, ParameterError
-from pdeanim.gltf.clipexport import QUANT_SHARE, clip_animation_glb, clip_frame_glb, export_times
+from pdeanim.gltf.clipexport import (
+    QUANT_SHARE,
+    clip_animation_glb,
+    clip_frame_glb,
+    export_position_error,
+    export_times,
+)
 from pdeanim.gltf.compact import PackOptions
+from pdeanim.gltf.glb import unpack_glb
 from pdeanim.gltf.read import read_animated_poses
 from pdeanim.gltf.validate import assert_clean, validate_many
 from pdeanim.gltf.write import animation_glb
@@ -63,7 +70,7 @@ def test_export_samples_with_last_frame_and_loops_seamlessly(wave):
     want = wave.evaluate(seconds / 1.3)
     shown = clip_vertices(glb)  # spot's UV seams weld: one written vertex for the clip's twins
     assert len(shown) < wave.n_vertices and set(shown) <= set(range(wave.n_vertices))
-    step = float(np.ptp(want.reshape(-1, 3), axis=0).max()) / (2**14 - 1)  # the default 14-bit grid
+    step = float(np.ptp(want.reshape(-1, 3), axis=0).max()) / (2**14 - 1)  # no stored error: 14 bits
     np.testing.assert_allclose(poses.vertices[:-1], want[:-1, shown], atol=step)  # half a step, 2x margin
     np.testing.assert_array_equal(poses.vertices[-1], poses.vertices[0])  # seamless wrap
     once = WaveClip(wave.rest, wave.faces, looping=False)
@@ -99,6 +106,38 @@ def test_cli_export_of_a_real_cyclic_clip(data_dir, tmp_path, capsys):
     poses = read_animated_poses(glb, fps=12)
     np.testing.assert_array_equal(poses.vertices[-1], poses.vertices[0])
     assert main(["export", str(tmp_path / "missing.clip"), "--out", str(out)]) == 2
+
+
+class ErrorWave(WaveClip):
+    """The wave clip stating an RMS fit error, as a fitted clip's header does."""
+
+    def __init__(self, *args, rms: float, **kw) -> None:
+        super().__init__(*args, **kw)
+        self.rms = rms
+
+    def info(self):
+        return {"kind": self.kind, "errors": {"rms": self.rms}}
+
+
+@pytest.mark.parametrize("rms", [1e-3, 4e-3])
+def test_default_grid_follows_the_clips_own_error(spot, rms):
+    """The default export's grid step is 2 x QUANT_SHARE x the clip's RMS error (its rounding adds that share
+    of it in RMS), every vertex within step x sqrt(3) / 2; position_bits sets the grid by hand instead."""
+    v, f = spot
+    clip = ErrorWave(v, f, looping=False, rms=rms)
+    assert export_position_error(clip) == QUANT_SHARE * rms
+    glb = clip_animation_glb(clip, fps=10)
+    doc, _ = unpack_glb(glb)
+    (scale,) = {n["scale"][0] for n in doc["nodes"] if "scale" in n}
+    assert scale == pytest.approx(2 * QUANT_SHARE * rms, rel=1e-6)
+    poses = read_animated_poses(glb, fps=10)
+    want = clip.evaluate(export_times(1.3, 10) / 1.3)[:, clip_vertices(glb)]
+    d = np.linalg.norm(poses.vertices - want, axis=-1)
+    assert d.max() <= scale * np.sqrt(3) / 2 * 1.01
+    assert 0.5 * QUANT_SHARE * rms < np.sqrt(np.mean(d * d)) <= 1.1 * QUANT_SHARE * rms  # measured 0.99-1.0
+    fine = clip_animation_glb(clip, fps=10, options=PackOptions(normals=False, position_bits=14))
+    assert len(fine) > len(glb)
+    assert export_position_error(WaveClip(v, f, looping=False)) is None  # no stored error: 14 bits
 
 
 def test_glb_in_fit_glb_out_with_pictures(morph, tmp_path):
