@@ -218,7 +218,7 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, fl
                      files={"file": ("creature.glb", glb, "model/gltf-binary")})
     assert poses.status_code == 201, poses.text
     # this test is about the player's look, so the fit is tighter than the default: at the default (rel. RMS
-    # 3e-3 of the diagonal) 1.50-1.84% of the model's pixels differ at t = 0.5 and 1 and 0.13% at t = 0
+    # 3e-3 of the diagonal) 1.50-1.84% of the model's pixels differ at t = 0.5 and 1 and 0.13% at t = 0 (flat)
     # (measured 2026-12-07), following the stored clip's largest error in each frame (1.9e-4, 8.7e-3 and
     # 8.9e-3 of the diagonal; the unrounded fit is 4e-7 off: it is the knots' rounding that the rate control
     # grows to fill the target, flat and smooth alike, so not the normals, UVs or the GPU path)
