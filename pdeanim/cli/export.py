@@ -20,7 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "export", help="write a clip as an animated GLB (morph targets + weights animation)",
         description="Sample a clip at --fps over its duration (last frame included; looping clips loop "
                     "seamlessly) and write a glTF 2.0 binary file. By default positions are quantised to a "
-                    "14-bit grid over the animation's extent (KHR_mesh_quantization), normals to bytes, "
+                    "grid no finer than the clip's own error needs (its rounding adds at most a quarter of "
+                    "the clip's RMS error; KHR_mesh_quantization), normals to bytes, "
                     "and every stream is compressed with EXT_meshopt_compression (three.js GLTFLoader with "
                     "MeshoptDecoder, Babylon.js and gltfpack read it); --no-compress --no-quantize writes "
                     "plain float32.")
@@ -34,9 +35,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="store float32 positions and normals instead of the integer grid and bytes")
     p.add_argument("--no-compress", dest="compress", action="store_false",
                    help="do not use EXT_meshopt_compression (for viewers without a meshopt decoder)")
-    p.add_argument("--position-bits", type=int, default=14, metavar="N",
-                   help="bits per axis of the position grid, 8..15 (default 14: a step of 6.1e-5 of the "
-                        "extent)")
+    p.add_argument("--position-bits", type=int, default=None, metavar="N",
+                   help="bits per axis of the position grid over the animation's extent, 8..15 (14: a step "
+                        "of 6.1e-5 of the extent); by default the step follows the clip's own error: the "
+                        "grid adds at most a quarter of the clip's RMS error (14 bits for a clip that "
+                        "stores no error)")
     p.add_argument("--normal-targets", dest="normals", action="store_true",
                    help="also write per-frame normal deltas (35-40%% larger on smooth meshes; by default "
                         "every frame is lit with the first frame's normals)")

@@ -1,9 +1,11 @@
 """GLB of evaluated positions in a :class:`~.layout.Layout` (so a glTF source keeps its look): one frame
 (float32 positions and unit normals), or an animation as morph targets with a one-hot ``weights`` track,
-small by default: positions on an integer grid (KHR_mesh_quantization, ``position_bits`` per axis over the
-animation's extent: 14 gives a step of 6.1e-5 of it, at least as fine as gltfpack -cc's default grid, which
-measured 6.9e-5 to 1.4e-4 in benchmarks/gltf_sizes.py), triangles in vertex-cache order, normals and their
-per-frame deltas as normalized bytes, and every stream compressed with EXT_meshopt_compression.
+small by default: positions on an integer grid (KHR_mesh_quantization), triangles in vertex-cache order,
+normals and their per-frame deltas as normalized bytes, and every stream compressed with
+EXT_meshopt_compression. The grid's step is either ``position_bits`` per axis over the animation's extent
+(14 gives 6.1e-5 of it) or, given ``position_error``, the coarsest step whose rounding adds at most that RMS
+distance to the frames (a clip export passes a share of the clip's own fit error: no finer than the clip
+needs, see :mod:`.clipexport`).
 
 Each mesh node's positions are quantised in its own local frame; the dequantising translation and uniform
 scale go on the node itself when it is a plain leaf (the plain layout), else on a new child node that holds
@@ -33,22 +35,36 @@ TARGET_VIEW_VALUES = 48_000_000  # morph-target bytes per buffer view (one mesho
 @dataclass(frozen=True)
 class PackOptions:
     """How an animation GLB is stored: ``quantize`` positions to ``position_bits`` (8..15, default 14) per
-    axis over the frames' extent (max error half a step) and normals
-    to bytes, ``compress`` with EXT_meshopt_compression, ``normals`` as per-frame morph deltas (else every
-    frame is lit with the first frame's normals), ``weld`` vertices whose written data are all equal (see
-    :mod:`.weld`; off keeps one vertex per clip vertex, in clip order). A welded primitive's vertices come in
-    the triangles' fetch order with a ``_PDEANIM_VERTEX`` map to the clip's; one that nothing welded stays as
-    it was (reordering it too would save only 2-3%, see docs/gltf.md)."""
+    axis over the frames' extent (max error half a step) or, with ``position_bits=None``, to the coarsest
+    step whose rounding adds an RMS distance of at most ``position_error`` (world units; uniform rounding to
+    a step s is s/2 RMS over three axes) while keeping 8..15 bits of the extent (14 bits when
+    ``position_error`` is None too), and normals to bytes, ``compress`` with EXT_meshopt_compression,
+    ``normals`` as per-frame morph deltas (else every frame is lit with the first frame's normals), ``weld``
+    vertices whose written data are all equal (see :mod:`.weld`; off keeps one vertex per clip vertex, in
+    clip order). A welded primitive's vertices come in
+    the triangles' fetch order with a ``_PDEANIM_VERTEX`` map to the clip's, also where nothing merged (the
+    order alone takes a mesh in capture order to 0.62x, see docs/gltf.md)."""
 
     quantize: bool = True
     compress: bool = True
-    position_bits: int = 14
+    position_bits: int | None = 14
     normals: bool = True
     weld: bool = True
+    position_error: float | None = None
 
     def __post_init__(self) -> None:
-        if not 8 <= int(self.position_bits) <= 15:
+        if self.position_bits is not None and not 8 <= int(self.position_bits) <= 15:
             raise ParameterError(f"position_bits must lie in [8, 15], got {self.position_bits}")
+        err = self.position_error
+        if err is not None and not (isinstance(err, (int, float)) and np.isfinite(err) and err > 0):
+            raise ParameterError(f"position_error must be a positive number, got {err!r}")
+
+    def grid_step(self, part_stretch: float = 1.0) -> float | None:
+        """The grid step asked for in a part's local units (None: ``position_bits`` decide), where
+        ``part_stretch`` is the most its local-to-world map lengthens a vector."""
+        if self.position_bits is not None or self.position_error is None:
+            return None
+        return 2.0 * float(self.position_error) / max(part_stretch, 1e-300)
 
 
 def _check_frames(frames: np.ndarray, layout: Layout) -> np.ndarray:
@@ -188,13 +204,24 @@ def _bounds(values: np.ndarray, axis: int | None = None) -> tuple[np.ndarray, np
     return np.stack(lo, axis=-1), np.stack(hi, axis=-1)
 
 
-class _Grid:
-    """Integer grid of one part: origin + step * q with q in [0, 2**bits - 1] over every frame."""
+MIN_BITS, MAX_BITS, FALLBACK_BITS = 8, 15, 14
+"""A grid asked for by its error keeps between 8 and 15 bits of the extent (int16 holds 15); without an error
+either, 14 bits."""
 
-    def __init__(self, local: np.ndarray, bits: int) -> None:
+
+class _Grid:
+    """Integer grid of one part: origin + step * q with q in [0, extent / step] over every frame, the step
+    ``extent / (2**bits - 1)`` or ``step`` (kept within MIN_BITS..MAX_BITS of the extent)."""
+
+    def __init__(self, local: np.ndarray, bits: int | None, step: float | None = None) -> None:
         self.origin, top = _bounds(local)
         extent = float((top - self.origin).max())
-        self.step = extent / (2**bits - 1) if extent > 0 else 1.0
+        if extent <= 0:
+            self.step = 1.0
+        elif step is None:
+            self.step = extent / (2 ** (FALLBACK_BITS if bits is None else bits) - 1)
+        else:
+            self.step = min(max(float(step), extent / (2**MAX_BITS - 1)), extent / (2**MIN_BITS - 1))
         # float32 arithmetic: its rounding is ~1e-3 of a step at 14 bits; int16 holds 0..2**15 - 1
         self.q = np.rint((local - self.origin.astype(np.float32)) / np.float32(self.step)).astype(np.int16)
 
@@ -233,15 +260,28 @@ def _add_targets(doc: dict, views: list[bytes], positions: np.ndarray, normals: 
                            view=add_view(doc, views, base.tobytes(), ARRAY_BUFFER, 8))
         doc["accessors"][pos].update(minmax_of(positions[0]))
         delta = (positions - positions[:1]).astype(np.int16)
-        tdata, tstride, tdtype = _padded(delta, np.int16, 4), 8, np.int16
+        lo, hi = _bounds(delta, axis=1)  # exact bounds of every target, (K, 3)
+        # a target whose deltas fit in a byte is written as BYTE (as gltfpack does): half the raw bytes, and
+        # meshopt's codec spends nothing on the high bytes it no longer has
+        small = (lo >= -127).all(axis=1) & (hi <= 127).all(axis=1)
+        kinds = [(small, np.int8, 4), (~small, np.int16, 8)]
     else:
         pos = add_accessor(doc, views, positions[0].astype(np.float32), "VEC3", ARRAY_BUFFER, minmax=True)
         delta = (positions - positions[:1]).astype(np.float32)
-        tdata, tstride, tdtype = delta, 12, np.float32
-    lo, hi = _bounds(delta, axis=1)  # exact bounds of every target, (K, 3)
+        lo, hi = _bounds(delta, axis=1)
+        kinds = [(np.ones(k, bool), np.float32, 12)]
+    placed: list[tuple[int, int, type] | None] = [None] * k
+    for which, dtype, stride in kinds:
+        idx = np.flatnonzero(which)
+        if not len(idx):
+            continue
+        part = delta if len(idx) == k else delta[idx]
+        data = part if dtype == np.float32 else _padded(part, dtype, 4)  # 4-byte aligned vertex strides
+        for i, (view, off) in zip(idx, _target_views(doc, views, data, stride), strict=True):
+            placed[i] = (view, off, dtype)
     targets: list[dict] = []
-    for i, (view, off) in enumerate(_target_views(doc, views, tdata, tstride)):
-        acc = add_accessor(doc, views, np.zeros((n, 3), tdtype), "VEC3", view=view, byte_offset=off)
+    for i, (view, off, dtype) in enumerate(placed):  # type: ignore[misc]
+        acc = add_accessor(doc, views, np.zeros((n, 3), dtype), "VEC3", view=view, byte_offset=off)
         doc["accessors"][acc].update(minmax_of(np.stack([lo[i], hi[i]])))
         targets.append({"POSITION": acc})
     nrm = None
@@ -348,7 +388,10 @@ def layout_animation_glb(layout: Layout, frames: np.ndarray, key_times: np.ndarr
     holders = []
     for part in layout.parts:
         local = _local(part, world[:, part.slots[0].start: part.slots[-1].stop]) if part.slots else None
-        grid = _Grid(local, opts.position_bits) if opts.quantize and local is not None else None
+        grid = None
+        if opts.quantize and local is not None:
+            stretch = float(np.linalg.norm(np.linalg.inv(part.to_local[:3, :3]), 2))  # local -> world
+            grid = _Grid(local, opts.position_bits, opts.grid_step(stretch))
         first = part.slots[0].start if part.slots else 0
         for slot in part.slots:
             a, b = slot.start - first, slot.stop - first

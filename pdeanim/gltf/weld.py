@@ -148,7 +148,9 @@ def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, n
     and its kept attributes (UVs...). Rewrites the primitive's indices (cache then fetch order) and
     attributes over the welded vertices and adds the :data:`VERTEX_MAP` attribute; returns ``keep`` (m,), the
     primitive's own vertex each written vertex takes its positions and normals from, or None when the
-    primitive stays as it was (nothing welded, or attributes the weld cannot follow)."""
+    primitive stays as it was (attributes the weld cannot follow). A primitive where nothing welds is
+    reordered all the same, as gltfpack does: meshopt's codec codes each vertex against the one before, and a
+    mesh in scan or capture order (samba) compresses to 0.62x in fetch order."""
     n = pos.shape[1]
     try:
         attrs = {name: accessor_rows(doc, views, acc) for name, acc in prim["attributes"].items()}
@@ -165,8 +167,6 @@ def weld_primitive(doc: dict, views: list[bytes], prim: dict, pos: np.ndarray, n
 
     rest = [pos[0], *([] if normals is None else [normals[0]]), *attrs.values()]
     welded = weld(weld_labels(row_bytes(*rest), motion), faces)
-    if welded.identity(n):
-        return None
     welded.faces = cache_order(welded.faces, len(welded.keep))
     welded = fetch_order(welded)
     keep = welded.keep

@@ -18,11 +18,12 @@ from pdeanim.gltf.layout import gltf_layout, plain_layout, source_layout
 from pdeanim.gltf.meshopt import EXT
 from pdeanim.gltf.read import read_animated_poses, read_static_mesh
 from pdeanim.gltf.validate import assert_clean, validate_many
+from pdeanim.gltf.weld import VERTEX_MAP
 from pdeanim.gltf.write import animation_glb
 from pdeanim.mesh.io import load_mesh
 from tests.ci import missing
 
-from .builders import skinned_bar_glb, textured_scene_glb
+from .builders import clip_vertices, skinned_bar_glb, textured_scene_glb
 
 LOOK_KEYS = ("materials", "textures", "samplers")
 
@@ -93,14 +94,19 @@ def test_animation_keeps_the_look_quantised_and_compressed():
     trs = ("matrix", "translation", "rotation", "scale")
     for node, source_node in zip(doc["nodes"][:3], sdoc["nodes"], strict=True):  # source transforms untouched
         assert {k: node.get(k) for k in trs} == {k: source_node.get(k) for k in trs}
-    np.testing.assert_array_equal(uv_of(glb, 1, 0), uv_of(src, 1, 0))
+    slot = next(s for s in gltf_layout(src).slots if (s.mesh, s.prim) == (1, 0))
+    gd = load_document(glb)  # the primitive in fetch order: its UVs follow its _PDEANIM_VERTEX map
+    shown = gd.accessor(gd.doc["meshes"][1]["primitives"][0]["attributes"][VERTEX_MAP])[:, 0].astype(int)
+    np.testing.assert_array_equal(uv_of(glb, 1, 0), uv_of(src, 1, 0)[shown - slot.start])
     back = read_animated_poses(glb, fps=10)
     # the body node scales by 2: world error <= 2 x half a 14-bit step of its local extent; 2x margin
     step = 2 * float(np.ptp(frames.reshape(-1, 3), axis=0).max()) / (2**14 - 1)
-    np.testing.assert_allclose(back.vertices, frames, atol=step)
+    # every primitive is written in fetch order (welded or not), with its _PDEANIM_VERTEX map
+    np.testing.assert_allclose(back.vertices, frames[:, clip_vertices(glb)], atol=step)
     plain = layout_animation_glb(gltf_layout(src), frames, times, np.arange(k), k,
                                  options=PackOptions(quantize=False, compress=False))
-    np.testing.assert_allclose(read_animated_poses(plain, fps=10).vertices, frames, atol=1e-5)
+    np.testing.assert_allclose(read_animated_poses(plain, fps=10).vertices, frames[:, clip_vertices(plain)],
+                               atol=1e-5)
     reports = validate_many([glb, plain])
     for label, report in zip(["compact look animation", "float look animation"], reports, strict=True):
         assert_clean(report, label)
@@ -120,7 +126,8 @@ def test_skinned_source_is_baked_and_its_skin_dropped():
         assert not any(a.startswith(("JOINTS_", "WEIGHTS_")) for a in attrs)
         assert [n.get("name") for n in doc["nodes"][:3]] == ["root", "tip", "bar"]
     np.testing.assert_allclose(read_static_mesh(frame)[0], frames[1], atol=1e-5)
-    np.testing.assert_allclose(read_animated_poses(anim, fps=1).vertices, frames, atol=1e-3)
+    np.testing.assert_allclose(read_animated_poses(anim, fps=1).vertices, frames[:, clip_vertices(anim)],
+                               atol=1e-3)
     for report in validate_many([frame, anim]):
         assert_clean(report, "baked skin")
 
