@@ -111,7 +111,8 @@ class Worker:
             if job.poses_id:
                 poses = session.get(PosesRecord, job.poses_id)
                 payload["poses"] = {"blob_key": poses.blob_key, "n_frames": poses.n_frames,
-                                    "n_vertices": poses.n_vertices}  # to check the fit's memory first
+                                    "n_vertices": poses.n_vertices,  # to check the fit's memory first
+                                    "animation": (poses.meta or {}).get("animation")}  # read from a glTF
             clip_id = (job.params or {}).get("clip_id")
             if clip_id:
                 clip = session.get(ClipRecord, clip_id)

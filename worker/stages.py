@@ -3,6 +3,7 @@ modules are imported here, lazily, so the worker starts even before a stage exis
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,7 @@ from pdeanim_service.store.blobs import BlobStore
 
 from .clipstore import store_clip
 
+log = logging.getLogger("pdeanim.worker")
 Partial = Callable[[dict], None]  # hands a part of the result to the parent before the stage goes on
 SIMULATE_SHARE = 0.75  # part of the progress bar a simulate + fit job gives to the simulation
 EXPORT_DECODE_BYTES = 256 << 20  # an export job decodes a clip whole up to this, else evaluates it by blocks
@@ -35,16 +37,18 @@ def _labelled(progress: Progress) -> Progress:
 
 
 def _fit(poses, options: dict, blobs: BlobStore, progress: Progress, memory: int,  # noqa: ANN001
-         tol=None) -> dict:  # noqa: ANN001
+         tol=None, skin_source: Callable[[], bytes] | None = None) -> dict:  # noqa: ANN001
     """Fit and store the clip; a missed target fails the job (TargetNotMetError, not retried) unless the
-    options ask for ``best_effort``."""
+    options ask for ``best_effort``. With bones, ``skin_source`` gives the skinned glTF the poses were read
+    from: its own skeleton is the bone layer, as ``pdeanim fit`` does with a skinned glTF."""
     from pdeanim.errors import TargetNotMetError
     from pdeanim.fit import FitOptions, fit_poses, target_shortfall
     from pdeanim.fit.budget import check_fit_memory
 
     check_fit_memory(poses.n_frames, poses.n_vertices, memory, tol)  # refused now, not after minutes of work
     fit_options = FitOptions.from_dict(options)
-    parts = fit_poses(poses, fit_options, progress=_labelled(progress), tolerances=tol)
+    skin = _source_skin(skin_source, poses) if fit_options.bones != 0 and skin_source is not None else None
+    parts = fit_poses(poses, fit_options, progress=_labelled(progress), tolerances=tol, skin=skin)
     shortfall = target_shortfall(parts.report)
     if shortfall and not fit_options.best_effort:
         raise TargetNotMetError(
@@ -109,7 +113,34 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
 
         fit_options = FitOptions.from_dict(options).validate()
         return plan_fit(job["id"], poses, fit_options, tol, blobs, _labelled(progress), workdir)
-    return {"clip": _fit(poses, options, blobs, progress, settings.job_memory_limit(), tol)}
+    source = _gltf_source(job, blobs)
+    if source is not None:
+        poses.meta["animation"] = stored["animation"]
+    return {"clip": _fit(poses, options, blobs, progress, settings.job_memory_limit(), tol, source)}
+
+
+def _gltf_source(job: dict, blobs: BlobStore) -> Callable[[], bytes] | None:
+    """The stored glTF of the job's mesh (read when called) when the poses were read from a glTF animation
+    (their row records it) and the mesh is a glTF, else None."""
+    mesh, stored = job.get("mesh") or {}, job.get("poses") or {}
+    if not isinstance(stored.get("animation"), dict) or not mesh.get("blob_key"):
+        return None
+    if not str(mesh.get("filename", "")).lower().endswith((".glb", ".gltf")):
+        return None
+    return lambda: blobs.get(mesh["blob_key"])
+
+
+def _source_skin(source: Callable[[], bytes], poses):  # noqa: ANN001, ANN202
+    """The skinned glTF's own bones for the poses (pdeanim.bones.gltfskin), or None where the file has no
+    skin or does not match the poses (logged; the fit then decomposes the motion into bones itself)."""
+    from pdeanim.bones.gltfskin import skin_bones
+    from pdeanim.errors import PosesInputError
+
+    try:
+        return skin_bones(source(), poses)
+    except PosesInputError as exc:
+        log.warning("the mesh's glTF skin does not fit the poses (%s): bones by decomposition", exc)
+        return None
 
 
 def _fit_in_tasks(n_frames: int, n_vertices: int, options: dict, settings: Settings, tol) -> bool:  # noqa: ANN001

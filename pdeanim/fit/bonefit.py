@@ -3,17 +3,24 @@ dynamic-PDE curves fit what the decoded bones leave.
 
 1. The bones: a skinned glTF's own skeleton (:mod:`pdeanim.bones.gltfskin`) or a skinning decomposition of
    the welded trajectories (:mod:`pdeanim.bones.motion`).
-2. The bone layer is fitted in time and rounded (:func:`pdeanim.model.bonelayer.encode_bones`, within
-   BONE_SHARE of the RMS target), then evaluated exactly as a reader does at the frame times.
+2. The joint rate control (:class:`BoneBudgets`): the bone layer is fitted in time and rounded
+   (:func:`pdeanim.model.bonelayer.encode_bones`) at RMS budgets searched by its error measured exactly as a
+   reader skins it against the frames: the coarsest budget whose bones alone meet the targets (RMS within
+   BONES_ALONE_FILL, every vertex within the max bound) gives a clip with a zero residual, and the coarsest
+   within each share of RESIDUAL_AIMS a clip with residual curves.
 3. The residual poses, frames - skinned + rest, are fitted by the ordinary pipeline about the stored rest pose
-   (motion "displacement"), and the bone layer is added to the coefficients part.
+   (motion "displacement"): its own rate control sees the whole clip's error, spends what the bones leave of
+   the budget and refines the curves where a vertex is past the max bound. The bone layer is appended to the
+   coefficients part.
 4. The stored clip (bones and curves) is decoded and measured at every source frame: the report's errors.
+   The smallest clip that meets the targets is kept.
 
 With ``bones="auto"`` the bone counts of BONE_LADDER are tried upwards from FIRST_BONES while the clip gets
 smaller, against the clip without bones (kept where it is smaller, e.g. on cloth-like motion)."""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -30,13 +37,13 @@ from ..curveset import CurveSet
 from ..errors import ParameterError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.bonelayer import BoneMotion, add_bone_layer, encode_bones, skinned_positions
+from ..model.bonelayer import BoneMotion, add_bone_layer, encode_bones, skin, skinned_positions
 from ..model.clipmodel import clip_from_parts
 from ..model.metrics import bbox_diagonal, error_summary
 from ..poses import Poses
 from ..progress import Progress, sub_progress
 from .options import FitOptions, FitTolerances
-from .ratecontrol import first_quantisation
+from .ratecontrol import first_quantisation, max_bound
 
 BONE_LADDER = (8, 16, 32, 64, 128)
 FIRST_BONES = 8
@@ -45,8 +52,8 @@ MIN_POINTS_PER_BONE = 24
 """Counts above (distinct trajectories / this) are not tried: bones of a few vertices cost more than they
 move."""
 BONE_SHARE = 0.5
-"""The bone layer's time fit and rounding may move vertices by this share of the RMS target (the residual
-curves correct it): coarser bones cost fewer bytes but leave more to the curves."""
+"""The budget search starts at this share of the RMS goal (the bone layer's encoder bound; the decoded layer
+lands well inside it)."""
 AUTO_SKIN_SHARE = 0.7
 """``bones="auto"``: decompositions stop once the skinning alone is within this share of the RMS target ..."""
 AUTO_GAIN = 0.1
@@ -55,6 +62,19 @@ explain: a morph, cloth). A count is fitted only where its skinning is within th
 the residual curves than a clip without bones spends (horse-collapse at 3e-3: 32 bones skin to 0.94 of the
 target and the clip is 155 KB, 64 bones to 0.61 and 143 KB, no bones 147 KB)."""
 MAX_SHARE_OF_MAX = 1 / 3
+BONES_ALONE_FILL = 0.95
+"""The bone layer alone (a zero residual) is tried at its coarsest encoding within this share of the RMS
+goal ..."""
+BONES_ALONE_MAX = 0.97
+"""... and this share of the max bound (a max target, or the soft bound of an RMS target)."""
+RESIDUAL_AIMS = (0.65,)
+"""With residual curves: the bone layer at its coarsest encoding within each of these shares of the RMS goal,
+coarser while the clip gets smaller (the curves fit what the bones leave). One share: on horse-collapse at
+3e-3 (128 bones) 0.5, 0.65, 0.8 and 0.95 gave 125.1, 120.8, 122.5 and 134.4 KB, and each share costs a
+residual fit."""
+BUDGET_GROWTH = 1.5
+BUDGET_STEPS = 6
+BUDGET_BISECTIONS = 1
 """With a max target only, the bone layer's RMS budget is this share of it."""
 
 FitFn = Callable[..., ClipParts]
@@ -147,38 +167,151 @@ def _decomposed(poses: Poses, options: FitOptions, bones: int, progress: Progres
 
 def _bone_clip(poses: Poses, options: FitOptions, progress: Progress, tol: FitTolerances,
                curves: CurveSet | None, motion: BoneMotion, rest: np.ndarray, fit: FitFn) -> ClipParts:
-    """Steps 2-4 of the module docstring for one bone motion about ``rest`` (V, 3)."""
+    """The smallest clip of one bone motion about ``rest`` (V, 3) that meets the targets, of (steps 2-5 of
+    the module docstring): the bone layer alone under a zero residual, where its coarsest encoding that
+    meets the targets exists, and the bone layer coarsened to each share of RESIDUAL_AIMS with the residual
+    curves fitted on top."""
     X = poses.vertices
     diag = bbox_diagonal(np.asarray(X[0], np.float64))
     targets = options.targets(diag)
-    budget = bone_budget(targets)
+    bound = max_bound(targets, tol)
     rest_q = stored_rest(rest, first_quantisation(targets, 0.0, tol).tolerance, diag)
-    t = _normalised(poses.times)
-    enc = encode_bones(motion, t, budget, rest_q, options.loop)
-    base = skinned_positions(enc, rest_q, t, options.loop)
-    residual = Poses((X - base) + rest_q.astype(np.float32), poses.faces, poses.times, dict(poses.meta),
-                     rest=rest_q)
+    goal = bone_goal(targets)
+    search = BoneBudgets(motion, rest_q, X, _normalised(poses.times), options.loop, goal)
+    candidates: list[ClipParts] = []
+    alone = None
+    if search.floor_meets(BONES_ALONE_FILL, BONES_ALONE_MAX * bound if bound is not None else None):
+        alone = search.coarsest(BONES_ALONE_FILL, BONES_ALONE_MAX * bound if bound is not None else None)
+    if alone is not None:
+        candidates.append(_residual_clip(poses, options, sub_progress(progress, 0.0, 0.2), tol, curves,
+                                         search, alone, rest_q, fit, zero=True))
+    budgets: list[float] = []
+    for i, aim in enumerate(RESIDUAL_AIMS):
+        step = sub_progress(progress, 0.2 + 0.8 * i / len(RESIDUAL_AIMS),
+                            0.2 + 0.8 * (i + 1) / len(RESIDUAL_AIMS))
+        b = search.coarsest(aim, None) or search.first
+        if b in budgets:
+            continue
+        budgets.append(b)
+        parts = _residual_clip(poses, options, step, tol, curves, search, b, rest_q, fit, zero=False)
+        candidates.append(parts)
+        if len(candidates) > 1 and _size(parts) >= min(_size(c) for c in candidates[:-1]):
+            break  # a coarser bone layer made the clip larger: the residual pays for it
+    met = [c for c in candidates if c.report.get("target_met")]
+    best = min(met or candidates, key=_size)
+    best.report["bones"]["tried"] = [{"residual": not c.report["bones"]["zero_residual"],
+                                      "budget_rms": c.report["bones"]["budget_rms"], "bytes": _size(c),
+                                      "rel_rms": c.report.get("rel_rms"), "rel_max": c.report.get("rel_max"),
+                                      "met": c.report.get("target_met")} for c in candidates]
+    best.report["bones"]["budget_search"] = search.trials()
+    return best
+
+
+def _residual_clip(poses: Poses, options: FitOptions, progress: Progress, tol: FitTolerances,
+                   curves: CurveSet | None, search: BoneBudgets, budget: float, rest_q: np.ndarray,
+                   fit: FitFn, zero: bool) -> ClipParts:
+    """The clip of the bone layer encoded at ``budget`` and the residual curves (steps 2-5; ``zero``: the
+    residual is the rest pose at every frame, curves whose knots are all 0, when the bones alone meet the
+    targets)."""
+    X = poses.vertices
+    diag = bbox_diagonal(np.asarray(X[0], np.float64))
+    targets = options.targets(diag)
+    enc, base = search.encoded(budget)
+    moved = np.broadcast_to(rest_q.astype(np.float32), X.shape) if zero else (X - base)
+    residual = Poses(np.array(moved + (0 if zero else rest_q.astype(np.float32)), np.float32), poses.faces,
+                     poses.times, dict(poses.meta), rest=rest_q)
     absolute = replace(options, target_rms=targets.rms, target_rel_rms=None, target_max=targets.max,
                        target_rel_max=None)
     parts = fit(residual, absolute, progress, curves=curves, tolerances=tol)
     residual_bytes = _size(parts)
-    parts.coefficients = with_bone_layer(parts.coefficients, enc)
+    parts.coefficients = append_bone_layer(parts.coefficients, enc)
     report = _measured(parts, poses, diag, targets)
     report["options"] = {**report.get("options", {}), **{k: v for k, v in options.to_dict().items()
                                                           if k.startswith("target")}}
     report["bones"] = {"n_bones": enc.n_bones, "influences": enc.n_influences, "segments": enc.n_segments,
                        "bone_bytes": _size(parts) - residual_bytes, "residual_bytes": residual_bytes,
                        "residual_share": residual_bytes / _size(parts), "budget_rms": budget,
-                       "encoding": enc.report, "diagonal": diag}
+                       "zero_residual": zero, "encoding": enc.report, "diagonal": diag}
     parts.report = report
     return parts
 
 
-def bone_budget(targets: Targets) -> float:
-    """The bone layer's RMS budget (absolute): BONE_SHARE of an RMS target, else of a share of a max
-    target."""
-    goal = targets.rms if targets.rms is not None else targets.max * MAX_SHARE_OF_MAX
-    return BONE_SHARE * goal
+class BoneBudgets:
+    """Encodings of one bone motion at RMS budgets (absolute), each measured exactly as a reader skins it on
+    the stored rest pose against the source frames: the budget search of the joint rate control (the
+    encoder's own RMS bound is conservative: the decoded layer lands at 0.3-0.7 of it on horse-collapse and
+    CesiumMan)."""
+
+    def __init__(self, motion: BoneMotion, rest_q: np.ndarray, frames: np.ndarray, t: np.ndarray,
+                 looping: bool, goal: float):
+        self.motion, self.rest_q, self.frames, self.t, self.looping = motion, rest_q, frames, t, looping
+        self.goal = goal
+        self.first = BONE_SHARE * goal
+        self._found: dict[float, tuple[Any, float, float]] = {}  # budget -> (encoding, RMS, max), no frames
+
+    def encoded(self, budget: float) -> tuple[Any, np.ndarray]:
+        """(encoded bone layer, (F, V, 3) float32 skinned positions at the frames) at ``budget``."""
+        self._measure(budget)
+        enc = self._found[budget][0]
+        return enc, skinned_positions(enc, self.rest_q, self.t, self.looping)
+
+    def _measure(self, budget: float) -> tuple[float, float]:
+        """(RMS, max) vertex distance of the bone layer at ``budget`` from the frames."""
+        if budget not in self._found:
+            enc = encode_bones(self.motion, self.t, budget, self.rest_q, self.looping)
+            base = skinned_positions(enc, self.rest_q, self.t, self.looping)
+            d = np.linalg.norm(base.astype(np.float64) - self.frames, axis=-1)
+            self._found[budget] = (enc, float(np.sqrt(np.mean(d * d))), float(d.max(initial=0.0)))
+        _, rms, largest = self._found[budget]
+        return rms, largest
+
+    def floor_meets(self, rms_share: float, largest: float | None) -> bool:
+        """Whether the unencoded skinning (exact tracks and weights) is within ``rms_share`` of the goal and
+        ``largest``: no encoding of it can be closer."""
+        d = np.linalg.norm(skin(self.motion, self.rest_q) - self.frames, axis=-1)
+        return float(np.sqrt(np.mean(d * d))) <= rms_share * self.goal and (
+            largest is None or float(d.max(initial=0.0)) <= largest)
+
+    def coarsest(self, rms_share: float, largest: float | None) -> float | None:
+        """The coarsest budget found whose bone layer is within ``rms_share`` of the goal (and ``largest``,
+        when given): grown by BUDGET_GROWTH from BONE_SHARE of the goal while it stays within, then bisected
+        (in log) BUDGET_BISECTIONS times; None when even the finest tried misses."""
+        def ok(b: float) -> bool:
+            rms, mx = self._measure(b)
+            return rms <= rms_share * self.goal and (largest is None or mx <= largest)
+
+        lo, hi = None, None
+        b = self.first
+        for _ in range(BUDGET_STEPS):
+            if ok(b):
+                lo = b
+                if hi is not None:
+                    break
+                b *= BUDGET_GROWTH
+            else:
+                hi = b
+                if lo is not None:
+                    break
+                b /= BUDGET_GROWTH
+        if lo is None:
+            return None
+        for _ in range(BUDGET_BISECTIONS if hi is not None else 0):
+            mid = math.sqrt(lo * hi)
+            lo, hi = (mid, hi) if ok(mid) else (lo, mid)
+        return lo
+
+    def trials(self) -> list[dict[str, float]]:
+        """Every budget measured: budget, the bone layer's RMS and max over the goal, weight bits,
+        segments."""
+        return [{"budget_rms": b, "rms_over_goal": v[1] / self.goal, "max_over_goal": v[2] / self.goal,
+                 "weight_bits": v[0].weight_bits, "segments": v[0].n_segments}
+                for b, v in sorted(self._found.items())]
+
+
+def bone_goal(targets: Targets) -> float:
+    """The RMS goal the bone layer's budgets are measured against (absolute): an RMS target, else a share of
+    a max target."""
+    return targets.rms if targets.rms is not None else targets.max * MAX_SHARE_OF_MAX
 
 
 def stored_rest(rest: np.ndarray, tolerance: float | None, diag: float) -> np.ndarray:
@@ -191,9 +324,10 @@ def stored_rest(rest: np.ndarray, tolerance: float | None, diag: float) -> np.nd
     return np.asarray(quantise.dequantise(q, step, origin), np.float32).astype(np.float64)
 
 
-def with_bone_layer(coefficients: bytes, enc: Any) -> bytes:
-    """The coefficients part with the bone layer's keys and arrays added (format 1.1, ``required``), its
-    other arrays packed as before."""
+def append_bone_layer(coefficients: bytes, enc: Any) -> bytes:
+    """The coefficients part with the bone layer's keys and arrays appended (format 1.1, ``required``), the
+    residual curves' arrays kept in the encodings the fit chose (compare
+    :func:`pdeanim.model.bonelayer.repack_with_bone_layer`, which packs every array at its smallest)."""
     encodings = container.array_encodings(coefficients)
     header, arrays = container.unpack(coefficients)
     arrays = dict(arrays)

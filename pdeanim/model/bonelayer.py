@@ -43,6 +43,8 @@ TIME_PDE, TIME_SPLINE = 0, 1
 FIT_SHARE, KNOT_SHARE, WEIGHT_SHARE = 0.8, 0.4, 0.3
 """Shares of the bone layer's RMS budget: the time fit, the rounding of the knots, the rounding of the weights
 (in quadrature: 0.94 of the budget)."""
+PRUNE_SHARE = 0.3
+"""Share of the bone layer's RMS budget by which dropping a vertex's weakest influences may move it."""
 WEIGHT_BITS = (4, 16)
 """Range of the weights' quantisation: levels of 1 / (2^n - 1), n chosen from the budget (format: 1..16)."""
 HALVINGS = 8
@@ -449,21 +451,38 @@ def _steps(tol: np.ndarray, biggest: np.ndarray) -> np.ndarray:
 
 def _quantise_weights(motion: BoneMotion, rest: np.ndarray, pivot: np.ndarray, target: float
                       ) -> tuple[np.ndarray, int, float]:
-    """(q (V, K) int64, bits, RMS estimate): weights rounded to n-bit levels, n the fewest whose expected RMS
-    vertex error (each weight's rounding, uniform, times the spread of the influences' positions over a few
-    frames) is within the weights' share of the budget."""
-    w = np.asarray(motion.weight, np.float64)
+    """(q (V, K) int64, bits, RMS estimate): the influences that move their vertex least (weight times the
+    distance of the influence's position from the blend, summed, within PRUNE_SHARE of the budget per
+    vertex; never a vertex's largest) dropped, the others renormalised and rounded to n-bit levels, n the
+    fewest whose expected RMS vertex error (each weight's rounding, uniform, times the spread of the
+    influences' positions over a few frames) is within the weights' share of the budget. Dropped influences
+    store as zero weights (and the previous slot's bone), which compress to almost nothing."""
+    w = np.array(motion.weight, np.float64)
     index = np.asarray(motion.index, np.int64)
     F = len(motion.rotvec)
     frames = np.unique(np.linspace(0, F - 1, min(F, WEIGHT_SAMPLE_FRAMES)).round().astype(np.int64))
     R = rodrigues(np.asarray(motion.rotvec, np.float64)[frames])
     T = np.asarray(motion.translation, np.float64)[frames]
-    spread = 0.0
     y = rest[:, None, :] - pivot[index]  # (V, K, 3)
-    for f in range(len(frames)):
-        p = np.einsum("vkij,vkj->vki", R[f][index], y) + pivot[index] + T[f][index]
+    positions = [np.einsum("vkij,vkj->vki", R[f][index], y) + pivot[index] + T[f][index]
+                 for f in range(len(frames))]
+    if PRUNE_SHARE > 0 and index.shape[1] > 1 and len(rest):
+        dist = np.zeros(w.shape)
+        for p in positions:
+            mean = np.einsum("vk,vki->vi", w, p)
+            dist = np.maximum(dist, np.linalg.norm(p - mean[:, None], axis=-1))
+        cost = w * dist
+        cost[np.arange(len(w)), np.argmax(w, axis=1)] = np.inf  # a vertex keeps its largest influence
+        order = np.argsort(cost, axis=1, kind="stable")
+        running = np.cumsum(np.take_along_axis(cost, order, 1), axis=1)
+        drop = np.zeros(w.shape, bool)
+        np.put_along_axis(drop, order, running <= PRUNE_SHARE * target, 1)
+        w = np.where(drop, 0.0, w)
+        w /= w.sum(axis=1, keepdims=True)
+    spread = 0.0
+    for p in positions:
         mean = np.einsum("vk,vki->vi", w, p)
-        spread += float(((p - mean[:, None]) ** 2).sum()) / max(len(rest), 1)
+        spread += float(((w > 0)[..., None] * (p - mean[:, None]) ** 2).sum()) / max(len(rest), 1)
     spread /= max(len(frames), 1)
     for bits in range(WEIGHT_BITS[0], WEIGHT_BITS[1] + 1):
         scale = 2**bits - 1
@@ -603,9 +622,12 @@ def add_bone_layer(header: dict[str, Any], arrays: dict[str, np.ndarray], enc: E
     arrays.update(bone_arrays)
 
 
-def with_bone_layer(coefficients: bytes, enc: EncodedBones, level: int = container.ZSTD_LEVEL) -> bytes:
-    """The coefficients part ``coefficients`` (kind "dynamic-pde", motion "displacement") with the bone layer
-    added: its curves become the residual on the skinned rest pose; their arrays are kept as they are."""
+def repack_with_bone_layer(coefficients: bytes, enc: EncodedBones, level: int = container.ZSTD_LEVEL
+                           ) -> bytes:
+    """The coefficients part ``coefficients`` (kind "dynamic-pde", motion "displacement") repacked with the
+    bone layer added, every array at its smallest encoding: its curves become the residual on the skinned
+    rest pose, their values unchanged (the fit keeps the curves' encodings:
+    :func:`pdeanim.fit.bonefit.append_bone_layer`)."""
     header, arrays = container.unpack(coefficients)
     if header.get("kind") != "dynamic-pde" or header.get("motion") != "displacement":
         raise ParameterError("a bone layer goes on a dynamic-PDE clip with motion 'displacement'")

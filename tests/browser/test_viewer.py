@@ -259,6 +259,63 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, fl
     assert (np.abs(gpu - cpu).max(axis=2) > 40).mean() < 0.005  # no facets on the GPU path
 
 
+CESIUM_MAN = HERE.parent / "gltf" / "data" / "CesiumMan.glb"
+
+
+def test_viewer_plays_a_service_made_bone_clip_of_a_skinned_gltf(services, browser_env, tmp_path):
+    """A skinned glTF (CesiumMan) uploaded as mesh and poses, fitted by the service with bones: the fit keeps
+    the file's skeleton and the viewer plays the clip with its bone layer, drawing frames that change, with
+    no error on the page's console, on the GPU path as on the CPU one."""
+    from pdeanim.clip import load_clip
+
+    key = make_key(services.backend, "bones")
+    api = client(services, key)
+    glb = CESIUM_MAN.read_bytes()
+    mesh = api.post("/v1/meshes", files={"file": ("CesiumMan.glb", glb, "model/gltf-binary")})
+    assert mesh.status_code == 201, mesh.text
+    poses = api.post(f"/v1/meshes/{mesh.json()['id']}/poses", params={"fps": 10},
+                     files={"file": ("CesiumMan.glb", glb, "model/gltf-binary")})
+    assert poses.status_code == 201, poses.text
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses.json()["id"],
+                                   "params": {"target_rel_rms": 3e-3, "bones": "auto"}})
+    assert r.status_code == 202, r.text
+    job = wait_job(api, r.json()["id"], timeout=600)
+    assert job["state"] == "succeeded", (job, services.logs())
+    cid = job["result"]["clip_id"]
+    clip = load_clip(api.get(f"/v1/clips/{cid}/topology").content,
+                     api.get(f"/v1/clips/{cid}/coefficients").content)
+    assert clip.bones is not None and clip.bones.enc.n_bones == 19  # the file's 19 joints, no decomposition
+    shots = [{"t": 0.1, "mode": "gpu", "path": str(tmp_path / "gpu_a.png")},
+             {"t": 0.6, "mode": "gpu", "path": str(tmp_path / "gpu_b.png")},
+             {"t": 0.6, "mode": "cpu", "path": str(tmp_path / "cpu_b.png")}]
+    run = {"url": f"{services.url}/viewer#clip={cid}&key={key}", "times": [0.0, 0.5], "shots": shots,
+           "playFrames": 20}
+    result = run_viewer(services, browser_env, tmp_path, run)
+    info = result["info"]
+    assert info["bones"] == {"nBones": 19, "residual": info["bones"]["residual"]}, info
+    assert info["mode"] == "gpu", info["gpuUnavailableReason"]
+    played = result["played"]
+    assert played["frames"] >= 20 and played["end"] != played["start"], played
+    # console errors, uncaught exceptions and failed requests; a request the page itself aborts (the size of
+    # the animation GLB is asked for with HEAD and dropped when the page moves on) is not a failure
+    errors = [line for line in result["logs"] if line.startswith(("error", "pageerror"))
+              or (line.startswith("requestfailed") and "ERR_ABORTED" not in line)]
+    assert not errors, errors
+    diag = float(np.linalg.norm(np.ptp(clip.evaluate(0.0), axis=0)))
+    for t, got in zip([0.0, 0.5], result["positions"], strict=True):
+        js = np.asarray(got, dtype=np.float64).reshape(-1, 3)
+        assert float(np.abs(js - clip.evaluate(t)).max()) <= TOLERANCE * diag, t
+    gpu_a, gpu_b, cpu_b = (canvas_part(load_png(s["path"])) for s in shots)
+    background = gpu_a[2, 2]
+    assert (np.abs(gpu_a - background).sum(axis=2) > 30).mean() > 0.01, "the model is not drawn"
+    moved = np.abs(gpu_a - gpu_b).sum(axis=2) > 30
+    assert moved.mean() > 0.002, f"only {moved.mean():.2%} of pixels change between t=0.1 and t=0.6"
+    same = np.abs(gpu_b - cpu_b).sum(axis=2) > 60
+    assert same.mean() < 0.005, f"GPU and CPU frames differ on {same.mean():.2%} of pixels"
+    for shot in shots:
+        shutil.copy(shot["path"], services.log_dir / f"bones-{Path(shot['path']).name}")
+
+
 def test_viewer_without_a_valid_key_says_why(services, browser_env, clips, tmp_path):
     job = {"url": f"{services.url}/viewer#clip={clips['dynamic-pde']}&key=pda_wrong",
            "out": str(tmp_path / "r.json")}

@@ -1,7 +1,7 @@
 // Drive the viewer in headless Chromium for tests/browser/test_viewer.py: open /viewer#clip=…&key=…, wait for
 // window.pdeanimViewer.ready, evaluate positions at the given times, screenshot GPU and CPU frames.
 // Usage: node viewer_check.mjs JOB, JOB = JSON {"url", "times": [t...], "shots": [{"t", "mode", "path"}],
-// "measureGlb", "out"}
+// "measureGlb", "playFrames", "out"}
 import { writeFileSync } from 'node:fs';
 import { openBrowser, releaseBrowser } from './chromium.mjs';
 import { drawReference, writeDataUrl } from './look_reference.mjs';
@@ -26,8 +26,17 @@ try {
     const v = window.pdeanimViewer;
     return { mode: v.mode, gpuUnavailableReason: v.gpuUnavailableReason, nVertices: v.clip.nVertices,
       kind: v.clip.kind, sizes: v.sizes(), stats: document.querySelector('#stats').innerText, model: v.model,
-      timings: v.timings, gpuBytes: v.gpuBytes };
+      timings: v.timings, gpuBytes: v.gpuBytes,
+      bones: v.clip.bones ? { nBones: v.clip.bones.nBones, residual: Boolean(v.clip.bones.residual) } : null };
   });
+  if (job.playFrames) {
+    // let it play: the animation loop advances t and draws until playFrames frames were drawn
+    const t0 = await page.evaluate(() => { const v = window.pdeanimViewer; v.resetFrameStats(); v.play(); return v.t; });
+    await page.waitForFunction((n) => window.pdeanimViewer.frameStats().frames >= n, { timeout: 120_000 },
+      job.playFrames);
+    result.played = await page.evaluate((start) => ({ start, end: window.pdeanimViewer.t,
+      ...window.pdeanimViewer.frameStats() }), t0);
+  }
   result.positions = [];
   for (const t of job.times ?? []) {
     result.positions.push(await page.evaluate((tt) => Array.from(window.pdeanimViewer.positions(tt)), t));

@@ -19,9 +19,9 @@ from pdeanim.model.bonelayer import (
     BoneMotion,
     EncodedBones,
     encode_bones,
+    repack_with_bone_layer,
     skinned_positions,
     weight_levels,
-    with_bone_layer,
 )
 from pdeanim.model.clipformat import CoefficientData, decode_topology, encode_coefficients
 from pdeanim.model.families import MU_TRIG_MAX
@@ -123,7 +123,7 @@ def synthetic_bone_case(K: int, B: int, residual: bool, looping: bool = False, d
         wave = 0.05 * np.sin(2 * np.pi * t[:, None] + 3 * grid[None, :, 0])[..., None] * np.array([0, 0, 1.0])
         poses = make_poses(grid[None] + wave, _grid_faces(topo), t * 2.0)
         parts = fit_poses(poses, FitOptions(segments=3))
-        return ClipParts(parts.topology, with_bone_layer(parts.coefficients, bones))
+        return ClipParts(parts.topology, repack_with_bone_layer(parts.coefficients, bones))
     return make
 
 
@@ -148,7 +148,7 @@ def fitted_bone_case(K: int, B: int, residual: bool) -> Callable[[], ClipParts]:
             bulge = 0.03 * np.sin(2 * np.pi * t)[:, None, None] * rest[None] * np.array([1.0, 1.0, 0.0])
         residual_poses = rest32.astype(np.float64)[None] + bulge  # what the bones leave, on the rest pose
         parts = fit_poses(make_poses(residual_poses, faces, times), FitOptions(segments=4))
-        return ClipParts(parts.topology, with_bone_layer(parts.coefficients, enc))
+        return ClipParts(parts.topology, repack_with_bone_layer(parts.coefficients, enc))
     return make
 
 

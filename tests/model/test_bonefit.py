@@ -12,6 +12,7 @@ from pdeanim import container
 from pdeanim.bones.gltfskin import skin_bones
 from pdeanim.clip import load_clip
 from pdeanim.fit import FitOptions, fit_poses
+from pdeanim.fit.bonefit import BONE_SHARE, BoneBudgets
 from pdeanim.gltf.read import read_animated_poses
 from pdeanim.poses import make_poses
 from tests.model.test_bones_decompose import bending_tube
@@ -79,11 +80,35 @@ def test_skinned_gltf_keeps_its_joints():
     skin = skin_bones(CESIUM_MAN, poses)
     assert skin.n_joints == 19 and skin.motion.n_bones == 19
     parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3, bones="auto"), skin=skin)
-    header = container.unpack(parts.coefficients)[0]
+    header, arrays = container.unpack(parts.coefficients)
     assert header["n_bones"] == 19
-    assert parts.report["bones"]["source"] == "gltf skin"
-    rel_rms, _ = decoded_rel_errors(parts, poses)
-    assert rel_rms <= 3e-3
+    b = parts.report["bones"]
+    assert b["source"] == "gltf skin"
+    rel_rms, rel_max = decoded_rel_errors(parts, poses)
+    assert rel_rms <= 3e-3 and rel_max <= 3 * 3e-3
+    # the skin explains the motion: the bones alone meet the target and the residual curves are all zero
+    assert b["zero_residual"] and not np.any(arrays["knots"])
+    assert len(parts.topology) + len(parts.coefficients) == min(c["bytes"] for c in b["tried"])
+    assert any(c["residual"] for c in b["tried"])  # a clip with residual curves was measured too
+
+
+def test_budget_search_finds_the_coarsest_bone_layer_within_a_share():
+    poses = read_animated_poses(CESIUM_MAN, fps=10)
+    skin = skin_bones(CESIUM_MAN, poses)
+    diag = float(np.linalg.norm(np.ptp(poses.vertices[0], axis=0)))
+    goal = 3e-3 * diag
+    t = (poses.times - poses.times[0]) / (poses.times[-1] - poses.times[0])
+    search = BoneBudgets(skin.motion, skin.rest, poses.vertices, t, False, goal)
+    found = search.coarsest(0.5, None)
+    trials = search.trials()
+    chosen = next(x for x in trials if x["budget_rms"] == found)
+    assert chosen["rms_over_goal"] <= 0.5
+    assert found > BONE_SHARE * goal  # the encoder's bound is conservative: the search coarsens past it
+    assert any(x["budget_rms"] > found and x["rms_over_goal"] > 0.5 for x in trials)  # a coarser one missed
+    enc, base = search.encoded(found)
+    d = np.linalg.norm(base.astype(np.float64) - poses.vertices, axis=-1)
+    assert np.sqrt(np.mean(d * d)) / goal == pytest.approx(chosen["rms_over_goal"], rel=1e-6)
+    assert search.coarsest(1e-6, None) is None  # no encoding is that close
 
 
 @pytest.mark.slow  # five fits of the tube: ~20 s on an idle machine

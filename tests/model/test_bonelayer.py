@@ -19,12 +19,12 @@ from pdeanim.model.bonelayer import (
     coarse_mu,
     decode_bones,
     encode_bones,
+    repack_with_bone_layer,
     skin,
     skinned_positions,
     sorted_influences,
     unwrap_rotvec,
     weight_levels,
-    with_bone_layer,
 )
 from pdeanim.model.rigid import rodrigues
 from tests.conformance.bonecases import bend_motion, synthetic_bones
@@ -285,7 +285,7 @@ def test_bones_go_only_on_displacement_clips():
 
     parts = CASES["fit-rigid-chord"][0]()
     with pytest.raises(Exception, match="motion 'displacement'"):
-        with_bone_layer(parts.coefficients, synthetic_bones(10, 2, 2, seed=3))
+        repack_with_bone_layer(parts.coefficients, synthetic_bones(10, 2, 2, seed=3))
 
 
 def test_cli_frame_evaluates_a_clip_with_bones(tmp_path):
@@ -322,3 +322,19 @@ def test_compiled_and_numpy_skinning_agree_bit_for_bit(monkeypatch):
     compiled = player.positions(t)
     monkeypatch.setattr(bonelayer, "COMPILED", False)
     np.testing.assert_array_equal(player.positions(t), compiled)
+
+
+def test_weak_influences_are_dropped_within_the_budget():
+    rest, _, motion = bend_motion(17, 5, 4)
+    times = np.arange(17) / 24.0
+    diag = float(np.linalg.norm(np.ptp(rest, axis=0)))
+    w = np.array(motion.weight)
+    w[:, -1] = np.where(w[:, -1] > 0, 1e-3, 0.0)  # a negligible last influence on every vertex
+    w /= w.sum(axis=1, keepdims=True)
+    weak = BoneMotion(motion.pivot, motion.index, w, motion.rotvec, motion.translation)
+    target = 1e-3 * diag
+    enc = encode_bones(weak, times, target, rest)
+    assert np.count_nonzero(enc.weight_q == 0) >= len(rest)  # at least the negligible influence went
+    t = (times - times[0]) / (times[-1] - times[0])
+    d = np.linalg.norm(skinned_positions(enc, rest, t).astype(np.float64) - skin(weak, rest), axis=-1)
+    assert np.sqrt(np.mean(d * d)) <= target
