@@ -423,8 +423,8 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     dd = d * d
     fitted = best.fitted.segm
     return WindowCodes(
-        index, np.ascontiguousarray(np.moveaxis(codes, 0, -1), np.int64), arrays["knot_step"],
-        (f0 + fitted.bounds).astype(np.int64), arrays["m"], weights, basis, dd.sum(axis=1),
+        index, np.ascontiguousarray(np.moveaxis(codes, 0, -1), np.int32), arrays["knot_step"],
+        (f0 + fitted.bounds).astype(np.int32), arrays["m"], weights.astype(np.int32), basis, dd.sum(axis=1),
         d.max(axis=1, initial=0.0), np.bincount(p.curve_of, dd.sum(axis=0), minlength=C),
         Errors.of(d, p.curve_of, C).curve_max, float((floor_d * floor_d).sum()),
         float(floor_d.max(initial=0.0)), best.trials,
@@ -512,12 +512,14 @@ def _joined_knots(windows: Sequence[WindowCodes], first: np.ndarray, C: int, W: 
     row = 0
     for i, w in enumerate(windows):
         k = scale[i][:, :, None, None]
-        scaled = w.codes * k
+        scaled = w.codes.astype(np.int64) * k
         if np.abs(scaled).max(initial=0) > quantise.MAX_CODE:
             raise ValueError("knot codes out of range on the windows' common step")
         codes[..., first[i]:first[i + 1]], w.codes = scaled, None
         r = len(w.basis)
-        weights[row:row + r] = w.weights * k[None, ..., 0]
+        weights[row:row + r] = w.weights.astype(np.int64) * k[None, ..., 0]
+        if np.abs(weights[row:row + r]).max(initial=0) > quantise.MAX_CODE:
+            raise ValueError("knot weights out of range on the windows' common step")
         basis[row:row + r, first[i]:first[i + 1]] = w.basis
         row += r
     order = quantise.difference_order(codes)
