@@ -66,8 +66,9 @@ def main() -> None:
     print(f"# windowed vs one-piece, windows {counts}, {now}, load {os.getloadavg()[0]:.1f}")
     print(f"# goals: windowed bytes <= {GOAL_BYTES}x one-piece; decoded rel-RMS <= target; rel-max <= "
           f"{GOAL_MAX}x target")
-    print("| sequence | frames x vertices | target | one-piece bytes (rms, max x target; segments) | windows | "
-          "windowed bytes (rms, max x target; segments) | windowed / one-piece | bytes goal | errors goal |")
+    print("| sequence | frames x vertices | target | one-piece bytes (rms, max x target; segments) | "
+          "windows | windowed bytes (rms, max x target; segments) | windowed / one-piece | bytes goal | "
+          "errors goal |")
     print("|---|---|---|---|---|---|---|---|---|")
     missed = 0
     for target in (float(t) for t in args.targets.split(",")):
