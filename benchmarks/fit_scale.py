@@ -71,6 +71,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--service-workers", type=parse_ints, default=[1, 2], help="job workers of (c)")
     ap.add_argument("--service-env", action="append", default=[], metavar="PDEANIM_X=VALUE",
                     help="an extra documented setting for the service of (c)")
+    ap.add_argument("--pca", action="store_true", help="(b): also size quantised PCA of each long input at "
+                    "the clip's error (issue 31's goal: the clip at most 0.6x its wire bytes)")
     ap.add_argument("--timeout", type=float, default=3600, help="seconds before a fit child or job is "
                     "stopped (recorded as timed out)")
     args = ap.parse_args(argv)
@@ -232,13 +234,52 @@ def prepare(item: LongInput, sequences: Path | None) -> None:
               + (f": {made['said']}" if made.get("said") else ""), flush=True)
 
 
+PCA_GOAL = 0.6
+"""Issue 31: a long input's clip at most this multiple of quantised PCA's wire bytes at the same error."""
+
+
+def pca_peer(row: dict, path: Path, clip: Path) -> None:
+    """The smallest quantised PCA file (benchmarks/peers_lowrank.py) at the clip's own decoded rel-RMS, its
+    wire bytes beside the clip's (both zstd -19 as served), added to ``row`` and printed with the goal."""
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from peers_common import wire_bytes
+    from peers_lowrank import method_pca
+
+    if not row.get("rel_rms") or not clip.exists():
+        return
+    with np.load(path) as d:
+        X, faces = np.asarray(d["vertices"], np.float32), np.asarray(d["faces"])
+    t0 = time.perf_counter()
+    rows = [r for r in method_pca(X, faces, (row["rel_rms"],), quick=True) if r["rel_rms"] <= row["rel_rms"]]
+    del X
+    row["clip_wire_bytes"] = wire_bytes(clip.read_bytes())
+    row["pca_wire_bytes"] = min((r["wire_bytes"] for r in rows), default=None)
+    ratio = None if not row["pca_wire_bytes"] else row["clip_wire_bytes"] / row["pca_wire_bytes"]
+    row["clip_over_pca"] = ratio
+    verdict = "not measured" if ratio is None else ("met" if ratio <= PCA_GOAL else "NOT met")
+    figure = "-" if ratio is None else f"{ratio:.3f}"
+    print(f"   {row['input']}: clip {row['clip_wire_bytes']:,} B on the wire at rel-RMS "
+          f"{row['rel_rms']:.3g}, "
+          f"quantised PCA {row['pca_wire_bytes'] or 0:,} B at <= that error "
+          f"({time.perf_counter() - t0:.0f} s): {figure}x (goal <= {PCA_GOAL}x: {verdict})", flush=True)
+
+
 def part_long(args: argparse.Namespace, work: Path) -> list[dict]:
-    """(b) the long inputs, made (or read from the cache) first."""
+    """(b) the long inputs, made (or read from the cache) first; with ``--pca`` each clip beside quantised
+    PCA of the same frames at the same error."""
     for item in args.long_inputs:
         prepare(item, args.data)
     print(markdown_table([], header=True), flush=True)
-    return [fit_row(item.name, item.path, target, args.long_repeats, args.timeout, work)
-            for item in args.long_inputs for target in args.long_targets]
+    rows = []
+    for item in args.long_inputs:
+        for target in args.long_targets:
+            row = fit_row(item.name, item.path, target, args.long_repeats, args.timeout, work)
+            if args.pca:
+                pca_peer(row, item.path, work / "fit.clip")
+            rows.append(row)
+    return rows
 
 
 def part_service(args: argparse.Namespace) -> dict:

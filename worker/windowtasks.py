@@ -64,7 +64,7 @@ def run_window(job: dict, blobs: BlobStore, settings: Settings, progress: Progre
     plan = windowed.WindowPlan.from_bytes(blobs.get(keys.plan_key(fit_job)))
     progress(0.0, f"{phase} {index + 1}/{W}" if phase in ("gram", "encode") else phase)
     if phase == "gram":
-        part = windowed.gram_window(plan, window_frames(blobs, fit_job, plan, index))
+        part = windowed.gram_window(plan, window_frames(blobs, fit_job, plan, index), index)
         blobs.put(part.to_bytes(), key=keys.gram_key(fit_job, index))
     elif phase == "space":
         parts = (windowed.GramPart.from_bytes(blobs.get(keys.gram_key(fit_job, i))) for i in range(W))

@@ -15,8 +15,9 @@ WINDOWED_BYTES_PER_FRAME_VERTEX = 64
 """A fit in windows of frames (pdeanim.fit.windowed) keeps, per frame-vertex, the poses (12 bytes), every
 frame's projected tracks (float32: 16 bytes per item, up to one item per vertex coordinate of three-point
 curves) and the clip's integer codes and tracks (4 + 4 bytes per knot coefficient): at most about 60."""
-WINDOWED_WINDOW_BYTES = 48
-"""... plus, per frame-vertex value of one window, its float64 arrays (items, projection, fields, ...)."""
+WINDOWED_WINDOW_BYTES = FIT_BYTES_PER_FRAME_VERTEX
+"""... plus, per frame-vertex value of one window, what an in-memory fit of its frames takes (each window
+runs the one-piece fit's segment search and rate control)."""
 FIT_BASE_BYTES = 512 * 1024**2  # the interpreter, numpy/scipy/numba and the poses themselves at small sizes
 PLAN_BYTES_PER_FRAME_VERTEX = 32
 """A fit in window tasks (the service's job queue): the task that plans it reads the poses once, the stored
@@ -37,7 +38,7 @@ def fit_memory_bytes(n_frames: int, n_vertices: int, tol: FitTolerances | None =
     values = int(n_frames) * int(n_vertices)
     if tol.dense_fit and values > tol.window_fit_values:
         return (FIT_BASE_BYTES + WINDOWED_BYTES_PER_FRAME_VERTEX * values
-                + WINDOWED_WINDOW_BYTES * min(values, tol.window_values) * 3)
+                + WINDOWED_WINDOW_BYTES * min(values, tol.window_values))
     return FIT_BASE_BYTES + FIT_BYTES_PER_FRAME_VERTEX * values
 
 
@@ -50,7 +51,7 @@ def window_task_memory_bytes(n_frames: int, n_vertices: int, tol: FitTolerances 
     values = int(n_frames) * int(n_vertices)
     sampled = curve_frames(int(n_frames), int(n_vertices)) * int(n_vertices)
     plan = PLAN_BYTES_PER_FRAME_VERTEX * values + PLAN_CURVE_BYTES_PER_VALUE * sampled
-    window = WINDOWED_WINDOW_BYTES * min(values, tol.window_values) * 3
+    window = WINDOWED_WINDOW_BYTES * min(values, tol.window_values)
     join = JOIN_BYTES_PER_FRAME_VERTEX * values
     return FIT_BASE_BYTES + max(plan, window, join)
 

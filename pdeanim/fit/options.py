@@ -155,11 +155,15 @@ class FitTolerances:
     35 segments 659 KB, 47 segments 429 KB; samba: 28 segments 688 KB, 174 segments 551 KB, both with a 4x
     lower max error; horse-collapse keeps its 5 segments for 52 frames)."""
     window_fit_values: int = 4_000_000
-    """Inputs of more frame-vertex values than this are fitted in windows of frames with a knot at every frame
-    (:mod:`pdeanim.fit.windowed`: memory bounded by a window, not by the frames), where the options allow."""
+    """Inputs of more frame-vertex values than this are fitted in windows of frames, each window's segments
+    chosen as a one-piece fit chooses them (:mod:`pdeanim.fit.windowed`: memory bounded by a window, not by
+    the frames), where the options allow."""
     window_values: int = 4_194_304
     """Frame-vertex values per window of frames in a windowed fit (a window's float64 arrays take about 8
     bytes per value each)."""
+    knot_basis: bool = True
+    """Whether the knots may go on a shared time basis (format §3.4) where that is smaller. A windowed fit's
+    windows store plain tracks (the format's per-window knot steps need knot_rank 0)."""
     window_quant_fill: float = 0.93
     """In a windowed fit each window's rounding grows while its RMS stays below this share of an RMS target
     (quant_fill of a one-piece fit): windows cannot trade error between them, so each lands closer to the

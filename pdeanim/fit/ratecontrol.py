@@ -49,7 +49,7 @@ def quantised(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
     quant = _rounding(sf, fitted, options, poses, exact, tol, trials)
     bound = max_bound(sf.targets, tol)
     F = poses.n_frames
-    for rank in (None, quant.rank):
+    for rank in (None, quant.rank) if tol.knot_basis else (0,):
         parts = encode(sf.p, sf.curves, sf.space, fitted, options, poses, None, replace(quant, rank=rank),
                        TRIAL_LEVEL)
         clip = decode(parts)
@@ -72,7 +72,9 @@ def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
     p, F = sf.p, poses.n_frames
     unrounded = Errors.of(exact[:F], p.curve_of, sf.curves.n_curves)
     quant = first_quantisation(sf.targets, unrounded.rms**2, tol)
-    if quant.tolerance is not None and unrounded.meets(sf.targets):
+    if not tol.knot_basis:
+        quant.rank = 0
+    elif quant.tolerance is not None and unrounded.meets(sf.targets):
         first = encode(p, sf.curves, sf.space, fitted, options, poses, None, quant, TRIAL_LEVEL)
         quant = replace(quant, rank=int(container.unpack(first.coefficients)[0]["knot_rank"]))
 

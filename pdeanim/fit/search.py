@@ -39,9 +39,11 @@ class Candidate:
 
 
 def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progress | None,
-              tol: FitTolerances, dense: int | None = None, search_cap: int | None = None) -> Candidate:
+              tol: FitTolerances, dense: int | None = None, search_cap: int | None = None,
+              start: np.ndarray | None = None) -> Candidate:
     """A time fit (error-driven up to ``search_cap`` segments, fixed segments, or ``dense`` evenly spaced
-    segments: a knot at every frame when there are enough) rounded and measured on the targets."""
+    segments: a knot at every frame when there are enough) rounded and measured on the targets. ``start``:
+    the boundaries (frames) the error-driven search starts from and keeps (default: the first and last)."""
     p = sf.p
     frames = len(p.t) - 1
     if options.segments or dense:
@@ -51,9 +53,11 @@ def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progres
         fitted, met, floor_high, history = time_stage(sf.space, segm, options.loop), None, False, []
         cap, unsplittable = dense is not None and not every, every
     else:
-        res = fit_adaptive(sf.space, Segmentation(np.array([0, frames]), p.t), sf.targets,
+        bounds = np.array([0, frames]) if start is None else np.asarray(start, np.int64)
+        res = fit_adaptive(sf.space, Segmentation(bounds, p.t), sf.targets,
                            lambda ts: model_distances(sf.space, ts, p.slots), sf.floor_d,
-                           min(options.max_segments, frames, search_cap or frames), options.loop, progress)
+                           min(options.max_segments, frames, (search_cap or frames) + len(bounds) - 2),
+                           options.loop, progress, None if start is None else bounds)
         fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
         cap, unsplittable = res.cap_reached, res.unsplittable
     exact = model_distances(sf.space, fitted, p.slots)
@@ -73,17 +77,18 @@ def _floor_above(sf: SpaceFit) -> bool:
 
 
 def best_candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progress | None,
-                   tol: FitTolerances) -> Candidate:
+                   tol: FitTolerances, start: np.ndarray | None = None) -> Candidate:
     """The fixed-segment candidate; or of the error-driven one (searched up to tol.search_share of the frame
-    intervals when the dense fit is tried) and the dense one (tol.dense_fit), the one that meets the targets,
-    the preferred one where both do, else the one closer to them. ``progress`` is the whole fit's (this stage
-    reports from 0.1 to 0.86)."""
+    intervals when the dense fit is tried; from the boundaries ``start``, see :func:`candidate`) and the dense
+    one (tol.dense_fit), the one that meets the targets, the preferred one where both do, else the one closer
+    to them. ``progress`` is the whole fit's (this stage reports from 0.1 to 0.86)."""
     if options.segments:
         return candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol)
     frames = len(sf.p.t) - 1
     dense = min(frames, options.max_segments)
     cap = min(dense, max(1, int(np.ceil(tol.search_share * frames)))) if tol.dense_fit else dense
-    search = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol, search_cap=cap)
+    search = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol, search_cap=cap,
+                       start=start)
     if not tol.dense_fit or search.fitted.segm.n_segments >= dense:
         return search
     if progress is not None:

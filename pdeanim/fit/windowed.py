@@ -1,19 +1,23 @@
-"""A fit of a long or large input in windows of frames, with a knot at every frame, as steps that any process
-may run: the windows are independent but for two joins.
-
-With a knot at every frame the knots of frame f depend on frame f alone (its projection on the curves' space
-bases), and the stored clip at frame f is the rest pose plus the knot fields of knot f. So the fit runs as
+"""A fit of a long or large input in windows of frames, as steps that any process may run: the windows are
+independent but for two joins, and each window chooses its segments as a one-piece fit does.
 
 1. :func:`plan_windows`: the curves (chosen on a subsample of the frames), the rest pose's rounding and the
    window bounds;
 2. :func:`gram_window` per window, then :func:`join_space`: the space family and constant of every item from
-   its Gram matrix summed over all frames;
-3. :func:`encode_window` per window: the window's knots, their rate control (its own knot steps, so that
-   every window meets the targets alone) and integer codes;
-4. :func:`join_clip`: the time models, the knot tracks and both parts of the clip.
+   its Gram matrix summed over all frames, and its time model (natural spline or the paper's pair: the
+   spline runs over all knots of the clip, so it is one choice for every window) from the summed Gram
+   matrices of what lines and the spline miss predicting every other frame;
+3. :func:`encode_window` per window: the one-piece fit's time search and rate control
+   (:func:`pdeanim.fit.search.best_candidate`: error-driven segments against a knot at every frame, the
+   smaller stored clip that meets the targets) on the window's frames, with its first and last frames as
+   knots and its own knot steps, so that every window meets the targets alone;
+4. :func:`join_clip`: the windows' knots one after the other (a linear segment between two windows' end
+   knots: the clip is continuous and no frame lies inside it), their steps per window (``knot_windows``,
+   format §3.3-3.4, plain tracks: the format's per-window steps need knot_rank 0) and both parts.
 
 Every step's result has ``to_bytes``/``from_bytes`` so that a job queue can hand windows to other workers
-(service: one task per window). Memory of a step: one window of frames in float64, never all frames.
+(service: one task per window). Memory of a step: one window of frames (an in-memory fit of them), never all
+frames.
 """
 
 from __future__ import annotations
@@ -31,22 +35,22 @@ from ..curveset import CurveSet
 from ..errors import InputError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.clipformat import TIME_SPLINE, decode_topology, topology_arrays
+from ..model.clipformat import TIME_SPLINE, TRIAL_LEVEL, decode_topology, topology_arrays
 from ..model.coefwriter import CoefficientFields, KnotCodes, write_coefficients
-from ..model.families import SPACE_KINDS, space_basis
-from ..model.fitcore import items_from_curves, vertex_slots
+from ..model.fitcore import SpaceStage, floor_distances, items_from_curves, vertex_slots
 from ..model.metrics import bbox_diagonal
 from ..model.parameterisation import curve_parameters
 from ..model.spacefit import SpaceProjection, project_items, search_D
-from ..model.spline import spline_evidence
+from ..model.spline import spline_residuals
 from ..poses import Poses, make_poses
 from ..progress import Progress, sub_progress
-from .encode import Quantisation
+from .encode import encode
 from .options import FitOptions, FitTolerances
-from .problem import u_grid
-from .ratecontrol import Errors, first_quantisation, search_rounding
-from .report import FitReport
-from .spacestage import space_fit
+from .problem import prepare, stored_distances, u_grid
+from .ratecontrol import Errors, first_quantisation
+from .report import FitReport, time_model_counts
+from .search import best_candidate
+from .spacestage import SpaceFit, space_fit
 
 CURVE_FRAMES = 128
 """Frames, evenly spaced, on which the curves of a windowed fit are chosen, at most ..."""
@@ -213,37 +217,57 @@ def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress
 @dataclass
 class GramPart:
     """One window's share of the space stage: every item's Gram matrix (K, N, N) summed over the window's
-    frames, and the window's summed squared distance of the vertices to their frame's centroid."""
+    frames, the window's summed squared distance of the vertices to their frame's centroid, and for the time
+    model the Gram matrices (K, N, N) float32 of what straight lines and the natural spline miss predicting
+    every other frame (:func:`pdeanim.model.spline.spline_residuals`) and which items move (K,)."""
 
     gram: np.ndarray
     spread: float
+    lin: np.ndarray
+    cub: np.ndarray
+    moving: np.ndarray
 
     def to_bytes(self) -> bytes:
-        return _pack("gram", {"spread": self.spread}, {"gram": self.gram})
+        return _pack("gram", {"spread": self.spread},
+                     {"gram": self.gram, "lin": self.lin, "cub": self.cub,
+                      "moving": self.moving.astype(np.uint8)})
 
     @classmethod
     def from_bytes(cls, blob: bytes) -> GramPart:
         h, a = _unpack("gram", blob)
-        return cls(a["gram"], float(h["spread"]))
+        return cls(a["gram"], float(h["spread"]), a["lin"], a["cub"], a["moving"].astype(bool))
 
 
-def gram_window(plan: WindowPlan, frames: np.ndarray) -> GramPart:
-    """Step 2, per window: the Gram matrices and spread of ``frames`` (w, V, 3)."""
+def gram_window(plan: WindowPlan, frames: np.ndarray, index: int) -> GramPart:
+    """Step 2, per window: the Gram matrices, spread and time-model evidence of ``frames`` (w, V, 3), window
+    ``index``."""
+    f0, f1 = plan.window(index)
+    if len(frames) != f1 - f0:
+        raise InputError(f"window {index} has {f1 - f0} frames, got {len(frames)}")
     Yk = plan.layout.item_rows(frames)  # (K, w, N)
     f = np.asarray(frames, np.float64)
     spread = float(((f - f.mean(axis=1, keepdims=True)) ** 2).sum())
-    return GramPart(np.swapaxes(Yk, 1, 2) @ Yk, spread)
+    lin, cub = spline_residuals(Yk, _normalised(plan.times)[f0:f1])
+    moving = np.ptp(Yk, axis=1).any(axis=-1)
+
+    def gram_of(r: np.ndarray) -> np.ndarray:
+        return (np.swapaxes(r, 1, 2) @ r).astype(np.float32)
+
+    return GramPart(np.swapaxes(Yk, 1, 2) @ Yk, spread, gram_of(lin), gram_of(cub), moving)
 
 
 @dataclass
 class SpaceModel:
-    """The space family (K,) and constant D (K,) of every item, and what the whole sequence's Gram matrices
-    and spread gave (the floor's summed squared error, the Karni-Gotsman denominator)."""
+    """The space family (K,) and constant D (K,) of every item, its time model (K,) bool (the natural spline,
+    else the paper's pair; one choice for every window, since the spline runs over all knots), and what the
+    whole sequence's Gram matrices and spread gave (the floor's summed squared error, the Karni-Gotsman
+    denominator)."""
 
     kind: np.ndarray
     D: np.ndarray
     gram_floor: float
     spread: float
+    spline: np.ndarray
 
     def projection(self, plan: WindowPlan) -> SpaceProjection:
         """The items' orthonormal space bases (the same, bit for bit, in every process)."""
@@ -253,42 +277,77 @@ class SpaceModel:
 
     def to_bytes(self) -> bytes:
         return _pack("space", {"gram_floor": self.gram_floor, "spread": self.spread},
-                     {"kind": self.kind.astype(np.uint8), "D": self.D.astype(np.float64)})
+                     {"kind": self.kind.astype(np.uint8), "D": self.D.astype(np.float64),
+                      "spline": self.spline.astype(np.uint8)})
 
     @classmethod
     def from_bytes(cls, blob: bytes) -> SpaceModel:
         h, a = _unpack("space", blob)
-        return cls(a["kind"].astype(np.int64), a["D"], float(h["gram_floor"]), float(h["spread"]))
+        return cls(a["kind"].astype(np.int64), a["D"], float(h["gram_floor"]), float(h["spread"]),
+                   a["spline"].astype(bool))
 
 
 def join_space(plan: WindowPlan, parts: Iterable[GramPart]) -> SpaceModel:
     """Join 1: each item's space family and constant, as the in-memory space stage chooses them, from the Gram
-    matrices summed over every window."""
+    matrices summed over every window; and its time model, as the in-memory fit chooses its natural-spline
+    candidates (:func:`pdeanim.model.spline.prefer_spline` on the projected tracks), from the summed Gram
+    matrices of the prediction residuals."""
     lay = plan.layout
     K, N = lay.n_items, lay.mask.shape[1]
-    gram, spread = np.zeros((K, N, N)), 0.0
+    gram, lin, cub, spread, moving = np.zeros((K, N, N)), np.zeros((K, N, N)), np.zeros((K, N, N)), 0.0, None
     for part in parts:
         gram += part.gram
+        lin += part.lin
+        cub += part.cub
         spread += part.spread
+        moving = part.moving if moving is None else moving | part.moving
     u, mask = lay.u.reshape(K, N), np.repeat(lay.mask, 3, axis=0)
     kind, D, floor = search_D(u, mask, gram, check_cond=False)
     proj = project_items(u, mask, kind, D, fallback=True)
+    options = plan.options
+    if options.time_model == "auto":
+        e_lin = np.einsum("kmn,kna,kma->k", lin, proj.U, proj.U)
+        e_cub = np.einsum("kmn,kna,kma->k", cub, proj.U, proj.U)
+        spline = (e_cub < plan.tol.cubic_gain * e_lin) & (e_lin > 0)
+    elif options.time_model == "spline":
+        spline = np.zeros(K, bool) if moving is None else moving
+    else:
+        spline = np.zeros(K, bool)
     return SpaceModel(np.asarray(proj.kind, np.int64), np.asarray(proj.D, np.float64), float(floor.sum()),
-                      spread)
+                      spread, np.asarray(spline, bool))
+
+
+SPLINE_GUARD = 6
+"""Where a window meets another and some items are on the natural spline, its segment search starts with a
+knot at each of this many frames next to the bound: the spline runs over all knots of the clip (format
+§3.5.2), and a window fits and measures its own knots alone; with knots on the frames there, the clip's
+values at the frames do not depend on the neighbour, and the neighbour's pull on the knot tangents decays
+about 4x per knot before it reaches the window's longer segments (with 3 knots, the morph sphere in 4
+windows was 1.09x off its measured max error in the middle of a 47-frame segment; with 6, 1.001x)."""
+GUARD_MAX_SHARE = 0.98
+"""... and such a window keeps its max error under this share of the soft max bound, for what is left."""
+
+
+BASIS_MIN_FRAMES = 16
+"""A window of fewer frames stores plain knot tracks: a shared basis of its own does not pay for its weights
+and for the finest common step it imposes on every window (7 windows of 8 frames of a 162-vertex mesh: 14.3 KB
+with bases, 10.7 KB without)."""
 
 
 @dataclass
 class WindowCodes:
-    """One window's share of the clip: integer knot codes (C, 3, 4, w) on its own knot steps (C, 3), the
-    time-model evidence of its tracks, its errors (stored clip and unrounded floor), rate-control trials."""
+    """One window's share of the clip: its knots' frames (S_w+1,), integer knot codes (C, 3, 4, S_w+1) on its
+    own knot steps (C, 3), with a shared time basis of its own (format §3.4) its integer weights (r_w, C, 3,
+    4) and basis (r_w, S_w+1) float32 (the codes are then the residual; r_w may be 0), its segments' signed
+    time constants (S_w, C, 3), its errors (stored clip and unrounded floor) and rate-control trials."""
 
     index: int
     codes: np.ndarray
     steps: np.ndarray
-    e_lin: np.ndarray  # (K,)
-    e_cub: np.ndarray  # (K,)
-    b_min: np.ndarray  # (K, 4) float32
-    b_max: np.ndarray  # (K, 4) float32
+    knot_frames: np.ndarray
+    m: np.ndarray
+    weights: np.ndarray
+    basis: np.ndarray
     frame_sq: np.ndarray  # (w,)
     frame_max: np.ndarray  # (w,)
     curve_sq: np.ndarray  # (C,)
@@ -298,7 +357,7 @@ class WindowCodes:
     trials: list[dict]
     quantisation: dict[str, Any]
 
-    _ARRAYS = ("codes", "steps", "e_lin", "e_cub", "b_min", "b_max", "frame_sq", "frame_max", "curve_sq",
+    _ARRAYS = ("codes", "steps", "knot_frames", "m", "weights", "basis", "frame_sq", "frame_max", "curve_sq",
                "curve_max")
 
     def to_bytes(self) -> bytes:
@@ -314,126 +373,80 @@ class WindowCodes:
 
 
 class WindowModel:
-    """What the encoding of every window shares: the space bases and, per vertex, the evaluator's space basis
-    (built once per process from the plan and the space model)."""
+    """What the encoding of every window shares: the plan, the space model and the items' space bases (built
+    once per process)."""
 
     def __init__(self, plan: WindowPlan, space: SpaceModel):
         self.plan, self.space = plan, space
-        lay = plan.layout
         self.proj = space.projection(plan)
-        C = lay.curves.n_curves
-        self.C = C
-        self.kind = self.proj.kind.reshape(C, 3).astype(np.uint8)
-        self.D = self.proj.D.reshape(C, 3).astype(np.float32)
-        cid = lay.curve_of
-        u = lay.u_per_vertex().astype(np.float32).astype(np.float64)
-        basis = np.zeros((len(cid), 3, 4))
-        Dv, kv = self.D.astype(np.float64)[cid], self.kind[cid]
-        for i, name in enumerate(SPACE_KINDS):
-            sel = kv == i
-            if np.any(sel):
-                basis[sel] = space_basis(u[sel][:, None], Dv[sel], name)[:, 0, :]
-        self.basis = basis  # (V, 3, 4): the evaluator's space basis
-        N = lay.mask.shape[1]
-        padded = np.zeros((C * N, 3, 4))
-        padded[lay.slots] = basis
-        # (C * 3, N, 4): each item's basis on its padded curve, so that fields are one batched product
-        by_item = np.moveaxis(padded.reshape(C, N, 3, 4), 2, 1)  # (C, 3, N, 4)
-        self.item_basis = np.ascontiguousarray(by_item).reshape(-1, N, 4)
-        c, n = np.divmod(lay.slots, N)
-        self.rows = ((c * 3)[:, None] + np.arange(3)[None, :]) * N + n[:, None]  # (V, 3) rows of the fields
-        self.base = plan.base()
-
-    def knots(self, b: np.ndarray) -> np.ndarray:
-        """(w, C, 3, 4) float64 knots (balanced space coefficients) of projections b (K, w, 4)."""
-        k = np.einsum("kab,kwb->kwa", self.proj.to_coef, np.asarray(b, np.float64))
-        return np.moveaxis(k.reshape(self.C, 3, b.shape[1], 4), 2, 0)
-
-    def fields(self, knots: np.ndarray) -> np.ndarray:
-        """(V, 3, w) float32 knot fields at the vertices of knots (C * 3, 4, w), computed on the padded curves
-        (no (V, 3, 4, w) temporary) in float64 and rounded as the evaluator rounds its fields; frames last, so
-        that gathering a vertex copies a contiguous run."""
-        on_curves = np.matmul(self.item_basis, knots)  # (C * 3, N, w)
-        w = knots.shape[-1]
-        return np.take(on_curves.reshape(-1, w), self.rows, axis=0).astype(np.float32)
 
 
 def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: Progress | None = None
                   ) -> WindowCodes:
-    """Step 3, per window: the knots of ``frames`` (w, V, 3; window ``index``), the coarsest knot steps
-    (rate control as in an in-memory fit, on this window's frames) with which the window meets the targets,
-    and their codes."""
-    plan, lay = model.plan, model.plan.layout
+    """Step 3, per window: the one-piece fit's time search and rate control on ``frames`` (w, V, 3; window
+    ``index``) with the joined space model and time models: the error-driven segments against a knot at every
+    frame, the smaller stored clip that meets the targets, on this window's own knot steps; its first and
+    last frames are knots, so the windows meet at a segment between two frames (continuous, and no frame's
+    value depends on another window's knots but through the spline's tangents, see SPLINE_GUARD)."""
+    plan, lay, space = model.plan, model.plan.layout, model.space
     f0, f1 = plan.window(index)
     if len(frames) != f1 - f0:
         raise InputError(f"window {index} has {f1 - f0} frames, got {len(frames)}")
-    Yk = lay.item_rows(frames)
-    b = Yk @ model.proj.U  # (K, w, 4)
-    d = _point_distances(Yk - b @ np.swapaxes(model.proj.U, 1, 2), lay.slots)
-    del Yk
-    C = model.C
-    floor = Errors.of(d, lay.curve_of, C)
-    t = _normalised(plan.times)[f0:f1]
-    e_lin, e_cub = spline_evidence(b, t)
-    spline = (e_cub < plan.tol.cubic_gain * e_lin) & (e_lin > 0)
-    knots = model.knots(b)  # (w, C, 3, 4)
-    largest = np.abs(knots).max(axis=(0, 3))[None, :, :, None]
-    knots = np.ascontiguousarray(np.moveaxis(knots, 0, -1))  # (C, 3, 4, w): the tracks' layout
-    # every frame is a knot: the linear pair's bound is 1, the spline items' that of the in-memory writer
-    bound = np.where(spline.reshape(C, 3), quantise.CUBIC_PAIR_MAX, 1.0)
-    weight, reach = quantise.item_sensitivity(lay.curve_of, model.basis, C, 1.0, bound)
-    target_t = np.ascontiguousarray(np.moveaxis(np.asarray(frames, np.float64), 0, -1))  # (V, 3, w)
-    base = model.base[:, :, None]
-
-    def steps_of(quant: Quantisation) -> np.ndarray:
-        if quant.knot_rms is not None:
-            steps = quantise.budget_steps(weight, reach, quant.knot_rms, quant.knot_cap, largest)
-        else:
-            steps = quantise.refined_steps(2.0 * quant.tolerance / np.maximum(reach, 1e-30), np.zeros((C, 3)),
-                                           largest)
-        if quant.refine is not None:
-            steps = quantise.refined_steps(steps, quant.refine, largest)
-        return steps
-
-    def distances(quant: Quantisation) -> tuple[np.ndarray, np.ndarray]:
-        """(V, w) distances of the stored clip to the frames, and the codes (C, 3, 4, w)."""
-        s64 = steps_of(quant).astype(np.float64)[:, :, None, None]
-        codes = np.rint(knots / s64)
-        stored = (codes * s64).astype(np.float32).astype(np.float64).reshape(C * 3, 4, -1)
-        diff = (model.fields(stored) + base).astype(np.float64)
-        diff -= target_t
-        return np.sqrt(np.einsum("vcw,vcw->vw", diff, diff)), codes
-
-    trials: list[dict] = []
-    targets = plan.targets
-    quant = first_quantisation(targets, floor.rms**2, plan.tol)
-    quant.tolerance = plan.tolerance
-
-    def measure(q: Quantisation) -> Errors:
-        if progress is not None:
-            progress(min(len(trials) / 10.0, 1.0), f"window {index + 1}: rounding trial {len(trials) + 1}")
-        return Errors.of(distances(q)[0].T, lay.curve_of, C)
-
-    tol = replace(plan.tol, quant_fill=plan.tol.window_quant_fill)
-    quant = search_rounding(targets, floor, quant, tol, measure, trials)
-    dist, codes = distances(quant)
-    if np.abs(codes).max(initial=0) > quantise.MAX_CODE:
-        raise ValueError("knot codes out of range")  # the steps keep them in range
-    dd = dist * dist
+    options = plan.options
+    poses = replace(make_poses(frames, None, plan.times[f0:f1]), rest=lay.rest.astype(np.float32))
+    p = prepare(poses, options, lay.curves)
+    Yk = np.moveaxis(p.Y, 0, 1)
+    b = Yk @ model.proj.U
+    floor = np.maximum(np.einsum("kfn,kfn->kf", Yk, Yk) - np.einsum("kfa,kfa->kf", b, b), 0.0)
+    spline = space.spline
+    stage = SpaceStage(model.proj, b, floor, Yk, spline if spline.any() else None, np.inf)
+    floor_d = floor_distances(stage, p.slots)
+    sf = SpaceFit(p, lay.curves, stage, floor_d, plan.targets, plan.diagonal, None)
+    tol = replace(plan.tol, quant_fill=plan.tol.window_quant_fill,
+                  knot_basis=plan.tol.knot_basis and len(frames) >= BASIS_MIN_FRAMES)
+    start = _start(plan, index, bool(spline.any()))
+    if start is not None and tol.soft_max_ratio is not None:
+        tol = replace(tol, soft_max_ratio=GUARD_MAX_SHARE * tol.soft_max_ratio)
+    best = best_candidate(sf, options, poses, progress, tol, start)
+    quant = best.quant
+    # the window's clip as its rate control measured it (the same encoding, decoded the same)
+    header, arrays = container.unpack(encode(p, lay.curves, stage, best.fitted, options, poses, None, quant,
+                                             TRIAL_LEVEL).coefficients)
+    C = lay.curves.n_curves
+    if not np.array_equal(arrays["time_model"].reshape(-1) == TIME_SPLINE, spline):
+        raise RuntimeError(f"window {index} changed the time model of some items")  # the slack keeps them
+    codes = quantise.decode_knot_tracks(arrays["knots"], int(header["knot_differences"]))
+    rank = int(header["knot_rank"])
+    weights = (quantise.unzigzag(arrays["knot_weights"]) if rank else np.zeros((0, C, 3, 4))).astype(np.int64)
+    basis = arrays["knot_basis"] if rank else np.zeros((0, len(codes)), np.float32)
+    d = stored_distances(p, best.approx, len(frames))  # (w, V): the window's stored clip, as measured
+    dd = d * d
+    fitted = best.fitted.segm
     return WindowCodes(
-        index, codes.astype(np.int32), steps_of(quant), e_lin, e_cub, b.min(axis=1).astype(np.float32),
-        b.max(axis=1).astype(np.float32), dd.sum(axis=0), dist.max(axis=0, initial=0.0),
-        np.bincount(lay.curve_of, dd.sum(axis=1), minlength=C), Errors.of(dist.T, lay.curve_of, C).curve_max,
-        float((d * d).sum()), float(d.max(initial=0.0)), trials,
-        {"tolerance": quant.tolerance, "knot_rms": quant.knot_rms, "knot_cap": quant.knot_cap})
+        index, np.ascontiguousarray(np.moveaxis(codes, 0, -1), np.int32), arrays["knot_step"],
+        (f0 + fitted.bounds).astype(np.int32), arrays["m"], weights.astype(np.int32), basis, dd.sum(axis=1),
+        d.max(axis=1, initial=0.0), np.bincount(p.curve_of, dd.sum(axis=0), minlength=C),
+        Errors.of(d, p.curve_of, C).curve_max, float((floor_d * floor_d).sum()),
+        float(floor_d.max(initial=0.0)), best.trials,
+        {"tolerance": quant.tolerance, "knot_rms": quant.knot_rms, "knot_cap": quant.knot_cap,
+         "segments": fitted.n_segments, "dense": best.dense is not None, "knot_rank": rank,
+         "met": bool(best.meets)})
 
 
-def _point_distances(resid: np.ndarray, slots: np.ndarray) -> np.ndarray:
-    """(w, V) lengths of item residuals (K, w, N) at the vertices' slots."""
-    K, w, N = resid.shape
-    r = resid.reshape(K // 3, 3, w, N)
-    sq = (r * r).sum(axis=1)  # (C, w, N)
-    return np.sqrt(np.take(np.moveaxis(sq, 1, 0).reshape(w, -1), slots, axis=1))
+def _start(plan: WindowPlan, index: int, spline: bool) -> np.ndarray | None:
+    """The boundaries (window frames) the segment search of window ``index`` starts from: its first and last
+    frame, and with spline items a knot at each of SPLINE_GUARD frames next to a bound with another window."""
+    f0, f1 = plan.window(index)
+    n = f1 - f0 - 1
+    if not spline or plan.n_windows == 1:
+        return None
+    g = min(SPLINE_GUARD, n // 2)
+    bounds = {0, n}
+    if index > 0:
+        bounds.update(range(1, g + 1))
+    if index < plan.n_windows - 1:
+        bounds.update(range(n - g, n))
+    return np.array(sorted(bounds), np.int64)
 
 
 def _normalised(times: np.ndarray) -> np.ndarray:
@@ -444,38 +457,31 @@ def _normalised(times: np.ndarray) -> np.ndarray:
 
 def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes],
               timings: dict[str, float] | None = None) -> ClipParts:
-    """Join 2: the clip of every window's codes: the time model of every item from the whole sequence's
-    evidence, the knot tracks, both parts and the fit report. Each window's codes are released (set to None)
-    once copied into the clip's."""
+    """Join 2: the clip of every window's knots, one after the other (a linear segment between the last knot
+    of a window and the first of the next: no frame lies inside it), on the windows' own knot steps
+    (``knot_windows``), with the joined time models; both parts and the fit report. Each window's codes are
+    released (set to None) once copied into the clip's."""
     W = plan.n_windows
     windows = sorted(windows, key=lambda w: w.index)
     if [w.index for w in windows] != list(range(W)):
         raise InputError(f"a windowed fit joins all {W} windows, got {[w.index for w in windows]}")
     lay, options = plan.layout, plan.options
     C, F = lay.curves.n_curves, plan.n_frames
-    if options.time_model == "auto":
-        e_lin = np.sum([w.e_lin for w in windows], axis=0)
-        e_cub = np.sum([w.e_cub for w in windows], axis=0)
-        spline = (e_cub < plan.tol.cubic_gain * e_lin) & (e_lin > 0)
-    elif options.time_model == "spline":
-        lo = np.min([w.b_min for w in windows], axis=0)
-        hi = np.max([w.b_max for w in windows], axis=0)
-        spline = (hi > lo).any(axis=-1)
-    else:
-        spline = np.zeros(lay.n_items, bool)
-    codes = np.empty((C, 3, 4, F), np.int32)
-    for w in windows:  # each window's codes are released once copied
-        f0, f1 = plan.window(w.index)
-        codes[..., f0:f1], w.codes = w.codes, None
-    order = quantise.difference_order(codes)
-    tracks = quantise.track_codes(codes, order, in_place=True)
-    S = F - 1
-    steps = windows[0].steps if W == 1 else np.stack([w.steps for w in windows])
-    report = _report(plan, space, windows, spline)
-    time_model = np.where(spline.reshape(C, 3), TIME_SPLINE, 0)
-    fields = CoefficientFields(_normalised(plan.times), plan.times, space.kind.reshape(C, 3), time_model,
-                               np.zeros((S, C, 3), np.float32), space.D.reshape(C, 3), options.motion, False)
-    knots = KnotCodes(steps, tracks, order, windows=plan.bounds if W > 1 else None)
+    knot_frames = np.concatenate([w.knot_frames for w in windows]).astype(np.int64)
+    first = np.concatenate([[0], np.cumsum([len(w.knot_frames) for w in windows])])  # (W+1,)
+    S = len(knot_frames) - 1
+    if not np.all(np.diff(knot_frames) > 0) or knot_frames[0] != 0 or knot_frames[-1] != F - 1:
+        raise InputError("the windows' knots do not rise from the first frame to the last")
+    m = np.zeros((S, C, 3), np.float32)  # the segments between windows are linear
+    for i, w in enumerate(windows):
+        m[first[i]:first[i + 1] - 1] = w.m
+    knots = _joined_knots(windows, first, C, W)
+    segment_t = _normalised(plan.times)[knot_frames]
+    time_model = np.where(space.spline.reshape(C, 3), TIME_SPLINE, 0).astype(np.uint8)
+    report = _report(plan, space, windows, knot_frames, time_model_counts(time_model, np.moveaxis(m, 0, -1)),
+                     knots.rank)
+    fields = CoefficientFields(segment_t, plan.times, space.kind.reshape(C, 3), time_model, m,
+                               space.D.reshape(C, 3), options.motion, False)
     header, arrays = write_coefficients(fields, knots, topology_id(plan.topology),
                                         {"errors": report.header_errors()})
     coefficients = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
@@ -485,8 +491,46 @@ def join_clip(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes
     return parts
 
 
-def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes], spline: np.ndarray
-            ) -> FitReport:
+def _joined_knots(windows: Sequence[WindowCodes], first: np.ndarray, C: int, W: int) -> KnotCodes:
+    """The clip's knots from every window's, each decoding to the very knots its window measured: plain
+    tracks on a step per window (``knot_windows``), or where some window stored its knots on a shared basis
+    (which the format allows only with one step per item), one step per item, the finest of the windows'
+    (powers of two, so a coarser window's codes and weights are exact multiples on it), and the windows'
+    bases side by side, each zero outside its own knots (format §3.4: the zeros add nothing, so every knot
+    sums its own window's terms in its window's order). Each window's codes are released once copied."""
+    S1 = int(first[-1])
+    rank = int(sum(len(w.basis) for w in windows))
+    if rank == 0:
+        steps = windows[0].steps if W == 1 else np.stack([w.steps for w in windows])
+        scale = [np.ones((C, 3), np.int64)] * W
+    else:
+        steps = np.min([w.steps for w in windows], axis=0)
+        scale = [np.rint(np.asarray(w.steps, np.float64) / steps).astype(np.int64) for w in windows]
+    codes = np.empty((C, 3, 4, S1), np.int32)
+    weights = np.zeros((rank, C, 3, 4), np.int64)
+    basis = np.zeros((rank, S1), np.float32)
+    row = 0
+    for i, w in enumerate(windows):
+        k = scale[i][:, :, None, None]
+        scaled = w.codes.astype(np.int64) * k
+        if np.abs(scaled).max(initial=0) > quantise.MAX_CODE:
+            raise ValueError("knot codes out of range on the windows' common step")
+        codes[..., first[i]:first[i + 1]], w.codes = scaled, None
+        r = len(w.basis)
+        weights[row:row + r] = w.weights.astype(np.int64) * k[None, ..., 0]
+        if np.abs(weights[row:row + r]).max(initial=0) > quantise.MAX_CODE:
+            raise ValueError("knot weights out of range on the windows' common step")
+        basis[row:row + r, first[i]:first[i + 1]] = w.basis
+        row += r
+    order = quantise.difference_order(codes)
+    tracks = quantise.track_codes(codes, order, in_place=True)
+    if rank == 0:
+        return KnotCodes(steps, tracks, order, windows=first if W > 1 else None)
+    return KnotCodes(steps, tracks, order, quantise.zigzag(weights), basis)
+
+
+def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes], knot_frames: np.ndarray,
+            time_models: dict[str, int], knot_rank: int) -> FitReport:
     """The fit report of a windowed fit (an in-memory fit's, plus its windows)."""
     lay, targets, diag = plan.layout, plan.targets, plan.diagonal
     F, V, C = plan.n_frames, lay.rest.shape[0], lay.curves.n_curves
@@ -501,11 +545,11 @@ def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes],
     met = found.meets(targets)
     rel = (lambda x: x / diag) if diag else (lambda x: None)
     kg = 100.0 * found.rms * np.sqrt(F * V) / np.sqrt(space.spread) if space.spread > 0 else None
-    K = lay.n_items
+    S = len(knot_frames) - 1
     return FitReport(
         rms=found.rms, max=found.largest, rel_rms=rel(found.rms), rel_max=rel(found.largest), kg=kg,
-        diagonal=diag, frames=F, vertices=V, curves=C, segments=F - 1,
-        segment_t=_normalised(plan.times).tolist(), segment_frames=list(range(F)),
+        diagonal=diag, frames=F, vertices=V, curves=C, segments=S,
+        segment_t=_normalised(plan.times)[knot_frames].tolist(), segment_frames=knot_frames.tolist(),
         per_frame_rms=np.sqrt(frame_sq / V).tolist(), per_frame_max=frame_max.tolist(),
         per_curve_rms=np.sqrt(curve_sq / np.maximum(counts, 1)).tolist(),
         per_curve_max=found.curve_max.tolist(),
@@ -514,11 +558,10 @@ def _report(plan: WindowPlan, space: SpaceModel, windows: Sequence[WindowCodes],
         targets={"rms": targets.rms, "max": targets.max}, target_met=met,
         floor_exceeds_target=not floor.meets(targets), adaptive_history=[], options=plan.options.to_dict(),
         curve_points=plan.report["curve_points"], curve_splits=plan.report["curve_splits"], dense_fit=True,
-        segment_cap_reached=False, every_frame_a_knot=not met, quantisation_tolerance=plan.tolerance,
-        quantisation_knot_rms=None, quantisation_knot_cap=None,
+        segment_cap_reached=False, every_frame_a_knot=not met and S == F - 1,
+        quantisation_tolerance=plan.tolerance, quantisation_knot_rms=None, quantisation_knot_cap=None,
         rate_control=[dict(t, window=w.index) for w in windows for t in w.trials],
-        tolerances=plan.tol.to_dict(), knot_rank=0,
-        time_models={"spline": int(spline.sum()), "pde": 0, "linear": int(K - spline.sum())},
+        tolerances=plan.tol.to_dict(), knot_rank=knot_rank, time_models=time_models,
         windows=[{"frames": list(plan.window(w.index)), **w.quantisation,
                   "rms": float(np.sqrt(w.frame_sq.sum() / (len(w.frame_sq) * V))),
                   "trials": len(w.trials)} for w in windows],
@@ -535,7 +578,7 @@ def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: Fit
     plan = plan_windows(poses, options, tol, sub_progress(progress, 0.0, 0.1), curves)
     W = plan.n_windows
     progress(0.1, f"space fit ({plan.n_frames} frames in {W} windows)")
-    space = join_space(plan, (gram_window(plan, X[f0:f1]) for f0, f1 in map(plan.window, range(W))))
+    space = join_space(plan, (gram_window(plan, X[slice(*plan.window(i))], i) for i in range(W)))
     t_space = time.perf_counter()
     model = WindowModel(plan, space)
     codes = []

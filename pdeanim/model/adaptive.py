@@ -65,8 +65,10 @@ def _splits(segm: Segmentation, badness: np.ndarray, n_split: int) -> Segmentati
 def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
                  distances: Callable[[TimeStage], np.ndarray], floor_d: np.ndarray,
                  max_segments: int, loop: bool = False,
-                 progress: Callable[[float, str], None] | None = None) -> AdaptiveResult:
-    """Refine segmentation until targets are met; ``distances(time)`` gives (F, V) model-to-data distances."""
+                 progress: Callable[[float, str], None] | None = None,
+                 keep: np.ndarray | None = None) -> AdaptiveResult:
+    """Refine segmentation until targets are met; ``distances(time)`` gives (F, V) model-to-data distances.
+    ``keep``: frames whose boundaries (in the starting ``segm``) are never merged away."""
     floor_targets, floor_high = _effective_targets(targets, floor_d)
     history: list[dict] = []
     cap_reached = unsplittable = False
@@ -92,7 +94,7 @@ def fit_adaptive(space: SpaceStage, segm: Segmentation, targets: Targets,
             break
         segm = new
     if met and not floor_high and segm.n_segments <= MERGE_MAX_SEGMENTS:
-        time, d = _merge(space, time, d, floor_targets, distances, loop, history)
+        time, d = _merge(space, time, d, floor_targets, distances, loop, history, keep)
     time, d = _polish(space, time, d, distances, loop, floor_targets)
     _, met_real = _frame_badness(d, targets)
     return AdaptiveResult(time, met_real, floor_high, history, cap_reached and not met_real,
@@ -144,15 +146,18 @@ def _polish(space: SpaceStage, time: TimeStage, d: np.ndarray, distances: Callab
 
 
 def _merge(space: SpaceStage, time: TimeStage, d: np.ndarray, targets: Targets,
-           distances: Callable[[TimeStage], np.ndarray], loop: bool, history: list[dict]
-           ) -> tuple[TimeStage, np.ndarray]:
-    """Greedily remove segment boundaries (quietest neighbours first) while the targets stay met."""
+           distances: Callable[[TimeStage], np.ndarray], loop: bool, history: list[dict],
+           keep: np.ndarray | None = None) -> tuple[TimeStage, np.ndarray]:
+    """Greedily remove segment boundaries (quietest neighbours first, none at a frame of ``keep``) while the
+    targets stay met."""
     tries = 0
     while time.segm.n_segments > 1 and tries < MAX_MERGE_TRIES:
         segm = time.segm
         badness, _ = _frame_badness(d, targets)
         energy = np.bincount(segm.frame_segment(), badness**2, minlength=segm.n_segments)
         order = np.argsort(energy[:-1] + energy[1:], kind="stable")
+        if keep is not None:
+            order = order[~np.isin(segm.bounds[order + 1], keep)]
         merged = False
         for s in order[: MAX_MERGE_TRIES - tries]:
             tries += 1

@@ -59,10 +59,30 @@ def spline_evidence(b: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """(K,) squared errors of straight lines and of the natural spline predicting the tracks b (K, F, W) at
     every other frame from the frames between (both parities summed); zeros below 4 frames. Sums over windows
     of frames add up to a whole sequence's evidence but for the frames next to window bounds."""
-    K, F, _ = b.shape
+    K = b.shape[0]
     e_lin, e_cub = np.zeros(K), np.zeros(K)
+    for lin, cub in _parity_residuals(b, t):
+        e_lin += np.einsum("kfw,kfw->k", lin, lin)
+        e_cub += np.einsum("kfw,kfw->k", cub, cub)
+    return e_lin, e_cub
+
+
+def spline_residuals(b: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lin, cub), each (K, n, W): what straight lines and the natural spline miss when they predict the
+    tracks b (K, F, W) at every other frame from the frames between (both parities; n = 0 below 4 frames).
+    Linear in b, so a windowed fit gathers their Gram matrices before it knows the space bases."""
+    pairs = list(_parity_residuals(b, t))
+    if not pairs:
+        empty = np.zeros((b.shape[0], 0, b.shape[2]))
+        return empty, empty
+    return np.concatenate([p[0] for p in pairs], axis=1), np.concatenate([p[1] for p in pairs], axis=1)
+
+
+def _parity_residuals(b: np.ndarray, t: np.ndarray):  # noqa: ANN202
+    """Per parity (none below 4 frames), the residuals (lin, cub) (K, n, W) of :func:`spline_residuals`."""
+    F = b.shape[1]
     if F < 4:
-        return e_lin, e_cub
+        return
     t = np.asarray(t, np.float64)
     for parity in (0, 1):
         kept = np.arange(parity, F, 2)
@@ -72,9 +92,7 @@ def spline_evidence(b: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarra
         target = b[:, out]
         cub = _on_frames(spline_design(t[kept], seg, tau), b[:, kept]) - target
         lin = (b[:, kept[seg]] * (1.0 - tau)[:, None] + b[:, kept[seg + 1]] * tau[:, None]) - target
-        e_lin += np.einsum("kfw,kfw->k", lin, lin)
-        e_cub += np.einsum("kfw,kfw->k", cub, cub)
-    return e_lin, e_cub
+        yield lin, cub
 
 
 def natural_tangents(P: np.ndarray, segment_t: np.ndarray) -> np.ndarray:

@@ -38,7 +38,7 @@ from pdeanim.poses import make_poses
 
 from . import bonecases
 
-FIXTURE_VERSION = 12
+FIXTURE_VERSION = 13
 """Bumped when the set of cases or their layout changes (the JS tests read the manifest)."""
 
 
@@ -92,13 +92,37 @@ def _smooth_spline(motion: str, time_model: str = "auto") -> Callable[[], ClipPa
 
 
 def _windows(motion: str) -> ClipParts:
-    """A fit in three windows of frames (a knot at every frame, one knot step per window)."""
+    """A fit in three windows of frames (plain knot tracks, one knot step per window; each window's segments
+    its own, a linear segment between windows)."""
     poses = _sphere_poses(n_frames=25)
     parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3, motion=motion),
-                      tolerances=FitTolerances(window_fit_values=0, window_values=8 * poses.n_vertices))
+                      tolerances=FitTolerances(window_fit_values=0, window_values=8 * poses.n_vertices,
+                                               knot_basis=False))
     header, arrays = container.unpack(parts.coefficients)
-    assert arrays["knot_windows"].tolist() == [0, 8, 17, 25] and arrays["knot_step"].shape[0] == 3, arrays
+    windows = arrays["knot_windows"].tolist()
+    assert len(windows) == 4 and windows[0] == 0 and windows[-1] == header["n_segments"] + 1, arrays
+    assert arrays["knot_step"].shape[0] == 3, arrays
     return _assert_features(parts, basis=False)
+
+
+def _windows_basis() -> ClipParts:
+    """A fit in two windows of frames whose knots are on each window's own shared time basis: one knot step
+    per item, the windows' bases side by side (each zero outside its window's knots, §3.4)."""
+    mesh = trimesh.creation.icosphere(subdivisions=2)  # 162 vertices bending, twisting and travelling
+    x = np.asarray(mesh.vertices)[None]
+    t = np.linspace(0.0, 1.0, 40)[:, None, None]
+    bend = 0.3 * np.sin(2 * np.pi * (1.5 * t + x[..., :1]) + 1.0) * np.array([0.0, 0.0, 1.0])
+    twist = 0.2 * np.sin(2 * np.pi * t + 2.0) * x[..., [1, 0, 2]] * np.array([1.0, -1.0, 0.0])
+    travel = np.array([1.0, 0.0, 0.0]) * np.sin(np.pi * t + 3.0)
+    poses = make_poses((x + bend + twist + travel).astype(np.float32), np.asarray(mesh.faces))
+    parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3),
+                      tolerances=FitTolerances(window_fit_values=0, window_values=20 * poses.n_vertices))
+    header, arrays = container.unpack(parts.coefficients)
+    basis = arrays["knot_basis"]
+    assert "knot_windows" not in arrays and len(parts.report["windows"]) == 2, header
+    assert all(w["knot_rank"] > 0 for w in parts.report["windows"]), parts.report["windows"]
+    assert np.any(basis[:, :10] != 0) and np.any(basis[:, -10:] != 0) and np.any(basis == 0), basis
+    return _assert_features(parts, basis=True)
 
 
 def _single_frame_rigid() -> ClipParts:
@@ -295,6 +319,7 @@ CASES: dict[str, tuple[Callable[[], ClipParts], dict]] = {
     "fit-blend-displacement-chord-loop-basis": (_fit_blend(True), {}),
     "fit-displacement-chord-windows": (lambda: _windows("displacement"), {}),
     "fit-absolute-chord-windows": (lambda: _windows("absolute"), {}),
+    "fit-displacement-chord-windows-basis": (_windows_basis, {}),
     "synthetic-displacement-paper": (_synthetic_dynamic("displacement", "paper", False), {}),
     "synthetic-absolute-chord-loop": (_synthetic_dynamic("absolute", "chord", True), {}),
     "synthetic-rigid-paper": (_synthetic_dynamic("rigid", "paper", False), {}),

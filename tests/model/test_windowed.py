@@ -1,8 +1,11 @@
-"""Fits in windows of frames (pdeanim.fit.windowed): the joined clip is one clip (one knot per frame, so it is
-continuous across window boundaries by construction), meets its target, stores what its report says, and
-matches the one-piece fit of the same frames within the target whatever the window size."""
+"""Fits in windows of frames (pdeanim.fit.windowed): the joined clip is one clip, continuous across window
+bounds (each window's first and last frames are knots, a linear segment joins two windows), whose windows
+choose their segments and rounding as a one-piece fit does; it meets its target, stores what its report says,
+and matches the one-piece fit of the same frames within the target whatever the window size."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -50,10 +53,13 @@ def motion() -> Poses:
 def test_a_windowed_fit_is_one_clip_that_meets_its_target_and_stores_what_it_reports(motion):
     parts = fit_poses(motion, FitOptions(target_rel_rms=TARGET), tolerances=_windowed(8, motion.n_vertices))
     r = parts.report
-    assert r["windowed"] and r["target_met"] and r["segments"] == motion.n_frames - 1
+    assert r["windowed"] and r["target_met"]
     assert [w["frames"] for w in r["windows"]][:2] == [[0, 9], [9, 17]]  # 7 balanced windows of 8-9 frames
     assert 0.8 * TARGET <= r["rel_rms"] <= TARGET and r["rel_max"] <= 3.0 * TARGET
     assert _decoded_rms(parts, motion) == pytest.approx(r["rms"], rel=1e-6)
+    # every window's first and last frames are knots: the windows meet at a segment between two frames
+    for f0, f1 in (w["frames"] for w in r["windows"]):
+        assert f0 in r["segment_frames"] and f1 - 1 in r["segment_frames"]
     # continuity across windows: halfway between two frames on either side of a window boundary the clip lies
     # between its neighbours' positions (no jump where a window ends)
     clip = load_clip(parts.topology, parts.coefficients)
@@ -63,13 +69,58 @@ def test_a_windowed_fit_is_one_clip_that_meets_its_target_and_stores_what_it_rep
     assert np.abs(mid - ends.mean(axis=0)).max() <= np.abs(ends[1] - ends[0]).max() + 1e-6
 
 
+def test_windows_of_smooth_motion_put_knots_where_the_motion_needs_them():
+    """A slow, smooth motion in two windows: each window keeps far fewer knots than frames (as the one-piece
+    fit of the same frames does), the clip meets its target as decoded (max within 3x), and the same input
+    gives the same bytes twice (every step deterministic)."""
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    x = np.asarray(mesh.vertices)[None]
+    t = np.linspace(0.0, 1.0, 80)[:, None, None]
+    poses = make_poses((x * (1.0 + 0.2 * np.sin(np.pi * t) * x[..., 2:]) + 0.5 * t * t).astype(np.float32),
+                       np.asarray(mesh.faces))
+    tol = _windowed(40, poses.n_vertices)
+    parts = fit_poses(poses, FitOptions(target_rel_rms=TARGET), tolerances=tol)
+    r = parts.report
+    assert len(r["windows"]) == 2 and r["segments"] <= 30, r["segments"]
+    assert all(w["segments"] < 20 for w in r["windows"]), r["windows"]
+    clip = load_clip(parts.topology, parts.coefficients)
+    d = np.linalg.norm(clip.evaluate(clip.frame_t()).astype(np.float64) - poses.vertices, axis=-1)
+    assert np.sqrt(np.mean(d * d)) <= TARGET * r["diagonal"] and d.max() <= 3.0 * TARGET * r["diagonal"]
+    again = fit_poses(poses, FitOptions(target_rel_rms=TARGET), tolerances=tol)
+    assert (again.topology, again.coefficients) == (parts.topology, parts.coefficients)
+
+
+def test_the_steps_through_bytes_give_the_clip_of_the_in_process_fit(motion):
+    """Every step's result through to_bytes/from_bytes (what window tasks store) joins to the very clip of
+    the in-process windowed fit, including windows whose knots are on their own shared time basis."""
+    from pdeanim.fit import windowed
+
+    tol = _windowed(20, motion.n_vertices)
+    options = FitOptions(target_rel_rms=TARGET)
+    whole = fit_poses(motion, options, tolerances=tol)
+    plan = windowed.WindowPlan.from_bytes(windowed.plan_windows(motion, options, tol).to_bytes())
+    frames = [motion.vertices[slice(*plan.window(i))] for i in range(plan.n_windows)]
+    grams = [windowed.GramPart.from_bytes(windowed.gram_window(plan, f, i).to_bytes())
+             for i, f in enumerate(frames)]
+    space = windowed.SpaceModel.from_bytes(windowed.join_space(plan, grams).to_bytes())
+    model = windowed.WindowModel(plan, space)
+    codes = [windowed.WindowCodes.from_bytes(windowed.encode_window(model, f, i).to_bytes())
+             for i, f in enumerate(frames)]
+    parts = windowed.join_clip(plan, space, codes)
+    assert (parts.topology, parts.coefficients) == (whole.topology, whole.coefficients)
+    h, _ = container.unpack(whole.coefficients)
+    if h["knot_rank"]:  # the windows' bases side by side decode to what each window measured
+        assert _decoded_rms(whole, motion) == pytest.approx(whole.report["rms"], rel=1e-6)
+
+
 @settings(max_examples=3, deadline=None)
 @given(seed=st.integers(0, 10**6), window=st.integers(8, 25))
 def test_windowed_and_one_piece_fits_agree_within_the_target(seed, window):
     """Any window size: the windowed clip meets the target and its frames lie within twice the target (RMS)
     of the one-piece fit's (each is within the target of the data; measured 1.24-1.28x). Bytes: this motion
-    is low-rank, which the one-piece fit stores on a shared time basis and the windowed one cannot (measured
-    1.34-1.39x)."""
+    is low-rank, which the one-piece fit stores on one shared time basis and the windowed one on a basis per
+    window, on the finest of the windows' steps (measured up to 1.63x for 5 windows of 8 frames, where the
+    per-window overheads weigh most)."""
     poses = _motion(40, seed)
     whole = fit_poses(poses, FitOptions(target_rel_rms=TARGET), tolerances=FitTolerances(dense_fit=True))
     part = fit_poses(poses, FitOptions(target_rel_rms=TARGET), tolerances=_windowed(window, poses.n_vertices))
@@ -78,37 +129,41 @@ def test_windowed_and_one_piece_fits_agree_within_the_target(seed, window):
     d = np.linalg.norm(a.evaluate(a.frame_t()).astype(np.float64) - b.evaluate(b.frame_t()), axis=-1)
     assert np.sqrt(np.mean(d * d)) <= 2 * TARGET * whole.report["diagonal"]
     size = [len(p.topology) + len(p.coefficients) for p in (whole, part)]
-    assert size[1] <= 1.6 * size[0]
+    assert size[1] <= 2.5 * size[0]
 
 
 def test_every_window_meets_the_target_alone_and_small_windows_cost_few_bytes(motion):
     """Each window's rate control is its own (knot steps per window): each meets the target; small windows
-    cost a little more than one window: their steps, and no trading of error between windows (measured 1.14x
-    for 7 windows of 8 frames of a 162-vertex mesh, where the per-window steps weigh most)."""
+    cost more than one window: their steps, their end knots, no trading of error between windows, and no
+    segments longer than a window (measured 1.56x for 7 windows of 8 frames of a 162-vertex mesh against one
+    window of 60 frames that needs 7 segments)."""
     small = fit_poses(motion, FitOptions(target_rel_rms=TARGET), tolerances=_windowed(8, motion.n_vertices))
     large = fit_poses(motion, FitOptions(target_rel_rms=TARGET), tolerances=_windowed(60, motion.n_vertices))
     target = TARGET * small.report["diagonal"]
     assert len(small.report["windows"]) == 7 and len(large.report["windows"]) == 1
-    assert all(0.8 * target <= w["rms"] <= target for w in small.report["windows"])
-    assert len(small.coefficients) <= 1.3 * len(large.coefficients)
+    assert all(0.6 * target <= w["rms"] <= target for w in small.report["windows"])
+    assert len(small.coefficients) <= 2.0 * len(large.coefficients)
 
 
 def test_broken_knot_windows_raise_clear_errors(motion):
     """docs/format.md §3.4: knot_windows rise strictly from 0 to S+1, one knot step per window, no basis."""
-    parts = fit_poses(motion, FitOptions(target_rel_rms=TARGET), tolerances=_windowed(20, motion.n_vertices))
+    tol = replace(_windowed(20, motion.n_vertices), knot_basis=False)
+    parts = fit_poses(motion, FitOptions(target_rel_rms=TARGET), tolerances=tol)
     h, a = container.unpack(parts.coefficients)
     S, C = h["n_segments"], h["n_curves"]
-    assert a["knot_windows"].tolist() == [0, 20, 40, 60] and a["knot_step"].shape == (3, C, 3)
+    windows = a["knot_windows"]
+    assert len(windows) == 4 and windows[0] == 0 and windows[-1] == S + 1
+    assert a["knot_step"].shape == (3, C, 3)
+    w1, w2 = int(windows[1]), int(windows[2])
 
     def edit(header: dict | None = None, drop: str | None = None, **arrays) -> bytes:
         b = {k: v for k, v in {**a, **arrays}.items() if k != drop}
         return container.pack({**h, **(header or {})}, b)
 
-    windows = a["knot_windows"]
     cases = [
-        (edit(knot_windows=np.array([0, 40, 20, 60], np.uint32)), "must rise strictly from 0 to 60"),
-        (edit(knot_windows=np.array([1, 20, 40, 60], np.uint32)), "must rise strictly"),
-        (edit(knot_windows=np.array([0, 20, 40, 59], np.uint32)), "must rise strictly"),
+        (edit(knot_windows=np.array([0, w2, w1, S + 1], np.uint32)), f"must rise strictly from 0 to {S + 1}"),
+        (edit(knot_windows=np.array([1, w1, w2, S + 1], np.uint32)), "must rise strictly"),
+        (edit(knot_windows=np.array([0, w1, w2, S], np.uint32)), "must rise strictly"),
         (edit(knot_windows=windows.astype(np.int32)), "'knot_windows' has dtype"),
         (edit(knot_windows=windows[:-1]), "'knot_step' has shape"),
         (edit(drop="knot_windows"), "'knot_step' has shape"),
