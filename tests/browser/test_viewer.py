@@ -191,15 +191,29 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, browser_env, cli
 
 
 # the clip's frames on the source glTF in the viewer against three.js drawing that glTF (its own skinning, at
-# the same times) in another page, without the viewer's CSP; the bound is 1% of the model's pixels (runs with
-# a 2e-4 fit: 0.01-0.15%)
+# the same times) in another page, without the viewer's CSP; the bound is 1% of the model's pixels off by more
+# than 40 levels. Neither fit meets it at the default target (rel. RMS 3e-3; measured 2026-12-07 at t = 0,
+# 0.5 and 1):
+# - "bones" (bones auto, what `pdeanim fit` does with a skinned glTF: the file's two joints and weights, joint
+#   tracks + residual): 1.14/1.09/2.71% flat, 1.34/1.43/3.17% smooth. The bone layer fills the target with
+#   the tail joint's track (one segment; 4-bit weights): the tail moves rigidly by 2-3.6e-3 of the diagonal
+#   (RMS; the body 1.4e-4), even at t = 0 where the source is at rest, which shifts every checker edge on a
+#   third of the model. Fitted at 1e-3 (2,400 coefficient bytes against 2,368): 0.05/0.42/0.50% flat,
+#   0.14/0.51/0.56% smooth.
+# - "curve" (bones 0, the HTTP default): 0.13/1.50/1.77% flat, -/1.84/1.78% smooth, following the stored
+#   clip's largest error in each frame (1.9e-4, 8.7e-3, 8.9e-3 of the diagonal; the unrounded fit is 4e-7 off:
+#   it is the knots' rounding, which the rate control grows to fill the target). Fitted at 2e-4: 0.01-0.31%.
 LOOK_TIMES = [0.0, 0.5, 1.0]
 LOOK_DIFFER = 0.01
 LOOK_FIT_RMS = 2e-4
+LOOK_BONES_RMS = 1e-3
+LOOK_FITS = {"bones": {"bones": "auto", "target_rel_rms": LOOK_BONES_RMS},
+             "curve": {"target_rel_rms": LOOK_FIT_RMS}}
 
 
-@pytest.mark.parametrize("flat", [True, False], ids=["flat", "smooth"])
-def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, flat, tmp_path):
+@pytest.mark.parametrize(("flat", "fit"), [(True, "bones"), (False, "bones"), (False, "curve")],
+                         ids=["flat-bones", "smooth-bones", "smooth-curve"])
+def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, flat, fit, tmp_path):
     """The mesh was uploaded as a textured, skinned GLB (flat: no normals, unwelded): the viewer plays the
     clip on that glTF (texture, flat or smooth shading kept) and its frames look like three.js's own rendering
     of the source at the same times, drawn in a page without the viewer's Content-Security-Policy."""
@@ -217,13 +231,7 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, fl
     poses = api.post(f"/v1/meshes/{mid}/poses", params={"fps": 10},
                      files={"file": ("creature.glb", glb, "model/gltf-binary")})
     assert poses.status_code == 201, poses.text
-    # this test is about the player's look, so the fit is tighter than the default: at the default (rel. RMS
-    # 3e-3 of the diagonal) 1.50-1.84% of the model's pixels differ at t = 0.5 and 1 and 0.13% at t = 0 (flat)
-    # (measured 2026-12-07), following the stored clip's largest error in each frame (1.9e-4, 8.7e-3 and
-    # 8.9e-3 of the diagonal; the unrounded fit is 4e-7 off: it is the knots' rounding that the rate control
-    # grows to fill the target, flat and smooth alike, so not the normals, UVs or the GPU path)
-    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses.json()["id"],
-                                   "params": {"target_rel_rms": LOOK_FIT_RMS}})
+    r = api.post("/v1/jobs", json={"kind": "fit", "poses_id": poses.json()["id"], "params": LOOK_FITS[fit]})
     assert r.status_code == 202, r.text
     job = wait_job(api, r.json()["id"], timeout=300)
     assert job["state"] == "succeeded", (job, services.logs())
@@ -235,12 +243,17 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, fl
     job = {"url": f"{services.url}/viewer#clip={cid}&key={key}&aa=0", "shots": shots, "reference": reference}
     result = run_viewer(services, browser_env, tmp_path, job)
     assert result["info"]["model"] == "gltf", result["info"]
+    # bones auto keeps the file's two joints (a bone clip, played with its bone layer); the curve fit has none
+    bones = (result["info"].get("bones") or {}).get("nBones")
+    assert bones == (2 if fit == "bones" else None), result["info"]
+    name = f"{'flat' if flat else 'smooth'}-{fit}"
     ref = result["reference"]
     assert ref["flat"] is flat  # GLTFLoader shades a glTF without normals flat
     # the texture shows in both pages: the viewer's CSP lets GLTFLoader read the GLB's embedded image
     assert ref["textured"] and ref["viewerTextured"], result["logs"]
     refused = [line for line in result["logs"] if "Content Security Policy" in line]
     assert not refused, refused
+    differs = []  # every time is measured and printed before the bound is checked
     for t, clip_path, ref_path in zip(LOOK_TIMES, ref["clipPaths"], ref["referencePaths"], strict=True):
         clip_img, ref_img = load_png(clip_path), load_png(ref_path)
         assert clip_img.shape == ref_img.shape
@@ -250,11 +263,14 @@ def test_viewer_plays_on_the_source_gltf_with_its_look(services, browser_env, fl
         colours = ref_img[model].std(axis=0).max()
         assert colours > 20, "the reference model shows no texture"
         differ = (np.abs(clip_img - ref_img).max(axis=2) > 40).sum() / model.sum()
-        print(f"look ({'flat' if flat else 'smooth'}, t={t}): {differ:.3%} of the model's pixels differ by "
-              f"more than 40 levels, model {model.mean():.1%} of the view")
-        assert differ < LOOK_DIFFER, f"t={t}: {differ:.2%} of the model's pixels differ from three.js's own"
-        shutil.copy(clip_path, services.log_dir / f"look-{'flat' if flat else 'smooth'}-clip-{t}.png")
-        shutil.copy(ref_path, services.log_dir / f"look-{'flat' if flat else 'smooth'}-reference-{t}.png")
+        print(f"look ({name}, t={t}): {differ:.3%} of the model's pixels differ by more than 40 levels, "
+              f"model {model.mean():.1%} of the view")
+        differs.append(differ)
+        shutil.copy(clip_path, services.log_dir / f"look-{name}-clip-{t}.png")
+        shutil.copy(ref_path, services.log_dir / f"look-{name}-reference-{t}.png")
+    worst = int(np.argmax(differs))
+    assert differs[worst] < LOOK_DIFFER, \
+        f"t={LOOK_TIMES[worst]}: {differs[worst]:.2%} of the model's pixels differ from three.js's own"
     gpu, cpu = (canvas_part(load_png(s["path"])) for s in shots)
     assert (np.abs(gpu - cpu).max(axis=2) > 40).mean() < 0.005  # no facets on the GPU path
 

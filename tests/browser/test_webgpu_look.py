@@ -13,13 +13,17 @@ from pathlib import Path
 import pytest
 
 from pdeanim.cli import main as pdeanim_main
+from pdeanim.clip import load_clip_file
 from tests.browser.models import creature_glb
 
 JS = Path(__file__).resolve().parents[2] / "clients" / "js"
-# as the viewer's look test: 1% of the model's pixels off by more than 40 levels, a fit at 2e-4 (runs: 0.02 to
-# 0.11% on every renderer)
+# as the viewer's look test: 1% of the model's pixels off by more than 40 levels. The fit is `pdeanim fit`'s
+# own (bones auto: a bone clip on the file's skeleton) at rel. RMS 1e-3: 0.04/0.44/0.28% flat, 0.04/0.34/0.29%
+# smooth at t = 0, 0.5, 1, the same on every renderer (2026-12-07). With no options at all (target 3e-3) it
+# does NOT meet 1%: 0.96/0.85/1.52% flat, 0.96/1.00/2.50% smooth (the bone layer spends the target on the
+# tail joint's track, see test_viewer.py); `--bones 0` at 3e-3: 0.24/1.58/1.44% flat.
 LOOK_DIFFER = 0.01
-LOOK_FIT_RMS = 2e-4
+LOOK_FIT_RMS = 1e-3
 TIMES = [0.0, 0.5, 1.0]
 CHROMIUMS = ("/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome")
 
@@ -49,6 +53,7 @@ def test_the_clip_on_a_textured_skinned_gltf_looks_like_three_js_on_webgpu_and_w
     glb.write_bytes(creature_glb(flat))
     argv = ["fit", str(glb), "--out", str(clip), "--fps", "10", "--target-rel-rms", str(LOOK_FIT_RMS)]
     assert pdeanim_main([*argv, "--quiet"]) == 0
+    assert load_clip_file(clip).bones is not None  # the CLI's default on a skinned glTF: the file's skeleton
     proc = subprocess.run(["node", str(JS / "test" / "tools" / "look_page.mjs"), str(glb), str(clip)], cwd=JS,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
