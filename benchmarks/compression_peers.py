@@ -170,6 +170,10 @@ def write_outputs(results: dict[str, list[dict]], args: argparse.Namespace, head
         peers_report.pareto_plot(name, rows, targets, args.out / f"pareto-{name}.png")
     text = "\n\n".join([
         head,
+        "In short: the clip's wire bytes (bone count; rel-RMS as a share of the target, rel-max as a "
+        "multiple of it) and the smallest peer (gltfpack, PCA, Dem Bones) on the wire at each yardstick, "
+        "with the clip's wire ratio to it:",
+        peers_report.compact_table(results, targets),
         "Bytes at each rel-RMS target: the clip, and the smallest file of each peer that meets the target "
         "(file / wire bytes; wire = zstd -19 of each file; max = rel-max as a multiple of the target). "
         "Wire ratio = clip wire bytes / the smallest of gltfpack, PCA and Dem Bones on the wire; file ratio "

@@ -135,6 +135,39 @@ def goal_cells(rows: list[dict], target: float) -> dict[str, str]:
     return out
 
 
+def _peer_brief(r: dict, target: float) -> str:
+    setting = r["setting"].split(",")[0] if r["method"] == "dembones" else r["setting"]
+    return (f"{LABELS[r['method']]} {nbytes(r['wire_bytes'])} ({setting}; RMS {r['rel_rms'] / target:.2f}, "
+            f"max {r['rel_max'] / target:.1f}x)")
+
+
+def compact_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
+    """One line per sequence and target: the clip on the wire (bones; rel-RMS as a share of the target,
+    rel-max as a multiple) and the smallest peer at each yardstick with the clip's wire ratio to it."""
+    head = ["input", "target", "clip wire (bones; rel-RMS share, rel-max x)",
+            f"smallest peer, RMS + max <= {MAX_YARDSTICK:g}x", "ratio", "smallest peer, RMS alone", "ratio"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        for t in targets:
+            c = clip_at(rows, t)
+            ok = c is not None and "wire_bytes" in c
+            if not ok:
+                cell = "not run" if c is None else "fit failed"
+            else:
+                miss = "" if c["target_met"] else ", target missed"
+                cell = (f"{nbytes(c['wire_bytes'])} ({c.get('bones', 0)}; {c['rel_rms'] / t:.2f}, "
+                        f"{c['rel_max'] / t:.1f}x{miss})")
+            cells = [name, f"{t:g}", cell]
+            for mr in (MAX_YARDSTICK, None):
+                p = smallest_peer(rows, t, mr)
+                if p is None:
+                    cells += ["none meets it", "-"]
+                else:
+                    cells += [_peer_brief(p, t), f"{c['wire_bytes'] / p['wire_bytes']:.2f}" if ok else "-"]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def goals_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
     """Issue 30's goals per sequence and target, each figure beside met / NOT met."""
     head = ["sequence", "target", f"<= {GOAL_STRICT:g}x peer (RMS + max <= {MAX_YARDSTICK:g}x)",
