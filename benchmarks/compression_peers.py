@@ -106,7 +106,7 @@ def run_sequence(name: str, source: Path | str, args: argparse.Namespace) -> lis
             "clip": lambda: peers_clip.method_clip(name, npz, X, t, work, tmo),
             "gltfpack": lambda: peers_gltfpack.method_gltfpack(X, faces, work, tmo, q, args.gltfpack_vp,
                                                                not args.gltfpack_no_vpf),
-            "pca": lambda: peers_lowrank.method_pca(X, faces, t, q),
+            "pca": lambda: peers_lowrank.method_pca(X, faces, t, q, args.pca_bits),
             "dembones": lambda: peers_dembones.method_dembones(name, X, faces, args.cache, q,
                                                                args.dembones_bones),
             "skinned": lambda: (peers_skinned.method_skinned(npz, X, work, tmo)
@@ -216,6 +216,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pdeanim-bench",
                     help="cache folder of Dem Bones solves (outside the repository)")
     ap.add_argument("--dembones-bones", help="comma-separated Dem Bones bone counts (default 8,16,32,64,128)")
+    ap.add_argument("--pca-bits", help="comma-separated bits of PCA's bases (default 8,10,12,14,16)")
     ap.add_argument("--gltfpack-vp", help="comma-separated -vp bit counts of gltfpack (default 8..16)")
     ap.add_argument("--gltfpack-no-vpf", action="store_true",
                     help="leave out gltfpack's float positions (-vpf: never the smallest at 3e-3 or 1e-3 in "
@@ -231,6 +232,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         ap.error(f"unknown methods: {', '.join(sorted(unknown))}")
     args.targets = tuple(float(t) for t in args.targets.split(","))
     args.merge = [Path(d) for d in args.merge.split(",")] if args.merge else []
+    args.pca_bits = tuple(int(b) for b in args.pca_bits.split(",")) if args.pca_bits else None
     args.gltfpack_vp = tuple(int(b) for b in args.gltfpack_vp.split(",")) if args.gltfpack_vp else None
     if args.dembones_bones:
         args.dembones_bones = tuple(int(b) for b in args.dembones_bones.split(","))

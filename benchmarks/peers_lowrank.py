@@ -1,8 +1,9 @@
 """The PCA and keyframe peers of the compression benchmark, each at the smallest size that meets a target.
 
-* PCA: mean + k bases + per-frame weights; bases quantised to b bits (one range per basis), the mean to b,
-  b + 2 or b + 4 bits, the weights to 16 bits, each array zstd -19, faces with meshoptimizer's index codec.
-  For each setting k is the smallest that meets the target (bisection on the decoded frames' error); the
+* PCA: mean + k bases + per-frame weights; bases quantised to b bits (one range per basis; b in BITS or
+  ``--pca-bits``), the mean to b, b + 2 or b + 4 bits, the weights to 16 bits, each array zstd -19, faces
+  with meshoptimizer's index codec. For each setting k is the smallest that meets the target (bisection on
+  the decoded frames' error), at each yardstick (rel-RMS alone; rel-RMS and rel-max <= 3x the target); the
   smallest file over the settings is the peer.
 * keyframes (a floor reference): K evenly spaced frames quantised to b bits (one range per axis over the
   whole sequence), zstd -19, linear interpolation in between; K the smallest that meets the target.
@@ -99,13 +100,13 @@ MAX_RATIO = 3.0
 """The stricter yardstick of issue 30: rel-max at most this multiple of the target (as the clip keeps it)."""
 
 
-def pca_settings(m: PcaModel, targets: tuple[float, ...], quick: bool) -> dict[tuple[float, float | None],
-                                                                            list[tuple]]:
+def pca_settings(m: PcaModel, targets: tuple[float, ...], quick: bool,
+                 bits_tried: tuple[int, ...] | None = None) -> dict[tuple[float, float | None], list[tuple]]:
     """Per target and yardstick (rel-RMS alone, or also rel-max <= MAX_RATIO x target), the (bits, mean_bits,
     k) settings that meet it with the smallest k for their bits, ordered by estimated size."""
     found: dict[tuple[float, float | None], list[tuple]] = {(t, mr): [] for t in targets
                                                             for mr in (None, MAX_RATIO)}
-    for bits in QUICK_BITS if quick else BITS:
+    for bits in QUICK_BITS if quick else (bits_tried or BITS):
         for mean_bits in sorted({min(16, bits + d) for d in ((0, 4) if quick else (0, 2, 4))}):
             for t, mr in found:
                 k = smallest_meeting(1, m.kmax, lambda k, b=bits, mb=mean_bits, t=t, mr=mr:
@@ -115,7 +116,8 @@ def pca_settings(m: PcaModel, targets: tuple[float, ...], quick: bool) -> dict[t
     return {key: [c[1:] for c in sorted(v)] for key, v in found.items()}
 
 
-def method_pca(X: np.ndarray, faces: np.ndarray, targets: tuple[float, ...], quick: bool) -> list[dict]:
+def method_pca(X: np.ndarray, faces: np.ndarray, targets: tuple[float, ...], quick: bool,
+               bits_tried: tuple[int, ...] | None = None) -> list[dict]:
     """For each target and yardstick (rel-RMS alone; rel-RMS and rel-max <= 3x the target), the smallest PCA
     file that meets it (bits of the bases and the mean searched, k by bisection), sized at zstd -19 for the
     shortlisted settings; on the welded trajectories (seam duplicates merged, the remap in the file)."""
@@ -123,7 +125,7 @@ def method_pca(X: np.ndarray, faces: np.ndarray, targets: tuple[float, ...], qui
     m = PcaModel(w.X, np.bincount(w.point_of, minlength=w.X.shape[1]) if w.merged else None)
     fc = faces_code(w.faces, w.X.shape[1])
     rows, done = [], set()
-    for settings in pca_settings(m, targets, quick).values():
+    for settings in pca_settings(m, targets, quick, bits_tried).values():
         for bits, mean_bits, k in settings[:SHORTLIST]:
             if (bits, mean_bits, k) in done:
                 continue
