@@ -43,6 +43,7 @@ class PcaModel:
         self._means: dict[int, tuple] = {}
         self._bases: dict[int, tuple] = {}
         self._errors: dict[tuple[int, int, int], tuple[float, float]] = {}
+        self._X32 = self._W32 = None
 
     def mean_q(self, bits: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(codes, dequantised flat, ranges) of the mean at ``bits``."""
@@ -65,8 +66,12 @@ class PcaModel:
     def errors(self, k: int, bits: int, mean_bits: int) -> tuple[float, float]:
         """(rel-RMS, rel-max) of the decoded frames (cached: the searches of both yardsticks share them)."""
         key = (k, bits, mean_bits)
-        if key not in self._errors:
-            d = np.linalg.norm(self.approx(k, bits, mean_bits) - self.X, axis=-1)
+        if key not in self._errors:  # in float32: the searches evaluate many k (errors far above 1e-7)
+            if self._X32 is None:
+                self._X32, self._W32 = self.X.astype(np.float32), self.W_dq.astype(np.float32)
+            flat = (self.mean_q(mean_bits)[1].astype(np.float32)
+                    + self._W32[:, :k] @ self.bases_q(bits)[1][:k].astype(np.float32))
+            d = np.linalg.norm(flat.reshape(self.X.shape) - self._X32, axis=-1)
             ms = np.mean(d * d) if self.counts is None else np.mean(d * d @ self.counts) / self.counts.sum()
             self._errors[key] = (float(np.sqrt(ms)) / self.diag, float(d.max()) / self.diag)
         return self._errors[key]
