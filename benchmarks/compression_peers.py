@@ -41,7 +41,7 @@ import peers_heldout
 import peers_lowrank
 import peers_report
 import peers_skinned
-from peers_common import ROOT, code_label, log
+from peers_common import OMP_WAIT_POLICY, ROOT, code_label, log
 from peers_synthetic import SYNTHETIC
 
 METHODS = ("clip", "gltfpack", "pca", "dembones", "skinned", "keyframes", "heldout")
@@ -139,7 +139,7 @@ def versions() -> str:
 
     return (f"{code_label()}; gltfpack {npm('gltfpack')}, "
             f"meshoptimizer (npm) {npm('meshoptimizer')}, py-dem-bones {version('py-dem-bones')}, "
-            f"zstandard {version('zstandard')}, numpy {np.__version__}")
+            f"zstandard {version('zstandard')}, numpy {np.__version__}; OMP_WAIT_POLICY={OMP_WAIT_POLICY}")
 
 
 class LoadSampler:
