@@ -33,16 +33,21 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import peers_clip
-import peers_dembones
-import peers_gltfpack
-import peers_heldout
-import peers_lowrank
-import peers_report
-import peers_skinned
-from peers_common import OMP_WAIT_POLICY, ROOT, code_label, log
-from peers_synthetic import SYNTHETIC
+BLAS_THREADS = os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+"""Set before numpy loads OpenBLAS (the fits' child processes inherit it): on the shared, loaded 2-core
+machine OpenBLAS's second thread made matrix products 3x slower. peers_common sets OMP_WAIT_POLICY for the
+same reason."""
+
+import numpy as np  # noqa: E402
+import peers_clip  # noqa: E402
+import peers_dembones  # noqa: E402
+import peers_gltfpack  # noqa: E402
+import peers_heldout  # noqa: E402
+import peers_lowrank  # noqa: E402
+import peers_report  # noqa: E402
+import peers_skinned  # noqa: E402
+from peers_common import OMP_WAIT_POLICY, ROOT, code_label, log  # noqa: E402
+from peers_synthetic import SYNTHETIC  # noqa: E402
 
 METHODS = ("clip", "gltfpack", "pca", "dembones", "skinned", "keyframes", "heldout")
 TARGETS = (3e-3, 1e-3)
@@ -139,7 +144,8 @@ def versions() -> str:
 
     return (f"{code_label()}; gltfpack {npm('gltfpack')}, "
             f"meshoptimizer (npm) {npm('meshoptimizer')}, py-dem-bones {version('py-dem-bones')}, "
-            f"zstandard {version('zstandard')}, numpy {np.__version__}; OMP_WAIT_POLICY={OMP_WAIT_POLICY}")
+            f"zstandard {version('zstandard')}, numpy {np.__version__}; OMP_WAIT_POLICY={OMP_WAIT_POLICY}, "
+            f"OPENBLAS_NUM_THREADS={BLAS_THREADS}")
 
 
 class LoadSampler:
