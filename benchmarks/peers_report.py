@@ -121,7 +121,7 @@ def goal_cells(rows: list[dict], target: float) -> dict[str, str]:
     out["max"] = f"{c['rel_max'] / target:.2f}x: {_verdict(within)}"
     share = c["rel_rms"] / target
     lo, hi = GOAL_RMS_BAND
-    out["band"] = f"{share:.2f}: {_verdict(lo <= share <= hi * (1 + 1e-9))}"
+    out["band"] = f"{share:.3f}: {_verdict(lo <= share <= hi * (1 + 1e-9))}"
     sk = best(rows, "skinned", target)
     if sk is not None and c.get("coefficients_wire"):
         ratio = c["coefficients_wire"] / sk["wire_bytes"]

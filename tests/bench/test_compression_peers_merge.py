@@ -45,7 +45,7 @@ def test_goals_are_met_or_not_per_cell_at_both_yardsticks() -> None:
     assert g["strict"] == "0.55x PCA: met"
     assert g["rms"] == "0.86x Dem Bones: NOT met"
     assert g["max"] == "2.50x: met"
-    assert g["band"] == "0.90: met"
+    assert g["band"] == "0.900: met"
     assert g["skinned"] == "1.20x: met"
     assert g["time"] == "100 s vs 80 s (64 bones (64 solved)): NOT met"
     table = peers_report.goals_table({"seq": rows}, (T, 1e-3))
@@ -55,7 +55,7 @@ def test_goals_are_met_or_not_per_cell_at_both_yardsticks() -> None:
 
 def test_a_clip_below_the_band_or_past_3x_max_is_not_met_and_no_peer_is_said() -> None:
     g = peers_report.goal_cells([clip(60_000, 0.5 * T, 3.5 * T)], T)
-    assert g["band"] == "0.50: NOT met"
+    assert g["band"] == "0.500: NOT met"
     assert g["max"] == "3.50x: NOT met"
     assert g["strict"] == g["rms"] == "no peer meets it"
 
