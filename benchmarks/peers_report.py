@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 PEERS = ("gltfpack", "pca", "dembones")
@@ -143,7 +144,8 @@ def _peer_brief(r: dict, target: float) -> str:
 
 def compact_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
     """One line per sequence and target: the clip on the wire (bones; rel-RMS as a share of the target,
-    rel-max as a multiple) and the smallest peer at each yardstick with the clip's wire ratio to it."""
+    rel-max as a multiple; the measured commit) and the smallest peer at each yardstick with the clip's wire
+    ratio to it."""
     head = ["input", "target", "clip wire (bones; rel-RMS share, rel-max x)",
             f"smallest peer, RMS + max <= {MAX_YARDSTICK:g}x", "ratio", "smallest peer, RMS alone", "ratio"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -155,8 +157,9 @@ def compact_table(results: dict[str, list[dict]], targets: tuple[float, ...]) ->
                 cell = "not run" if c is None else "fit failed"
             else:
                 miss = "" if c["target_met"] else ", target missed"
+                code = re.search(r"\b[0-9a-f]{7,}\b", c.get("code") or "")
                 cell = (f"{nbytes(c['wire_bytes'])} ({c.get('bones', 0)}; {c['rel_rms'] / t:.2f}, "
-                        f"{c['rel_max'] / t:.1f}x{miss})")
+                        f"{c['rel_max'] / t:.1f}x{miss}{'; ' + code.group(0) if code else ''})")
             cells = [name, f"{t:g}", cell]
             for mr in (MAX_YARDSTICK, None):
                 p = smallest_peer(rows, t, mr)

@@ -75,8 +75,8 @@ def test_merge_joins_the_rows_of_separate_runs_and_keeps_the_first_clip(tmp_path
     write_run(tmp_path / "peers", {"seq": [inp, peer("pca", 110_000, 0.8 * T, 2.0 * T)]}, [3.0, 5.0])
     write_run(tmp_path / "bones", {"seq": [inp, peer("dembones", 70_000, 0.95 * T, 9.0 * T, solve_s=80.0)],
                                    "other": [inp]}, [7.0])
-    write_run(tmp_path / "clip-a", {"seq": [inp, clip(60_000, 0.9 * T, 2.5 * T, code="commit aaa")]}, [4.0])
-    write_run(tmp_path / "clip-b", {"seq": [inp, clip(50_000, 0.9 * T, 2.5 * T, code="commit bbb")]}, [4.0])
+    for folder, wire, code in (("clip-a", 60_000, "commit aaa1234"), ("clip-b", 50_000, "commit bbb1234")):
+        write_run(tmp_path / folder, {"seq": [inp, clip(wire, 0.9 * T, 2.5 * T, code=code)]}, [4.0])
     out = tmp_path / "merged"
     folders = ",".join(str(tmp_path / d) for d in ("peers", "bones", "clip-a", "clip-b"))
     assert compression_peers.main(["--merge", folders, "--out", str(out), "--targets", "0.003",
@@ -84,12 +84,13 @@ def test_merge_joins_the_rows_of_separate_runs_and_keeps_the_first_clip(tmp_path
     merged = json.loads((out / "results.json").read_text())
     assert list(merged) == ["seq", "other"]
     assert [r["method"] for r in merged["seq"]] == ["input", "pca", "dembones", "clip"]
-    assert next(r for r in merged["seq"] if r["method"] == "clip")["code"] == "commit aaa"
+    assert next(r for r in merged["seq"] if r["method"] == "clip")["code"] == "commit aaa1234"
     table = (out / "table.md").read_text()
     assert table == capsys.readouterr().out
     assert "4 output folders merged" in table and "1-min load average 3.0..7.0" in table
     assert "`compression_peers.py --methods x`" in table
     assert "| seq | 0.003 | 0.55x PCA: met | 0.86x Dem Bones: NOT met |" in table
+    assert "| seq | 0.003 | 60,000 (0; 0.90, 2.5x; aaa1234) | PCA 110,000" in table
 
 
 def test_gltfpack_settings_can_be_narrowed(tmp_path: Path) -> None:
