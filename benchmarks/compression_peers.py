@@ -28,22 +28,26 @@ import argparse
 import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import peers_clip
-import peers_dembones
-import peers_gltfpack
-import peers_heldout
-import peers_lowrank
-import peers_report
-import peers_skinned
-from peers_common import ROOT, log
-from peers_synthetic import SYNTHETIC
+BLAS_THREADS = os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+"""Set before numpy loads OpenBLAS (the fits' child processes inherit it): on the shared, loaded 2-core
+machine OpenBLAS's second thread made matrix products 3x slower. peers_common sets OMP_WAIT_POLICY for the
+same reason."""
+
+import numpy as np  # noqa: E402
+import peers_clip  # noqa: E402
+import peers_dembones  # noqa: E402
+import peers_gltfpack  # noqa: E402
+import peers_heldout  # noqa: E402
+import peers_lowrank  # noqa: E402
+import peers_report  # noqa: E402
+import peers_skinned  # noqa: E402
+from peers_common import OMP_WAIT_POLICY, ROOT, code_label, log  # noqa: E402
+from peers_synthetic import SYNTHETIC  # noqa: E402
 
 METHODS = ("clip", "gltfpack", "pca", "dembones", "skinned", "keyframes", "heldout")
 TARGETS = (3e-3, 1e-3)
@@ -105,8 +109,9 @@ def run_sequence(name: str, source: Path | str, args: argparse.Namespace) -> lis
         q, t, tmo = args.quick, args.targets, args.fit_timeout
         steps = {
             "clip": lambda: peers_clip.method_clip(name, npz, X, t, work, tmo),
-            "gltfpack": lambda: peers_gltfpack.method_gltfpack(X, faces, work, tmo, q),
-            "pca": lambda: peers_lowrank.method_pca(X, faces, t, q),
+            "gltfpack": lambda: peers_gltfpack.method_gltfpack(X, faces, work, tmo, q, args.gltfpack_vp,
+                                                               not args.gltfpack_no_vpf),
+            "pca": lambda: peers_lowrank.method_pca(X, faces, t, q, args.pca_bits),
             "dembones": lambda: peers_dembones.method_dembones(name, X, faces, args.cache, q,
                                                                args.dembones_bones),
             "skinned": lambda: (peers_skinned.method_skinned(npz, X, work, tmo)
@@ -137,13 +142,10 @@ def versions() -> str:
 
     from importlib.metadata import version
 
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                            text=True).stdout.strip() or "unknown"
-    dirty = subprocess.run(["git", "status", "--porcelain", "--", "pdeanim"], cwd=ROOT, capture_output=True,
-                           text=True).stdout.strip()
-    return (f"commit {commit}{' (pdeanim/ modified)' if dirty else ''}; gltfpack {npm('gltfpack')}, "
+    return (f"{code_label()}; gltfpack {npm('gltfpack')}, "
             f"meshoptimizer (npm) {npm('meshoptimizer')}, py-dem-bones {version('py-dem-bones')}, "
-            f"zstandard {version('zstandard')}, numpy {np.__version__}")
+            f"zstandard {version('zstandard')}, numpy {np.__version__}; OMP_WAIT_POLICY={OMP_WAIT_POLICY}, "
+            f"OPENBLAS_NUM_THREADS={BLAS_THREADS}")
 
 
 class LoadSampler:
@@ -174,11 +176,19 @@ def write_outputs(results: dict[str, list[dict]], args: argparse.Namespace, head
         peers_report.pareto_plot(name, rows, targets, args.out / f"pareto-{name}.png")
     text = "\n\n".join([
         head,
+        "In short: the clip's wire bytes (bone count; rel-RMS as a share of the target, rel-max as a "
+        "multiple of it) and the smallest peer (gltfpack, PCA, Dem Bones) on the wire at each yardstick, "
+        "with the clip's wire ratio to it:",
+        peers_report.compact_table(results, targets),
         "Bytes at each rel-RMS target: the clip, and the smallest file of each peer that meets the target "
         "(file / wire bytes; wire = zstd -19 of each file; max = rel-max as a multiple of the target). "
         "Wire ratio = clip wire bytes / the smallest of gltfpack, PCA and Dem Bones on the wire; file ratio "
         "the same with file bytes:",
         peers_report.summary_table(results, targets),
+        "Goals of issue 30 per sequence and target (the clip's wire bytes over the smallest peer meeting the "
+        "target; rel-max and rel-RMS as multiples of the target; a skinned input's coefficients over its own "
+        "gltfpack'd animation; the fit's seconds against the strongest Dem Bones setting's solve):",
+        peers_report.goals_table(results, targets),
         "Skinned glTF inputs: the clip's coefficients part (bone layer + residual curves) against the "
         "source's own animation and skin after gltfpack -cc (the mesh counted on neither side):",
         peers_report.skinned_table(results, targets),
@@ -212,7 +222,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pdeanim-bench",
                     help="cache folder of Dem Bones solves (outside the repository)")
     ap.add_argument("--dembones-bones", help="comma-separated Dem Bones bone counts (default 8,16,32,64,128)")
+    ap.add_argument("--pca-bits", help="comma-separated bits of PCA's bases (default 8,10,12,14,16)")
+    ap.add_argument("--gltfpack-vp", help="comma-separated -vp bit counts of gltfpack (default 8..16)")
+    ap.add_argument("--gltfpack-no-vpf", action="store_true",
+                    help="leave out gltfpack's float positions (-vpf: never the smallest at 3e-3 or 1e-3 in "
+                         "the 2026-12-02 run of every sequence)")
     ap.add_argument("--fit-timeout", type=float, default=3600.0, help="seconds per fit / gltfpack run")
+    ap.add_argument("--merge", help="comma-separated OUT folders of finished runs: write their rows as one "
+                                    "table into --out (no run; --sequences orders the inputs)")
     ap.add_argument("--resume", action="store_true", help="keep the inputs already in OUT/results.json")
     args = ap.parse_args(argv)
     args.methods = tuple(m for m in args.methods.split(",") if m)
@@ -220,6 +237,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     if unknown:
         ap.error(f"unknown methods: {', '.join(sorted(unknown))}")
     args.targets = tuple(float(t) for t in args.targets.split(","))
+    args.merge = [Path(d) for d in args.merge.split(",")] if args.merge else []
+    args.pca_bits = tuple(int(b) for b in args.pca_bits.split(",")) if args.pca_bits else None
+    args.gltfpack_vp = tuple(int(b) for b in args.gltfpack_vp.split(",")) if args.gltfpack_vp else None
     if args.dembones_bones:
         args.dembones_bones = tuple(int(b) for b in args.dembones_bones.split(","))
     if "gltfpack" in args.methods and not peers_gltfpack.GLTFPACK_CLI.exists():  # a missing peer flatters
@@ -227,19 +247,70 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
-def run_record(args: argparse.Namespace, seconds: float, loads: list[float]) -> dict:
-    """The run's time and load, added to those of the runs that --resume continued (OUT/run.json)."""
+def run_record(args: argparse.Namespace, seconds: float, loads: list[float], started: str = "",
+               fit: str = "") -> dict:
+    """The run's time and load, added to those of the runs that --resume continued (OUT/run.json), with the
+    command, the measured code and the tools' versions of each run."""
     path = args.out / "run.json"
     prev = json.loads(path.read_text()) if args.resume and path.exists() else {"seconds": 0.0, "loads": []}
-    rec = {"seconds": prev["seconds"] + seconds, "loads": prev["loads"] + loads,
-           "finished": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    now = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    run = {"command": " ".join(sys.argv), "started": started, "finished": now, "seconds": seconds,
+           "project": fit, "versions": versions()}
+    rec = {"seconds": prev["seconds"] + seconds, "loads": prev["loads"] + loads, "finished": now,
+           "started": prev.get("started") or started or now, "runs": [*prev.get("runs", []), run]}
     path.write_text(json.dumps(rec))
     return rec
+
+
+def merge(args: argparse.Namespace) -> int:
+    """--merge: the results of several runs (each a finished OUT folder) as one table in --out. The rows of
+    each input are joined; a clip or held-out row of a target that an earlier folder has is left out (logged),
+    so the folder order picks the clip code shown."""
+    results: dict[str, list[dict]] = {}
+    records = []
+    for folder in args.merge:
+        part = json.loads((folder / "results.json").read_text())
+        for name, rows in part.items():
+            have = results.setdefault(name, [])
+            seen = {(r["method"], r.get("target"), r.get("protocol")) for r in have
+                    if r.get("method") in ("input", "clip", "heldout")}
+            for r in rows:
+                key = (r["method"], r.get("target"), r.get("protocol"))
+                if r.get("method") in ("input", "clip", "heldout") and key in seen:
+                    if r["method"] != "input":
+                        log(f"merge: {name} {key} of {folder} left out (an earlier folder has it)")
+                    continue
+                have.append(r)
+        if (folder / "run.json").exists():
+            records.append((folder, json.loads((folder / "run.json").read_text())))
+    order = args.sequences.split(",") if args.sequences else list(results)
+    results = {n: results[n] for n in order if n in results}
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "results.json").write_text(json.dumps(results, indent=1, default=float))
+    loads = np.array([x for _, r in records for x in r["loads"]])
+    parts = []
+    for folder, r in records:
+        for run in r.get("runs", [{"finished": r["finished"], "seconds": r["seconds"]}]):
+            what = f"; `{run['command']}`; {run['project']}; {run['versions']}" if run.get("command") else ""
+            parts.append(f"- {folder.name}: {run.get('started', '?')} to {run['finished']}, "
+                         f"{run['seconds']:.0f} s{what}")
+        if r["loads"]:
+            lo, hi = min(r["loads"]), max(r["loads"])
+            parts.append(f"  (1-min load {lo:.1f}..{hi:.1f} over that folder's runs)")
+    load = (f"1-min load average {loads.min():.1f}..{loads.max():.1f} (mean {loads.mean():.1f}, sampled "
+            "every 15 s; shared machine)" if len(loads) else "load not recorded")
+    head = (f"Compression peers, {len(args.merge)} output folders merged, {os.cpu_count()} CPUs, {load}. "
+            "The runs:\n" + "\n".join(parts))
+    print(write_outputs(results, args, head))
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run every input, write the outputs, print the tables."""
     args = parse_args(argv)
+    if args.merge:
+        return merge(args)
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     fit = peers_clip.fit_label()  # refuses unlabelled non-default fit options before any work
     inputs = load_inputs(args)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -253,7 +324,7 @@ def main(argv: list[str] | None = None) -> int:
         results[name] = run_sequence(name, source, args)
         (args.out / "results.json").write_text(json.dumps(results, indent=1, default=float))
     sampler.stop()
-    rec = run_record(args, time.perf_counter() - start, sampler.samples)
+    rec = run_record(args, time.perf_counter() - start, sampler.samples, started, fit)
     load = np.array(rec["loads"])
     head = (f"Compression peers{' (--quick)' if args.quick else ''}, finished {rec['finished']}, "
             f"{rec['seconds']:.0f} s, {os.cpu_count()} CPUs, 1-min load average "

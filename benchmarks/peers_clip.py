@@ -9,12 +9,13 @@ refuses to run otherwise (:func:`check_fit_options`, tested in tests/bench/).
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
-from peers_common import ROOT, log, result, wire_bytes
+from peers_common import CODE, code_label, log, result, wire_bytes
 
 FIT_EXTRA_ARGS: tuple[str, ...] = ()
 """Options added to every ``pdeanim fit`` of the benchmark (none: the CLI's defaults)."""
@@ -73,10 +74,13 @@ def fit_command(poses: str | Path, out: str | Path, target: float) -> list[str]:
 
 
 def run_fit(poses: Path, out: Path, target: float, timeout: float) -> dict:
-    """``pdeanim fit`` in a child process: exit code, seconds, peak RSS (MB), the stderr's verdict."""
+    """``pdeanim fit`` in a child process (the measured tree's pdeanim, peers_common.CODE, first on its path):
+    exit code, seconds, peak RSS (MB), the stderr's verdict."""
     cmd = fit_command(poses, out, target)
     try:
-        p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+        path = [str(CODE), *filter(None, [os.environ.get("PYTHONPATH")])]
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
+        p = subprocess.run(cmd, cwd=CODE, env=env, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"rc": None, "timeout": True}
     seconds = peak = None
@@ -105,7 +109,7 @@ def clip_row(parts, approx: np.ndarray, X: np.ndarray, target: float, res: dict)
                format_version=parts.report.get("format_version"), message=res.get("message", ""),
                bones=(parts.report.get("bones") or {}).get("n_bones", 0),
                residual_share=(parts.report.get("bones") or {}).get("residual_share"),
-               coefficients_wire=wire_bytes(parts.coefficients))
+               coefficients_wire=wire_bytes(parts.coefficients), code=code_label())
     r["target_met"] = bool(res["rc"] == 0 and r["rel_rms"] <= target * (1 + 1e-9))
     return r
 

@@ -13,9 +13,33 @@ from pathlib import Path
 
 import numpy as np
 
+OMP_WAIT_POLICY = os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+"""OpenMP threads (Dem Bones', and any the fits load) sleep instead of spinning while they wait: on a shared,
+loaded machine spinning threads made a Dem Bones solve 30x slower (89 s against 2.9 s for the 384-vertex tube
+at load 20). Set before any OpenMP runtime loads; the fits' child processes inherit it."""
+
 ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+CODE = Path(os.environ.get("PDEANIM_CODE") or ROOT).resolve()
+"""The tree whose ``pdeanim`` is measured: $PDEANIM_CODE (e.g. ``git archive COMMIT | tar -x -C DIR`` of
+another commit, to measure its clip with this benchmark) or this checkout. The clip fits run it and every
+score uses its metrics; $PDEANIM_CODE_LABEL names it in the tables when it is not a git checkout."""
+if str(CODE) not in sys.path:
+    sys.path.insert(0, str(CODE))
+
+
+def code_label() -> str:
+    """The measured code: its short commit (marked when pdeanim/ has local changes) or $PDEANIM_CODE_LABEL."""
+    import subprocess
+
+    if os.environ.get("PDEANIM_CODE_LABEL"):
+        return os.environ["PDEANIM_CODE_LABEL"]
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=CODE, capture_output=True,
+                            text=True).stdout.strip()
+    if not commit or not (CODE / ".git").exists():
+        return f"unlabelled tree {CODE}" if CODE != ROOT else "unknown"
+    dirty = subprocess.run(["git", "status", "--porcelain", "--", "pdeanim"], cwd=CODE, capture_output=True,
+                           text=True).stdout.strip()
+    return f"commit {commit}{' (pdeanim/ modified)' if dirty else ''}"
 
 from pdeanim.model.metrics import error_summary  # noqa: E402
 

@@ -93,14 +93,16 @@ def pack_and_score(src: Path, X: np.ndarray, flags: list[str], work: Path, timeo
     return row
 
 
-def method_gltfpack(X: np.ndarray, faces: np.ndarray, work: Path, timeout: float, quick: bool) -> list[dict]:
-    """Every ``-cc -vp N`` setting of every variant on the positions-only morph GLB (quick: even N of KHR
-    integer positions only)."""
+def method_gltfpack(X: np.ndarray, faces: np.ndarray, work: Path, timeout: float, quick: bool,
+                    vp_bits: tuple[int, ...] | None = None, floats: bool = True) -> list[dict]:
+    """Every ``-cc -vp N`` setting (N in ``vp_bits``, default 8..16) of every variant on the positions-only
+    morph GLB (``floats=False`` leaves out the -vpf variants; quick: even N of KHR integer positions only)."""
     src = work / "frames-positions.glb"
     src.write_bytes(positions_morph_glb(X, faces))
     rows = []
-    for variant in QUICK_VARIANTS if quick else VARIANTS:
-        for n in VP_BITS[::2] if quick else VP_BITS:
+    variants = QUICK_VARIANTS if quick else tuple(v for v in VARIANTS if floats or "-vpf" not in v)
+    for variant in variants:
+        for n in VP_BITS[::2] if quick else (vp_bits or VP_BITS):
             row = pack_and_score(src, X, ["-cc", "-vp", str(n), *variant], work, timeout)
             if row is not None:
                 rows.append(row)

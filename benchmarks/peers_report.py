@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 PEERS = ("gltfpack", "pca", "dembones")
@@ -81,6 +82,110 @@ def summary_table(results: dict[str, list[dict]], targets: tuple[float, ...]) ->
                      for m in (*PEERS, *REFERENCES)]
             lines.append("| " + " | ".join([name, f"{t:g}", *clip, *peers, *ratios(rows, t, MAX_YARDSTICK),
                                             *ratios(rows, t)]) + " |")
+    return "\n".join(lines)
+
+
+GOAL_STRICT = 0.6
+"""Issue 30: clip wire bytes at most this multiple of the strongest peer meeting rel-RMS and rel-max <= 3x."""
+GOAL_RMS = 0.8
+"""Issue 30: clip wire bytes at most this multiple of the strongest peer meeting the rel-RMS alone."""
+GOAL_RMS_BAND = (0.85, 1.0)
+"""Issue 30: the clip's rel-RMS as a share of the target."""
+GOAL_SKINNED = 1.2
+"""Issue 30: a skinned input's clip coefficients at most this multiple of its own gltfpack'd animation."""
+
+
+def _verdict(ok: bool) -> str:
+    return "met" if ok else "NOT met"
+
+
+def smallest_peer(rows: list[dict], target: float, max_ratio: float | None = None) -> dict | None:
+    """The smallest row on the wire of any peer (gltfpack, PCA, Dem Bones) meeting the target."""
+    found = [r for m in PEERS if (r := best(rows, m, target, max_ratio=max_ratio))]
+    return min(found, key=lambda r: r["wire_bytes"]) if found else None
+
+
+def goal_cells(rows: list[dict], target: float) -> dict[str, str]:
+    """Each goal of issue 30 at one sequence and target: the figure and met / NOT met."""
+    c = clip_at(rows, target)
+    if c is None or "wire_bytes" not in c:
+        return {}
+    out = {}
+    for key, cap, mr in (("strict", GOAL_STRICT, MAX_YARDSTICK), ("rms", GOAL_RMS, None)):
+        p = smallest_peer(rows, target, mr)
+        if p is None:
+            out[key] = "no peer meets it"
+        else:
+            ratio = c["wire_bytes"] / p["wire_bytes"]
+            out[key] = f"{ratio:.2f}x {LABELS[p['method']]}: {_verdict(c['target_met'] and ratio <= cap)}"
+    within = c["rel_max"] <= MAX_YARDSTICK * target * (1 + 1e-9)
+    out["max"] = f"{c['rel_max'] / target:.2f}x: {_verdict(within)}"
+    share = c["rel_rms"] / target
+    lo, hi = GOAL_RMS_BAND
+    out["band"] = f"{share:.3f}: {_verdict(lo <= share <= hi * (1 + 1e-9))}"
+    sk = best(rows, "skinned", target)
+    if sk is not None and c.get("coefficients_wire"):
+        ratio = c["coefficients_wire"] / sk["wire_bytes"]
+        out["skinned"] = f"{ratio:.2f}x: {_verdict(ratio <= GOAL_SKINNED)}"
+    solves = [r["solve_s"] for r in rows if r.get("method") == "dembones" and r.get("solve_s") is not None]
+    db = best(rows, "dembones", target)  # the strongest Dem Bones setting's solve, else the fastest
+    solve = db["solve_s"] if db is not None else (min(solves) if solves else None)
+    if solve is not None and c.get("fit_s") is not None:
+        which = db["setting"].split(",")[0] if db is not None else "fastest solve"
+        out["time"] = f"{c['fit_s']:.0f} s vs {solve:.0f} s ({which}): {_verdict(c['fit_s'] <= solve)}"
+    return out
+
+
+def _peer_brief(r: dict, target: float) -> str:
+    setting = r["setting"].split(",")[0] if r["method"] == "dembones" else r["setting"]
+    return (f"{LABELS[r['method']]} {nbytes(r['wire_bytes'])} ({setting}; RMS {r['rel_rms'] / target:.2f}, "
+            f"max {r['rel_max'] / target:.1f}x)")
+
+
+def compact_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
+    """One line per sequence and target: the clip on the wire (bones; rel-RMS as a share of the target,
+    rel-max as a multiple; the measured commit) and the smallest peer at each yardstick with the clip's wire
+    ratio to it."""
+    head = ["input", "target", "clip wire (bones; rel-RMS share, rel-max x)",
+            f"smallest peer, RMS + max <= {MAX_YARDSTICK:g}x", "ratio", "smallest peer, RMS alone", "ratio"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        for t in targets:
+            c = clip_at(rows, t)
+            ok = c is not None and "wire_bytes" in c
+            if not ok:
+                cell = "not run" if c is None else "fit failed"
+            else:
+                miss = "" if c["target_met"] else ", target missed"
+                code = re.search(r"\b[0-9a-f]{7,}\b", c.get("code") or "")
+                cell = (f"{nbytes(c['wire_bytes'])} ({c.get('bones', 0)}; {c['rel_rms'] / t:.2f}, "
+                        f"{c['rel_max'] / t:.1f}x{miss}{'; ' + code.group(0) if code else ''})")
+            cells = [name, f"{t:g}", cell]
+            for mr in (MAX_YARDSTICK, None):
+                p = smallest_peer(rows, t, mr)
+                if p is None:
+                    cells += ["none meets it", "-"]
+                else:
+                    cells += [_peer_brief(p, t), f"{c['wire_bytes'] / p['wire_bytes']:.2f}" if ok else "-"]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def goals_table(results: dict[str, list[dict]], targets: tuple[float, ...]) -> str:
+    """Issue 30's goals per sequence and target, each figure beside met / NOT met."""
+    head = ["sequence", "target", f"<= {GOAL_STRICT:g}x peer (RMS + max <= {MAX_YARDSTICK:g}x)",
+            f"<= {GOAL_RMS:g}x peer (RMS alone)", f"rel-max <= {MAX_YARDSTICK:g}x",
+            f"rel-RMS {GOAL_RMS_BAND[0]:g}-{GOAL_RMS_BAND[1]:g} of target",
+            f"skinned <= {GOAL_SKINNED:g}x", "fit time <= Dem Bones solve"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, rows in results.items():
+        for t in targets:
+            g = goal_cells(rows, t)
+            if not g:
+                lines.append(f"| {name} | {t:g} | no clip |" + " - |" * (len(head) - 3))
+                continue
+            cells = [g.get(k, "-") for k in ("strict", "rms", "max", "band", "skinned", "time")]
+            lines.append("| " + " | ".join([name, f"{t:g}", *cells]) + " |")
     return "\n".join(lines)
 
 

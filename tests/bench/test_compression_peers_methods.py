@@ -93,3 +93,22 @@ def test_held_out_frames_are_every_fourth_from_zero_without_forcing_the_last(fra
     assert (frames - 1 in keep.tolist()) == ((frames - 1) % 4 == 0)
     assert sorted([*keep.tolist(), *left.tolist()]) == list(range(frames))
     assert inside.tolist() == [f for f in left.tolist() if f < keep[-1]]
+
+
+def test_pca_peer_is_also_sized_for_the_max_error_yardstick() -> None:
+    """A peer at its strongest on the stricter yardstick (rel-max <= 3x the target too): k is searched for
+    that as well, not only for rel-RMS (issue 30)."""
+    import peers_report
+
+    rng = np.random.default_rng(1)
+    X, faces = rig4_tube(frames=24)
+    diag = float(np.linalg.norm(X[0].max(0) - X[0].min(0)))
+    target = 3e-3
+    X = X.copy()
+    X[:, 7] += 12 * target * diag * rng.standard_normal((len(X), 3))  # one vertex on its own: a max error
+    rows = peers_lowrank.method_pca(X, faces, (target,), quick=True)
+    loose = peers_report.best(rows, "pca", target)
+    strict = peers_report.best(rows, "pca", target, max_ratio=3.0)
+    assert loose is not None and loose["rel_max"] > 3 * target
+    assert strict is not None and strict["rel_max"] <= 3 * target and strict["rel_rms"] <= target
+    assert strict["k"] > loose["k"]
