@@ -238,10 +238,10 @@ function knotWindows(ca, S) {
  * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double (no fused multiply-add:
  * bit for bit the knots of every other reader).
  */
-function decodeKnots(ch, ca, S, C) {
+function decodeKnots(ch, ca, S, C, maxRank = S + 1) {
   const r = ch.knot_rank;
-  if (!Number.isInteger(r) || r < 0 || r > S + 1) {
-    throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${S + 1}, got ${JSON.stringify(r)}`);
+  if (!Number.isInteger(r) || r < 0 || r > maxRank) {
+    throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${maxRank}, got ${JSON.stringify(r)}`);
   }
   const { steps, z, order, windows } = knotTracks(ch, ca, S, C);
   const n = S + 1;
@@ -447,6 +447,22 @@ export function decodeDynamic(topo, coef) {
   };
 }
 
+/** The decoding steps a streamable clip's head and windows share with whole clips (streamformat.js). */
+export const parts = {
+  need,
+  count,
+  topologyArrays,
+  curveOfVertices,
+  toVertexOrder,
+  nondecreasing,
+  familyOf,
+  timeModelOf,
+  decodeKnots,
+  rigidTracks,
+  motionOf,
+  checkFinite,
+};
+
 /** Per-vertex space basis (V, 3, 4) float64 of a decoded dynamic clip (t-independent). */
 export function vertexBasis(clip) {
   const { nVertices: V, curveOf, u, uColumns, D, family } = clip;
@@ -570,6 +586,70 @@ export function naturalSplineTangents(segmentT, values, cols, out = new Float64A
         const tj = y[yo + k] - upper[j] * y[yo + block + k];
         y[yo + k] = tj;
         out[vo + k] = tj;
+      }
+    }
+  }
+  return out;
+}
+
+/**
+ * The knot tangents of a clamped cubic spline: naturalSplineTangents' rows j = 1..S-1 with T_0 = first and
+ * T_S = last given (cols values each, float64; moved to the right-hand side), solved by the Thomas
+ * algorithm in float64 (a streamable clip's window, docs/format.md §3.10). out as naturalSplineTangents.
+ */
+export function clampedSplineTangents(segmentT, values, cols, first, last, out = new Float64Array(values.length)) {
+  const S = segmentT.length - 1;
+  if (!(S >= 1) || values.length !== (S + 1) * cols || first.length !== cols || last.length !== cols) {
+    throw new RangeError(`clamped spline tangents need (S+1) x cols values and cols end tangents, S >= 1`);
+  }
+  const delta = new Float64Array(S);
+  for (let j = 0; j < S; j++) delta[j] = segmentT[j + 1] - segmentT[j];
+  // interior rows j = 1..S-1: delta_j T_j-1 + 2 (delta_j-1 + delta_j) T_j + delta_j-1 T_j+1 = rhs_j
+  const piv = new Float64Array(S + 1);
+  const upper = new Float64Array(S + 1);
+  for (let j = 1; j < S; j++) {
+    const diag = 2 * (delta[j - 1] + delta[j]);
+    piv[j] = j === 1 ? diag : diag - delta[j] * upper[j - 1];
+    upper[j] = delta[j - 1] / piv[j];
+  }
+  const y = new Float64Array(S + 1);
+  for (let c = 0; c < cols; c++) {
+    for (let j = 1; j < S; j++) {
+      const p = values[j * cols + c];
+      const dl = (p - values[(j - 1) * cols + c]) / delta[j - 1];
+      const dr = (values[(j + 1) * cols + c] - p) / delta[j];
+      let rhs = 3 * (delta[j] * dl + delta[j - 1] * dr);
+      if (j === 1) rhs -= delta[1] * first[c];
+      if (j === S - 1) rhs -= delta[S - 2] * last[c];
+      y[j] = j === 1 ? rhs / piv[1] : (rhs - delta[j] * y[j - 1]) / piv[j];
+    }
+    out[c] = first[c];
+    out[S * cols + c] = last[c];
+    let next = last[c];
+    for (let j = S - 1; j >= 1; j--) {
+      next = j === S - 1 ? y[j] : y[j] - upper[j] * next;
+      out[j * cols + c] = next;
+    }
+  }
+  return out;
+}
+
+/**
+ * The end tangent fields (float64, V * 3 each: T_0 and T_S = sum over k of the window's end tangent
+ * coefficients times S_k(u), in the order of the knot fields) of a streamable clip's window (§3.10).
+ */
+function endTangentFields(clip, ends) {
+  const { nVertices: V, curveOf } = clip;
+  const B = vertexBasis(clip);
+  const n = clip.nCurves * 12;
+  const out = [new Float64Array(V * 3), new Float64Array(V * 3)];
+  for (let e = 0; e < 2; e++) {
+    for (let v = 0; v < V; v++) {
+      const kc = e * n + curveOf[v] * 12;
+      for (let w = 0; w < 3; w++) {
+        const b = v * 12 + w * 4;
+        const k = kc + w * 4;
+        out[e][v * 3 + w] = B[b] * ends[k] + B[b + 1] * ends[k + 1] + B[b + 2] * ends[k + 2] + B[b + 3] * ends[k + 3];
       }
     }
   }
@@ -743,7 +823,10 @@ export class DynamicEvaluator {
     if (this._tangentFields === null && this.spline !== null) {
       const fields = this.fields;
       const out = new Float32Array(fields.length);
-      this._tangentFields = naturalSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, out);
+      const ends = this.clip.tangentEnds; // a streamable clip's window: its end tangents are given (§3.10)
+      this._tangentFields = ends
+        ? clampedSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, ...endTangentFields(this.clip, ends), out)
+        : naturalSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, out);
     }
     return this._tangentFields;
   }
