@@ -21,7 +21,8 @@ export function isStreamHeader(header) {
  * The prefix of container bytes: {headerLength H, dataStart 16 + H} once the first 16 bytes are in (null
  * before), checked (magic, version).
  */
-export function containerPrefix(bytes) {
+export function containerPrefix(data) {
+  const bytes = asBytes(data);
   if (bytes.byteLength < 16) return null;
   for (let i = 0; i < 8; i++) {
     if (bytes[i] !== MAGIC.charCodeAt(i)) throw new ClipFormatError('not a pdeanim container (bad magic bytes)');
@@ -33,7 +34,8 @@ export function containerPrefix(bytes) {
 }
 
 /** The JSON header of container bytes holding at least its first 16 + H bytes. */
-export function containerHeader(bytes) {
+export function containerHeader(data) {
+  const bytes = asBytes(data);
   const { dataStart } = containerPrefix(bytes);
   let header;
   try {
@@ -166,6 +168,13 @@ export function decodeStreamHead(topology, head) {
   };
   shell.base = vertexBase(shell);
   return shell;
+}
+
+function asBytes(data) {
+  if (data instanceof Uint8Array) return data;
+  if (data instanceof ArrayBuffer) return new Uint8Array(data);
+  if (ArrayBuffer.isView(data)) return new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+  throw new ClipFormatError('expected an ArrayBuffer or a typed array');
 }
 
 /** The byte range [from, to) of window i in the part (offsets from the part's first byte). */
