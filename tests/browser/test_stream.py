@@ -37,8 +37,9 @@ def services(browser_ready, tmp_path_factory):  # noqa: F811 - the browser fixtu
 
 
 def long_clip() -> ClipParts:
-    """A 600-segment clip of a 642-vertex sphere: the topology and time constants of a short fit, its knots a
-    travelling wave (and some noise) over 601 frames (made, not fitted: the test is about bytes and windows)."""
+    """A 600-segment clip of a 642-vertex sphere: the topology and time constants of a short fit, its knots
+    a travelling wave (and some noise) over 601 frames (made, not fitted: the test is about bytes and
+    windows)."""
     import trimesh
 
     from pdeanim import container
@@ -89,7 +90,8 @@ def stored_clip(services: Services, key: str, clip_id: str, parts: ClipParts) ->
         store.close()
 
 
-def test_a_long_clip_plays_from_the_service_before_its_last_byte_arrives(services, browser_env, tmp_path):
+def test_a_long_clip_plays_from_the_service_before_its_last_byte_arrives(services, browser_env,  # noqa: F811
+                                                                        tmp_path):
     key = make_key(services.backend, "stream")
     stored_clip(services, key, "clip_long_stream", long_clip())
     api = client(services, key)
@@ -99,8 +101,8 @@ def test_a_long_clip_plays_from_the_service_before_its_last_byte_arrives(service
     job = {"origin": services.url, "clip": "clip_long_stream", "key": key, "play": 0.26,
            "maxWindows": MAX_WINDOWS, "throughput": max(20_000, int(total / DOWNLOAD_SECONDS)),
            "out": str(tmp_path / "result.json")}
-    proc = subprocess.run(["node", str(HERE / "stream_check.mjs"), json.dumps(job)], cwd=HERE, env=browser_env,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(["node", str(HERE / "stream_check.mjs"), json.dumps(job)], cwd=HERE,
+                          env=browser_env, capture_output=True, text=True, timeout=300)
     result = json.loads(Path(job["out"]).read_text()) if Path(job["out"]).exists() else {}
     assert proc.returncode == 0 and "error" not in result, (proc.stdout, proc.stderr, result, services.logs())
     page = result["page"]
@@ -123,4 +125,3 @@ def test_a_long_clip_plays_from_the_service_before_its_last_byte_arrives(service
     assert later > 0, "no bytes arrived after the first frame"
     assert len(page["windowsShown"]) >= 3 and page["windowsShown"] == sorted(page["windowsShown"]), page
     assert page["mostDecoded"] <= MAX_WINDOWS, page
-    print(json.dumps({k: v for k, v in page.items()}), received, total, later)

@@ -47,7 +47,7 @@ function settle({ data }) {
   if (data.error) {
     const Err = data.error.name === 'ClipFormatError' ? ClipFormatError : Error;
     job.reject(new Err(data.error.message));
-  } else job.resolve(data.stream ? data : data.clip);
+  } else job.resolve(data.stream || data.windowed ? data : data.clip);
 }
 
 /**
@@ -110,10 +110,14 @@ export async function decodeClipOffThread(parts, { tables = true, width = 4096, 
   const message = { id, fzstd: fzstdUrl(), tables, width };
   for (const k of ['topology', 'coefficients', 'file']) if (parts[k]) message[k] = copyOf(parts[k]);
   const transfer = ['topology', 'coefficients', 'file'].filter((k) => message[k]).map((k) => message[k]);
-  return new Promise((resolve, reject) => {
+  const done = await new Promise((resolve, reject) => {
     pending.set(id, { resolve, reject });
     worker.postMessage(message, transfer);
   });
+  if (!done?.windowed) return done;
+  // a streamable clip held whole (docs/format.md §3.10): decoded here, its windows when first evaluated (the
+  // loader streams such clips through the worker instead)
+  return loadClip(done.windowed.topology, done.windowed.coefficients);
 }
 
 /** Post message to the worker and resolve with its answer (settle()). */

@@ -87,6 +87,12 @@ self.onmessage = async ({ data }) => {
     }
     const parts = data.file ? splitClipFile(data.file) : data;
     const clip = await loadClip(parts.topology, parts.coefficients);
+    if (clip.windowed) {
+      // the streamable layout held whole: its windows decode where it is played (the bytes go back there)
+      const back = { topology: parts.topology.slice(), coefficients: parts.coefficients.slice() };
+      self.postMessage({ id, windowed: back }, [back.topology.buffer, back.coefficients.buffer]);
+      return;
+    }
     if (data.tables) clip.gpuTables = gpuTables(clip, { width: data.width });
     self.postMessage({ id, clip }, [...transferables(clip)]);
   } catch (err) {

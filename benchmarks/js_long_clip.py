@@ -1,0 +1,121 @@
+"""Make the long clip of the JS first-frame benchmark (benchmarks/js_first_frame.mjs --stream): 1,000 frames
+on the ~33.7k-vertex spot, in the whole layout (1.0) and in the streamable one (1.2, feature "stream").
+
+The topology, space constants and time constants come from a real fit of a short bending wave of the mesh
+(9 frames; the spot of fit_scale_inputs.py, decimated to ~34k vertices); the 1,000 frames' knots are
+*synthetic* (a travelling wave plus noise, scaled so that the whole clip's coefficients are about ``--mbytes``
+MB, the size the issue measured for a windowed fit of a 1,047-frame x 34k character at 3e-3): a long fit
+costs minutes and GBs, and what the benchmark measures (bytes per window, decoding, GPU tables, memory)
+depends on the layout and the sizes, not on how the knots were chosen.
+
+    .venv/bin/python benchmarks/js_long_clip.py [--frames 1000] [--vertices 34000] [--out-dir DIR]
+
+Writes DIR/long<V>-<F>.clip (1.0) and DIR/long<V>-<F>.stream.clip (kept: a rerun reuses them). Default DIR:
+/tmp/pdeanim-js-long.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+
+from fit_scale_inputs import decimated_spot  # noqa: E402
+
+DEFAULT_DIR = Path("/tmp/pdeanim-js-long")
+FPS = 30.0
+
+
+def short_fit(vertices: int):
+    """ClipParts of a 9-frame bending wave of the subdivided spot (segments 2, time-pair items)."""
+    from pdeanim.fit import FitOptions, fit_poses
+    from pdeanim.poses import make_poses
+
+    rest, faces = decimated_spot(vertices)
+    rest = np.asarray(rest, np.float64)
+    axis = int(np.argmax(np.ptp(rest, axis=0)))
+    u = (rest[:, axis] - rest[:, axis].min()) / np.ptp(rest[:, axis])
+    frames = []
+    for f in range(9):
+        x = rest.copy()
+        x[:, (axis + 1) % 3] += 0.05 * np.ptp(rest[:, axis]) * u * np.sin(2 * np.pi * (u - f / 8))
+        frames.append(x)
+    return fit_poses(make_poses(np.stack(frames), np.asarray(faces), np.arange(9) / FPS),
+                     FitOptions(segments=2, time_model="pde"))
+
+
+def long_parts(short, frames: int, noise: float):
+    """ClipParts of ``frames`` frames (one segment each) on the short fit's topology and constants."""
+    from pdeanim import container
+    from pdeanim.clip import ClipParts
+    from pdeanim.model.clipformat import CoefficientData, decode_coefficients, encode_coefficients
+
+    header, arrays = container.unpack(short.coefficients)
+    C = int(header["n_curves"])
+    src = decode_coefficients(header, arrays, C)
+    S = frames - 1
+    s = np.arange(S + 1)[:, None, None, None]
+    phase = np.arange(C)[None, :, None, None] * 0.37 + np.arange(3)[None, None, :, None]
+    scale = float(np.abs(src.knots).max())
+    rng = np.random.default_rng(7)
+    knots = (src.knots[:1] + 0.05 * scale * np.sin(2 * np.pi * s / 60 + phase)
+             + rng.normal(0.0, noise * scale, (S + 1, *src.knots.shape[1:])))
+    data = CoefficientData(np.linspace(0.0, 1.0, S + 1), np.arange(S + 1) / FPS,
+                           np.repeat(src.family[:1], S, axis=0), np.repeat(np.asarray(src.m)[:1], S, axis=0),
+                           src.D, knots.astype(np.float32), src.motion, False, {"errors": {}}, {},
+                           src.time_model)
+    return ClipParts(short.topology, encode_coefficients(short.topology, data))
+
+
+def make(out_dir: Path, vertices: int, frames: int, mbytes: float) -> tuple[Path, Path]:
+    """The 1.0 and streamable CLIP files (made once per out_dir, size and length)."""
+    from pdeanim.clip import read_clip_file, write_clip_file
+    from pdeanim.model.streamlayout import to_stream
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    whole = out_dir / f"long{vertices}-{frames}.clip"
+    stream = out_dir / f"long{vertices}-{frames}.stream.clip"
+    if not whole.exists():
+        t0 = time.perf_counter()
+        short = short_fit(vertices)
+        print(f"short fit: {time.perf_counter() - t0:.0f} s", flush=True)
+        # the noise level that gives about mbytes of coefficients: doubling the noise costs about one more
+        # bit per knot value (frames x C x 12 of them)
+        from pdeanim import container
+
+        values = frames * int(container.unpack(short.coefficients)[0]["n_curves"]) * 12
+        noise, parts = 1e-3, None
+        for _ in range(5):
+            parts = long_parts(short, frames, noise)
+            size = len(parts.coefficients) / 1e6
+            print(f"noise {noise:.2e}: {size:.1f} MB", flush=True)
+            if abs(size - mbytes) < 0.1 * mbytes:
+                break
+            noise *= 2.0 ** float(np.clip((mbytes - size) * 8e6 / values, -4, 4))
+        write_clip_file(whole, parts)
+    if not stream.exists():
+        write_clip_file(stream, to_stream(read_clip_file(whole)))
+    return whole, stream
+
+
+def main() -> int:
+    """Make (or reuse) the clips and print their sizes."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vertices", type=int, default=34_000)
+    ap.add_argument("--frames", type=int, default=1000)
+    ap.add_argument("--mbytes", type=float, default=12.8, help="target size of the 1.0 coefficients")
+    ap.add_argument("--out-dir", type=Path, default=DEFAULT_DIR)
+    args = ap.parse_args()
+    for path in make(args.out_dir, args.vertices, args.frames, args.mbytes):
+        print(f"{path}: {path.stat().st_size} bytes")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
