@@ -112,6 +112,14 @@ test('PDEClipLoader plays a long streamable clip while it downloads: first windo
       timeUniforms(vw, t);
       assert.deepEqual(vs.textures.frame.data, vw.textures.frame.data, `frame table at t=${t}`);
     }
+    // knots are carried from window to window: a seek to a window whose predecessor was decoded before
+    // restarts right there (its start state is known), and decodes as the whole clip
+    const k = clip.windowAt(0.55);
+    const mark = log.length;
+    await clip.whenReady(0.55);
+    assert.deepEqual(ev.evaluate(0.55), whole.evaluate(0.55));
+    const seek = log.slice(mark).find((r) => r.range !== null);
+    assert.equal(Number(/bytes=(\d+)-/.exec(seek.range)[1]), clip.windows[k].offset);
     clip.close();
     // a service clip: the coefficients part is asked for in the streamable layout, the topology beside it
     const service = await loader.loadAsync(`${url}/v1/clips/L`);

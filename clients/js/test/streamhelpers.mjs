@@ -1,5 +1,6 @@
 // Test helpers for the streamable layout (docs/format.md §3.10): write a clip's coefficients in that layout
-// from its decoded arrays (integer knots on one step per item, time-pair items), to build long clips and
+// from its decoded arrays (integer knots on one step per item, carried from window to window; time-pair
+// items), to build long clips and
 // stream them over HTTP in tests. The Python writer (pdeanim.model.streamlayout) makes the conformance
 // fixtures; this one follows the same specification so that the JS tests can make clips of any length.
 
@@ -24,6 +25,7 @@ export function streamPart(src, per) {
     space_kind: { dtype: '<u1', shape: [C, 3], data: Uint8Array.from(src.spaceKind) },
     time_model: { dtype: '<u1', shape: [C, 3], data: new Uint8Array(C * 3) },
     D: { dtype: '<f4', shape: [C, 3], data: Float32Array.from(src.D) },
+    knot_step: { dtype: '<f4', shape: [C, 3], data: Float32Array.from(steps) },
     ...(src.rigid ?? {}),
   };
   const windows = {};
@@ -31,25 +33,22 @@ export function streamPart(src, per) {
   for (let a = 0, i = 0; a < S; a += per, i++) {
     const b = Math.min(S, a + per);
     const Si = b - a;
-    const codes = new Uint32Array(n * (Si + 1)); // (C, 3, 4, Si+1): differences from 0 within the window
+    // the clip's difference tracks (order 1), columns first .. b: knot a of a later window is carried
+    const first = i === 0 ? 0 : a + 1;
+    const cols = b - first + 1;
+    const codes = new Uint32Array(n * cols);
     for (let k = 0; k < n; k++) {
-      let prev = 0;
-      for (let j = 0; j <= Si; j++) {
-        const v = q[(a + j) * n + k];
-        codes[k * (Si + 1) + j] = zig(v - prev);
-        prev = v;
+      for (let j = 0; j < cols; j++) {
+        const s = first + j;
+        codes[k * cols + j] = zig(q[s * n + k] - (s > 0 ? q[(s - 1) * n + k] : 0));
       }
     }
-    const step2 = new Float32Array(2 * C * 3);
-    step2.set(steps, 0);
-    step2.set(steps, C * 3);
     const inner = encodeContainer(
       { part: 'coefficients-window', format_version: '1.2', window: i, first_knot: a, last_knot: b },
       {
         segment_t: { dtype: '<f8', shape: [Si + 1], data: segT.slice(a, b + 1) },
         m: { dtype: '<f4', shape: [Si, C, 3], data: Float32Array.from(src.m.subarray(a * C * 3, b * C * 3)) },
-        knot_step: { dtype: '<f4', shape: [2, C, 3], data: step2 },
-        knots: { dtype: '<u4', shape: [C, 3, 4, Si + 1], data: codes, encoding: 'zstd' },
+        knots: { dtype: '<u4', shape: [C, 3, 4, cols], data: codes, encoding: 'zstd' },
       },
     );
     windows[`window_${i}`] = { dtype: '<u1', shape: [inner.length], data: inner };

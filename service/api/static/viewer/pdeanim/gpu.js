@@ -2,7 +2,7 @@
 // clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js.
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, clampedSplineTangents, naturalSplineTangents, timeIndex, vertexBase } from './dynamic.js';
+import { DynamicEvaluator, clampedSplineTangents, timeIndex, vertexBase } from './dynamic.js';
 import { ringNormals, triangleFrame, triangleQuality, vertexRings } from './geometry.js';
 import { orthonormalBases } from './orthobasis.js';
 
@@ -272,8 +272,8 @@ function gpuNumbering(curveOf, offsets, short, zero = null) {
  */
 function orthonormalTangents(clip, r) {
   const { knots, segmentT } = clip;
-  // a streamable clip's window (docs/format.md §3.10): a clamped spline, its end tangents given
-  const ends = clip.tangentEnds ?? null;
+  // a streamable clip's window (docs/format.md §3.10): its known end tangents (null: a natural end)
+  const ends = [clip.tangentFirst ?? null, clip.tangentLast ?? null];
   const cols = r.length / 4; // C * 3 items (R: 16 numbers each) of 4 coefficients: one track per coefficient
   const n = knots.length / cols;
   const out = new Float32Array(knots.length);
@@ -296,9 +296,8 @@ function orthonormalTangents(clip, r) {
       }
     }
     const into = nb === B ? tb : tb.subarray(0, n * nb);
-    const tangents = ends
-      ? clampedSplineTangents(segmentT, values, nb, ...orthonormalEnds(ends, r, t0, nb), into)
-      : naturalSplineTangents(segmentT, values, nb, into);
+    const [first, last] = ends.map((e) => (e === null ? null : orthonormalEnds(e, r, t0, nb)));
+    const tangents = clampedSplineTangents(segmentT, values, nb, first, last, into);
     for (let s = 0; s < n; s++) {
       for (let k = 0; k < nb; k++) out[s * cols + t0 + k] = tangents[s * nb + k];
     }
@@ -306,19 +305,16 @@ function orthonormalTangents(clip, r) {
   return out;
 }
 
-/** R Tc of the end tangents (2 x C x 3 x 4 float64) of tracks t0 .. t0 + nb - 1: [first, last] (nb each). */
+/** R Tc of one end's tangent coefficients (C x 3 x 4 float64) on tracks t0 .. t0 + nb - 1 (nb values). */
 function orthonormalEnds(ends, r, t0, nb) {
-  const cols = r.length / 4;
-  const out = [new Float64Array(nb), new Float64Array(nb)];
-  for (let e = 0; e < 2; e++) {
-    for (let k = 0; k < nb; k += 4) {
-      const o = e * cols + t0 + k;
-      const R = ((t0 + k) / 4) * 16;
-      for (let i = 0; i < 4; i++) {
-        let acc = 0;
-        for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * ends[o + j];
-        out[e][k + i] = acc;
-      }
+  const out = new Float64Array(nb);
+  for (let k = 0; k < nb; k += 4) {
+    const o = t0 + k;
+    const R = ((t0 + k) / 4) * 16;
+    for (let i = 0; i < 4; i++) {
+      let acc = 0;
+      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * ends[o + j];
+      out[k + i] = acc;
     }
   }
   return out;

@@ -147,11 +147,14 @@ export async function openStreamOffThread({ topology, head }, { tables = true, w
       }
     }
     const shared = tables ? gpuTables(shell, { width }) : null;
+    const states = new Map(); // the state each window handed on (knots are carried, §3.10)
     return {
       shell,
       tables: shared,
-      decode: async (i, bytes) => {
-        const clip = decodeStreamWindow(shell, bytes, i);
+      decode: async (i, bytes, keep = true) => {
+        const { clip, state } = decodeStreamWindow(shell, bytes, i, i > 0 ? (states.get(i - 1) ?? null) : null);
+        states.set(i, state);
+        if (!keep) return null;
         return { clip, tables: shared ? windowTables(clip, shared.r, shared.spline) : null };
       },
       close() {},
@@ -165,10 +168,10 @@ export async function openStreamOffThread({ topology, head }, { tables = true, w
   return {
     shell,
     tables: opened.tables,
-    decode: async (i, bytes) => {
-      const b = copyOf(bytes);
-      const win = await call(worker, { op: 'window', sid, index: i, bytes: b }, [b]);
-      return { clip: joinWindow(shell, win.clip), tables: win.tables };
+    decode: async (i, bytes, keep = true) => {
+      const b = bytes.byteOffset === 0 && bytes.byteLength === bytes.buffer.byteLength ? bytes.buffer : copyOf(bytes);
+      const win = await call(worker, { op: 'window', sid, index: i, bytes: b, keep }, [b]);
+      return keep ? { clip: joinWindow(shell, win.clip), tables: win.tables } : null;
     },
     close: () => worker.postMessage({ op: 'close', sid }),
   };

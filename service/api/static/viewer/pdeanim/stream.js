@@ -210,6 +210,8 @@ export class WindowedClip extends EventTarget {
     this.maxWindows = maxWindows;
     /** The decoded windows: index → {clip, tables, evaluator}, in the order of their last use. */
     this.decoded = new Map();
+    /** The state each window decoded so far hands to the next (docs/format.md §3.10: knots are carried). */
+    this.states = new Map();
   }
 
   /** The window index of normalised time t (§3.10: the last window starting at or before the wrapped time). */
@@ -234,7 +236,16 @@ export class WindowedClip extends EventTarget {
     if (w) {
       this.decoded.delete(i); // most recently used last
     } else {
-      w = { clip: decodeStreamWindow(this.shell, this.windowBytes(i), i), tables: null, evaluator: null };
+      // from the last window whose start state is known (window 0's is), decoding the ones between
+      let j = i;
+      while (j > 0 && !this.states.has(j - 1)) j--;
+      let clip = null;
+      for (; j <= i; j++) {
+        const out = decodeStreamWindow(this.shell, this.windowBytes(j), j, j > 0 ? this.states.get(j - 1) : null);
+        this.states.set(j, out.state);
+        clip = out.clip;
+      }
+      w = { clip, tables: null, evaluator: null };
       while (this.decoded.size >= this.maxWindows) this.decoded.delete(this.decoded.keys().next().value);
     }
     this.decoded.set(i, w);
@@ -304,6 +315,7 @@ export class StreamingClip extends WindowedClip {
     this.windows = windows;
     this.behind = Math.max(0, Math.min(behind, maxWindows - 2));
     this.inflight = new Map(); // index → Promise of the decoded window
+    this.stateSent = new Set(); // windows handed to the decoder (it holds the state each hands on)
     this.fetcher = fetcher;
     this.playhead = 0; // the window index of the play head
     this.stream = null; // the current sequential read: {reader, queue, next (the window it delivers next)}
@@ -407,10 +419,19 @@ export class StreamingClip extends WindowedClip {
     const need = this.wanted().find((i) => !this.decoded.has(i) && !this.inflight.has(i));
     if (need === undefined) return this._resume();
     const s = this.stream;
-    const next = s ? s.next : this.ended ? this.nWindows : -1;
-    const ahead = this.maxWindows - this.behind;
-    if (s === null || next > need || need - next > ahead) this._restart(need);
+    const from = this._restartPoint(need);
+    if (s === null || s.next > need || from > s.next) this._restart(from);
     else this._resume();
+  }
+
+  /**
+   * Where a read that must deliver window i starts: i when window i - 1's state was handed to the decoder
+   * (or i is 0), else the latest window before it that can start (knots are carried from window to window).
+   */
+  _restartPoint(i) {
+    let j = i;
+    while (j > 0 && !this.stateSent.has(j - 1)) j--;
+    return j;
   }
 
   _resume() {
@@ -484,6 +505,7 @@ export class StreamingClip extends WindowedClip {
         const bytes = queue.take(w.length);
         stream.next++;
         if (this._isWanted(i) && !this.decoded.has(i) && !this.inflight.has(i)) this._decode(i, bytes);
+        else if (!this.stateSent.has(i)) this._advance(i, bytes);
         continue;
       }
       const { value, done } = await stream.reader.read();
@@ -520,9 +542,16 @@ export class StreamingClip extends WindowedClip {
     return i < this.playhead && !this._isWanted(i);
   }
 
+  /** Hand window i's bytes to the decoder for the state it carries on only (a window not wanted now). */
+  _advance(i, bytes) {
+    this.stateSent.add(i);
+    this.fetcher.decode(i, bytes, false).catch((error) => this._fail(error));
+  }
+
   /** Decode window i's bytes (in the worker); on arrival it joins the decoded windows unless evicted meanwhile. */
   _decode(i, bytes) {
-    const job = this.fetcher.decode(i, bytes).then(
+    this.stateSent.add(i);
+    const job = this.fetcher.decode(i, bytes, true).then(
       (win) => {
         this.inflight.delete(i);
         if (this.closed) return;

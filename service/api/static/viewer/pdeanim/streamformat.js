@@ -3,11 +3,11 @@
 // time order, each a container of its own that decodes with the head alone. The head decodes into a "shell"
 // (everything but the per-segment data) and each window into a dynamic clip of its own (stream.js plays them).
 
-import { ClipFormatError, MAGIC, checkFormatVersion, decodeContainer } from './container.js';
-import { hasBones } from './bones.js';
-import { parts, vertexBase } from './dynamic.js';
+import { ClipFormatError, MAGIC, checkBounded, checkFormatVersion, decodeContainer } from './container.js';
+import { decodeBones, hasBones } from './bones.js';
+import { clampedSplineTangents, parts, vertexBase } from './dynamic.js';
 
-const { need, count, topologyArrays, curveOfVertices, toVertexOrder, nondecreasing, familyOf, timeModelOf } = parts;
+const { need, count, topologyArrays, curveOfVertices, toVertexOrder, nondecreasing, familyOf, timeModelOf, checkFinite } = parts;
 
 /** The feature a streamable coefficients part requires. */
 export const STREAM_FEATURE = 'stream';
@@ -108,9 +108,6 @@ export function decodeStreamHead(topology, head) {
   if (ch.kind !== 'dynamic-pde') throw new ClipFormatError(`a streamable clip must be dynamic-pde, got ${JSON.stringify(ch.kind)}`);
   checkFormatVersion(topo.header, 'topology');
   checkFormatVersion(ch, 'coefficients');
-  if (hasBones(ch)) {
-    throw new ClipFormatError('streamable clips with a bone layer are not played by this reader yet (feature "stream" with "bones")');
-  }
   const th = topo.header;
   const V = count(th, 'n_vertices', 'topology');
   const t = topologyArrays(th, topo.arrays, V);
@@ -156,7 +153,10 @@ export function decodeStreamHead(topology, head) {
     family: Uint8Array.from(spaceKind),
     D: need(ca, 'D', [C, 3], 'coefficients', ['<f4']).data,
     timeModel: timeModel.includes(1) ? timeModel : null,
-    knotWeights: r ? need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', ['<u4']) : null,
+    knotWeights: r ? need(ca, 'knot_weights', [r, C, 3, 4], 'coefficients', ['<u4']).data : null,
+    // one knot step for the whole clip (else each window has its own, (2, C, 3))
+    knotStep: ca.knot_step ? need(ca, 'knot_step', [C, 3], 'coefficients', ['<f4']).data : null,
+    knotDifferences: knotDifferences(ch),
     motion,
     looping: Boolean(ch.looping),
     rigid: motion === 'rigid' ? parts.rigidTracks(ca, C) : null,
@@ -166,6 +166,7 @@ export function decodeStreamHead(topology, head) {
     topologyId: ch.topology_id ?? null,
     index,
   };
+  if (hasBones(ch)) Object.assign(shell, headBones(ch, ca, V, motion));
   shell.base = vertexBase(shell);
   return shell;
 }
@@ -183,13 +184,90 @@ export function windowRange(headerLength, w) {
   return [from, from + w.nbytes];
 }
 
+const BONE_HEAD = ['bone_pivot', 'bone_index', 'bone_weight', 'bone_time_model', 'bone_step'];
+
+/** A probe of the bone tracks' shapes: §3.9's checks run on the head's arrays with these (B bones, Sb segments). */
+function boneProbe(head, B, Sb, m = null, knots = null) {
+  return {
+    ...head,
+    bone_segment_t: { dtype: '<f8', shape: [Sb + 1], data: Float64Array.from({ length: Sb + 1 }, (_, j) => j / Sb) },
+    bone_m: m ?? { dtype: '<f4', shape: [Sb, B, 6], data: new Float32Array(Sb * B * 6) },
+    bone_knots: knots ?? { dtype: '<u4', shape: [B, 6, Sb + 1], data: new Uint32Array(B * 6 * (Sb + 1)) },
+  };
+}
+
 /**
- * Decode window i of a streamable clip (its inner container's bytes) with the clip's shell into a dynamic
- * clip of its own: the shell's static data, segments a .. b - 1 (nSegments b - a, segmentT the clip's
- * boundaries there), knots a .. b, and for clips with spline items tangentEnds (2 x C x 3 x 4 float64: the
- * tangent coefficients at knots a and b).
+ * The head's bone layer (format 1.1 with "stream"): its per-clip arrays checked as §3.9 checks them; the
+ * tracks are per window. The residual counts as present (the GPU tables of every window are then alike).
  */
-export function decodeStreamWindow(shell, bytes, i) {
+function headBones(ch, ca, V, motion) {
+  const head = Object.fromEntries(BONE_HEAD.filter((k) => ca[k]).map((k) => [k, ca[k]]));
+  const B = ch.n_bones;
+  if (!Number.isInteger(B) || B < 1) throw new ClipFormatError(`bone layer header key 'n_bones' must be a positive integer, got ${JSON.stringify(B)}`);
+  const layer = decodeBones(ch, boneProbe(head, B, 1), V, motion, new Float32Array(0));
+  return { bones: { ...layer, residual: true, segmentT: null, m: null, knots: null, tangents: null }, boneHead: head };
+}
+
+/** Window i's bone layer (its own bone tracks, self-contained; spline channels with both ends known). */
+function windowBones(shell, w, wh, wa, label) {
+  const [j0, j1] = Array.isArray(w.boneKnots) ? w.boneKnots : [];
+  if (!(Number.isInteger(j0) && Number.isInteger(j1) && j1 > j0) || wh.first_bone_knot !== j0 || wh.last_bone_knot !== j1) {
+    throw new ClipFormatError(`damaged stream index: ${label}'s bone knots disagree with the index`);
+  }
+  const B = shell.bones.nBones;
+  const Sb = j1 - j0;
+  const seg = need(wa, 'bone_segment_t', [Sb + 1], label, ['<f8']).data;
+  let rising = seg[0] <= w.t0 && seg[Sb] >= w.t1;
+  for (let j = 1; j <= Sb && rising; j++) rising = seg[j] > seg[j - 1];
+  if (!rising) throw new ClipFormatError(`${label}'s bone_segment_t must increase strictly and cover ${w.t0}..${w.t1}`);
+  const ch = shell.header;
+  const layer = decodeBones(ch, boneProbe(shell.boneHead, B, Sb, wa.bone_m, wa.bone_knots), shell.nVertices, shell.motion, new Float32Array(0));
+  layer.segmentT = Float64Array.from(seg);
+  layer.residual = true;
+  if (layer.tangents) {
+    const n = B * 6;
+    const ends = need(wa, 'bone_tangents', [2, B, 6], label, ['<f8']).data;
+    layer.tangents = clampedSplineTangents(layer.segmentT, layer.knots, n, ends.slice(0, n), ends.slice(n, 2 * n));
+  }
+  return layer;
+}
+
+/** The coefficients header's knot_differences (1 or 2). */
+function knotDifferences(ch) {
+  const order = ch.knot_differences;
+  if (order !== 1 && order !== 2) {
+    throw new ClipFormatError(`coefficients knot_differences must be 1 or 2, got ${JSON.stringify(order)}`);
+  }
+  return order;
+}
+
+const unzig = (q) => (q >>> 1) ^ -(q & 1);
+
+/**
+ * The state window i hands to window i + 1 (docs/format.md §3.10), or that a window holds itself (start_*
+ * arrays): {codes (C*12 integers p at its last knot), slopes (order 2: p[b] - p[b-1], else null), knot (C*12
+ * float32 knot values there), tangent (spline clips: C*12 float64 tangent coefficients there, else null)}.
+ */
+function ownState(shell, wa, label) {
+  if (wa.start_codes === undefined) return null;
+  const n = shell.nCurves * 12;
+  const shape = [shell.nCurves, 3, 4];
+  const codes = Float64Array.from(need(wa, 'start_codes', shape, label, ['<u4']).data, unzig);
+  const slopes = shell.knotDifferences === 2 ? Float64Array.from(need(wa, 'start_slopes', shape, label, ['<u4']).data, unzig) : null;
+  const knot = Float32Array.from(need(wa, 'start_knot', shape, label, ['<f4']).data);
+  const tangent = shell.timeModel ? Float64Array.from(need(wa, 'start_tangents', shape, label, ['<f8']).data) : null;
+  if (codes.length !== n) throw new ClipFormatError(`${label}: bad start state`);
+  return { codes, slopes, knot, tangent };
+}
+
+/**
+ * Decode window i of a streamable clip (its inner container's bytes) with the clip's shell and the state of
+ * window i - 1 (null for window 0, or a window that holds its own start state; docs/format.md §3.10) into
+ * {clip, state}: clip a dynamic clip of its own (the shell's static data, segments a .. b - 1 with the clip's
+ * boundaries, knots a .. b, for spline clips tangentFirst / tangentLast: the known end tangent coefficients,
+ * C*12 float64, or null for a natural end), state what it hands to window i + 1.
+ */
+export function decodeStreamWindow(shell, bytes, i, carried = null) {
   const w = shell.index[i];
   if (!w) throw new ClipFormatError(`the clip has no window ${i} (it has ${shell.index.length})`);
   const { header: wh, arrays: wa } = decodeContainer(bytes);
@@ -209,40 +287,39 @@ export function decodeStreamWindow(shell, bytes, i) {
   const timeModel = shell.timeModel
     ? timeModelOf({ time_model: { dtype: '<u1', shape: [C, 3], data: shell.timeModel } }, C, m, S, segT)
     : null;
-  const ch = shell.header;
-  const r = ch.knot_rank;
-  const steps = need(wa, 'knot_step', [2, C, 3], label, ['<f4']);
-  const ka = { knots: wa.knots };
-  if (r === 0) {
-    // row 0 steps knots a .. b - 1, row 1 knot b: the knot windows [0, S, S + 1] of §3.4
-    ka.knot_step = steps;
-    ka.knot_windows = { dtype: '<u4', shape: [3], data: Uint32Array.of(0, S, S + 1) };
-  } else {
-    ka.knot_step = { dtype: '<f4', shape: [C, 3], data: steps.data.subarray(0, C * 3) };
-    ka.knot_weights = shell.knotWeights;
-    ka.knot_basis = wa.knot_basis;
+  const state = i === 0 ? null : (ownState(shell, wa, label) ?? carried);
+  if (i > 0 && state === null) {
+    throw new ClipFormatError(`${label} continues window ${i - 1}: decode that one first, or fetch it with its start state`);
   }
-  const knots = parts.decodeKnots(ch, ka, S, C, Number.MAX_SAFE_INTEGER);
-  let tangentEnds = null;
-  if (timeModel) {
-    const g = need(wa, 'tangents', [2, C, 3, 4], label, ['<u4']).data;
+  const steps = wa.knot_step
+    ? need(wa, 'knot_step', [2, C, 3], label, ['<f4']).data
+    : shell.knotStep
+      ? Float32Array.from([...shell.knotStep, ...shell.knotStep])
+      : null;
+  if (steps === null) throw new ClipFormatError(`${label} has no knot_step, nor has the head`);
+  if (steps.some((x) => !(x > 0))) throw new ClipFormatError(`${label}'s knot steps must be positive`);
+  const first = i === 0 ? 0 : 1; // the window's first stored knot (knot a of a later window is carried)
+  const n = S + 1 - first;
+  const tracks = need(wa, 'knots', [C, 3, 4, n], label, ['<u4']).data;
+  const r = shell.header.knot_rank;
+  const basis = r ? need(wa, 'knot_basis', [r, n], label, ['<f4']).data : null;
+  const { knots, end } = windowKnots(shell, { tracks, steps, basis, n, first, S, state });
+  checkFinite(knots, `${label} knots`);
+  checkBounded(knots, `${label} knots`);
+  let tangentLast = null;
+  if (timeModel && i < shell.index.length - 1) {
+    const g = need(wa, 'tangents', [C, 3, 4], label, ['<u4']).data;
     const bits = wh.tangent_bits;
     if (!Number.isInteger(bits) || bits < 0 || bits > 30) {
       throw new ClipFormatError(`${label}: tangent_bits must be an integer in 0..30, got ${JSON.stringify(bits)}`);
     }
     const scale = 2 ** -bits;
-    const delta = [segT[1] - segT[0], segT[S] - segT[S - 1]];
-    tangentEnds = new Float64Array(2 * C * 12);
-    const h = steps.data;
-    for (let e = 0; e < 2; e++) {
-      for (let j = 0; j < C * 12; j++) {
-        const q = g[e * C * 12 + j];
-        const d = (q >>> 1) ^ -(q & 1);
-        tangentEnds[e * C * 12 + j] = ((d * h[e * C * 3 + (j >> 2)]) * scale) / delta[e];
-      }
-    }
+    const delta = segT[S] - segT[S - 1];
+    tangentLast = new Float64Array(C * 12);
+    for (let j = 0; j < C * 12; j++) tangentLast[j] = ((unzig(g[j]) * steps[C * 3 + (j >> 2)]) * scale) / delta;
   }
-  return joinWindow(shell, {
+  const clip = joinWindow(shell, {
+    bones: shell.bones ? windowBones(shell, w, wh, wa, label) : null,
     window: i,
     s0: w.a,
     s1: w.b,
@@ -251,12 +328,51 @@ export function decodeStreamWindow(shell, bytes, i) {
     family,
     m,
     knots,
-    tangentEnds,
+    tangentFirst: timeModel && i > 0 ? state.tangent : null,
+    tangentLast,
   });
+  return { clip, state: { ...end, tangent: tangentLast } };
+}
+
+/**
+ * The float32 knots ((S+1) x C*12) of a window and its end state {codes, slopes, knot}: the integer tracks'
+ * running sums continued from state (none: from 0), float32(p x h) with h row 0 of steps for the stored knots
+ * but the last (row 1), or on the shared time basis (§3.4); knot a of a later window is the carried one.
+ */
+function windowKnots(shell, { tracks, steps, basis, n, first, S, state }) {
+  const T = shell.nCurves * 12;
+  const order = shell.knotDifferences;
+  const r = shell.header.knot_rank;
+  const knots = new Float32Array((S + 1) * T);
+  if (first === 1) knots.set(state.knot, 0);
+  const codes = new Float64Array(T);
+  const slopes = order === 2 ? new Float64Array(T) : null;
+  const weights = r ? shell.knotWeights : null;
+  for (let k = 0; k < T; k++) {
+    let p = state ? state.codes[k] : 0;
+    let slope = state && order === 2 ? state.slopes[k] : 0;
+    const item = k >> 2;
+    for (let j = 0; j < n; j++) {
+      const d = unzig(tracks[k * n + j]);
+      if (order === 1) p += d;
+      else p += slope += d;
+      const h = steps[(j === n - 1 ? shell.nCurves * 3 : 0) + item];
+      const o = (first + j) * T + k;
+      if (!r) knots[o] = Math.fround(p * h);
+      else {
+        let acc = 0;
+        for (let jj = 0; jj < r; jj++) acc += (unzig(weights[jj * T + k]) * h) * basis[jj * n + j];
+        knots[o] = Math.fround(acc + p * h);
+      }
+    }
+    codes[k] = p;
+    if (slopes) slopes[k] = slope;
+  }
+  return { knots, end: { codes, slopes, knot: knots.slice(S * T) } };
 }
 
 /** The arrays and counts of a decoded window that are its own (a worker sends these, not the shell's). */
-export const WINDOW_FIELDS = Object.freeze(['window', 's0', 's1', 'nSegments', 'segmentT', 'family', 'm', 'knots', 'tangentEnds']);
+export const WINDOW_FIELDS = Object.freeze(['bones', 'window', 's0', 's1', 'nSegments', 'segmentT', 'family', 'm', 'knots', 'tangentFirst', 'tangentLast']);
 
 /** A decoded window's own fields (WINDOW_FIELDS). */
 export function windowFields(clip) {
@@ -267,5 +383,6 @@ export function windowFields(clip) {
 export function joinWindow(shell, fields) {
   const clip = { ...shell, ...fields };
   delete clip.index;
+  delete clip.boneHead;
   return clip;
 }

@@ -46,8 +46,9 @@ function handOver(value, keep) {
 /**
  * Streamable clips (docs/format.md §3.10). {op: 'open', sid, topology, head, tables, width}: decode the head
  * (topology_id checked) and the GPU tables all windows share → {id, stream: true, clip (the shell), tables};
- * {op: 'window', sid, index, bytes} → {id, stream: true, clip (the window's own fields), tables (timeIndex,
- * tangents)}; {op: 'close', sid}.
+ * {op: 'window', sid, index, bytes, keep} → {id, stream: true, clip (the window's own fields), tables
+ * (timeIndex, tangents)}, or, keep false, {id, stream: true, advanced: index} (only the state the window
+ * carries on to the next is kept: windows are decoded in order); {op: 'close', sid}.
  */
 async function streamOp(data) {
   const { id } = data;
@@ -64,13 +65,21 @@ async function streamOp(data) {
       }
     }
     const tables = data.tables ? gpuTables(shell, { width: data.width }) : null;
-    streams.set(data.sid, { shell, r: tables?.r ? tables.r.slice() : null, spline: Boolean(tables?.spline) });
+    streams.set(data.sid, { shell, r: tables?.r ? tables.r.slice() : null, spline: Boolean(tables?.spline), states: new Map() });
     self.postMessage({ id, stream: true, clip: shell, tables }, handOver(tables, shell));
     return;
   }
   const state = streams.get(data.sid);
   if (!state) throw new Error(`no open stream ${data.sid} in the decoder worker`);
-  const clip = decodeStreamWindow(state.shell, new Uint8Array(data.bytes), data.index);
+  // knots are carried from window to window: window i decodes with the state window i - 1 handed on
+  const i = data.index;
+  const out = decodeStreamWindow(state.shell, new Uint8Array(data.bytes), i, i > 0 ? (state.states.get(i - 1) ?? null) : null);
+  state.states.set(i, out.state);
+  if (!data.keep) {
+    self.postMessage({ id, stream: true, advanced: i });
+    return;
+  }
+  const clip = out.clip;
   const tables = state.r ? windowTables(clip, state.r, state.spline) : null;
   const fields = windowFields(clip);
   self.postMessage({ id, stream: true, clip: fields, tables }, handOver({ fields, tables }, state.shell));
