@@ -78,6 +78,13 @@ async function heaps(page, cdp) {
 
 async function runOnce(browser, mode) {
   const page = await browser.newPage();
+  const logs = [];
+  page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
+  page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
+  page.on('error', (e) => logs.push(`crash: ${e.message}`));
+  process.on('exit', () => {
+    if (logs.length && process.exitCode) console.error(logs.slice(-20).join('\n'));
+  });
   const cdp = await page.createCDPSession();
   await cdp.send('Network.enable');
   await cdp.send('Runtime.enable');
@@ -93,7 +100,8 @@ async function runOnce(browser, mode) {
   await page.goto(url);
   await page.waitForFunction('window.first !== undefined', { timeout: 600_000 });
   const first = await page.evaluate('window.first');
-  if (first.error) throw new Error(first.error);
+  if (first.error) throw new Error(`${first.error}\n${logs.join('\n')}`);
+  const fail = (err) => new Error(`${err.message}; page log:\n${logs.slice(-20).join('\n')}`);
   const [id, req] = Object.entries(requests).find(([, r]) => r.url.endsWith(`/clip/${mode}`));
   const offset = req.wallTime - req.timestamp; // wall clock minus the network events' clock
   const firstByte = firstData[id];
@@ -103,7 +111,9 @@ async function runOnce(browser, mode) {
     window.play = n;
   }, play);
   for (;;) {
-    const done = await page.evaluate('window.played !== undefined');
+    const done = await page.evaluate('window.played !== undefined').catch((err) => {
+      throw fail(err);
+    });
     const h = await heaps(page, cdp);
     heapMax = { page: Math.max(heapMax.page, h.page), worker: Math.max(heapMax.worker, h.worker) };
     if (done) break;
