@@ -39,7 +39,7 @@ try {
   }
   result.positions = [];
   for (const t of job.times ?? []) {
-    result.positions.push(await page.evaluate((tt) => Array.from(window.pdeanimViewer.positions(tt)), t));
+    result.positions.push(await page.evaluate(async (tt) => Array.from(await window.pdeanimViewer.positions(tt)), t));
   }
   if (job.measureGlb) result.glb = await page.evaluate(() => window.pdeanimViewer.measureGlb());
   result.animationRequests = animationRequests;

@@ -19,7 +19,7 @@ export const ENCODINGS = Object.freeze(['zstd', 'shuffle-zstd']);
 export const FORMAT_VERSION = '1.0';
 
 /** The format features this reader implements (a part's `required` list may name only these). */
-export const SUPPORTED_FEATURES = Object.freeze(['bones']);
+export const SUPPORTED_FEATURES = Object.freeze(['bones', 'stream']);
 
 /**
  * Throw ClipFormatError unless a part's header.format_version is "1.<minor>" (minor versions only add header
@@ -253,9 +253,10 @@ function decodeArray(bytes, start, name, spec) {
 
 /**
  * Decode container bytes into {header, arrays}; each array is {dtype, shape, data} with data a typed
- * array (a view on the input where alignment allows). Throws ClipFormatError.
+ * array (a view on the input where alignment allows). skip: a predicate of the array names not to decode
+ * (they may lie beyond the bytes given). Throws ClipFormatError.
  */
-export function decodeContainer(data) {
+export function decodeContainer(data, { skip = null } = {}) {
   const bytes = asBytes(data);
   if (bytes.byteLength < 16) {
     throw new ClipFormatError(`blob of ${bytes.byteLength} bytes is too short to be a pdeanim container`);
@@ -286,6 +287,9 @@ export function decodeContainer(data) {
   const table = header.arrays || {};
   delete header.arrays;
   const arrays = {};
-  for (const [name, spec] of Object.entries(table)) arrays[name] = decodeArray(bytes, start, name, spec);
+  for (const [name, spec] of Object.entries(table)) {
+    // skip (a predicate of array names): arrays left undecoded, e.g. the windows after a streamable clip's head
+    if (skip === null || !skip(name)) arrays[name] = decodeArray(bytes, start, name, spec);
+  }
   return { header, arrays };
 }

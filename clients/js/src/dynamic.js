@@ -238,10 +238,10 @@ function knotWindows(ca, S) {
  * knot_basis[j, s], then + p[c, w, k, s] * h), every product and sum an IEEE double (no fused multiply-add:
  * bit for bit the knots of every other reader).
  */
-function decodeKnots(ch, ca, S, C) {
+function decodeKnots(ch, ca, S, C, maxRank = S + 1) {
   const r = ch.knot_rank;
-  if (!Number.isInteger(r) || r < 0 || r > S + 1) {
-    throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${S + 1}, got ${JSON.stringify(r)}`);
+  if (!Number.isInteger(r) || r < 0 || r > maxRank) {
+    throw new ClipFormatError(`coefficients knot_rank must be an integer in 0..${maxRank}, got ${JSON.stringify(r)}`);
   }
   const { steps, z, order, windows } = knotTracks(ch, ca, S, C);
   const n = S + 1;
@@ -447,6 +447,22 @@ export function decodeDynamic(topo, coef) {
   };
 }
 
+/** The decoding steps a streamable clip's head and windows share with whole clips (streamformat.js). */
+export const parts = {
+  need,
+  count,
+  topologyArrays,
+  curveOfVertices,
+  toVertexOrder,
+  nondecreasing,
+  familyOf,
+  timeModelOf,
+  decodeKnots,
+  rigidTracks,
+  motionOf,
+  checkFinite,
+};
+
 /** Per-vertex space basis (V, 3, 4) float64 of a decoded dynamic clip (t-independent). */
 export function vertexBasis(clip) {
   const { nVertices: V, curveOf, u, uColumns, D, family } = clip;
@@ -571,6 +587,83 @@ export function naturalSplineTangents(segmentT, values, cols, out = new Float64A
         y[yo + k] = tj;
         out[vo + k] = tj;
       }
+    }
+  }
+  return out;
+}
+
+/**
+ * The knot tangents of the cubic spline through values ((S+1) x cols) at segmentT with known end tangents
+ * (first, last: cols float64 values each, or null for that end's natural condition; docs/format.md §3.10): the
+ * natural spline's system of naturalSplineTangents with a known end's row replaced by T = value (diagonal 1,
+ * off-diagonal 0), solved by the Thomas algorithm in float64 in the reference reader's order. Both null:
+ * naturalSplineTangents. out as there.
+ */
+export function clampedSplineTangents(segmentT, values, cols, first, last, out = new Float64Array(values.length)) {
+  if (first === null && last === null) return naturalSplineTangents(segmentT, values, cols, out);
+  const S = segmentT.length - 1;
+  if (!(S >= 1) || values.length !== (S + 1) * cols) {
+    throw new RangeError(`spline tangents need (S+1) x cols = ${S + 1} x ${cols} values, S >= 1`);
+  }
+  const dx = new Float64Array(S);
+  for (let j = 0; j < S; j++) dx[j] = segmentT[j + 1] - segmentT[j];
+  const lower = new Float64Array(S + 1); // coefficient of T_j-1 in row j
+  const diag = new Float64Array(S + 1);
+  const upper = new Float64Array(S + 1); // coefficient of T_j+1
+  diag[0] = 2;
+  upper[0] = 1;
+  for (let j = 1; j < S; j++) {
+    lower[j] = dx[j];
+    diag[j] = 2 * (dx[j - 1] + dx[j]);
+    upper[j] = dx[j - 1];
+  }
+  lower[S] = 1;
+  diag[S] = 2;
+  if (first !== null) [diag[0], upper[0]] = [1, 0];
+  if (last !== null) [diag[S], lower[S]] = [1, 0];
+  const c = new Float64Array(S + 1);
+  const piv = new Float64Array(S + 1);
+  c[0] = upper[0] / diag[0];
+  piv[0] = diag[0];
+  for (let j = 1; j <= S; j++) {
+    piv[j] = diag[j] - lower[j] * c[j - 1];
+    c[j] = upper[j] / piv[j];
+  }
+  const y = new Float64Array(S + 1);
+  for (let k = 0; k < cols; k++) {
+    const d = (j) => (values[(j + 1) * cols + k] - values[j * cols + k]) / dx[j];
+    for (let j = 0; j <= S; j++) {
+      let rhs;
+      if (j === 0) rhs = first !== null ? first[k] : 3 * d(0);
+      else if (j === S) rhs = last !== null ? last[k] : 3 * d(S - 1);
+      else rhs = 3 * (dx[j] * d(j - 1) + dx[j - 1] * d(j));
+      if (j === 0) y[0] = rhs / diag[0];
+      else y[j] = (rhs - lower[j] * y[j - 1]) / piv[j];
+    }
+    out[S * cols + k] = y[S];
+    for (let j = S - 1; j >= 0; j--) {
+      y[j] -= c[j] * y[j + 1];
+      out[j * cols + k] = y[j];
+    }
+  }
+  return out;
+}
+
+/**
+ * The known end tangent fields (float64, V * 3: sum over k of the end's tangent coefficients times S_k(u),
+ * in the order of the knot fields) of a streamable clip's window (§3.10), or null for a natural end.
+ */
+function endTangentField(clip, ends) {
+  if (ends === null) return null;
+  const { nVertices: V, curveOf } = clip;
+  const B = vertexBasis(clip);
+  const out = new Float64Array(V * 3);
+  for (let v = 0; v < V; v++) {
+    const kc = curveOf[v] * 12;
+    for (let w = 0; w < 3; w++) {
+      const b = v * 12 + w * 4;
+      const k = kc + w * 4;
+      out[v * 3 + w] = B[b] * ends[k] + B[b + 1] * ends[k + 1] + B[b + 2] * ends[k + 2] + B[b + 3] * ends[k + 3];
     }
   }
   return out;
@@ -743,7 +836,10 @@ export class DynamicEvaluator {
     if (this._tangentFields === null && this.spline !== null) {
       const fields = this.fields;
       const out = new Float32Array(fields.length);
-      this._tangentFields = naturalSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, out);
+      // a streamable clip's window: its known end tangents (§3.10); else (both null) the natural spline
+      const first = endTangentField(this.clip, this.clip.tangentFirst ?? null);
+      const last = endTangentField(this.clip, this.clip.tangentLast ?? null);
+      this._tangentFields = clampedSplineTangents(this.clip.segmentT, fields, this.nVertices * 3, first, last, out);
     }
     return this._tangentFields;
   }

@@ -2,7 +2,7 @@
 // clip (docs/format.md has the math; this mirrors the CPU path). The GLSL is in glsl.js.
 
 import { CyclicEvaluator } from './cyclic.js';
-import { DynamicEvaluator, naturalSplineTangents, timeIndex, vertexBase } from './dynamic.js';
+import { DynamicEvaluator, clampedSplineTangents, timeIndex, vertexBase } from './dynamic.js';
 import { ringNormals, triangleFrame, triangleQuality, vertexRings } from './geometry.js';
 import { orthonormalBases } from './orthobasis.js';
 
@@ -71,7 +71,8 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH, directMax = null } = {}
   const spline = residual && (clip.timeModel ?? null) !== null; // null unless some item is on the natural spline
   const coefficientTexels = 3;
   const curveTexels = coefficientTexels + (rigid ? 3 : 0);
-  const zero = bones ? zeroCurves(clip.knots, C) : null; // curves without residual (bone clips only)
+  // curves without residual (bone clips only; a streaming clip's head has no knots: none skipped)
+  const zero = bones && clip.knots ? zeroCurves(clip.knots, C) : null;
   // directMax (tests): the most vertices of a direct curve (default: curveTexels, where they cost no more)
   const numbering = gpuNumbering(curveOf, offsets, directMax ?? curveTexels, zero);
   const { gpuIndex, gpuCurve, nDirect, nGpuCurves, skinOnly } = numbering;
@@ -89,7 +90,8 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH, directMax = null } = {}
   // skin-only vertices: (0, rest xyz), bone indices, bone weights
   const vertex = texture(vertexTexelsAll, width);
   const direct = vertexRows(clip, { ...numbering, vertexTexels, skinTexel, base, q }, vertex.data);
-  const tangents = spline ? orthonormalTangents(clip, r) : null;
+  // a streaming clip's (no knots in its head): tangents and time index per window (windowTables)
+  const tangents = spline && clip.knots ? orthonormalTangents(clip, r) : null;
   const textures = { vertex, frame: texture(frameTexels, width), ring: ringTexture(ring, width) };
   return {
     kind: clip.kind,
@@ -116,7 +118,7 @@ export function gpuTables(clip, { width = TEXTURE_WIDTH, directMax = null } = {}
     tangents,
     direct,
     rings,
-    timeIndex: timeIndex(clip), // for the CPU evaluator (a worker makes it off the main thread)
+    timeIndex: clip.knots ? timeIndex(clip) : null, // for the CPU evaluator (a worker makes it off the main thread)
     maxHeight: Math.max(...Object.values(textures).map((x) => x.height)),
   };
 }
@@ -271,6 +273,8 @@ function gpuNumbering(curveOf, offsets, short, zero = null) {
  */
 function orthonormalTangents(clip, r) {
   const { knots, segmentT } = clip;
+  // a streamable clip's window (docs/format.md §3.10): its known end tangents (null: a natural end)
+  const ends = [clip.tangentFirst ?? null, clip.tangentLast ?? null];
   const cols = r.length / 4; // C * 3 items (R: 16 numbers each) of 4 coefficients: one track per coefficient
   const n = knots.length / cols;
   const out = new Float32Array(knots.length);
@@ -292,12 +296,37 @@ function orthonormalTangents(clip, r) {
         }
       }
     }
-    const tangents = naturalSplineTangents(segmentT, values, nb, nb === B ? tb : tb.subarray(0, n * nb));
+    const into = nb === B ? tb : tb.subarray(0, n * nb);
+    const [first, last] = ends.map((e) => (e === null ? null : orthonormalEnds(e, r, t0, nb)));
+    const tangents = clampedSplineTangents(segmentT, values, nb, first, last, into);
     for (let s = 0; s < n; s++) {
       for (let k = 0; k < nb; k++) out[s * cols + t0 + k] = tangents[s * nb + k];
     }
   }
   return out;
+}
+
+/** R Tc of one end's tangent coefficients (C x 3 x 4 float64) on tracks t0 .. t0 + nb - 1 (nb values). */
+function orthonormalEnds(ends, r, t0, nb) {
+  const out = new Float64Array(nb);
+  for (let k = 0; k < nb; k += 4) {
+    const o = t0 + k;
+    const R = ((t0 + k) / 4) * 16;
+    for (let i = 0; i < 4; i++) {
+      let acc = 0;
+      for (let j = i; j < 4; j++) acc += r[R + i * 4 + j] * ends[o + j];
+      out[k + i] = acc;
+    }
+  }
+  return out;
+}
+
+/**
+ * The per-window tables of a streaming clip's window (a dynamic clip of its own, stream.js) given the
+ * orthonormal bases r of its head's gpuTables(): {timeIndex, tangents (spline clips, else null)}.
+ */
+export function windowTables(windowClip, r, spline) {
+  return { timeIndex: timeIndex(windowClip), tangents: spline && r ? orthonormalTangents(windowClip, r) : null };
 }
 
 /**
@@ -326,15 +355,18 @@ export function frameView(layout, data = null) {
   // (a crowd's view, without a table, reads no knot rows on the CPU)
   if (layout.kind !== 'cyclic-spine' && data !== null) {
     // made once on the layout, so that views read them instead of making their own
-    if (layout.residual) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
+    // (a streaming clip's rows are made per view and window: its knots come and go)
+    const streaming = Boolean(layout.clip.windowed);
+    if (layout.residual && !streaming) segmentRows(layout, layout.rows?.seg >= 0 ? layout.rows.seg : 0);
     // a second view (another player's time): make every knot's row once rather than two per table switch
     layout.views = (layout.views ?? 0) + 1;
-    if (layout.residual && layout.views === 2) layout.allRows = allKnotRows(layout);
+    if (layout.residual && layout.views === 2 && !streaming) layout.allRows = allKnotRows(layout);
     if (layout.bones) layout.boneRows ??= new Float64Array(layout.nBones * 12);
     if (layout.bones) layout.skinScratch ??= new Float64Array(3);
   }
   const view = Object.create(layout);
   view.tableAt = [-1, NaN, NaN];
+  if (layout.clip.windowed) view.rows = null;
   if (data !== null) {
     view.textures = { ...layout.textures, frame: { data, width: layout.width, height: data.length / 4 / layout.width } };
   }
@@ -578,16 +610,18 @@ export function timeUniforms(layout, t) {
     const wt = 2 * Math.PI * clip.swim.frequency * (t * clip.period);
     return { seg: 0, sw: Math.sin(wt), cw: Math.cos(wt), changed: true };
   }
-  const ev = layout.evaluator;
-  const loc = ev.locate(t);
+  const loc = layout.evaluator.locate(t);
+  // a streaming clip's evaluator locates t in a window: that window's evaluator (segments numbered in it)
+  const ev = layout.evaluator.current ?? layout.evaluator;
   const seg = loc[0];
   const last = layout.tableAt ?? (layout.tableAt = [-1, NaN, NaN]);
-  if (seg === last[0] && loc[1] === last[1] && ((!layout.rigid && !layout.bones) || loc[2] === last[2])) {
+  if (seg === last[0] && loc[1] === last[1] && ev === last[3] && ((!layout.rigid && !layout.bones) || loc[2] === last[2])) {
     return { seg, sw: 0, cw: 0, changed: false };
   }
   last[0] = seg;
   last[1] = loc[1];
   last[2] = loc[2];
+  last[3] = ev;
   ev.segmentState();
   writeFrame(layout, ev, seg, layout.textures.frame.data);
   return { seg, sw: 0, cw: 0, changed: true };
@@ -614,9 +648,13 @@ function orthonormalRow(r, knots, o, out) {
  * orthonormal bases (a, b: C * 12 float64) and, for clips with spline items, the spline tangents there (tl,
  * th, already in that basis), so that a frame's coefficients are a weighted sum of rows per item.
  */
-function segmentRows(layout, seg) {
+function segmentRows(layout, seg, ev = layout.evaluator) {
   const C = layout.nCurves;
-  const spline = layout.tangents !== null;
+  // a streaming clip's window: its own knots and tangents (windowTables), segments numbered in the window
+  const windowed = ev.clip.s0 !== undefined;
+  // (a window's tangents: made by the worker with its tables, else here on first use)
+  const tangents = !windowed ? layout.tangents : layout.spline ? (ev.windowTangents ??= orthonormalTangents(ev.clip, layout.r)) : null;
+  const spline = layout.spline && tangents !== null;
   const rows = (layout.rows ??= {
     seg: -1,
     a: new Float64Array(C * 12),
@@ -625,23 +663,24 @@ function segmentRows(layout, seg) {
     th: spline ? new Float64Array(C * 12) : null,
     y: new Float64Array(C * 12), // the frame's coefficients
   });
-  if (rows.seg === seg) return rows;
-  if (layout.allRows) {
+  if (rows.seg === seg && rows.ev === ev) return rows;
+  if (layout.allRows && !windowed) {
     // players at other times: every knot's row made once (allKnotRows), read in place
     const n = C * 12;
     const { knots: k, tangents: tg } = layout.allRows;
     [rows.a, rows.b] = [k.subarray(seg * n, (seg + 1) * n), k.subarray((seg + 1) * n, (seg + 2) * n)];
     if (spline) [rows.tl, rows.th] = [tg.subarray(seg * n, (seg + 1) * n), tg.subarray((seg + 1) * n, (seg + 2) * n)];
     rows.seg = seg;
+    rows.ev = ev;
     return rows;
   }
-  const { knots } = layout.clip;
+  const { knots } = ev.clip;
   const row = (j, out, tangentsOut) => {
     orthonormalRow(layout.r, knots, j * C * 12, out);
     // a float64 copy: every row the frame loop reads is then of one type
-    if (spline) tangentsOut.set(layout.tangents.subarray(j * C * 12, (j + 1) * C * 12));
+    if (spline) tangentsOut.set(tangents.subarray(j * C * 12, (j + 1) * C * 12));
   };
-  if (rows.seg >= 0 && seg === rows.seg + 1) {
+  if (rows.seg >= 0 && seg === rows.seg + 1 && rows.ev === ev) {
     // playing forward: the knot at the segment's start is the previous segment's end
     [rows.a, rows.b, rows.tl, rows.th] = [rows.b, rows.a, rows.th, rows.tl];
     row(seg + 1, rows.b, rows.th);
@@ -650,6 +689,7 @@ function segmentRows(layout, seg) {
     row(seg + 1, rows.b, rows.th);
   }
   rows.seg = seg;
+  rows.ev = ev;
   return rows;
 }
 
@@ -709,7 +749,7 @@ function frameCoefficients(layout, ev, seg, rows) {
 function writeFrame(layout, ev, seg, d) {
   if (layout.bones) writeBones(layout, ev, d, layout.boneTexel);
   if (!layout.residual) return;
-  const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg));
+  const y = frameCoefficients(layout, ev, seg, segmentRows(layout, seg, ev));
   writeDirect(layout, ev, y, d, 0);
   const { nDirect, gpuCurve } = layout;
   const rot = layout.rigid ? ev.rot : null;

@@ -36,5 +36,14 @@ export {
   vertexBase,
 } from './dynamic.js';
 export { CyclicEvaluator } from './cyclic.js';
+export {
+  StreamingClip,
+  WindowedClip,
+  WindowedEvaluator,
+  WindowPendingError,
+  decodeWindowedClip,
+  openRange,
+} from './stream.js';
+export { STREAM_FEATURE, decodeStreamHead, decodeStreamWindow, isStreamHeader, streamIndex } from './streamformat.js';
 export { spaceBasis, timePair, rigidTimePair, locate } from './basis.js';
 export { computeNormals, boundingBoxDiagonal, ringNormals, triangleFrame, vertexRings } from './geometry.js';

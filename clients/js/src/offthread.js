@@ -4,12 +4,14 @@
 // console warning in the second case.
 
 import { ClipFormatError } from './container.js';
-import { loadClip, splitClipFile } from './clip.js';
-import { gpuTables } from './gpu.js';
+import { loadClip, sha256Hex, splitClipFile } from './clip.js';
+import { gpuTables, windowTables } from './gpu.js';
+import { decodeStreamHead, decodeStreamWindow, joinWindow } from './streamformat.js';
 import './zstd.js';
 
 let workerStart = null; // Promise of the started decoder worker, or of null when none could start
 let nextId = 0;
+let nextStream = 0;
 const pending = new Map();
 let warned = false;
 
@@ -45,7 +47,7 @@ function settle({ data }) {
   if (data.error) {
     const Err = data.error.name === 'ClipFormatError' ? ClipFormatError : Error;
     job.reject(new Err(data.error.message));
-  } else job.resolve(data.clip);
+  } else job.resolve(data.stream || data.windowed ? data : data.clip);
 }
 
 /**
@@ -108,8 +110,69 @@ export async function decodeClipOffThread(parts, { tables = true, width = 4096, 
   const message = { id, fzstd: fzstdUrl(), tables, width };
   for (const k of ['topology', 'coefficients', 'file']) if (parts[k]) message[k] = copyOf(parts[k]);
   const transfer = ['topology', 'coefficients', 'file'].filter((k) => message[k]).map((k) => message[k]);
-  return new Promise((resolve, reject) => {
+  const done = await new Promise((resolve, reject) => {
     pending.set(id, { resolve, reject });
     worker.postMessage(message, transfer);
   });
+  if (!done?.windowed) return done;
+  // a streamable clip held whole (docs/format.md §3.10): decoded here, its windows when first evaluated (the
+  // loader streams such clips through the worker instead)
+  return loadClip(done.windowed.topology, done.windowed.coefficients);
+}
+
+/** Post message to the worker and resolve with its answer (settle()). */
+function call(worker, message, transfer = []) {
+  const id = nextId++;
+  return new Promise((resolve, reject) => {
+    pending.set(id, { resolve, reject });
+    worker.postMessage({ ...message, id, fzstd: fzstdUrl() }, transfer);
+  });
+}
+
+/**
+ * Open a streamable clip (docs/format.md §3.10) for decoding window by window, in a Web Worker where one can
+ * run, else here: its topology part and head (the first bytes of its coefficients part, up to its first
+ * window) are decoded (topology_id checked where WebCrypto is available) with the GPU tables every window
+ * shares (tables, default true; textures width texels wide). Resolves to {shell, tables, decode(index,
+ * bytes) → Promise of {clip (the window's dynamic clip), tables (its timeIndex, tangents)}, close()}.
+ */
+export async function openStreamOffThread({ topology, head }, { tables = true, width = 4096, useWorker = true } = {}) {
+  const worker = useWorker && workerUnavailableReason() === null ? await (workerStart ??= startWorker()) : null;
+  if (worker === null) {
+    const shell = decodeStreamHead(topology, head);
+    if (shell.topologyId) {
+      const have = await sha256Hex(topology);
+      if (have !== null && have !== shell.topologyId) {
+        throw new ClipFormatError('the coefficients were made for another topology part (topology_id mismatch)');
+      }
+    }
+    const shared = tables ? gpuTables(shell, { width }) : null;
+    const states = new Map(); // the state each window handed on (knots are carried, §3.10)
+    return {
+      shell,
+      tables: shared,
+      decode: async (i, bytes, keep = true) => {
+        const { clip, state } = decodeStreamWindow(shell, bytes, i, i > 0 ? (states.get(i - 1) ?? null) : null);
+        states.set(i, state);
+        if (!keep) return null;
+        return { clip, tables: shared ? windowTables(clip, shared.r, shared.spline) : null };
+      },
+      close() {},
+    };
+  }
+  const sid = nextStream++;
+  const t = copyOf(topology);
+  const h = copyOf(head);
+  const opened = await call(worker, { op: 'open', sid, topology: t, head: h, tables, width }, [t, h]);
+  const shell = opened.clip;
+  return {
+    shell,
+    tables: opened.tables,
+    decode: async (i, bytes, keep = true) => {
+      const b = bytes.byteOffset === 0 && bytes.byteLength === bytes.buffer.byteLength ? bytes.buffer : copyOf(bytes);
+      const win = await call(worker, { op: 'window', sid, index: i, bytes: b, keep }, [b]);
+      return keep ? { clip: joinWindow(shell, win.clip), tables: win.tables } : null;
+    },
+    close: () => worker.postMessage({ op: 'close', sid }),
+  };
 }

@@ -304,6 +304,8 @@ export class ClipPlayer {
    * clip's CPU positions at t when the caller already has them (shared between meshes).
    */
   setTime(t, evaluated = null) {
+    // a streaming clip (stream.js): the play head moves there; a window not decoded yet keeps the last frame
+    if (this.clip.windowed && !this.clip.setPlayhead(t)) return this;
     if (this._onGPU) this.frames.frame(t);
     else this._writeCPU(evaluated ?? this.evaluator.evaluate(t, this._cpuBuffers().clip));
     this._time = t;

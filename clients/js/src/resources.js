@@ -90,12 +90,13 @@ export class ClipResources {
     this._crowdReason = undefined;
   }
 
-  /** Why the clip cannot take its crowd form (null when it can): cyclic clips, no GPU, too large a table. */
+  /** Why the clip cannot take its crowd form (null when it can): cyclic or streaming clips, no GPU, too large a table. */
   get crowdReason() {
     if (this._crowdReason !== undefined) return this._crowdReason;
     const L = this.layout;
     if (this.gpuReason) this._crowdReason = this.gpuReason;
     else if (L.kind === 'cyclic-spine') this._crowdReason = 'cyclic clips keep their per-player uniforms';
+    else if (L.clip.windowed) this._crowdReason = 'a streaming clip keeps per-player tables (its knots come by window)';
     else {
       const table = knotTables(L, this.limit);
       this._crowdReason =

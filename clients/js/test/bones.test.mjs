@@ -103,12 +103,12 @@ test('the skinned base is float32 of the float64 sum in the stored influence ord
 });
 
 test('the required rule: "bones" is supported; unknown features are refused naming them and the supported set', () => {
-  assert.deepEqual([...SUPPORTED_FEATURES], ['bones']);
+  assert.deepEqual([...SUPPORTED_FEATURES], ['bones', 'stream']);
   const c = byName('fit-displacement-chord');
   const { topology, coefficients } = fixtureParts(c);
   const bones = boneClipParts(c);
   const require = (bytes, required) => edited(bytes, ({ header }) => Object.assign(header, { format_version: '1.1', required }));
-  const msg = /the coefficients part requires format feature\(s\) "wings" that this reader lacks \(it supports: bones\)/;
+  const msg = /the coefficients part requires format feature\(s\) "wings" that this reader lacks \(it supports: bones, stream\)/;
   refused(() => decodeClip(topology, require(bones.coefficients, ['bones', 'wings'])), msg);
   refused(() => decodeClip(topology, require(coefficients, ['wings'])), msg);
   refused(() => decodeClip(require(topology, ['x-topo']), coefficients), /topology part requires format feature\(s\) "x-topo"/);

@@ -26,7 +26,9 @@ test('the fixture set covers every kind, motion, parameterisation, looping mode 
   assert.deepEqual([...new Set(dyn.map((c) => c.param_mode))].sort(), ['chord', 'paper']);
   assert.ok(dyn.some((c) => c.looping) && dyn.some((c) => !c.looping));
   // 1.0, but the bone layer's (format 1.1, required "bones"; test/bones.test.mjs covers them)
-  assert.ok(cases.every((c) => c.format_version === (c.bones ? '1.1' : FORMAT_VERSION)), 'fixtures are 1.0 or bones 1.1');
+  // (and the streamable layout's, format 1.2 with "stream" in required: test/stream.test.mjs covers it too)
+  const version = (c) => (c.stream ? '1.2' : c.bones ? '1.1' : FORMAT_VERSION);
+  assert.ok(cases.every((c) => c.format_version === version(c)), 'fixtures are 1.0, bones 1.1 or stream 1.2');
   // every optional feature of the layout, alone and together, each in looping and open clips where the
   // writer allows it: a fixture the tests below rely on must exist (a vanished file fails here)
   const basis = dyn.filter((c) => c.knot_rank > 0);
@@ -41,6 +43,14 @@ test('fixtures decode to their manifest features: knot rank below S + 1, time mo
   for (const c of man.cases.filter((x) => x.kind === 'dynamic-pde')) {
     const { topology, coefficients } = splitClipFile(readBytes(join(FIXTURES, c.clip)));
     const clip = decodeClip(topology, coefficients);
+    if (c.stream) {
+      // the streamable layout: its windows as the manifest lists them (their data decode when evaluated)
+      assert.ok(clip.windowed && clip.nWindows === c.stream.n_windows, c.name);
+      assert.deepEqual(clip.index.map((w) => [w.a, w.b]), c.stream.knots, c.name);
+      assert.deepEqual(clip.index.map((w) => [w.t0, w.t1]), c.stream.t, c.name);
+      assert.equal(clip.header.knot_rank, c.knot_rank, c.name);
+      continue;
+    }
     assert.equal(clip.topologyHeader.format_version, FORMAT_VERSION, c.name);
     const r = clip.header.knot_rank;
     assert.equal(r, c.knot_rank, c.name);

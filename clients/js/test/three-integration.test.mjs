@@ -33,7 +33,7 @@ function serve() {
       '/v1/clips/abc/topology': parts.topology,
       '/v1/clips/abc/coefficients': parts.coefficients,
       '/files/x.clip': file,
-    }[req.url];
+    }[req.url.split('?')[0]];
     if (req.headers.authorization !== 'Bearer k1') {
       res.writeHead(401, { 'Content-Type': 'application/json' });
       res.end(JSON.stringify({ error: { code: 'unauthorized', message: 'unknown API key' } }));

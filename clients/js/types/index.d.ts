@@ -11,7 +11,7 @@ export declare const ENCODINGS: readonly ['zstd', 'shuffle-zstd'];
 /** The clip format written and read (docs/format.md): readers accept any "1.<minor>". */
 export declare const FORMAT_VERSION: '1.0';
 /** The format features this reader implements (a part's `required` list may name only these). */
-export declare const SUPPORTED_FEATURES: readonly ['bones'];
+export declare const SUPPORTED_FEATURES: readonly ['bones', 'stream'];
 /**
  * Throws ClipFormatError unless header.format_version is "1.<minor>" and every feature its `required` names
  * is supported (checkRequired).
@@ -190,7 +190,79 @@ export interface CyclicClip extends ClipBase {
   frames: number;
 }
 
-export type Clip = DynamicClip | CyclicClip;
+/** One time window of a streamable clip: its index entry (docs/format.md §3.10). */
+export interface StreamWindow {
+  index: number;
+  array: string;
+  /** Byte offset and size in the coefficients part's data (StreamingClip: offset/length in the resource). */
+  offset: number;
+  nbytes: number;
+  /** Its first and last normalised time, knot (segments a .. b - 1). */
+  t0: number;
+  t1: number;
+  a: number;
+  b: number;
+  s0?: number;
+  s1?: number;
+  length?: number;
+}
+
+/**
+ * A clip of the streamable layout (format 1.2, feature "stream", docs/format.md §3.10): its head decoded (the
+ * static data of a DynamicClip, without the per-segment arrays) and its time windows decoded when needed, at
+ * most maxWindows at once. Evaluators and players take it as any dynamic clip.
+ */
+export interface WindowedClip extends Omit<DynamicClip, 'segmentT' | 'family' | 'm' | 'knots'> {
+  readonly windowed: true;
+  readonly nWindows: number;
+  readonly index: StreamWindow[];
+  maxWindows: number;
+  /** The decoded windows: index -> {clip (a DynamicClip of its segments), tables, evaluator}. */
+  readonly decoded: Map<number, { clip: DynamicClip; tables: object | null; evaluator: DynamicEvaluator | null }>;
+  /** The window holding normalised time t. */
+  windowAt(t: number): number;
+  /** Whether a frame at t can be evaluated now. */
+  ready(t: number): boolean;
+  /** Move the play head to t (a StreamingClip fetches and evicts); whether t's window is decoded. */
+  setPlayhead(t: number): boolean;
+}
+
+/**
+ * A streamable clip played while it downloads (PDEClipLoader resolves with it once its first window is
+ * decoded). Events: 'window' (detail {index, s0, s1, t0, t1, decoded}), 'evict' ({index}), 'progress'
+ * ({loaded, position}), 'error' ({error}), 'end'.
+ */
+export interface StreamingClip extends WindowedClip, EventTarget {
+  readonly streaming: true;
+  /** The windows with their byte ranges in the resource. */
+  readonly windows: StreamWindow[];
+  /** The window index of the play head. */
+  readonly playhead: number;
+  /** The windows wanted now: the play head's and the next ones. */
+  wanted(): number[];
+  /** Resolves once t's window is decoded (the play head moved there). */
+  whenReady(t: number): Promise<void>;
+  /** Stop downloading and drop the windows. */
+  close(): void;
+}
+
+export declare const STREAM_FEATURE: 'stream';
+/** Whether a coefficients (or CLIP file) header is of the streamable layout (`required` lists "stream"). */
+export declare function isStreamHeader(header: Record<string, any>): boolean;
+/** The checked window index of a streamable coefficients header (ClipFormatError "damaged stream index"). */
+export declare function streamIndex(header: Record<string, any>): StreamWindow[];
+/** A streamable coefficients part held in memory, its windows decoded when first evaluated. */
+export declare function decodeWindowedClip(
+  topology: ArrayBuffer | ArrayBufferView,
+  coefficients: ArrayBuffer | ArrayBufferView,
+  options?: { maxWindows?: number },
+): WindowedClip;
+/** Thrown when a streaming clip is evaluated at a time whose window is not decoded. */
+export declare class WindowPendingError extends Error {
+  readonly window: number;
+}
+
+export type Clip = DynamicClip | CyclicClip | WindowedClip;
 
 /** CPU evaluator: positions (V * 3, original vertex order) at normalised clip time t. */
 export interface Evaluator {

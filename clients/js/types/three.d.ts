@@ -195,6 +195,14 @@ export declare class PDEClipLoader extends Loader<Clip> {
   constructor(manager?: LoadingManager);
   setWorker(on: boolean): this;
   setTextureWidth(width: number): this;
+  /**
+   * Play streamable clips (format 1.2, feature "stream") while they download: the loader resolves with a
+   * StreamingClip once the first window is decoded (default true; a service clip is asked for with
+   * ?layout=stream). false: the whole body first.
+   */
+  setStreaming(on: boolean): this;
+  /** Windows of a streaming clip decoded at once (default 4, at least 2). */
+  setMaxWindows(n: number): this;
   parse(buffer: ArrayBuffer): Clip;
   parseAsync(buffer: ArrayBuffer): Promise<Clip>;
 }
@@ -219,3 +227,17 @@ export declare function decodeClipOffThread(
 ): Promise<Clip>;
 /** Why clips cannot be decoded in a Web Worker here (null when they can). */
 export declare function workerUnavailableReason(): string | null;
+/**
+ * Open a streamable clip for decoding window by window (in the Web Worker where one can run): its topology
+ * part and head (the coefficients part's bytes up to its first window), checked, with the GPU tables all
+ * windows share.
+ */
+export declare function openStreamOffThread(
+  parts: { topology: ArrayBuffer | ArrayBufferView; head: ArrayBuffer | ArrayBufferView },
+  options?: { tables?: boolean; width?: number; useWorker?: boolean },
+): Promise<{
+  shell: object;
+  tables: GpuLayout | null;
+  decode(index: number, bytes: Uint8Array): Promise<{ clip: Clip; tables: object | null }>;
+  close(): void;
+}>;

@@ -193,7 +193,8 @@ class Viewer {
   frame(clip) {
     const box = new THREE.Box3();
     const pos = new Float32Array(clip.nVertices * 3);
-    const times = clip.looping ? [0, 0.25, 0.5, 0.75] : [0, 0.25, 0.5, 0.75, 1];
+    // a clip still downloading (the streamable layout) is framed on the times it has decoded so far
+    const times = (clip.looping ? [0, 0.25, 0.5, 0.75] : [0, 0.25, 0.5, 0.75, 1]).filter((t) => clip.ready?.(t) ?? true);
     this.model.updateMatrixWorld(true);
     const toWorld = this.model.matrixWorld;
     for (const t of times) {
@@ -394,12 +395,19 @@ function nextFrame() {
 window.pdeanimViewer = {
   ready,
   /** The CPU-evaluated positions (V * 3, clip vertex order) at normalised time t. */
-  positions(t) {
+  async positions(t) {
+    await viewer.clip.whenReady?.(Number(t)); // a streaming clip: t's window fetched and decoded first
     const out = new Float32Array(viewer.clip.nVertices * 3);
     return viewer.evaluator.evaluate(Number(t), out) ?? out;
   },
   /** Pause and show time t; resolves after it has been rendered. */
-  async show(t) { viewer.pause(); viewer.apply(Number(t)); await nextFrame(); return viewer.t; },
+  async show(t) {
+    viewer.pause();
+    await viewer.clip.whenReady?.(Number(t));
+    viewer.apply(Number(t));
+    await nextFrame();
+    return viewer.t;
+  },
   setMode: (mode) => viewer.setMode(mode),
   get mode() { return viewer.mode; },
   get gpuUnavailableReason() { return viewer.gpuReason; },

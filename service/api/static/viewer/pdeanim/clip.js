@@ -3,6 +3,8 @@
 import { ClipFormatError, checkFormatVersion, decodeContainer } from './container.js';
 import { CyclicEvaluator, decodeCyclic } from './cyclic.js';
 import { DynamicEvaluator, decodeDynamic } from './dynamic.js';
+import { WindowedEvaluator, decodeWindowedClip } from './stream.js';
+import { isStreamHeader } from './streamformat.js';
 
 const KINDS = {
   'dynamic-pde': [decodeDynamic, DynamicEvaluator],
@@ -21,7 +23,13 @@ function bytesOf(data) {
  */
 export function decodeClip(topology, coefficients) {
   const topo = decodeContainer(topology);
-  const coef = decodeContainer(coefficients);
+  const coef = decodeContainer(coefficients, { skip: (name) => /^window_\d+$/.test(name) });
+  if (coef.header.part === 'coefficients' && isStreamHeader(coef.header)) {
+    // the streamable layout (docs/format.md §3.10): its windows decode when first evaluated
+    const clip = decodeWindowedClip(topology, coefficients);
+    clip.topologyId = coef.header.topology_id ?? null;
+    return clip;
+  }
   if (topo.header.part !== 'topology') {
     throw new ClipFormatError(`expected a topology part, got ${JSON.stringify(topo.header.part)}`);
   }
@@ -156,6 +164,7 @@ export async function fetchClipFile(url, { key, headers = {}, fetch: fetchFn, si
  * dynamic clip's timeIndex() made elsewhere (in a Web Worker, with the GPU tables).
  */
 export function createEvaluator(clip, prepared = null) {
+  if (clip?.windowed) return new WindowedEvaluator(clip); // a clip played while it downloads (stream.js)
   const entry = KINDS[clip?.kind];
   if (!entry) throw new ClipFormatError(`unknown clip kind ${JSON.stringify(clip?.kind)}`);
   return new entry[1](clip, prepared);

@@ -90,6 +90,7 @@ export class ScenePlayer {
 
   /** Show normalised time t on every mesh (one CPU evaluation shared by all on the CPU path). */
   setTime(t) {
+    if (this.clip.windowed && !this.clip.setPlayhead(t)) return this; // window not decoded yet (stream.js)
     const cpu = this.players.some((p) => !p.gpu);
     if (cpu) this.resources.evaluator.evaluate(t, this._positions);
     for (const p of this.players) p.setTime(t, cpu ? this._positions : null);

@@ -9,5 +9,5 @@ export { ScenePlayer, attachClipToScene } from './scene.js';
 export { ClipResources, FrameTables } from './resources.js';
 export { PDEClipLoader } from './loader.js';
 export { clipAnimation, clipDuration } from './mixer.js';
-export { decodeClipOffThread, workerUnavailableReason } from './offthread.js';
+export { decodeClipOffThread, openStreamOffThread, workerUnavailableReason } from './offthread.js';
 export { WEBGPU_REFUSAL } from './webgl.js';
