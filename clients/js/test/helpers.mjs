@@ -25,6 +25,11 @@ export function manifest() {
   return JSON.parse(readFileSync(join(FIXTURES, 'manifest.json'), 'utf8'));
 }
 
+/** The manifest without its streamable cases, for tests of whole clips' internals (knots, tables). */
+export function withoutStream(man) {
+  return { ...man, cases: man.cases.filter((c) => !c.stream) };
+}
+
 export function expected(c) {
   return new Float32Array(readBytes(join(FIXTURES, c.expected)).buffer);
 }

@@ -17,10 +17,12 @@ import {
   retimed,
   sampleTimes,
   takenTimes,
+  withoutStream,
   worstDeviation,
 } from './helpers.mjs';
 
-const man = manifest();
+// streamable clips (format 1.2) decode window by window: test/stream.test.mjs checks their tables
+const man = withoutStream(manifest());
 const dynamic = man.cases.filter((c) => c.kind === 'dynamic-pde' && !c.bones); // bones: test/bones.test.mjs
 
 /**
@@ -198,7 +200,9 @@ test('spline items: time_model 1 in every segment with m = 0; the knots do not d
     const C = clip.nCurves;
     assert.equal(clip.timeModel.length, C * 3, c.name);
     assert.ok(clip.timeModel.every((x) => x === TIME_PDE || x === TIME_SPLINE), c.name);
-    assert.ok(clip.timeModel.includes(TIME_SPLINE) && clip.timeModel.includes(TIME_PDE), c.name);
+    assert.ok(clip.timeModel.includes(TIME_SPLINE), c.name);
+    // (a written fixture may have every item on the spline; the '-mixed' ones have both)
+    if (c.name !== c.fixture.name) assert.ok(clip.timeModel.includes(TIME_PDE), c.name);
     for (let i = 0; i < clip.m.length; i++) {
       if (clip.timeModel[i % (C * 3)] === TIME_SPLINE) assert.equal(clip.m[i], 0, c.name);
     }
@@ -300,7 +304,8 @@ test('items off the spline evaluate bit for bit as in the same clip without spli
         }
       }
     }
-    if (!clip.rigid) assert.ok(compared > 0, c.name);
+    const someOff = clip.timeModel.includes(TIME_PDE);
+    if (!clip.rigid && someOff) assert.ok(compared > 0, c.name);
     if (clip.rigid) rigidCompared += compared;
   }
   assert.ok(rigidCompared > 0, 'no rigid clip has a curve off the spline');
