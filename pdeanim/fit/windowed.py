@@ -49,7 +49,7 @@ from .options import FitOptions, FitTolerances
 from .problem import prepare, stored_distances, u_grid
 from .ratecontrol import Errors, first_quantisation
 from .report import FitReport, time_model_counts
-from .search import best_candidate
+from .search import best_candidate, candidate
 from .spacestage import SpaceFit, space_fit
 
 CURVE_FRAMES = 128
@@ -407,7 +407,12 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     start = _start(plan, index, bool(spline.any()))
     if start is not None and tol.soft_max_ratio is not None:
         tol = replace(tol, soft_max_ratio=GUARD_MAX_SHARE * tol.soft_max_ratio)
-    best = best_candidate(sf, options, poses, progress, tol, start)
+    long = frames.shape[0] * frames.shape[1] > tol.window_search_values
+    if tol.dense_fit and not options.segments and long:
+        best = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol,
+                         min(len(frames) - 1, options.max_segments))  # long window: the dense fit alone
+    else:
+        best = best_candidate(sf, options, poses, progress, tol, start, lazy=True)
     quant = best.quant
     # the window's clip as its rate control measured it (the same encoding, decoded the same)
     header, arrays = container.unpack(encode(p, lay.curves, stage, best.fitted, options, poses, None, quant,
