@@ -15,6 +15,7 @@ from ..model.clipformat import (
     TIME_PDE,
     TIME_SPLINE,
     CoefficientData,
+    TopologyData,
     coefficient_arrays,
     decode_coefficients,
     decode_topology,
@@ -108,6 +109,16 @@ def stored_clip(p: Problem, curves: CurveSet, space: SpaceStage, fitted: TimeSta
     """The clip a reader decodes from :func:`encode` with the knots on ``quant.rank`` shared tracks (None or
     0: plain tracks), built from the unpacked arrays (nothing compressed): what the rate control measures
     each rounding on."""
+    topo, header, arrays = unpacked_coefficients(p, curves, space, fitted, options, poses, quant)
+    return DynamicClip(topo, decode_coefficients(header, arrays, topo.curves.n_curves))
+
+
+def unpacked_coefficients(p: Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage,
+                          options: FitOptions, poses: Poses, quant: Quantisation
+                          ) -> tuple[TopologyData, dict, dict[str, np.ndarray]]:
+    """(decoded topology, coefficients header, arrays) of :func:`encode` with the knots on ``quant.rank``
+    shared tracks (None or 0: plain tracks), neither part compressed (knot differences of order 1): the same
+    decoded knots and codes, without the trial compressions."""
     u = p.u_per_vertex()
     header, arrays = topology_arrays(curves, u, poses.faces, p.rest, options.param_mode, quant.tolerance)
     topo = decode_topology(header, arrays)
@@ -118,7 +129,7 @@ def stored_clip(p: Problem, curves: CurveSet, space: SpaceStage, fitted: TimeSta
     header, arrays = coefficient_arrays("", topo, coef, quant.tolerance, quant.knot_rms, quant.knot_cap,
                                         spectrum=spectrum, choose=False, knot_refine=quant.refine,
                                         knot_rank=quant.rank or 0)
-    return DynamicClip(topo, decode_coefficients(header, arrays, topo.curves.n_curves))
+    return topo, header, arrays
 
 
 def decode(parts: ClipParts) -> DynamicClip:

@@ -168,6 +168,12 @@ class FitTolerances:
     """In a windowed fit each window's rounding grows while its RMS stays below this share of an RMS target
     (quant_fill of a one-piece fit): windows cannot trade error between them, so each lands closer to the
     target (samba in 4 windows at 3e-3: 476 KB at 0.85, 455 KB at 0.93, as one piece 437 KB)."""
+    window_search_values: int = 2_000_000
+    """In a windowed fit, a window of more frame-vertex values than this skips the error-driven segment
+    search and stores the dense candidate (a knot at every frame, the one-piece rate control and shared knot
+    basis): searching as well made windows 1.5-2.9x slower for the same bytes on pdance, elephant-gallop
+    and horse-collapse, and on long inputs the dense candidate is what the windows kept (elephant-gallop
+    tiled to 250 frames: 249 segments of 249). 0: never search in windows."""
     search_share: float = 0.125
     """With the dense fit, the error-driven search stops at this share of the frame intervals: a clip that
     needs more segments than that has been smaller with a knot at every frame on every benchmark sequence,

@@ -44,6 +44,13 @@ def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progres
     """A time fit (error-driven up to ``search_cap`` segments, fixed segments, or ``dense`` evenly spaced
     segments: a knot at every frame when there are enough) rounded and measured on the targets. ``start``:
     the boundaries (frames) the error-driven search starts from and keeps (default: the first and last)."""
+    return rounded(sf, options, poses, tol, dense,
+                   *time_fit(sf, options, progress, dense, search_cap, start))
+
+
+def time_fit(sf: SpaceFit, options: FitOptions, progress: Progress | None, dense: int | None = None,
+             search_cap: int | None = None, start: np.ndarray | None = None) -> tuple:
+    """The unrounded time fit of :func:`candidate`: (fitted, met, floor_high, history, cap, unsplittable)."""
     p = sf.p
     frames = len(p.t) - 1
     if options.segments or dense:
@@ -60,6 +67,14 @@ def candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progres
                            options.loop, progress, None if start is None else bounds)
         fitted, met, floor_high, history = res.time, res.met, res.floor_exceeds_target, res.history
         cap, unsplittable = res.cap_reached, res.unsplittable
+    return fitted, met, floor_high, history, cap, unsplittable
+
+
+def rounded(sf: SpaceFit, options: FitOptions, poses: Poses, tol: FitTolerances, dense: int | None,
+            fitted: TimeStage, met: bool | None, floor_high: bool, history: list, cap: bool,
+            unsplittable: bool) -> Candidate:
+    """:func:`candidate` of an unrounded :func:`time_fit`: rounded by the rate control and measured."""
+    p = sf.p
     exact = model_distances(sf.space, fitted, p.slots)
     trials: list[dict] = []
     quant, approx, size = quantised(sf, fitted, options, poses, exact, tol, trials)
@@ -77,23 +92,33 @@ def _floor_above(sf: SpaceFit) -> bool:
 
 
 def best_candidate(sf: SpaceFit, options: FitOptions, poses: Poses, progress: Progress | None,
-                   tol: FitTolerances, start: np.ndarray | None = None) -> Candidate:
+                   tol: FitTolerances, start: np.ndarray | None = None, lazy: bool = False) -> Candidate:
     """The fixed-segment candidate; or of the error-driven one (searched up to tol.search_share of the frame
     intervals when the dense fit is tried; from the boundaries ``start``, see :func:`candidate`) and the dense
     one (tol.dense_fit), the one that meets the targets, the preferred one where both do, else the one closer
-    to them. ``progress`` is the whole fit's (this stage reports from 0.1 to 0.86)."""
+    to them. ``progress`` is the whole fit's (this stage reports from 0.1 to 0.86). ``lazy`` (a window of a
+    windowed fit): a search that missed the targets unrounded is not rounded when the dense candidate meets
+    them (rounding only adds error, so it would lose to the dense one: its rate control is skipped)."""
     if options.segments:
         return candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol)
     frames = len(sf.p.t) - 1
     dense = min(frames, options.max_segments)
     cap = min(dense, max(1, int(np.ceil(tol.search_share * frames)))) if tol.dense_fit else dense
-    search = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol, search_cap=cap,
-                       start=start)
+    found = time_fit(sf, options, sub_progress(progress, 0.1, 0.85), search_cap=cap, start=start)
+    full = None
+    if lazy and tol.dense_fit and found[1] is not None and not found[1] and found[0].segm.n_segments < dense:
+        if progress is not None:
+            progress(0.86, f"dense fit ({dense} segments)")
+        full = candidate(sf, options, poses, None, tol, dense)
+        if full.meets:
+            return full
+    search = rounded(sf, options, poses, tol, None, *found)
     if not tol.dense_fit or search.fitted.segm.n_segments >= dense:
         return search
-    if progress is not None:
-        progress(0.86, f"dense fit ({dense} segments)")
-    full = candidate(sf, options, poses, None, tol, dense)
+    if full is None:
+        if progress is not None:
+            progress(0.86, f"dense fit ({dense} segments)")
+        full = candidate(sf, options, poses, None, tol, dense)
     if search.meets and full.meets:
         return full if preferred(sf, options, poses, full, search, tol) else search
     if search.meets or full.meets:

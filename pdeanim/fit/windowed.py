@@ -35,7 +35,7 @@ from ..curveset import CurveSet
 from ..errors import InputError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.clipformat import TIME_SPLINE, TRIAL_LEVEL, decode_topology, topology_arrays
+from ..model.clipformat import TIME_SPLINE, decode_topology, topology_arrays
 from ..model.coefwriter import CoefficientFields, KnotCodes, write_coefficients
 from ..model.fitcore import SpaceStage, floor_distances, items_from_curves, vertex_slots
 from ..model.metrics import bbox_diagonal
@@ -44,12 +44,12 @@ from ..model.spacefit import SpaceProjection, project_items, search_D
 from ..model.spline import spline_residuals
 from ..poses import Poses, make_poses
 from ..progress import Progress, sub_progress
-from .encode import encode
+from .encode import unpacked_coefficients
 from .options import FitOptions, FitTolerances
 from .problem import prepare, stored_distances, u_grid
 from .ratecontrol import Errors, first_quantisation
 from .report import FitReport, time_model_counts
-from .search import best_candidate
+from .search import best_candidate, candidate
 from .spacestage import SpaceFit, space_fit
 
 CURVE_FRAMES = 128
@@ -407,11 +407,15 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     start = _start(plan, index, bool(spline.any()))
     if start is not None and tol.soft_max_ratio is not None:
         tol = replace(tol, soft_max_ratio=GUARD_MAX_SHARE * tol.soft_max_ratio)
-    best = best_candidate(sf, options, poses, progress, tol, start)
+    long = frames.shape[0] * frames.shape[1] > tol.window_search_values
+    if tol.dense_fit and not options.segments and long:
+        best = candidate(sf, options, poses, sub_progress(progress, 0.1, 0.85), tol,
+                         min(len(frames) - 1, options.max_segments))  # long window: the dense fit alone
+    else:
+        best = best_candidate(sf, options, poses, progress, tol, start, lazy=True)
     quant = best.quant
     # the window's clip as its rate control measured it (the same encoding, decoded the same)
-    header, arrays = container.unpack(encode(p, lay.curves, stage, best.fitted, options, poses, None, quant,
-                                             TRIAL_LEVEL).coefficients)
+    _, header, arrays = unpacked_coefficients(p, lay.curves, stage, best.fitted, options, poses, quant)
     C = lay.curves.n_curves
     if not np.array_equal(arrays["time_model"].reshape(-1) == TIME_SPLINE, spline):
         raise RuntimeError(f"window {index} changed the time model of some items")  # the slack keeps them

@@ -90,6 +90,16 @@ def test_windows_of_smooth_motion_put_knots_where_the_motion_needs_them():
     assert (again.topology, again.coefficients) == (parts.topology, parts.coefficients)
 
 
+def test_windows_past_the_search_bound_store_the_dense_candidate(motion):
+    """FitTolerances.window_search_values bounds the search's cost: a window of more frame-vertex values
+    skips the error-driven search and keeps a knot at every frame, still meeting its target as decoded."""
+    tol = replace(_windowed(30, motion.n_vertices), window_search_values=0)
+    parts = fit_poses(motion, FitOptions(target_rel_rms=TARGET), tolerances=tol)
+    r = parts.report
+    assert len(r["windows"]) == 2 and r["segments"] == motion.n_frames - 1, r["segments"]
+    assert r["target_met"] and _decoded_rms(parts, motion) <= TARGET * r["diagonal"]
+
+
 def test_the_steps_through_bytes_give_the_clip_of_the_in_process_fit(motion):
     """Every step's result through to_bytes/from_bytes (what window tasks store) joins to the very clip of
     the in-process windowed fit, including windows whose knots are on their own shared time basis."""
