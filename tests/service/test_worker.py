@@ -19,6 +19,9 @@ from pdeanim_service.store.models import ClipRecord, Job
 from .harness import Services, client, make_key, wait_job
 
 HEAVY = {"mode": "eel", "frames": 240, "n_curves": 101, "points": 128, "modes": 12}
+# twice HEAVY's frames and points: its peak is far above the OOM test's limit (HEAVY's alone was close enough
+# to 520 MiB that it stayed under it in one full-suite run)
+OVER_LIMIT = {"mode": "eel", "frames": 480, "n_curves": 101, "points": 256, "modes": 12}
 LIGHT = {"mode": "eel", "frames": 8, "n_curves": 11, "points": 16, "modes": 3}
 
 
@@ -185,7 +188,7 @@ def test_out_of_memory_fails_at_once_naming_the_limit_and_the_worker_survives(se
     limit = 520 * 2**20
     services.env_extra.update({"PDEANIM_JOB_MEMORY_BYTES": str(limit), "PDEANIM_JOB_TIMEOUT_SECONDS": "600"})
     worker = services.start_worker()
-    job_id = submit(api, mesh_id, HEAVY)
+    job_id = submit(api, mesh_id, OVER_LIMIT)
     job = wait_job(api, job_id, timeout=300)
     assert job["state"] == "failed" and job["attempt"] == 1, job
     message = job["error"]["message"]

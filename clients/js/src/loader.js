@@ -146,7 +146,12 @@ export class PDEClipLoader extends Loader {
       });
       topologyJob.catch(() => {}); // (awaited below; a failure of the other request comes first)
     }
-    const opened = await openRange(main, 0, options);
+    // a clip without a streamable layout (a cyclic clip: 422 not_streamable) is read whole from the plain route
+    const plain = (err) => {
+      if (!(service && this.streaming && err?.status === 422 && err?.code === 'not_streamable')) throw err;
+      return openRange(`${base}/coefficients`, 0, options);
+    };
+    const opened = await openRange(main, 0, options).catch(plain);
     total[mainKey] = opened.total;
     const body = new BodyReader(opened, (n) => {
       loaded[mainKey] += n;

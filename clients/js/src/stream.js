@@ -15,13 +15,15 @@ export function progressEvent(type, init) {
 /** An Error with the server's message for a non-2xx response (its JSON error body where there is one). */
 export async function responseError(res, url) {
   let detail = '';
+  let code = null;
   try {
     const body = await res.json();
     detail = body?.error?.message ? `: ${body.error.message}` : '';
+    code = body?.error?.code ?? null;
   } catch {
     /* not JSON */
   }
-  return new Error(`GET ${url} answered ${res.status}${detail}`);
+  return Object.assign(new Error(`GET ${url} answered ${res.status}${detail}`), { status: res.status, code });
 }
 
 /**

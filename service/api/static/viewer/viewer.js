@@ -126,11 +126,14 @@ class Viewer {
     this.evaluator = createEvaluator(clip);
     const entries = (u) => performance.getEntriesByName(new URL(u, location.href).href).at(-1);
     const decoded = (u) => entries(u)?.decodedBodySize || 0;
+    // the loader asks for the streamable layout (?layout=stream) and reads the plain part where there is none
+    const coefficients = [`${urls.coefficients}?layout=stream`, urls.coefficients].find((u) => entries(u))
+      ?? urls.coefficients;
     this.sizes = {
       topologyWire: wireBytes(urls.topology, decoded(urls.topology)),
-      coefficientsWire: wireBytes(urls.coefficients, decoded(urls.coefficients)),
+      coefficientsWire: wireBytes(coefficients, decoded(coefficients)),
       topology: decoded(urls.topology),
-      coefficients: decoded(urls.coefficients),
+      coefficients: decoded(coefficients),
       raw: this.meta.sizes?.raw_float32_bytes
         ?? (this.meta.frames ?? clip.frameTimes.length) * clip.nVertices * 12,
       glb: null,
