@@ -390,31 +390,47 @@ function gpuCurveCount(layout) {
  * §3.6). The direct vertices (whose per-frame table holds positions) are evaluated like the others in a
  * crowd: their curves follow the GPU curves, and their records (as the vertex texture's) start at
  * directTexel. {data, width, height, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel,
- * directTexel, texels} (width: fittedWidth at most maxWidth). A frame's coefficients are then phi0 a + phi1 b
+ * directTexel, texels} (width: fittedWidth at most maxWidth; muTexel -1: every item on the spline, no indices). A frame's coefficients are then phi0 a + phi1 b
  * (or the cubic's four terms) in float32 on the GPU, where the per-player table has them in float64.
  */
 export function knotTables(layout, maxWidth = TEXTURE_WIDTH) {
+  const plan = knotTablePlan(layout, maxWidth);
+  const tex = texture(plan.texels, plan.width);
+  const table = { ...plan, ...tex };
+  if (plan.curves > 0) writeKnotTable(layout, table, crowdCurves(layout));
+  return table;
+}
+
+/**
+ * The layout of knotTables() without its values: {curves, tangentTexel, muTexel, rigidKnotTexel,
+ * rigidMuTexel, directTexel, texels, width, height, bytes}. muTexel is -1 when every item is on the natural
+ * spline (no time pair to index: the shader takes the cubic weights for all).
+ */
+export function knotTablePlan(layout, maxWidth = TEXTURE_WIDTH) {
   const { nSegments: S, nDirect } = layout;
   // the crowd's curve numbers: the GPU curves', then the direct curves' (their vertices read records here)
-  const crowdCurve = crowdCurves(layout);
   const curves = layout.residual ? gpuCurveCount(layout) + directCurves(layout).length : 0;
   const spline = layout.residual && layout.tangents !== null;
   const knotTexels = (S + 1) * curves * 3;
   const tangentTexel = knotTexels;
-  const muTexel = knotTexels * (spline ? 2 : 1);
+  const muStart = knotTexels * (spline ? 2 : 1);
+  // the per-segment time-pair indices: not needed when every item is on the spline
+  const items = spline ? layout.evaluator.spline : null;
+  const mu = items === null || items.some((x) => x !== 1);
+  const muTexel = mu ? muStart : -1;
   // rigid clips: per rigid knot and curve its rotation vector and centroid, per rigid segment their constants
   const rg = layout.rigid ? layout.clip.rigid : null;
   const Sr = rg ? rg.segmentT.length - 1 : 0;
-  const rigidKnotTexel = muTexel + S * curves;
+  const rigidKnotTexel = muStart + (mu ? S * curves : 0);
   const rigidMuTexel = rigidKnotTexel + (rg ? (Sr + 1) * curves * 2 : 0);
   // the direct vertices' records, as the vertex texture's (vertexTexels each: curve and base, basis rows, bones)
   const directTexel = rigidMuTexel + Sr * curves;
   const VT = layout.vertexTexels ?? 4;
   const texels = Math.max(1, directTexel + (curves > 0 ? nDirect * VT : 0));
-  const tex = texture(texels, fittedWidth(texels, maxWidth));
-  const table = { ...tex, curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel, texels };
-  if (curves > 0) writeKnotTable(layout, table, crowdCurve);
-  return table;
+  const width = fittedWidth(texels, maxWidth);
+  const height = Math.ceil(texels / width);
+  const bytes = width * height * 16;
+  return { curves, tangentTexel, muTexel, rigidKnotTexel, rigidMuTexel, directTexel, texels, width, height, bytes };
 }
 
 /** The values of knotTables() into table.data (crowdCurve: each clip curve's number in the table). */
@@ -439,7 +455,7 @@ function writeKnotTable(layout, table, crowdCurve) {
   }
   const { muIndex } = layout.evaluator;
   const items = spline ? layout.evaluator.spline : null;
-  for (let s = 0; s < S; s++) {
+  for (let s = 0; muTexel >= 0 && s < S; s++) {
     for (let c = 0; c < C; c++) {
       const cg = crowdCurve[c];
       if (cg < 0) continue;

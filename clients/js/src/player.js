@@ -6,7 +6,7 @@
 import { BufferAttribute, InstancedBufferAttribute, Matrix3, Matrix4 } from 'three';
 import { computeNormals } from './geometry.js';
 import { clipNormals, frameNormals, gpuAttributes, meshAttributes, smoothVertices } from './gpu.js';
-import { ClipResources, FrameTables } from './resources.js';
+import { CROWD_FORMS, ClipResources, FrameTables } from './resources.js';
 import { webglBackend } from './webgl.js';
 
 export const MAP_ATTRIBUTES = ['_pdeanim_vertex', '_PDEANIM_VERTEX'];
@@ -28,6 +28,7 @@ export const PLAYER_OPTIONS = Object.freeze([
   'frames',
   'influence',
   'timeOffsets',
+  'crowdForm',
 ]);
 
 /** The per-vertex attributes a player adds to a geometry. */
@@ -128,7 +129,10 @@ function transformNormals(e, n) {
  * tables (from a Web Worker), shadows (default true), frustumCulled (default false), resources (a
  * ClipResources; default: the clip's shared one, ClipResources.acquire), frames (a FrameTables shared by
  * meshes showing the same time), influence (default 1), timeOffsets (InstancedMesh only: each instance's
- * time offset, an instanced attribute; GPU only, no evaluation pass). Players of one clip share its data
+ * time offset, an instanced attribute; GPU only, no evaluation pass), crowdForm (when players of the clip at
+ * distinct times take its crowd form: 'auto', the default, unless it takes more than twice the GPU bytes of
+ * per-frame tables; 'bytes', where it takes fewer; 'always'; 'never': ClipResources.crowdForm, for all the
+ * clip's players). Players of one clip share its data
  * texture; each has its own time (per-frame table and uniforms) and its own patched materials.
  */
 export class ClipPlayer {
@@ -147,6 +151,13 @@ export class ClipPlayer {
     this.vertexMap = resolveVertexMap(mesh.geometry, clip, options.vertexMap);
     this.resources = options.resources ? options.resources.retain() : ClipResources.acquire(clip, options);
     try {
+      // when the clip's players at distinct times take the crowd form (ClipResources.crowdForm)
+      if (options.crowdForm !== undefined) {
+        if (!CROWD_FORMS.includes(options.crowdForm)) {
+          throw new RangeError(`crowdForm must be ${CROWD_FORMS.join(', ')}; got ${options.crowdForm}`);
+        }
+        this.resources.crowdForm = options.crowdForm;
+      }
       if (offsets && this.resources.gpuReason) throw new Error(`timeOffsets play on the GPU only: ${this.resources.gpuReason}`);
       const crowd = backend.crowd === true; // whether the backend's shaders read the crowd form
       this.frames = (options.frames ?? new FrameTables(this.resources, { offsets: offsets?.offsets ?? null, crowd })).retain();

@@ -8,11 +8,12 @@ import assert from 'node:assert/strict';
 import { findChromium, pageResult } from './pagerun.mjs';
 
 // the paper's time pairs (rigid, looping; :curves: every curve's rigid motion on the GPU, none direct), spline
-// items, a bone clip with a residual, a cyclic clip
+// items (some, all), a bone clip with a residual, a cyclic clip
 const CASES = [
   'fit-rigid-paper-loop',
   'fit-rigid-paper-loop:curves',
   'fit-displacement-chord-smooth-spline',
+  'fit-displacement-chord-windows-basis', // every item on the spline: no time-pair indices
   'bones-fit-k4-residual',
   'cyclic-trout-travelling-rotate-vertical',
 ];

@@ -87,7 +87,8 @@ function emulateCrowd(player, v, slot) {
   const cg = Math.round(head[0]);
   const seg = Math.round(fr(row.timeTexel)[0]);
   const cw = fr(row.timeTexel + 1);
-  const mu = knot(table.muTexel + seg * table.curves + cg);
+  // (muTexel -1: every item on the spline, no indices)
+  const mu = table.muTexel < 0 ? [-1, -1, -1, -1] : knot(table.muTexel + seg * table.curves + cg);
   const mad = (ws, rows) => [0, 1, 2, 3].map((k) => rows.reduce((acc, x, i) => f(acc + f(ws[i] * x[k])), 0));
   const coefficients = (w) => {
     const a = (seg * table.curves + cg) * 3 + w;
@@ -133,7 +134,7 @@ function deviation(player, clip, t, base = 0) {
 test('players of one clip share its data texture; each has its own time row and time', () => {
   const c = byName('fit-rigid-chord-smooth-spline');
   const clip = loadCase(c);
-  const a = attachClip(meshOf(clip), clip);
+  const a = attachClip(meshOf(clip), clip, { crowdForm: 'always' });
   assert.equal(a.crowd, false, 'one player alone: its own per-frame table');
   const alone = a.frames.bytes;
   const b = attachClip(meshOf(clip), clip);
@@ -280,7 +281,7 @@ test('InstancedMesh with timeOffsets: one time row per distinct offset, each ins
     const n = 6;
     const mesh = new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshStandardMaterial(), n);
     const offsets = [0, 0.25, 0.5, 0.25, 0.75, 0];
-    const player = attachClip(mesh, clip, { timeOffsets: offsets });
+    const player = attachClip(mesh, clip, { timeOffsets: offsets, crowdForm: 'always' });
     assert.equal(player.frames.offsets.length, 4);
     assert.ok(player.crowd, 'offsets: the crowd form');
     assert.equal(player.pass, false);
@@ -307,6 +308,19 @@ test('InstancedMesh with timeOffsets: one time row per distinct offset, each ins
     assert.match(s.vertexShader, /in float pdeSlot;/);
     player.detach();
     assert.equal(mesh.geometry.getAttribute('pdeSlot'), undefined);
+    // crowdForm 'never': a per-frame table per slot, each instance reading its own
+    const other = new THREE.InstancedMesh(geometryOf(clip), new THREE.MeshStandardMaterial(), n);
+    const tables = attachClip(other, clip, { timeOffsets: offsets, crowdForm: 'never' });
+    assert.equal(tables.crowd, false);
+    tables.setTime(t);
+    const each = tables.uniforms.pdeSlotTexels.value;
+    for (let i = 0; i < n; i++) {
+      let ti = t + offsets[i];
+      ti = clip.looping ? ti - Math.floor(ti) : Math.min(ti, 1);
+      const dev = deviation(tables, clip, ti, slot.array[i] * each);
+      assert.ok(dev <= 1e-6 * c.diagonal, `${name} 'never' instance ${i}: ${dev / c.diagonal}`);
+    }
+    tables.detach();
   }
 });
 
@@ -343,7 +357,7 @@ test('timeOffsets are refused with a reason where they cannot play', () => {
 test('players at distinct times: the clip tables once, each extra player a time row, freed with the last', () => {
   const c = byName('fit-displacement-chord-smooth-pde'); // 12 segments of the paper's time pairs
   const clip = loadCase(c);
-  const first = attachClip(meshOf(clip), clip);
+  const first = attachClip(meshOf(clip), clip, { crowdForm: 'always' });
   const alone = { bytes: first.gpuBytes, table: first.frames.bytes };
   const players = [first, ...Array.from({ length: 39 }, () => first.clone())];
   const res = first.resources;
@@ -393,7 +407,7 @@ test('a second player turns the first into the crowd form: its materials recompi
   const c = byName('fit-displacement-chord');
   const clip = loadCase(c);
   const mesh = meshOf(clip);
-  const a = attachClip(mesh, clip, { pass: true });
+  const a = attachClip(mesh, clip, { pass: true, crowdForm: 'always' });
   assert.equal(a.pass, true);
   assert.equal(a.crowd, false);
   a.setTime(0.35);
@@ -430,7 +444,7 @@ test('a second player turns the first into the crowd form: its materials recompi
 test('the crowd form keeps the per-frame state of bone clips and rigid clips in each player\'s row', () => {
   for (const name of ['bones-fit-k4-residual', 'bones-synthetic-k3-zero-loop', 'fit-rigid-paper-loop']) {
     const clip = decodeClipFile(readBytes(join(FIXTURES, `${name}.clip`)));
-    const a = attachClip(meshOf(clip), clip);
+    const a = attachClip(meshOf(clip), clip, { crowdForm: 'always' });
     const b = a.clone();
     assert.ok(a.crowd && b.crowd, name);
     const { row } = a.resources.crowd;
@@ -463,7 +477,7 @@ test("a backend whose shaders do not read the crowd form keeps per-frame tables 
   const b = new ClipPlayer(meshOf(clip), clip, {}, plain);
   assert.equal(a.resources, b.resources);
   assert.ok(!a.crowd && !b.crowd && a.resources.crowd === null);
-  const x = attachClip(meshOf(clip), clip);
+  const x = attachClip(meshOf(clip), clip, { crowdForm: 'always' });
   const y = x.clone();
   assert.ok(x.crowd && y.crowd, 'the WebGL players take the crowd form');
   assert.ok(!a.crowd && !b.crowd, 'the others keep their tables');
@@ -482,7 +496,7 @@ test('rigid clips with GPU curves: the crowd form moves each curve in the shader
     // no direct curves (the fixtures' curves are short): every curve's rigid motion is the shader's
     const tables = gpuTables(clip, { directMax: 0 });
     assert.equal(tables.nDirect, 0);
-    const a = attachClip(meshOf(clip), clip, { tables });
+    const a = attachClip(meshOf(clip), clip, { tables, crowdForm: 'always' });
     a.setTime(0.3);
     assert.ok(deviation(a, clip, 0.3) <= 1e-6 * c.diagonal, `${name} alone`);
     const b = a.clone();
@@ -509,4 +523,52 @@ test('setTime after detach does not throw in the crowd form (the clip resources 
   assert.equal(b.resources.crowd, null);
   assert.doesNotThrow(() => b.setTime(0.4));
   assert.equal(b.textures.frame, undefined);
+});
+
+test("crowdForm 'auto' (default) and 'bytes': distinct times keep per-frame tables until the crowd form pays", () => {
+  const c = byName('fit-displacement-chord'); // a knot table of 12 per-frame tables' bytes
+  const clip = loadCase(c);
+  for (const [form, ratio] of [['auto', 2], ['bytes', 1]]) {
+    const first = attachClip(meshOf(clip), clip, form === 'auto' ? {} : { crowdForm: form });
+    const res = first.resources;
+    assert.equal(res.crowdForm, form);
+    const players = [first];
+    while (res.crowd === null) {
+      const before = res.formBytes(1);
+      players.push(first.clone());
+      // the crowd form once it takes at most `ratio` times the tables' bytes, at every count of players
+      assert.equal(res.crowd !== null, before.crowd <= ratio * before.tables, `${form}: ${players.length} players`);
+      assert.ok(players.length < 40, 'the crowd form pays at some count');
+    }
+    assert.ok(players.length > 2, 'two players keep their tables (the knot table costs more)');
+    assert.ok(players.every((p) => p.crowd));
+    players.forEach((p, i) => p.setTime((i * 0.37) % 1));
+    for (const [i, p] of players.entries()) assert.ok(deviation(p, clip, (i * 0.37) % 1) <= 1e-6 * c.diagonal, `${i}`);
+    for (const p of players) p.detach();
+  }
+  // 'never': per-frame tables whatever the count; distinct times right there too
+  const a = attachClip(meshOf(clip), clip, { crowdForm: 'never' });
+  const many = [a, ...Array.from({ length: 20 }, () => a.clone())];
+  assert.ok(many.every((p) => !p.crowd));
+  many.forEach((p, i) => p.setTime((i * 0.37) % 1));
+  for (const [i, p] of many.entries()) assert.ok(deviation(p, clip, (i * 0.37) % 1) <= 1e-6 * c.diagonal, `never ${i}`);
+  for (const p of many) p.detach();
+  assert.throws(() => attachClip(meshOf(clip), clip, { crowdForm: 'sometimes' }), /crowdForm must be/);
+});
+
+test('a clip whose items are all on the spline has no time-pair indices in its knot table', () => {
+  const c = byName('fit-displacement-chord-windows-basis');
+  const clip = loadCase(c);
+  const a = attachClip(meshOf(clip), clip, { crowdForm: 'always' });
+  const b = a.clone();
+  const { table } = a.resources.crowd;
+  assert.equal(table.muTexel, -1);
+  assert.equal(a.uniforms.pdeMuTexel.value, -1);
+  assert.equal(table.rigidKnotTexel, table.tangentTexel * 2, 'knots and tangents only');
+  a.setTime(0.2);
+  b.setTime(0.7);
+  assert.ok(deviation(a, clip, 0.2) <= 1e-6 * c.diagonal);
+  assert.ok(deviation(b, clip, 0.7) <= 1e-6 * c.diagonal);
+  a.detach();
+  b.detach();
 });

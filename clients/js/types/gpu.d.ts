@@ -129,7 +129,7 @@ export declare function textureBytes(tables: GpuLayout): number;
 /**
  * A crowd's shared knot table: per knot and GPU curve the coordinates' knot coefficients in the orthonormal
  * bases (3 texels), spline tangents likewise from tangentTexel, per segment and GPU curve each coordinate's
- * time-pair index (-1: spline item) from muTexel.
+ * time-pair index (-1: spline item) from muTexel (-1 when every item is on the spline: no indices).
  */
 export interface KnotTables {
   data: Float32Array;
@@ -154,6 +154,10 @@ export interface CrowdRow {
 }
 /** The crowd's shared knot table of a dynamic layout (rows of at most maxWidth texels). */
 export declare function knotTables(layout: GpuLayout, maxWidth?: number): KnotTables;
+/** The knot table's layout without its values (muTexel -1: every item on the spline, no time-pair indices). */
+export type KnotTablePlan = Omit<KnotTables, 'data'> & { bytes: number };
+/** The size of knotTables(layout, maxWidth) without writing it. */
+export declare function knotTablePlan(layout: GpuLayout, maxWidth?: number): KnotTablePlan;
 /** The texels of a dynamic layout's per-player time row. */
 export declare function crowdRow(layout: GpuLayout): CrowdRow;
 /** Write layout's time row at t into data from value offset; returns whether it was rewritten. */

@@ -4,7 +4,7 @@ import type {
   AnimationClip, DataTexture, Loader, LoadingManager, Matrix4, Mesh, Object3D, WebGLRenderer,
 } from 'three';
 import type { Clip, Evaluator } from './index.js';
-import type { CrowdRow, GpuLayout, KnotTables, MeshAttributes } from './gpu.js';
+import type { CrowdRow, GpuLayout, KnotTablePlan, KnotTables, MeshAttributes } from './gpu.js';
 
 export interface AttachOptions {
   /** Evaluate on the GPU (default true); false starts with the CPU fallback. */
@@ -23,6 +23,12 @@ export interface AttachOptions {
   frames?: FrameTables;
   /** InstancedMesh only: each instance's time offset (one per-frame table per distinct offset; GPU only). */
   timeOffsets?: ArrayLike<number>;
+  /**
+   * When players of the clip at distinct times take its crowd form (shared knot table, a time row each):
+   * 'auto' (default) unless it takes more than twice the GPU bytes of a per-frame table per time, 'bytes'
+   * where it takes fewer, 'always', 'never'. Sets ClipResources.crowdForm (for all the clip's players).
+   */
+  crowdForm?: 'auto' | 'bytes' | 'always' | 'never';
   /**
    * The renderer: its capabilities.maxTextureSize bounds the data textures (else 4096 is assumed), and with
    * float render targets (EXT_color_buffer_float) the clip is evaluated in a pass before drawing. A
@@ -85,6 +91,17 @@ export declare class ClipResources {
   readonly atlasBytes: number;
   /** Take the crowd form (every registered FrameTables switches); returns whether the clip is in it. */
   toCrowd(): boolean;
+  /** When players at distinct times take the crowd form: 'auto' (default: unless it takes over twice the bytes). */
+  crowdForm: 'auto' | 'bytes' | 'always' | 'never';
+  /** The crowd form's knot table size (no values): knotTablePlan. */
+  readonly knotPlan: KnotTablePlan;
+  /**
+   * GPU bytes of the registered times (and `adding` more slots) in each form: the knot table and an atlas of
+   * time rows, or a per-frame table per time; null where the crowd form is not possible.
+   */
+  formBytes(adding?: number): { crowd: number; tables: number } | null;
+  /** Whether the crowd form pays for the registered times (plus `adding` slots), by crowdForm. */
+  crowdPays(adding?: number): boolean;
   retain(): this;
   release(): void;
   dispose(): void;

@@ -137,6 +137,32 @@ function boneKnots(z, step, order, n) {
 }
 
 /**
+ * The distinct time constants of each bone segment's channels that are not on the spline: {index (S * n: the
+ * channel's among its segment's), unique (their values, segment after segment), start (S + 1), widest}.
+ */
+function distinctConstants(m, n, S, timeModel) {
+  const index = new Int32Array(S * n);
+  const unique = [];
+  const start = new Int32Array(S + 1);
+  let widest = 1;
+  for (let s = 0; s < S; s++) {
+    const seen = new Map();
+    for (let i = 0; i < n; i++) {
+      if (timeModel[i] === 1) continue;
+      const mu = m[s * n + i];
+      if (!seen.has(mu)) {
+        seen.set(mu, seen.size);
+        unique.push(mu);
+      }
+      index[s * n + i] = seen.get(mu);
+    }
+    start[s + 1] = unique.length;
+    widest = Math.max(widest, seen.size);
+  }
+  return { index, unique: Float64Array.from(unique), start, widest };
+}
+
+/**
  * The bone transforms of a decoded bone layer at a time: at(tw) fills rot (B*9, row-major R_b) and trans
  * (B*3, T_b) in float64 (docs/format.md: channel values by their time models, R_b by Rodrigues), and
  * affine (B*12: rows of x -> R_b (x - c_b) + c_b + T_b, i.e. [R_b | c_b + T_b - R_b c_b], for the GPU).
@@ -151,6 +177,9 @@ export class BonePose {
     this.loc = [0, 0, 0];
     this.pair = [0, 0];
     this.tw = NaN;
+    this.distinct = null; // distinctConstants(), made on first use
+    this.phi0 = null;
+    this.phi1 = null;
   }
 
   /** The transforms at wrapped (or clamped) clip time tw in [0, 1]; returns this. */
@@ -168,12 +197,21 @@ export class BonePose {
     const h10 = tau * omt * omt;
     const h11 = tau * tau * (tau - 1);
     const v = this.values;
+    // each distinct constant of the segment's channels once (a crowd poses every player each frame)
+    const { index, unique, start } = (this.distinct ??= distinctConstants(m, n, segmentT.length - 1, timeModel));
+    const phi0 = (this.phi0 ??= new Float64Array(this.distinct.widest));
+    const phi1 = (this.phi1 ??= new Float64Array(this.distinct.widest));
+    for (let k = 0, j = start[s]; j < start[s + 1]; k++, j++) {
+      const pair = timePair(tau, unique[j], this.pair);
+      phi0[k] = pair[0];
+      phi1[k] = pair[1];
+    }
     for (let i = 0; i < n; i++) {
       if (timeModel[i] === 1) {
         v[i] = h00 * knots[P0 + i] + h01 * knots[P1 + i] + delta * (h10 * tangents[P0 + i] + h11 * tangents[P1 + i]);
       } else {
-        const pair = timePair(tau, m[s * n + i], this.pair);
-        v[i] = pair[0] * knots[P0 + i] + pair[1] * knots[P1 + i];
+        const k = index[s * n + i];
+        v[i] = phi0[k] * knots[P0 + i] + phi1[k] * knots[P1 + i];
       }
     }
     for (let b = 0; b < B; b++) {

@@ -238,7 +238,8 @@ vec3 pdeEval(int v) {
   int cg = int(head.x + 0.5);
   int seg = int(pdeFrame(pdeTimeTexel).x + 0.5);
   vec4 cw = pdeFrame(pdeTimeTexel + 1);
-  vec4 mu = pdeKnot(pdeMuTexel + seg * pdeKnotCurves + cg);
+  // (no time-pair indices when every item is on the spline: the cubic weights for all)
+  vec4 mu = pdeMuTexel < 0 ? vec4(-1.0) : pdeKnot(pdeMuTexel + seg * pdeKnotCurves + cg);
   for (int w = 0; w < 3; w++) p[w] += dot(pdeCoefficients(cg, w, seg, mu, cw), pdeRecord(direct, r + 1 + w));
 #ifdef PDEANIM_RIGID
   p = pdeRigid(cg, p);

@@ -3,8 +3,9 @@
 // reference-counted and freed with its last player. FrameTables: the clip at one player's time (or, for an
 // instanced crowd, at each distinct time offset). One player alone has a per-frame table (every curve's
 // coefficients at its time, evaluated on the CPU); once players show distinct times (a second FrameTables,
-// or an instanced crowd), the clip turns into its crowd form: one shared knot table (gpu.js knotTables) and
-// per time a row of a few texels (segment, time pairs: gpu.js crowdRow) in one shared texture, the atlas.
+// or an instanced crowd) and the crowd form takes at most twice the GPU bytes of a table per time (crowdForm), the
+// clip turns into its crowd form: one shared knot table (gpu.js knotTables) and per time a row of a few
+// texels (segment, time pairs: gpu.js crowdRow) in one shared texture, the atlas.
 
 import { DataTexture, FloatType, NearestFilter, RGBAFormat } from 'three';
 import { createEvaluator } from './clip.js';
@@ -14,6 +15,7 @@ import {
   frameTexels,
   frameView,
   gpuLayout,
+  knotTablePlan,
   knotTables,
   timeRow,
   timeUniforms,
@@ -27,6 +29,10 @@ function dataTexture(t) {
   tex.needsUpdate = true;
   return tex;
 }
+
+/** crowdForm: the most bytes of the crowd form per byte of per-frame tables (ClipResources.crowdPays). */
+const CROWD_BYTES_RATIO = { auto: 2, bytes: 1, always: Infinity, never: 0 };
+export const CROWD_FORMS = Object.freeze(Object.keys(CROWD_BYTES_RATIO));
 
 /** The shared resources of each clip object, by texture width and limit (freed with their last user). */
 const CACHE = new WeakMap();
@@ -88,6 +94,14 @@ export class ClipResources {
     /** The crowd form once players show distinct times: {table, texture, row, atlas}; null before. */
     this.crowd = null;
     this._crowdReason = undefined;
+    /**
+     * When players at distinct times take the crowd form (crowdPays): 'auto' (the default: unless the knot
+     * table and a time row per time take more than twice the GPU bytes of a per-frame table per time; the
+     * tables cost the CPU every curve's coefficients per player and frame, the rows a few numbers), 'bytes'
+     * (only where it takes fewer bytes), 'always' (from the second time on) or 'never'. Set it before the
+     * players are made (the form is kept once taken).
+     */
+    this.crowdForm = 'auto';
   }
 
   /** Why the clip cannot take its crowd form (null when it can): cyclic or streaming clips, no GPU, too large a table. */
@@ -98,12 +112,51 @@ export class ClipResources {
     else if (L.kind === 'cyclic-spine') this._crowdReason = 'cyclic clips keep their per-player uniforms';
     else if (L.clip.windowed) this._crowdReason = 'a streaming clip keeps per-player tables (its knots come by window)';
     else {
-      const table = knotTables(L, this.limit);
+      const plan = this.knotPlan;
       this._crowdReason =
-        table.height > this.limit ? `the clip's knot table needs ${table.height} rows (limit ${this.limit})` : null;
-      if (this._crowdReason === null) this._knots = table;
+        plan.height > this.limit ? `the clip's knot table needs ${plan.height} rows (limit ${this.limit})` : null;
     }
     return this._crowdReason;
+  }
+
+  /** The size of the crowd form's knot table (gpu.js knotTablePlan; made on first use, no values written). */
+  get knotPlan() {
+    this._knotPlan ??= knotTablePlan(this.layout, this.limit);
+    return this._knotPlan;
+  }
+
+  /**
+   * GPU bytes of the times registered (FrameTables, with `adding` more slots of a table being made) in each
+   * form: {crowd: the knot table and an atlas with a row per slot, tables: a per-frame table (and evaluation
+   * pass) per time}; null when the clip cannot take the crowd form.
+   */
+  formBytes(adding = 0) {
+    if (this.crowdReason !== null) return null;
+    const L = this.layout;
+    const stride = frameTexels(L);
+    const tableBytes = (k) => L.width * Math.max(1, Math.ceil((stride * k) / L.width)) * 16;
+    let slots = adding;
+    let tables = adding > 0 ? tableBytes(adding) : 0;
+    for (const t of this.tables) {
+      if (!t.crowdCapable || t.cyclic) continue;
+      slots += t.offsets.length;
+      tables += t.crowd ? tableBytes(t.offsets.length) : t.bytes;
+    }
+    const row = (this._row ??= crowdRow(L));
+    let capacity = 4;
+    while (capacity < slots) capacity *= 2;
+    const atlas = L.width * Math.ceil((capacity * row.texels) / L.width) * 16;
+    return { crowd: this.knotPlan.bytes + atlas, tables };
+  }
+
+  /** Whether the crowd form pays for the times registered (plus `adding` slots), by crowdForm. */
+  crowdPays(adding = 0) {
+    const ratio = CROWD_BYTES_RATIO[this.crowdForm];
+    if (ratio === undefined) throw new RangeError(`crowdForm must be ${CROWD_FORMS.join(', ')}; got ${this.crowdForm}`);
+    if (ratio === 0) return false;
+    if (ratio === Infinity) return this.crowdReason === null;
+    const b = this.formBytes(adding);
+    return b !== null && b.crowd <= ratio * b.tables;
   }
 
   /**
@@ -113,9 +166,8 @@ export class ClipResources {
   toCrowd() {
     if (this.crowd) return true;
     if (this.crowdReason !== null) return false;
-    const table = this._knots;
-    this._knots = null;
-    const row = crowdRow(this.layout);
+    const table = knotTables(this.layout, this.limit);
+    const row = (this._row ??= crowdRow(this.layout));
     this.crowd = { table, texture: dataTexture(table), row, atlas: { slots: [], data: null, texture: null } };
     const u = this.uniforms;
     u.pdeKnotTex.value = this.crowd.texture;
@@ -275,10 +327,14 @@ export class FrameTables {
     this._lastT = null;
     this._listeners = new Set();
     this.first = -1; // the crowd form's first atlas row
-    resources.tables.add(this);
     try {
       const others = [...resources.tables].filter((x) => x.crowdCapable).length;
-      const crowd = this.crowdCapable && !this.cyclic && (this.slots || resources.crowd !== null || others >= 2);
+      // distinct times (an instanced crowd, or a second table) take the crowd form where it pays (crowdForm)
+      const crowd =
+        this.crowdCapable &&
+        !this.cyclic &&
+        (resources.crowd !== null || ((this.slots || others >= 1) && resources.crowdPays(this.offsets.length)));
+      resources.tables.add(this);
       // (toCrowd switches every registered table, this one included)
       if (crowd && resources.toCrowd()) this._toCrowd();
       else this._ownTable();
