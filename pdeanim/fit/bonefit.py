@@ -199,9 +199,10 @@ def _bone_clip(poses: Poses, options: FitOptions, progress: Progress, tol: FitTo
     candidates: list[ClipParts] = []
     alone = None
     if search.floor_meets(BONES_ALONE_FILL, BONES_ALONE_MAX * bound if bound is not None else None):
-        alone = search.coarsest(BONES_ALONE_FILL, BONES_ALONE_MAX * bound if bound is not None else None)
+        largest = BONES_ALONE_MAX * bound if bound is not None else None
+        alone = search.coarsest(BONES_ALONE_FILL, largest)
         if alone is not None and slope is not None:
-            alone = search.by_slope(alone, slope)
+            alone = search.by_slope(alone, slope, BONES_ALONE_FILL, largest)
     if alone is not None:
         candidates.append(_residual_clip(poses, options, sub_progress(progress, 0.0, 0.2), tol, curves,
                                          search, alone, rest_q, fit, zero=True))
@@ -323,15 +324,18 @@ class BoneBudgets:
             lo, hi = (mid, hi) if ok(mid) else (lo, mid)
         return lo
 
-    def by_slope(self, budget: float, slope: float) -> float:
-        """Of ``budget`` and up to SLOPE_STEPS finer ones (each BUDGET_GROWTH finer), the budget whose bone
-        layer has the least :func:`rd_cost` (its bytes at the trial zstd level, its max distance): a finer
-        layer is taken where it cuts the largest error by more, relatively, than the slope-th power of the
-        bytes it adds (the coarsest encoding within the bounds can be 2-3x off at the worst vertex for a
-        few percent of the bytes: one joint segment fewer, 4-bit weights)."""
+    def by_slope(self, budget: float, slope: float, rms_share: float, largest: float | None) -> float:
+        """Of ``budget`` and up to SLOPE_STEPS finer ones (each BUDGET_GROWTH finer) within ``rms_share`` of
+        the goal and ``largest``, the budget whose bone layer has the least :func:`rd_cost` (its bytes at the
+        trial zstd level, its max distance): a finer layer is taken where it cuts the largest error by more,
+        relatively, than the slope-th power of the bytes it adds (the coarsest encoding within the bounds can
+        be 2-3x off at the worst vertex for a few percent of the bytes: one joint segment fewer, 4-bit
+        weights)."""
         def cost(b: float) -> float:
-            self._measure(b)
-            return rd_cost(self._bytes(b), self._found[b][2], slope)
+            rms, mx = self._measure(b)
+            if rms > rms_share * self.goal or (largest is not None and mx > largest):
+                return math.inf
+            return rd_cost(self._bytes(b), mx, slope)
 
         best, b = budget, budget
         for _ in range(SLOPE_STEPS):
