@@ -83,10 +83,10 @@ residual fit."""
 BUDGET_GROWTH = 1.5
 BUDGET_STEPS = 6
 BUDGET_BISECTIONS = 1
+"""With a max target only, the bone layer's RMS budget is this share of it."""
 SLOPE_STEPS = 4
 """A skinned glTF's bone layer alone: finer budgets tried past the coarsest within the bounds
 (:meth:`BoneBudgets.by_slope`)."""
-"""With a max target only, the bone layer's RMS budget is this share of it."""
 
 FitFn = Callable[..., ClipParts]
 
