@@ -196,9 +196,9 @@ def test_viewer_plays_the_clip_as_python_evaluates_it(services, browser_env, cli
 # - "bones" (bones auto at the default target, rel. RMS 3e-3: what `pdeanim fit` does with a skinned glTF, the
 #   file's two joints and weights): the file's own skeleton bounds the largest error by the target
 #   (FitTolerances.skin_max_ratio) and the bone layer is the rate-distortion slope rule's (skin_rd_slope):
-#   in a user's page 0.36/0.35/0.25% flat, 0.32/0.25/0.21% smooth (test_webgpu_look.py; here not yet measured
-#   with the rules). Before those two rules (2026-12-07): 1.14/1.09/2.71% flat, 1.34/1.43/3.17% smooth (the
-#   tail joint's track in one segment, 4-bit weights: the tail moved rigidly by 2-3.6e-3 of the diagonal).
+#   0.28/0.27/0.29% flat, 0.40/0.36/0.37% smooth (2026-12-08, t = 0, 0.5, 1). Before those two rules
+#   (2026-12-07): 1.14/1.09/2.71% flat, 1.34/1.43/3.17% smooth (the tail joint's track in one segment, 4-bit
+#   weights: the tail moved rigidly by 2-3.6e-3 of the diagonal).
 # - "curve" (bones 0, the HTTP default): does NOT meet 1% at the default target: 0.13/1.50/1.77% flat,
 #   -/1.84/1.78% smooth, following the stored clip's largest error in each frame (1.9e-4, 8.7e-3, 8.9e-3 of
 #   the diagonal: the knots' rounding, which the rate control grows to fill the target). Fitted at 2e-4:
