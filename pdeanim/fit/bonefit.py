@@ -37,7 +37,15 @@ from ..curveset import CurveSet
 from ..errors import ParameterError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.bonelayer import BoneMotion, add_bone_layer, encode_bones, skin, skinned_positions
+from ..model.bonelayer import (
+    BoneMotion,
+    add_bone_layer,
+    bones_header_arrays,
+    encode_bones,
+    skin,
+    skinned_positions,
+)
+from ..model.clipformat import TRIAL_LEVEL
 from ..model.clipmodel import clip_from_parts
 from ..model.metrics import bbox_diagonal, error_summary
 from ..poses import Poses
@@ -76,6 +84,9 @@ BUDGET_GROWTH = 1.5
 BUDGET_STEPS = 6
 BUDGET_BISECTIONS = 1
 """With a max target only, the bone layer's RMS budget is this share of it."""
+SLOPE_STEPS = 4
+"""A skinned glTF's bone layer alone: finer budgets tried past the coarsest within the bounds
+(:meth:`BoneBudgets.by_slope`)."""
 
 FitFn = Callable[..., ClipParts]
 
@@ -96,7 +107,11 @@ def fit_with_bones(poses: Poses, options: FitOptions, progress: Progress, tol: F
         parts.report["bones"] = {"n_bones": 0, "source": "none", "skipped": "input larger than a bone fit "
                                  "holds in memory (FitTolerances.window_fit_values)"}
     elif skin is not None:
-        parts = _bone_clip(poses, plain, progress, tol, curves, skin.motion, skin.rest, fit)
+        skin_tol = tol
+        if tol.soft_max_ratio is not None and tol.skin_max_ratio is not None:
+            skin_tol = replace(tol, soft_max_ratio=min(tol.soft_max_ratio, tol.skin_max_ratio))
+        parts = _bone_clip(poses, plain, progress, skin_tol, curves, skin.motion, skin.rest, fit,
+                           slope=tol.skin_rd_slope)
         parts.report["bones"].update(source="gltf skin", joints=skin.n_joints)
     elif options.bones != "auto":
         parts = _decomposed(poses, plain, int(options.bones), progress, tol, curves, fit)
@@ -166,11 +181,14 @@ def _decomposed(poses: Poses, options: FitOptions, bones: int, progress: Progres
 
 
 def _bone_clip(poses: Poses, options: FitOptions, progress: Progress, tol: FitTolerances,
-               curves: CurveSet | None, motion: BoneMotion, rest: np.ndarray, fit: FitFn) -> ClipParts:
+               curves: CurveSet | None, motion: BoneMotion, rest: np.ndarray, fit: FitFn,
+               slope: float | None = None) -> ClipParts:
     """The smallest clip of one bone motion about ``rest`` (V, 3) that meets the targets, of (steps 2-5 of
     the module docstring): the bone layer alone under a zero residual, where its coarsest encoding that
     meets the targets exists, and the bone layer coarsened to each share of RESIDUAL_AIMS with the residual
-    curves fitted on top."""
+    curves fitted on top. With a rate-distortion ``slope`` (a skinned glTF on its own skeleton), the bone
+    layer alone is the finer encoding :meth:`BoneBudgets.by_slope` prefers, and of the clips that meet the
+    targets the one of least bytes x max error^(1 / slope) is kept instead of the smallest."""
     X = poses.vertices
     diag = bbox_diagonal(np.asarray(X[0], np.float64))
     targets = options.targets(diag)
@@ -181,7 +199,10 @@ def _bone_clip(poses: Poses, options: FitOptions, progress: Progress, tol: FitTo
     candidates: list[ClipParts] = []
     alone = None
     if search.floor_meets(BONES_ALONE_FILL, BONES_ALONE_MAX * bound if bound is not None else None):
-        alone = search.coarsest(BONES_ALONE_FILL, BONES_ALONE_MAX * bound if bound is not None else None)
+        largest = BONES_ALONE_MAX * bound if bound is not None else None
+        alone = search.coarsest(BONES_ALONE_FILL, largest)
+        if alone is not None and slope is not None:
+            alone = search.by_slope(alone, slope, BONES_ALONE_FILL, largest)
     if alone is not None:
         candidates.append(_residual_clip(poses, options, sub_progress(progress, 0.0, 0.2), tol, curves,
                                          search, alone, rest_q, fit, zero=True))
@@ -198,7 +219,10 @@ def _bone_clip(poses: Poses, options: FitOptions, progress: Progress, tol: FitTo
         if len(candidates) > 1 and _size(parts) >= min(_size(c) for c in candidates[:-1]):
             break  # a coarser bone layer made the clip larger: the residual pays for it
     met = [c for c in candidates if c.report.get("target_met")]
-    best = min(met or candidates, key=_size)
+    if slope is None:
+        best = min(met or candidates, key=_size)
+    else:
+        best = min(met or candidates, key=lambda c: rd_cost(_size(c), c.report.get("max", 0.0), slope))
     best.report["bones"]["tried"] = [{"residual": not c.report["bones"]["zero_residual"],
                                       "budget_rms": c.report["bones"]["budget_rms"], "bytes": _size(c),
                                       "rel_rms": c.report.get("rel_rms"), "rel_max": c.report.get("rel_max"),
@@ -300,12 +324,46 @@ class BoneBudgets:
             lo, hi = (mid, hi) if ok(mid) else (lo, mid)
         return lo
 
+    def by_slope(self, budget: float, slope: float, rms_share: float, largest: float | None) -> float:
+        """Of ``budget`` and up to SLOPE_STEPS finer ones (each BUDGET_GROWTH finer) within ``rms_share`` of
+        the goal and ``largest``, the budget whose bone layer has the least :func:`rd_cost` (its bytes at the
+        trial zstd level, its max distance): a finer layer is taken where it cuts the largest error by more,
+        relatively, than the slope-th power of the bytes it adds (the coarsest encoding within the bounds can
+        be 2-3x off at the worst vertex for a few percent of the bytes: one joint segment fewer, 4-bit
+        weights)."""
+        def cost(b: float) -> float:
+            rms, mx = self._measure(b)
+            if rms > rms_share * self.goal or (largest is not None and mx > largest):
+                return math.inf
+            return rd_cost(self._bytes(b), mx, slope)
+
+        best, b = budget, budget
+        for _ in range(SLOPE_STEPS):
+            b /= BUDGET_GROWTH
+            if cost(b) < cost(best):
+                best = b
+        return best
+
+    def _bytes(self, budget: float) -> int:
+        """Bytes of the bone layer encoded at ``budget`` (its arrays packed at the trial zstd level)."""
+        enc = self._found[budget][0]
+        header, arrays = bones_header_arrays(enc)
+        return len(container.pack(header, arrays, {name: container.SMALLEST for name in arrays},
+                                  level=TRIAL_LEVEL))
+
     def trials(self) -> list[dict[str, float]]:
         """Every budget measured: budget, the bone layer's RMS and max over the goal, weight bits,
         segments."""
         return [{"budget_rms": b, "rms_over_goal": v[1] / self.goal, "max_over_goal": v[2] / self.goal,
                  "weight_bits": v[0].weight_bits, "segments": v[0].n_segments}
                 for b, v in sorted(self._found.items())]
+
+
+def rd_cost(size: float, largest: float, slope: float) -> float:
+    """The rate-distortion cost by which the bone path of a skinned glTF compares encodings and clips:
+    log(bytes) + log(max error) / slope (of two, the finer is preferred where its max error is lower by
+    more than its bytes are higher to the power ``slope``)."""
+    return math.log(max(size, 1)) + math.log(max(largest, 1e-30)) / slope
 
 
 def bone_goal(targets: Targets) -> float:

@@ -148,6 +148,20 @@ class FitTolerances:
     which the knots' rounding takes a vertex past it gets finer steps (where the unrounded fit was within it),
     and of two candidate fits the one within it is kept. Never reported as a missed target. None: no soft
     bound."""
+    skin_max_ratio: float | None = 1.0
+    """A skinned glTF fitted on its own skeleton: the soft max bound is this times the RMS target (at most
+    soft_max_ratio). The source is that skeleton's skinning, so the bone layer reaches any vertex with a few
+    more bits of joint track where the curves would pay for every outlier; and a vertex off by 3x the target
+    moves texture edges where a viewer sees them (the Look of issue 32: CesiumMan at 3e-3, three.js's own
+    skinning as reference, 2.50% of the model's pixels off by > 40 levels with 3, 0.34% with 1, for 3.7%
+    more coefficient bytes). None: soft_max_ratio."""
+    skin_rd_slope: float | None = 8.0
+    """... and its bone layer alone is encoded finer than the coarsest within the bounds, and of its clips
+    that meet the targets the one kept, by least bytes x max error^(1 / this): a finer encoding is taken where
+    it cuts the worst vertex's error by more than its byte growth to this power (2x lower for at most 9%
+    more bytes). A quantiser's own slope is 3-6 (one more bit a value halves the error); joint tracks and
+    weights step in coarser jumps (the Fox: 2x lower for 0.7% more bone-layer bytes). 6 and 8 chose the same
+    on the creature, CesiumMan and the Fox. None: the smallest clip, the coarsest bone layer."""
     dense_fit: bool = True
     """Besides the error-driven search, fit a knot at every frame (or max_segments evenly spaced ones) and
     keep the smaller stored clip that meets the targets: a dense fit is far more accurate, which leaves most

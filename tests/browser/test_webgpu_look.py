@@ -19,12 +19,12 @@ from tests.ci import in_ci
 
 JS = Path(__file__).resolve().parents[2] / "clients" / "js"
 # as the viewer's look test: 1% of the model's pixels off by more than 40 levels. The fit is `pdeanim fit`'s
-# own (bones auto: a bone clip on the file's skeleton) at rel. RMS 1e-3: 0.04/0.44/0.28% flat, 0.04/0.34/0.29%
-# smooth at t = 0, 0.5, 1, the same on every renderer (2026-12-07). With no options at all (target 3e-3) it
-# does NOT meet 1%: 0.96/0.85/1.52% flat, 0.96/1.00/2.50% smooth (the bone layer spends the target on the
-# tail joint's track, see test_viewer.py); `--bones 0` at 3e-3: 0.24/1.58/1.44% flat.
+# own with no options (bones auto: a bone clip on the file's skeleton, rel. RMS 3e-3; its max bound is the
+# target, FitTolerances.skin_max_ratio, and the bone layer the rate-distortion slope rule's, skin_rd_slope):
+# 0.36/0.35/0.25% flat, 0.32/0.25/0.21% smooth at t = 0, 0.5, 1, the same on every renderer (2026-12-07;
+# before those two rules 0.96/0.85/1.52% flat, 0.96/1.00/2.50% smooth). benchmarks/look_skinned.py
+# measures CesiumMan and the Fox too (docs/gltf.md).
 LOOK_DIFFER = 0.01
-LOOK_FIT_RMS = 1e-3
 TIMES = [0.0, 0.5, 1.0]
 CHROMIUMS = ("/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome")
 
@@ -52,7 +52,7 @@ def test_the_clip_on_a_textured_skinned_gltf_looks_like_three_js_on_webgpu_and_w
     glb = tmp_path / "model.glb"
     clip = tmp_path / "model.clip"
     glb.write_bytes(creature_glb(flat))
-    argv = ["fit", str(glb), "--out", str(clip), "--fps", "10", "--target-rel-rms", str(LOOK_FIT_RMS)]
+    argv = ["fit", str(glb), "--out", str(clip), "--fps", "10"]  # the defaults
     assert pdeanim_main([*argv, "--quiet"]) == 0
     assert load_clip_file(clip).bones is not None  # the CLI's default on a skinned glTF: the file's skeleton
     proc = subprocess.run(["node", str(JS / "test" / "tools" / "look_page.mjs"), str(glb), str(clip)], cwd=JS,
