@@ -61,7 +61,7 @@ AUTO_GAIN = 0.1
 explain: a morph, cloth). A count is fitted only where its skinning is within the target: more is left to
 the residual curves than a clip without bones spends (horse-collapse at 3e-3: 32 bones skin to 0.94 of the
 target and the clip is 155 KB, 64 bones to 0.61 and 143 KB, no bones 147 KB)."""
-SPARSE_SHARE = 0.3
+SPARSE_SHARE = 0.5
 """The decomposition keeps a vertex's fewest influences whose RMS distance over frames is within this share
 of the RMS goal (in quadrature) of its best with four: zero weights and repeated bone indices compress to
 almost nothing (see docs/compression.md, "Sparser skinning weights")."""
