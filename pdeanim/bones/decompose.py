@@ -51,9 +51,11 @@ class Decomposition:
 
 
 def decompose(frames: np.ndarray, bones: int, iterations: int = ITERATIONS,
-              influences: int = INFLUENCES) -> Decomposition:
+              influences: int = INFLUENCES, sparse_rms: float = 0.0) -> Decomposition:
     """SSDR of frames (F, P, 3) (distinct trajectories; the rest pose is frame 0) with ``bones`` bones (at
-    most the points). Deterministic."""
+    most the points). ``sparse_rms`` > 0: after the first alternation each point keeps the fewest influences
+    whose RMS distance over frames is within this (in quadrature) of its best with all of them (zero weights
+    compress to almost nothing in the bone layer). Deterministic."""
     X = np.asarray(frames, np.float64)
     F, P = X.shape[:2]
     B = max(1, min(int(bones), P))
@@ -63,8 +65,9 @@ def decompose(frames: np.ndarray, bones: int, iterations: int = ITERATIONS,
     labels, R, t = _rigid_clusters(Xt, rest, labels, B)
     index = labels[:, None]
     weight = np.ones((P, 1))
-    for _ in range(iterations):
-        index, weight = solve_weights(Xt, rest, R, t, index, weight, influences)
+    for i in range(iterations):
+        sparse_ms = float(sparse_rms) ** 2 if i > 0 else 0.0
+        index, weight = solve_weights(Xt, rest, R, t, index, weight, influences, sparse_ms)
         R, t = _update_transforms(Xt, rest, R, t, index, weight)
     R[0], t[0] = np.eye(3), 0.0  # frame 0 is the rest pose: every bone at identity, exactly
     dec = Decomposition(rest, index, weight, R, t, np.zeros(P))

@@ -13,13 +13,13 @@ from .trajweld import weld_trajectories
 
 
 def fitted_bones(frames: np.ndarray, bones: int, iterations: int = ITERATIONS,
-                 influences: int = INFLUENCES) -> tuple[BoneMotion, float]:
+                 influences: int = INFLUENCES, sparse_rms: float = 0.0) -> tuple[BoneMotion, float]:
     """The bone motion of frames (F, V, 3) (rest pose: frame 0) by a skinning decomposition with at most
-    ``bones`` bones and ``influences`` per vertex on the welded trajectories, and the skinning's RMS error
-    per vertex over all frames."""
+    ``bones`` bones and ``influences`` per vertex on the welded trajectories (``sparse_rms``: see
+    :func:`~pdeanim.bones.decompose.decompose`), and the skinning's RMS error per vertex over all frames."""
     welded = weld_trajectories(frames)
     X = np.asarray(frames, np.float64)[:, welded.keep]
-    dec = decompose(X, bones, iterations, influences)
+    dec = decompose(X, bones, iterations, influences, sparse_rms)
     counts = np.bincount(welded.point_of, minlength=welded.n_points)
     rms = float(np.sqrt((dec.point_sq * counts).sum() / (X.shape[0] * len(welded.point_of))))
     return to_motion(dec, welded.point_of), rms

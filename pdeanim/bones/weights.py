@@ -53,10 +53,13 @@ def simplex_qp(G: np.ndarray, c: np.ndarray, active: np.ndarray) -> np.ndarray:
 
 
 def solve_weights(Xt: np.ndarray, rest: np.ndarray, R: np.ndarray, t: np.ndarray, index: np.ndarray,
-                  weight: np.ndarray, influences: int) -> tuple[np.ndarray, np.ndarray]:
+                  weight: np.ndarray, influences: int, sparse_ms: float = 0.0
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """New influences (P, K) int64 and weights (P, K) of trajectories Xt (P, F, 3) for bone transforms
     (F, B, 3, 3) / (F, B, 3), starting
-    from the current ``index``/``weight`` (P, K0) (kept among the candidates, so no point gets worse)."""
+    from the current ``index``/``weight`` (P, K0) (kept among the candidates, so no point gets worse).
+    ``sparse_ms`` > 0: each point keeps the fewest influences (weights solved again on them) whose mean
+    square distance over frames is at most this above its best with K (zero weights for the others)."""
     P, B = rest.shape[0], t.shape[1]
     m = min(CANDIDATES, B)
     k = min(influences, m)
@@ -86,9 +89,36 @@ def solve_weights(Xt: np.ndarray, rest: np.ndarray, R: np.ndarray, t: np.ndarray
             w = simplex_qp(G, c, keep & (w > 0))
             cand = np.take_along_axis(cand, top, 1)
             w = np.take_along_axis(w, top, 1)
+            G = np.take_along_axis(np.take_along_axis(G, top[:, :, None], 1), top[:, None, :], 2)
+            c = np.take_along_axis(c, top, 1)
+        if sparse_ms > 0 and k > 1:
+            w = _sparser(G, c, w, sparse_ms * F)
         out_i[block], out_w[block] = cand, w
     order = np.argsort(-out_w, axis=1, kind="stable")
     return np.take_along_axis(out_i, order, 1), np.take_along_axis(out_w, order, 1)
+
+
+def _sparser(G: np.ndarray, c: np.ndarray, w: np.ndarray, allowed: float) -> np.ndarray:
+    """Weights (n, k) on the fewest of each point's influences (its largest weights, solved again on them)
+    whose objective w^T G w - 2 c^T w (a sum over frames of squared distances, less a constant) is at most
+    ``allowed`` above that of ``w``."""
+    full = _objective(G, c, w)
+    rank = np.argsort(np.argsort(-w, axis=1, kind="stable"), axis=1, kind="stable")
+    out, done = w.copy(), np.zeros(len(w), bool)
+    for kept in range(1, w.shape[1]):
+        idx = np.flatnonzero(~done)
+        if not len(idx):
+            break
+        v = simplex_qp(G[idx], c[idx], (rank[idx] < kept) & (w[idx] > 0))
+        ok = _objective(G[idx], c[idx], v) <= full[idx] + allowed
+        out[idx[ok]] = v[ok]
+        done[idx[ok]] = True
+    return out
+
+
+def _objective(G: np.ndarray, c: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(n,) w^T G w - 2 c^T w of each point."""
+    return np.einsum("vi,vij,vj->v", w, G, w) - 2.0 * np.einsum("vi,vi->v", c, w)
 
 
 def _gram(p: np.ndarray, cand: np.ndarray, Q: np.ndarray, S: np.ndarray, U: np.ndarray) -> np.ndarray:

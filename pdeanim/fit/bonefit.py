@@ -69,6 +69,10 @@ AUTO_GAIN = 0.1
 explain: a morph, cloth). A count is fitted only where its skinning is within the target: more is left to
 the residual curves than a clip without bones spends (horse-collapse at 3e-3: 32 bones skin to 0.94 of the
 target and the clip is 155 KB, 64 bones to 0.61 and 143 KB, no bones 147 KB)."""
+SPARSE_SHARE = 0.5
+"""The decomposition keeps a vertex's fewest influences whose RMS distance over frames is within this share
+of the RMS goal (in quadrature) of its best with four: zero weights and repeated bone indices compress to
+almost nothing (see docs/compression.md, "Sparser skinning weights")."""
 MAX_SHARE_OF_MAX = 1 / 3
 BONES_ALONE_FILL = 0.95
 """The bone layer alone (a zero residual) is tried at its coarsest encoding within this share of the RMS
@@ -140,7 +144,8 @@ def _auto(poses: Poses, options: FitOptions, progress: Progress, tol: FitToleran
     for i, B in enumerate(ladder):
         progress(0.3 + 0.3 * i / len(ladder), f"skinning decomposition, {B} bones")
         t0 = time.perf_counter()
-        found[B] = (*fitted_bones(poses.vertices, B), time.perf_counter() - t0)
+        found[B] = (*fitted_bones(poses.vertices, B, sparse_rms=SPARSE_SHARE * targets.rms),
+                    time.perf_counter() - t0)
         rms = found[B][1]
         skinning.append({"bones": B, "skinning_rel_rms": rms / diag if diag else None,
                          "seconds": found[B][2]})
@@ -170,7 +175,9 @@ def _decomposed(poses: Poses, options: FitOptions, bones: int, progress: Progres
     if found is None:
         progress(0.0, f"skinning decomposition, {bones} bones")
         t0 = time.perf_counter()
-        found = (*fitted_bones(poses.vertices, bones), time.perf_counter() - t0)
+        goal = bone_goal(options.targets(bbox_diagonal(np.asarray(poses.vertices[0], np.float64))))
+        found = (*fitted_bones(poses.vertices, bones, sparse_rms=SPARSE_SHARE * goal),
+                 time.perf_counter() - t0)
     motion, skin_rms, seconds = found
     parts = _bone_clip(poses, options, sub_progress(progress, 0.2, 1.0), tol, curves, motion,
                        np.asarray(poses.vertices[0], np.float64), fit)

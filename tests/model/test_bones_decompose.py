@@ -70,3 +70,17 @@ def test_unmoving_input_is_exact(bones):
     X = np.repeat(np.random.default_rng(0).normal(size=(1, 40, 3)), 4, axis=0)
     dec = decompose(X, bones)
     assert dec.rms < 1e-9
+
+
+def test_sparse_weights_keep_fewer_influences_within_their_allowance():
+    X, _ = bending_tube()
+    X = X[:, weld_trajectories(X).keep]
+    diag = np.linalg.norm(np.ptp(X[0], axis=0))
+    dense = decompose(X, 3)
+    allowed = 1e-3 * diag
+    sparse = decompose(X, 3, sparse_rms=allowed)
+    assert np.count_nonzero(sparse.weight) < 0.9 * np.count_nonzero(dense.weight)
+    assert np.all(sparse.weight >= 0) and np.allclose(sparse.weight.sum(axis=1), 1.0)
+    point_rms = np.sqrt(sparse.point_sq / len(X))
+    assert point_rms.max() < 3 * allowed  # each point within its allowance (transforms refitted after)
+    assert sparse.rms < 2 * allowed
