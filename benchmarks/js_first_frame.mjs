@@ -6,7 +6,9 @@
 // "whole" (the same frames in the whole layout: everything decoded before frame 0). Medians of --runs fresh
 // pages per mode; each goal of issue 31 printed beside its figure with met / NOT met, and the load average.
 //
-//   node benchmarks/js_first_frame.mjs [--stream S.clip] [--whole W.clip] [--runs 3] [--play 1000]
+//   node benchmarks/js_first_frame.mjs [--stream S.clip] [--whole W.clip] [--runs 3] [--play 1000] [--windows 4] [--cpu]
+//
+// (--windows: the loader's setMaxWindows; --cpu: the player's CPU path, not the GPU evaluation; PDEANIM_DEBUG=1 prints the frame reached and the heap while playing)
 //
 // The clips default to those of benchmarks/js_long_clip.py (1,000 frames x 34k vertices; run that first). They
 // are served over HTTP by this script (Range requests answered), as the service serves them.
@@ -22,6 +24,7 @@ const args = process.argv.slice(2);
 const opt = (name, fallback) => (args.includes(name) ? args[args.indexOf(name) + 1] : fallback);
 const runs = Number(opt('--runs', 3));
 const play = Number(opt('--play', 1000));
+const maxWindows = Number(opt('--windows', 4)); // the loader's setMaxWindows
 const clips = {
   stream: opt('--stream', '/tmp/pdeanim-js-long/long34000-1000.stream.clip'),
   whole: opt('--whole', '/tmp/pdeanim-js-long/long34000-1000.clip'),
@@ -96,7 +99,7 @@ async function runOnce(browser, mode) {
   cdp.on('Network.dataReceived', (e) => {
     firstData[e.requestId] ??= e.timestamp;
   });
-  const url = `${base}/benchmarks/js_first_frame.html?clip=/clip/${mode}&stream=${mode === 'stream' ? 1 : 0}`;
+  const url = `${base}/benchmarks/js_first_frame.html?clip=/clip/${mode}&stream=${mode === 'stream' ? 1 : 0}&windows=${maxWindows}${args.includes('--cpu') ? '&gpu=0' : ''}`;
   await page.goto(url);
   await page.waitForFunction('window.first !== undefined', { timeout: 600_000 });
   const first = await page.evaluate('window.first');
@@ -115,11 +118,13 @@ async function runOnce(browser, mode) {
       throw fail(err);
     });
     const h = await heaps(page, cdp);
+    if (process.env.PDEANIM_DEBUG) console.error(`frame ${await page.evaluate('window.k')}, heap: page ${(h.page / MB).toFixed(1)} MB, worker ${(h.worker / MB).toFixed(1)} MB`);
     heapMax = { page: Math.max(heapMax.page, h.page), worker: Math.max(heapMax.worker, h.worker) };
     if (done) break;
     await new Promise((r) => setTimeout(r, 500));
   }
   const played = await page.evaluate('window.played');
+  if (played.error) throw new Error(`while playing: ${played.error}\n${logs.join('\n')}`);
   await page.close();
   return {
     ...first,
@@ -135,7 +140,7 @@ async function runOnce(browser, mode) {
   };
 }
 
-console.log(`load average before: ${load()}; ${runs} runs per mode, ${play} frames played`);
+console.log(`load average before: ${load()}; ${runs} runs per mode, ${play} frames played, at most ${maxWindows} windows decoded`);
 for (const [mode, path] of Object.entries(clips)) {
   if (!existsSync(path)) {
     console.log(`${mode}: ${path} missing (benchmarks/js_long_clip.py makes it): not measured`);
@@ -159,7 +164,8 @@ try {
     console.log(`  JS heap (page + decoder worker, used + array buffers): ${m('heap_first_mb').toFixed(1)} MB at the first frame, ` +
       `${m('heap_max_mb').toFixed(1)} MB at most while playing (page ${m('heap_max_page_mb').toFixed(1)}, worker ${m('heap_max_worker_mb').toFixed(1)})`);
     console.log(`  playing ${f.frames} frames: longest main-thread task ${m('longest_task_ms').toFixed(0)} ms, ` +
-      `${m('tasks_over_50ms')} tasks over 50 ms, ${m('waited')} frames waited for their window, at most ${m('most_decoded')} windows decoded, ${m('seconds').toFixed(1)} s`);
+      `${m('tasks_over_50ms')} tasks over 50 ms, ${m('waited')} frames waited for their window, at most ${m('most_decoded')} windows decoded, ${m('seconds').toFixed(1)} s ` +
+      `(${m('slow_frames')} animation frames over 1 s: the GPU, software WebGL, behind)`);
   }
   const s = results.stream;
   if (s) {

@@ -326,7 +326,10 @@ function orthonormalEnds(ends, r, t0, nb) {
  * orthonormal bases r of its head's gpuTables(): {timeIndex, tangents (spline clips, else null)}.
  */
 export function windowTables(windowClip, r, spline) {
-  return { timeIndex: timeIndex(windowClip), tangents: spline && r ? orthonormalTangents(windowClip, r) : null };
+  // (without mu, S x C x 3 float64 that the evaluators do not read: 7 MB a window on a 34k-vertex clip)
+  const index = timeIndex(windowClip);
+  delete index.mu;
+  return { timeIndex: index, tangents: spline && r ? orthonormalTangents(windowClip, r) : null };
 }
 
 /**

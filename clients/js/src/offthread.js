@@ -134,7 +134,8 @@ function call(worker, message, transfer = []) {
  * run, else here: its topology part and head (the first bytes of its coefficients part, up to its first
  * window) are decoded (topology_id checked where WebCrypto is available) with the GPU tables every window
  * shares (tables, default true; textures width texels wide). Resolves to {shell, tables, decode(index,
- * bytes) → Promise of {clip (the window's dynamic clip), tables (its timeIndex, tangents)}, close()}.
+ * bytes) → Promise of {clip (the window's dynamic clip), tables (its timeIndex, tangents)}, forget(indices)
+ * (drop the states those windows carry on), close()}.
  */
 export async function openStreamOffThread({ topology, head }, { tables = true, width = 4096, useWorker = true } = {}) {
   const worker = useWorker && workerUnavailableReason() === null ? await (workerStart ??= startWorker()) : null;
@@ -157,6 +158,10 @@ export async function openStreamOffThread({ topology, head }, { tables = true, w
         if (!keep) return null;
         return { clip, tables: shared ? windowTables(clip, shared.r, shared.spline) : null };
       },
+      forget: (indices) => {
+        for (const j of indices) states.delete(j);
+      },
+      states,
       close() {},
     };
   }
@@ -173,6 +178,8 @@ export async function openStreamOffThread({ topology, head }, { tables = true, w
       const win = await call(worker, { op: 'window', sid, index: i, bytes: b, keep }, [b]);
       return keep ? { clip: joinWindow(shell, win.clip), tables: win.tables } : null;
     },
+    // (messages are handled in order: a window sent before this decodes with the state it needs)
+    forget: (indices) => worker.postMessage({ op: 'forget', sid, indices }),
     close: () => worker.postMessage({ op: 'close', sid }),
   };
 }

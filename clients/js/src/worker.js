@@ -48,12 +48,19 @@ function handOver(value, keep) {
  * (topology_id checked) and the GPU tables all windows share → {id, stream: true, clip (the shell), tables};
  * {op: 'window', sid, index, bytes, keep} → {id, stream: true, clip (the window's own fields), tables
  * (timeIndex, tangents)}, or, keep false, {id, stream: true, advanced: index} (only the state the window
- * carries on to the next is kept: windows are decoded in order); {op: 'close', sid}.
+ * carries on to the next is kept: windows are decoded in order); {op: 'forget', sid, indices}: drop the states
+ * those windows carry on (no answer); {op: 'close', sid}.
  */
 async function streamOp(data) {
   const { id } = data;
   if (data.op === 'close') {
     streams.delete(data.sid);
+    return;
+  }
+  if (data.op === 'forget') {
+    // stream.js drops the states no window it holds starts from: memory stays flat however long the clip
+    const open = streams.get(data.sid);
+    for (const j of data.indices ?? []) open?.states.delete(j);
     return;
   }
   if (data.op === 'open') {

@@ -777,6 +777,19 @@ export function timeIndex(clip) {
   return { mu, muIndex, muUnique: Float64Array.from(unique), muStart, widest };
 }
 
+/** The (curve, coordinate) item of each of a clip's V * 3 values: made once per curveOf array (windows share it). */
+const ITEMS = new WeakMap();
+function valueItems(clip) {
+  let item = ITEMS.get(clip.curveOf);
+  if (item === undefined) {
+    const V = clip.nVertices;
+    item = new Int32Array(V * 3);
+    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) item[v * 3 + w] = clip.curveOf[v] * 3 + w;
+    ITEMS.set(clip.curveOf, item);
+  }
+  return item;
+}
+
 /**
  * CPU evaluator of a decoded dynamic-PDE clip. The per-segment time state (what the GPU path needs each
  * frame) is set up here; the per-vertex knot fields of the CPU evaluation on first use.
@@ -789,15 +802,15 @@ export class DynamicEvaluator {
     this.nVertices = V;
     this._fields = null;
     this._tangentFields = null;
-    this.item = new Int32Array(V * 3); // (curve, coordinate) item of each value
-    for (let v = 0; v < V; v++) for (let w = 0; w < 3; w++) this.item[v * 3 + w] = clip.curveOf[v] * 3 + w;
+    this.item = valueItems(clip); // (curve, coordinate) item of each value (shared by a streaming clip's windows)
     const { mu, muIndex, muUnique, muStart, widest } = prepared ?? timeIndex(clip);
     Object.assign(this, { mu, muIndex, muUnique, muStart });
     this.uPhi0 = new Float64Array(widest); // the distinct pairs of the current segment
     this.uPhi1 = new Float64Array(widest);
     this.loc = [0, 0, 0]; // segment, tau, wrapped t of the last locate()
     this.rigidLoc = [0, 0, 0];
-    this.base = vertexBase(clip);
+    // a streaming clip's windows share the shell's base (read only here; a bone clip makes its own below)
+    this.base = clip.windowed && clip.base?.length === V * 3 ? clip.base : vertexBase(clip);
     this.phi0 = new Float64Array(C * 3);
     this.phi1 = new Float64Array(C * 3);
     // The natural-spline time model (docs/format.md §3.5): null unless some item is on it (every other

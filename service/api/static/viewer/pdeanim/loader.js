@@ -206,7 +206,9 @@ export class PDEClipLoader extends Loader {
     const fetcher = {
       open: (from) => openRange(main, from, options),
       decode: decoder.decode,
+      forget: decoder.forget,
       close: decoder.close,
+      decoder,
     };
     const clip = new StreamingClip(decoder.shell, windows, fetcher, { maxWindows: this.maxWindows });
     clip.gpuTables = decoder.tables;

@@ -308,7 +308,7 @@ function deferred() {
  *
  * windows: the shell's index with {offset, length}: each window's byte range in the resource. fetcher:
  * {open(from) → Promise of openRange()'s {reader, queue}, decode(index, bytes) → Promise of {clip, tables},
- * close()}.
+ * forget(indices) (optional: drop the states those windows carry on), close()}.
  */
 export class StreamingClip extends WindowedClip {
   constructor(shell, windows, fetcher, { maxWindows = 4, behind = 1 } = {}) {
@@ -318,6 +318,7 @@ export class StreamingClip extends WindowedClip {
     this.behind = Math.max(0, Math.min(behind, maxWindows - 2));
     this.inflight = new Map(); // index → Promise of the decoded window
     this.stateSent = new Set(); // windows handed to the decoder (it holds the state each hands on)
+    this.checkpointStride = 1; // states kept for seeks: windows a multiple of this apart (_forgetStates)
     this.fetcher = fetcher;
     this.playhead = 0; // the window index of the play head
     this.stream = null; // the current sequential read: {reader, queue, next (the window it delivers next)}
@@ -390,20 +391,50 @@ export class StreamingClip extends WindowedClip {
     }
   }
 
-  /** Drop decoded windows neither wanted nor among the `behind` ones just behind the play head. */
-  _evict() {
+  /** The windows held now: the wanted ones and the `behind` ones just behind the play head. */
+  _held() {
     const keep = new Set(this.wanted());
     for (let k = 1; k <= this.behind; k++) {
       const i = this.playhead - k;
       if (i >= 0) keep.add(i);
       else if (this.looping) keep.add(i + this.nWindows);
     }
+    return keep;
+  }
+
+  /** Drop decoded windows neither wanted nor among the `behind` ones just behind the play head. */
+  _evict() {
+    const keep = this._held();
     for (const i of [...this.decoded.keys()]) {
       if (!keep.has(i)) {
         this.decoded.delete(i);
         this.dispatchEvent(customEvent('evict', { index: i }));
       }
     }
+    this._forgetStates(keep);
+  }
+
+  /**
+   * Tell the decoder to drop carried states (docs/format.md §3.10, 1.7 MB each on a 34k-vertex clip) so that
+   * it holds a bounded number whatever the clip's length: those the held windows start from, the one the
+   * read continues from, and at most maxWindows checkpoints (windows a multiple of a stride apart, the stride
+   * doubling as the clip plays on), where a seek to a window evicted meanwhile restarts the read.
+   */
+  _forgetStates(keep = this._held()) {
+    if (!this.fetcher.forget) return;
+    const needed = new Set();
+    for (const i of keep) needed.add(i - 1);
+    if (this.stream) needed.add(this.stream.next - 1);
+    const others = [...this.stateSent].filter((j) => !needed.has(j));
+    let checkpoints = others.filter((j) => j % this.checkpointStride === 0);
+    while (checkpoints.length > this.maxWindows) {
+      this.checkpointStride *= 2;
+      checkpoints = checkpoints.filter((j) => j % this.checkpointStride === 0);
+    }
+    const drop = others.filter((j) => j % this.checkpointStride !== 0);
+    if (drop.length === 0) return;
+    for (const j of drop) this.stateSent.delete(j);
+    this.fetcher.forget(drop);
   }
 
   /** Whether window i should be decoded now. */
@@ -548,6 +579,7 @@ export class StreamingClip extends WindowedClip {
   _advance(i, bytes) {
     this.stateSent.add(i);
     this.fetcher.decode(i, bytes, false).catch((error) => this._fail(error));
+    this._forgetStates();
   }
 
   /** Decode window i's bytes (in the worker); on arrival it joins the decoded windows unless evicted meanwhile. */
@@ -574,6 +606,7 @@ export class StreamingClip extends WindowedClip {
       },
     );
     this.inflight.set(i, job);
+    this._forgetStates();
   }
 
   /** Stop reading and drop every window (the players of the clip show nothing new). */
