@@ -75,21 +75,24 @@ def fit_command(poses: str | Path, out: str | Path, target: float) -> list[str]:
 
 def run_fit(poses: Path, out: Path, target: float, timeout: float) -> dict:
     """``pdeanim fit`` in a child process (the measured tree's pdeanim, peers_common.CODE, first on its path):
-    exit code, seconds, peak RSS (MB), the stderr's verdict."""
+    exit code, seconds, peak RSS (MB), the stderr's verdict, the 1-min load average at its start and end."""
     cmd = fit_command(poses, out, target)
+    load0 = os.getloadavg()[0]
     try:
         path = [str(CODE), *filter(None, [os.environ.get("PYTHONPATH")])]
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
         p = subprocess.run(cmd, cwd=CODE, env=env, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"rc": None, "timeout": True}
+    load = [load0, os.getloadavg()[0]]
     seconds = peak = None
     for line in p.stderr.splitlines():
         if line.startswith("BENCH "):
             _, s, kb = line.split()
             seconds, peak = float(s), int(kb) / 1024.0
     tail = [ln for ln in p.stderr.splitlines() if ln.startswith("pdeanim fit:") or "Error" in ln]
-    return {"rc": p.returncode, "seconds": seconds, "peak_mb": peak, "message": " ".join(tail)[-400:]}
+    return {"rc": p.returncode, "seconds": seconds, "peak_mb": peak, "message": " ".join(tail)[-400:],
+            "load": load}
 
 
 def load_fitted(out: Path):  # noqa: ANN201
@@ -109,7 +112,7 @@ def clip_row(parts, approx: np.ndarray, X: np.ndarray, target: float, res: dict)
                format_version=parts.report.get("format_version"), message=res.get("message", ""),
                bones=(parts.report.get("bones") or {}).get("n_bones", 0),
                residual_share=(parts.report.get("bones") or {}).get("residual_share"),
-               coefficients_wire=wire_bytes(parts.coefficients), code=code_label())
+               coefficients_wire=wire_bytes(parts.coefficients), code=code_label(), fit_load=res.get("load"))
     r["target_met"] = bool(res["rc"] == 0 and r["rel_rms"] <= target * (1 + 1e-9))
     return r
 

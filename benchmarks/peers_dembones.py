@@ -7,6 +7,7 @@ sequences)."""
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -24,20 +25,24 @@ INFLUENCES = 4
 
 
 def solve(name: str, X: np.ndarray, faces: np.ndarray, bones: int, cache: Path) -> dict:
-    """Weights (B, V) and transforms (F, B, 4, 4) of Dem Bones with ``bones`` bones, cached on disk."""
+    """Weights (B, V) and transforms (F, B, 4, 4) of Dem Bones with ``bones`` bones, cached on disk, with the
+    solve's seconds and the 1-min load average at its start and end (None for a cache written without it)."""
     path = cache / f"dembones-{name}-{X.shape[0]}x{X.shape[1]}-b{bones}-i{ITERATIONS}.npz"
     if path.exists():
         with np.load(path) as d:
-            return {"weights": d["weights"], "transforms": d["transforms"], "seconds": float(d["seconds"])}
+            load = [float(x) for x in d["load"]] if "load" in d.files else None
+            return {"weights": d["weights"], "transforms": d["transforms"], "seconds": float(d["seconds"]),
+                    "load": load}
     from py_dem_bones import solve_skinning
 
-    t = time.perf_counter()
+    load0, t = os.getloadavg()[0], time.perf_counter()
     res = solve_skinning(X[0].astype(np.float64), X.astype(np.float64), bones, faces=faces,
                          max_influences=INFLUENCES, iterations=ITERATIONS)
-    secs = time.perf_counter() - t
+    secs, load = time.perf_counter() - t, [load0, os.getloadavg()[0]]
     cache.mkdir(parents=True, exist_ok=True)
-    np.savez(path, weights=res.weights, transforms=res.transforms, seconds=secs)
-    return {"weights": res.weights, "transforms": res.transforms, "seconds": secs}
+    np.savez(path, weights=res.weights, transforms=res.transforms, seconds=secs, load=np.array(load))
+    log(f"{name}: dem bones {bones} bones solved in {secs:.1f} s (1-min load {load[0]:.1f} -> {load[1]:.1f})")
+    return {"weights": res.weights, "transforms": res.transforms, "seconds": secs, "load": load}
 
 
 def skin(rest: np.ndarray, W: np.ndarray, R: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -89,5 +94,6 @@ def method_dembones(name: str, X: np.ndarray, faces: np.ndarray, cache: Path, qu
             blob = pack_payload("dembones", {"faces": fc, **w.arrays(), **arrays})
             solved = sol["weights"].shape[0]
             setting = f"{b} bones ({solved} solved), rest {rest_bits}-bit, bones {bone_bits}-bit"
-            rows.append(result("dembones", setting, blob, approx, X, solve_s=sol["seconds"]))
+            rows.append(result("dembones", setting, blob, approx, X, solve_s=sol["seconds"],
+                               solve_load=sol["load"]))
     return rows

@@ -132,8 +132,18 @@ def goal_cells(rows: list[dict], target: float) -> dict[str, str]:
     solve = db["solve_s"] if db is not None else (min(solves) if solves else None)
     if solve is not None and c.get("fit_s") is not None:
         which = db["setting"].split(",")[0] if db is not None else "fastest solve"
-        out["time"] = f"{c['fit_s']:.0f} s vs {solve:.0f} s ({which}): {_verdict(c['fit_s'] <= solve)}"
+        src = db if db is not None else min((r for r in rows if r.get("method") == "dembones"
+                                             and r.get("solve_s") is not None), key=lambda r: r["solve_s"])
+        out["time"] = (f"{c['fit_s']:.0f} s{_load(c.get('fit_load'))} vs {solve:.0f} s ({which}"
+                       f"{_load(src.get('solve_load'), ';')}): {_verdict(c['fit_s'] <= solve)}")
     return out
+
+
+def _load(load: list[float] | None, sep: str = "") -> str:
+    """' (load A-B)': the 1-min load average at a timed step's start and end, when recorded."""
+    if not load:
+        return ""
+    return f"{sep} load {load[0]:.0f}-{load[1]:.0f}" if sep else f" (load {load[0]:.0f}-{load[1]:.0f})"
 
 
 def _peer_brief(r: dict, target: float) -> str:

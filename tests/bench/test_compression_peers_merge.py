@@ -53,6 +53,14 @@ def test_goals_are_met_or_not_per_cell_at_both_yardsticks() -> None:
     assert "| seq | 0.001 | no clip |" in table
 
 
+def test_the_time_goal_prints_the_load_of_the_fit_and_of_the_solve_when_recorded() -> None:
+    rows = [clip(60_000, 0.9 * T, 2.5 * T, fit_load=[12.4, 15.6]),
+            peer("dembones", 70_000, 0.95 * T, 9.0 * T, setting="32 bones (32 solved), rest 16-bit",
+                 solve_s=120.0, solve_load=[9.0, 11.2])]
+    assert (peers_report.goal_cells(rows, T)["time"]
+            == "100 s (load 12-16) vs 120 s (32 bones (32 solved); load 9-11): met")
+
+
 def test_a_clip_below_the_band_or_past_3x_max_is_not_met_and_no_peer_is_said() -> None:
     g = peers_report.goal_cells([clip(60_000, 0.5 * T, 3.5 * T)], T)
     assert g["band"] == "0.500: NOT met"
