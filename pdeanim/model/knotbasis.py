@@ -180,12 +180,13 @@ def _on_basis(knots: np.ndarray, tracks: np.ndarray, rows: np.ndarray, steps: np
 
 
 SHARED_BITS = 8
-"""A clip's shared weights (:class:`SharedWeights`) are rounded to a power-of-two grid per item of this many
-bits below the item's largest weight: fine enough that a window's residual takes little of the rounding ...
+"""A clip's shared weights (:class:`SharedWeights`) are rounded to one power-of-two grid this many bits below
+the largest weight (AnimatedMorphSphere in 2 windows: 12 bits 9,256 B, 10 bits 8,832 B, 8 bits 8,360 B, its
+error 0.08, 0.12 and 0.36 of the target; the windows' rate control measures what the grid leaves) ...
 """
 SHARED_SCALE = 2.0 ** (SHARED_BITS + 1)
 """... and the weights of shapes of RMS size (as the knots they span) are stored this many times larger, so
-that the grid is about twice an item's motion, no finer than any useful knot step of it: a window's steps
+that the grid is about twice the largest item's motion, no finer than a useful knot step: a window's steps
 then stay its own and the weights are whole codes on them (with trailing zero bits)."""
 
 
@@ -193,9 +194,9 @@ then stay its own and the weights are whole codes on them (with trailing zero bi
 class SharedWeights:
     """Weights that every window of a windowed fit may put its knots on (one set per clip, so that the
     joined clip stores them once, not once per window): integer codes (r, C, 3, 4) on a power-of-two grid
-    (C, 3) per item (0 where the item has no weight). A window's knot steps are made no coarser than the grid
-    where it uses them, so that the weights are whole codes on every window's steps and on the finest of
-    them (the joined clip's)."""
+    (C, 3), the same for every item (0 where the item has no weight: small items get small codes). A
+    window's knot steps are made no coarser than the grid where it uses them, so that the weights are whole
+    codes on every window's steps and on the finest of them (the joined clip's)."""
 
     codes: np.ndarray
     grid: np.ndarray
@@ -207,7 +208,7 @@ class SharedWeights:
     @classmethod
     def of(cls, values: np.ndarray) -> SharedWeights:
         """The shared weights of shapes ``values`` (r, C, 3, 4) of RMS size: SHARED_SCALE times them, on a
-        grid of SHARED_BITS per item."""
+        grid SHARED_BITS below the largest."""
         values = np.asarray(values, np.float64) * SHARED_SCALE
         largest = np.abs(values).max(axis=(0, 3)) if len(values) else np.zeros(values.shape[1:3])
         largest = np.where(largest > 0, largest.max(initial=0.0), 0.0)  # one grid: small items, small codes
