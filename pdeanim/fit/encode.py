@@ -41,7 +41,8 @@ class Quantisation:
     knot_rms: float | None = None
     knot_cap: float | None = None
     refine: np.ndarray | None = None
-    rank: int | None = None  # the knots on that many shared time tracks (0: plain tracks; None: the smallest)
+    rank: int | None = None  # the knots on that many shared time tracks (0: plain tracks; None: the smallest;
+    # -r: on the leading r of a windowed fit's shared weights, SpaceStage.shared_weights)
 
     def finer(self) -> Quantisation:
         """Half the rounding error."""
@@ -76,7 +77,7 @@ def coefficient_data(space: SpaceStage, fitted: TimeStage, options: FitOptions, 
     return CoefficientData(fitted.segm.segment_t, times, np.moveaxis(family, 2, 0),
                            np.moveaxis(np.abs(mu), 2, 0), space.proj.D.reshape(C, 3),
                            np.moveaxis(knots, 2, 0), options.motion, options.loop, {"errors": errors},
-                           time_model=time_model)
+                           time_model=time_model, shared=space.shared_weights)
 
 
 def encode(p: Problem, curves: CurveSet, space: SpaceStage, fitted: TimeStage, options: FitOptions,

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import container
 from ..model.adaptive import Targets
-from ..model.clipformat import TRIAL_LEVEL
+from ..model.clipformat import SHARED_KEY, TRIAL_LEVEL
 from ..model.fitcore import TimeStage
 from ..model.quantise import power_of_two_step
 from ..poses import Poses
@@ -54,7 +54,7 @@ def quantised(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
                        TRIAL_LEVEL)
         clip = decode(parts)
         approx = clip.evaluate(clip.frame_t())
-        chosen = int(container.unpack(parts.coefficients)[0]["knot_rank"])
+        chosen = stored_rank(parts.coefficients)
         found = Errors.of(stored_distances(sf.p, approx, F), sf.p.curve_of, sf.curves.n_curves)
         unrounded = Errors.of(exact[:F], sf.p.curve_of, sf.curves.n_curves)
         reachable = quant.tolerance is not None and unrounded.meets(sf.targets)
@@ -62,6 +62,14 @@ def quantised(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
                 found.meets(sf.targets) and (bound is None or _over(found, unrounded, bound) is None)):
             break
     return replace(quant, rank=chosen), approx, len(parts.topology) + len(parts.coefficients)
+
+
+def stored_rank(coefficients: bytes) -> int:
+    """The knots' rank of an encoded coefficients part as a Quantisation's ``rank``: -r where they are on the
+    leading r of a windowed fit's shared weights."""
+    header = container.read_header(coefficients)
+    rank = int(header["knot_rank"])
+    return -rank if header.get(SHARED_KEY) else rank
 
 
 def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses, exact: np.ndarray,
@@ -76,7 +84,7 @@ def _rounding(sf: SpaceFit, fitted: TimeStage, options: FitOptions, poses: Poses
         quant.rank = 0
     elif quant.tolerance is not None and unrounded.meets(sf.targets):
         first = encode(p, sf.curves, sf.space, fitted, options, poses, None, quant, TRIAL_LEVEL)
-        quant = replace(quant, rank=int(container.unpack(first.coefficients)[0]["knot_rank"]))
+        quant = replace(quant, rank=stored_rank(first.coefficients))
 
     def measure(q: Quantisation) -> Errors:
         clip = stored_clip(p, sf.curves, sf.space, fitted, options, poses, q)

@@ -35,9 +35,10 @@ from ..curveset import CurveSet
 from ..errors import InputError
 from ..model import quantise
 from ..model.adaptive import Targets
-from ..model.clipformat import TIME_SPLINE, decode_topology, topology_arrays
+from ..model.clipformat import SHARED_KEY, TIME_SPLINE, decode_topology, topology_arrays
 from ..model.coefwriter import CoefficientFields, KnotCodes, write_coefficients
 from ..model.fitcore import SpaceStage, floor_distances, items_from_curves, vertex_slots
+from ..model.knotbasis import SharedWeights
 from ..model.metrics import bbox_diagonal
 from ..model.parameterisation import curve_parameters
 from ..model.spacefit import SpaceProjection, project_items, search_D
@@ -59,6 +60,11 @@ CURVE_VALUES = 1 << 20
 at least MIN_WINDOW_FRAMES frames."""
 MIN_WINDOW_FRAMES = 8
 """Frames per window at least (the time-model evidence needs a few frames on either side)."""
+SHARED_RANK = 16
+"""Shapes of motion, at most, that every window may put its knots on (:class:`SharedWeights`: the principal
+shapes of the frames the curves are chosen on), stored once in the clip instead of a time basis with its own
+weights per window (AnimatedMorphSphere in 8 windows: 11 ranks of weights, 6.1 KB of an 8.4 KB one-piece
+clip)."""
 
 
 def windowed_applies(n_frames: int, n_vertices: int, options: FitOptions, tol: FitTolerances) -> bool:
@@ -153,6 +159,7 @@ class WindowPlan:
     tolerance: float | None
     diagonal: float
     report: dict[str, Any] = field(default_factory=dict)
+    patterns: np.ndarray | None = None  # (r, V, 3) float32 principal shapes of the curves' frames (RMS size)
 
     @property
     def n_windows(self) -> int:
@@ -182,7 +189,8 @@ class WindowPlan:
                               "tolerance": self.tolerance, "diagonal": self.diagonal, "report": self.report},
                      {"order": cs.order.astype(np.int32), "offsets": cs.offsets.astype(np.int32),
                       "rest": self.layout.rest.astype(np.float32), "bounds": self.bounds.astype(np.uint32),
-                      "times": self.times, "topology": np.frombuffer(self.topology, np.uint8)})
+                      "times": self.times, "topology": np.frombuffer(self.topology, np.uint8),
+                      **({} if self.patterns is None else {"patterns": self.patterns.astype(np.float32)})})
 
     @classmethod
     def from_bytes(cls, blob: bytes) -> WindowPlan:
@@ -191,7 +199,8 @@ class WindowPlan:
         curves = CurveSet(a["order"].astype(np.int32), a["offsets"].astype(np.int32))
         return cls(options, FitTolerances(**h["tolerances"]),
                    Layout.of(curves, a["rest"], options.motion == "absolute"), a["bounds"].astype(np.int64),
-                   a["times"], a["topology"].tobytes(), h["tolerance"], h["diagonal"], h["report"])
+                   a["times"], a["topology"].tobytes(), h["tolerance"], h["diagonal"], h["report"],
+                   a.get("patterns"))
 
 
 def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress: Progress | None = None,
@@ -210,8 +219,25 @@ def plan_windows(poses: Poses, options: FitOptions, tol: FitTolerances, progress
                                      options.param_mode, tolerance)
     topology = container.pack(header, arrays, {n: container.SMALLEST for n in arrays})
     report = {"curve_points": sf.curve_points, "curve_splits": sf.splits, "curve_frames": int(len(picked))}
+    shared = tol.knot_basis and tol.window_shared_weights
+    patterns = _patterns(np.asarray(sub.vertices), layout) if shared else None
     return WindowPlan(options, tol, layout, window_bounds(F, V, tol), np.asarray(poses.times, np.float64),
-                      topology, tolerance, diagonal, report)
+                      topology, tolerance, diagonal, report, patterns)
+
+
+def _patterns(frames: np.ndarray, layout: Layout) -> np.ndarray:
+    """(r, V, 3) float32 the leading SHARED_RANK principal shapes (uncentred, as the knots are stored; each of
+    its RMS size over the frames) of what the curves fit of ``frames`` (n, V, 3): displacement or
+    positions."""
+    n = len(frames)
+    values = np.asarray(frames, np.float64).reshape(n, -1)
+    if not layout.absolute:
+        values = values - layout.rest.reshape(1, -1)
+    energy, vectors = np.linalg.eigh(values @ values.T)
+    order = np.argsort(energy)[::-1][:SHARED_RANK]
+    keep = order[energy[order] > 1e-12 * max(float(energy.max(initial=0.0)), 1e-300)]
+    shapes = (vectors[:, keep].T @ values) / np.sqrt(n)  # unit shapes times sqrt(energy / n)
+    return shapes.reshape(len(keep), -1, 3).astype(np.float32)
 
 
 @dataclass
@@ -268,6 +294,7 @@ class SpaceModel:
     gram_floor: float
     spread: float
     spline: np.ndarray
+    shared: SharedWeights | None = None  # the knot weights every window may use (stored once in the clip)
 
     def projection(self, plan: WindowPlan) -> SpaceProjection:
         """The items' orthonormal space bases (the same, bit for bit, in every process)."""
@@ -276,15 +303,19 @@ class SpaceModel:
                              self.kind, self.D, fallback=True)
 
     def to_bytes(self) -> bytes:
+        shared = {} if self.shared is None else {"shared_codes": self.shared.codes.astype(np.int32),
+                                                 "shared_grid": self.shared.grid.astype(np.float32)}
         return _pack("space", {"gram_floor": self.gram_floor, "spread": self.spread},
                      {"kind": self.kind.astype(np.uint8), "D": self.D.astype(np.float64),
-                      "spline": self.spline.astype(np.uint8)})
+                      "spline": self.spline.astype(np.uint8), **shared})
 
     @classmethod
     def from_bytes(cls, blob: bytes) -> SpaceModel:
         h, a = _unpack("space", blob)
+        shared = None if "shared_codes" not in a else SharedWeights(
+            a["shared_codes"].astype(np.int64), a["shared_grid"].astype(np.float64))
         return cls(a["kind"].astype(np.int64), a["D"], float(h["gram_floor"]), float(h["spread"]),
-                   a["spline"].astype(bool))
+                   a["spline"].astype(bool), shared)
 
 
 def join_space(plan: WindowPlan, parts: Iterable[GramPart]) -> SpaceModel:
@@ -314,7 +345,19 @@ def join_space(plan: WindowPlan, parts: Iterable[GramPart]) -> SpaceModel:
     else:
         spline = np.zeros(K, bool)
     return SpaceModel(np.asarray(proj.kind, np.int64), np.asarray(proj.D, np.float64), float(floor.sum()),
-                      spread, np.asarray(spline, bool))
+                      spread, np.asarray(spline, bool), _shared_weights(plan, proj))
+
+
+def _shared_weights(plan: WindowPlan, proj: SpaceProjection) -> SharedWeights | None:
+    """The plan's principal shapes as knot weights (r, C, 3, 4): the balanced space coefficients of each
+    shape on the items' space bases, rounded to their grid (:class:`SharedWeights`)."""
+    if plan.patterns is None or len(plan.patterns) == 0:
+        return None
+    lay = plan.layout
+    Y = items_from_curves(plan.patterns, lay.idx, lay.mask)  # (r, K, N)
+    z = np.einsum("rkn,kna->rka", Y, proj.U)
+    a = np.einsum("kab,rkb->rka", proj.to_coef, z)
+    return SharedWeights.of(a.reshape(len(a), lay.mask.shape[0], 3, 4))
 
 
 SPLINE_GUARD = 6
@@ -399,11 +442,12 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     b = Yk @ model.proj.U
     floor = np.maximum(np.einsum("kfn,kfn->kf", Yk, Yk) - np.einsum("kfa,kfa->kf", b, b), 0.0)
     spline = space.spline
-    stage = SpaceStage(model.proj, b, floor, Yk, spline if spline.any() else None, np.inf)
-    floor_d = floor_distances(stage, p.slots)
-    sf = SpaceFit(p, lay.curves, stage, floor_d, plan.targets, plan.diagonal, None)
     tol = replace(plan.tol, quant_fill=plan.tol.window_quant_fill,
                   knot_basis=plan.tol.knot_basis and len(frames) >= BASIS_MIN_FRAMES)
+    stage = SpaceStage(model.proj, b, floor, Yk, spline if spline.any() else None, np.inf,
+                       space.shared if tol.knot_basis else None)
+    floor_d = floor_distances(stage, p.slots)
+    sf = SpaceFit(p, lay.curves, stage, floor_d, plan.targets, plan.diagonal, None)
     start = _start(plan, index, bool(spline.any()))
     if start is not None and tol.soft_max_ratio is not None:
         tol = replace(tol, soft_max_ratio=GUARD_MAX_SHARE * tol.soft_max_ratio)
@@ -434,7 +478,7 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
         float(floor_d.max(initial=0.0)), best.trials,
         {"tolerance": quant.tolerance, "knot_rms": quant.knot_rms, "knot_cap": quant.knot_cap,
          "segments": fitted.n_segments, "dense": best.dense is not None, "knot_rank": rank,
-         "met": bool(best.meets)})
+         "shared_weights": bool(header.get(SHARED_KEY)), "met": bool(best.meets)})
 
 
 def _start(plan: WindowPlan, index: int, spline: bool) -> np.ndarray | None:
@@ -503,7 +547,9 @@ def _joined_knots(windows: Sequence[WindowCodes], first: np.ndarray, C: int, W: 
     bases side by side, each zero outside its own knots (format §3.4: the zeros add nothing, so every knot
     sums its own window's terms in its window's order). Each window's codes are released once copied."""
     S1 = int(first[-1])
-    rank = int(sum(len(w.basis) for w in windows))
+    shared = [bool(w.quantisation.get("shared_weights")) for w in windows]
+    rank_shared = max([len(w.basis) for w, s in zip(windows, shared, strict=True) if s], default=0)
+    rank = rank_shared + int(sum(len(w.basis) for w, s in zip(windows, shared, strict=True) if not s))
     if rank == 0:
         steps = windows[0].steps if W == 1 else np.stack([w.steps for w in windows])
         scale = [np.ones((C, 3), np.int64)] * W
@@ -513,7 +559,7 @@ def _joined_knots(windows: Sequence[WindowCodes], first: np.ndarray, C: int, W: 
     codes = np.empty((C, 3, 4, S1), np.int32)
     weights = np.zeros((rank, C, 3, 4), np.int64)
     basis = np.zeros((rank, S1), np.float32)
-    row = 0
+    row, filled = rank_shared, 0  # the shared weights' rows first, then each own basis's
     for i, w in enumerate(windows):
         k = scale[i][:, :, None, None]
         scaled = w.codes.astype(np.int64) * k
@@ -521,9 +567,17 @@ def _joined_knots(windows: Sequence[WindowCodes], first: np.ndarray, C: int, W: 
             raise ValueError("knot codes out of range on the windows' common step")
         codes[..., first[i]:first[i + 1]], w.codes = scaled, None
         r = len(w.basis)
-        weights[row:row + r] = w.weights.astype(np.int64) * k[None, ..., 0]
-        if np.abs(weights[row:row + r]).max(initial=0) > quantise.MAX_CODE:
+        wk = w.weights.astype(np.int64) * k[None, ..., 0]
+        if np.abs(wk).max(initial=0) > quantise.MAX_CODE:
             raise ValueError("knot weights out of range on the windows' common step")
+        if shared[i]:  # the same values in every window that uses them: stored once
+            if not np.array_equal(weights[:min(r, filled)], wk[:min(r, filled)]):
+                raise RuntimeError(f"window {w.index} changed the clip's shared knot weights")
+            weights[filled:r] = wk[filled:r]
+            filled = max(filled, r)
+            basis[:r, first[i]:first[i + 1]] = w.basis
+            continue
+        weights[row:row + r] = wk
         basis[row:row + r, first[i]:first[i + 1]] = w.basis
         row += r
     order = quantise.difference_order(codes)

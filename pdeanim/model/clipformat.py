@@ -51,6 +51,9 @@ BASIS_MARGIN = 0.9
 the trial level: level 19 compresses plain tracks relatively better (horse-collapse, dense fit at 3e-3:
 rank 18 looked smaller at level 3, 161,200 B against 143,992 B at level 19)."""
 TRIAL_LEVEL = quantise.TRIAL_LEVEL
+SHARED_KEY = "knot_shared"
+"""Header key of a windowed fit's window trial encoding whose knots are on the clip's shared weights (never in
+a written clip: the join stores the weights once)."""
 
 MOTIONS = ("displacement", "absolute", "rigid")
 TIME_PDE, TIME_SPLINE = 0, 1
@@ -89,6 +92,7 @@ class CoefficientData:
     extra: dict[str, np.ndarray] = field(default_factory=dict)  # "rigid_*" arrays of motion "rigid"
     time_model: np.ndarray | None = None  # (C, 3) uint8; None: every item TIME_PDE
     bones: EncodedBones | None = None  # format 1.1 bone layer (§3.9); the curves are then the residual
+    shared: knotbasis.SharedWeights | None = None  # weights a windowed fit's windows share (writer only)
 
     def spline_items(self) -> np.ndarray:
         """(C, 3) bool: the items on the natural spline."""
@@ -178,12 +182,13 @@ def coefficient_arrays(topo_id: str, topo: TopologyData, data: CoefficientData,
     if spectrum is None and knot_rank != 0:
         spectrum = knotbasis.track_spectrum(topo.curves, topo.u, family, m, data.D, data.knots)
     codes = _knot_encoding(data, steps, spectrum, choose, knot_rank)
+    header = data.header if not codes.shared else {**data.header, SHARED_KEY: True}
     C = family.shape[1]
     fields = CoefficientFields(
         data.segment_t, data.frame_times, family[0] % 2 if len(family) else np.zeros((C, 3), np.uint8),
         data.spline_items(), np.where((family >= 2) & (m > 0), -m, m), data.D, data.motion, data.looping)
     layer_header, layer_arrays = ({}, {}) if data.bones is None else bones_header_arrays(data.bones)
-    return write_coefficients(fields, codes, topo_id, data.header, extra_header=layer_header,
+    return write_coefficients(fields, codes, topo_id, header, extra_header=layer_header,
                               extra_arrays={**data.extra, **layer_arrays})
 
 
@@ -209,12 +214,16 @@ def _knot_steps(topo: TopologyData, data: CoefficientData, family: np.ndarray, m
 def _knot_encoding(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None,
                    choose: bool, rank: int | None) -> KnotCodes:
     """The stored knots: on ``rank`` shared tracks (0: plain tracks; a rank whose codes would overflow falls
-    back to plain ones), or with ``rank`` None the smallest encoding; the order of the differences chosen by
-    size only when ``choose``."""
+    back to plain ones; -r: on the leading r of ``data.shared``, a windowed fit's weights), or with ``rank``
+    None the smallest encoding; the order of the differences chosen by size only when ``choose``."""
     if rank is None:
         return _smallest_knots(data, steps, spectrum)
     found = None
-    if rank and spectrum is not None:
+    if rank < 0 and spectrum is not None and data.shared is not None:
+        on = knotbasis.on_shared(spectrum, data.shared, steps, data.looping, -rank)
+        if on is not None:
+            found, steps = on
+    elif rank and spectrum is not None:
         found = knotbasis.basis_of_rank(spectrum, steps, data.looping, rank)
     residual = quantise.quantise_knots(data.knots, steps) if found is None else found.residual
     if choose:
@@ -223,7 +232,7 @@ def _knot_encoding(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis
         tracks, order = quantise.knot_tracks(residual, 1), 1
     if found is None:
         return KnotCodes(steps, tracks, order)
-    return KnotCodes(steps, tracks, order, quantise.zigzag(found.weights), found.basis)
+    return KnotCodes(steps, tracks, order, quantise.zigzag(found.weights), found.basis, shared=rank < 0)
 
 
 def _smallest_knots(data: CoefficientData, steps: np.ndarray, spectrum: knotbasis.TrackSpectrum | None
@@ -240,6 +249,15 @@ def _smallest_knots(data: CoefficientData, steps: np.ndarray, spectrum: knotbasi
         trial = _trial_bytes(option)
         if trial < size:
             best, size = option, trial
+    for r in knotbasis.shared_ranks(spectrum, data.shared, steps):
+        on = knotbasis.on_shared(spectrum, data.shared, steps, data.looping, r)
+        if on is None:
+            continue
+        residual, order = quantise.encode_knot_tracks(on[0].residual)
+        option = KnotCodes(on[1], residual, order, quantise.zigzag(on[0].weights), on[0].basis, shared=True)
+        trial = _trial_bytes(option)  # the weights not counted: the clip stores them once for every window
+        if trial < size:
+            best, size = option, trial
     return best
 
 
@@ -247,6 +265,8 @@ def _trial_bytes(codes: KnotCodes) -> int:
     """Compressed size of the knot arrays at the trial level (the choice must not depend on the final level:
     the fit measures the clip of its trial encodings)."""
     arrays = codes.arrays()
+    if codes.shared:
+        del arrays["knot_weights"]
     packed = container.pack({}, arrays, {name: container.SMALLEST for name in arrays}, TRIAL_LEVEL)
     return len(packed)
 

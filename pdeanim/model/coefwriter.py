@@ -53,6 +53,7 @@ class KnotCodes:
     weights: np.ndarray | None = None
     basis: np.ndarray | None = None
     windows: np.ndarray | None = None
+    shared: bool = False  # weights a windowed fit's windows share (writer only: a window's trial encoding)
 
     @property
     def rank(self) -> int:

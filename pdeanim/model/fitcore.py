@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from .knotbasis import SharedWeights
 from .segments import Segmentation
 from .spacefit import SpaceProjection, project_items, search_D
 from .timefit import CUBIC_SLACK, fit_tracks, fit_tracks_spline, predict
@@ -28,6 +29,7 @@ class SpaceStage:
     Yk: np.ndarray | None = None
     spline_candidates: np.ndarray | None = None  # (K,) bool; None: the paper's time model only
     spline_slack: float = CUBIC_SLACK
+    shared_weights: SharedWeights | None = None  # knot weights a windowed fit's windows share (format §3.4)
 
 
 @dataclass

@@ -116,7 +116,8 @@ def _windows_basis() -> ClipParts:
     travel = np.array([1.0, 0.0, 0.0]) * np.sin(np.pi * t + 3.0)
     poses = make_poses((x + bend + twist + travel).astype(np.float32), np.asarray(mesh.faces))
     parts = fit_poses(poses, FitOptions(target_rel_rms=3e-3),
-                      tolerances=FitTolerances(window_fit_values=0, window_values=20 * poses.n_vertices))
+                      tolerances=FitTolerances(window_fit_values=0, window_values=20 * poses.n_vertices,
+                                               window_shared_weights=False))
     header, arrays = container.unpack(parts.coefficients)
     basis = arrays["knot_basis"]
     assert "knot_windows" not in arrays and len(parts.report["windows"]) == 2, header

@@ -184,3 +184,25 @@ def test_broken_knot_windows_raise_clear_errors(motion):
     for broken, match in cases:
         with pytest.raises(ClipFormatError, match=match):
             decode_coefficients(*container.unpack(broken), C)
+
+
+def test_windows_of_a_low_rank_motion_share_one_set_of_knot_weights():
+    """A blend of two shapes in 3 windows: every window puts its knots on the clip's shared weights (the
+    principal shapes of the plan's frames), stored once: the clip's rank is that of one window, not the sum,
+    it decodes to what the windows measured, and it is smaller than with a basis per window."""
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    x = np.asarray(mesh.vertices)
+    t = np.linspace(0.0, 1.0, 60)[:, None, None]
+    shapes = 0.3 * np.sin(3 * x[None]) * np.array([1.0, 0.5, -0.7]), 0.2 * x[None, :, [1, 2, 0]] ** 2
+    frames = x[None] + np.sin(2 * np.pi * t) * shapes[0] + np.cos(3 * np.pi * t) ** 2 * shapes[1]
+    poses = make_poses(frames.astype(np.float32), np.asarray(mesh.faces))
+    options, tol = FitOptions(target_rel_rms=TARGET), _windowed(20, poses.n_vertices)
+    shared = fit_poses(poses, options, tolerances=tol)
+    own = fit_poses(poses, options, tolerances=replace(tol, window_shared_weights=False))
+    windows = shared.report["windows"]
+    assert len(windows) == 3 and all(w["shared_weights"] for w in windows), windows
+    assert shared.report["knot_rank"] == max(w["knot_rank"] for w in windows) > 0
+    assert shared.report["target_met"]
+    assert _decoded_rms(shared, poses) == pytest.approx(shared.report["rms"], rel=1e-6)
+    size = [len(p.topology) + len(p.coefficients) for p in (shared, own)]
+    assert size[0] < 0.9 * size[1], size
