@@ -184,3 +184,27 @@ def test_broken_knot_windows_raise_clear_errors(motion):
     for broken, match in cases:
         with pytest.raises(ClipFormatError, match=match):
             decode_coefficients(*container.unpack(broken), C)
+
+
+@pytest.mark.parametrize("compressed", [False, True])
+def test_poses_mapped_from_a_file_give_the_clip_of_poses_in_memory(motion, tmp_path, compressed):
+    """A long .npz read a window at a time from a file mapping (the CLI's path for windowed fits: the .npz
+    itself when stored uncompressed, else a temporary file it is inflated into) fits the very same clip."""
+    from pdeanim.npzread import release_pages
+    from pdeanim.posefiles import load_poses
+
+    path = tmp_path / "poses.npz"
+    (np.savez_compressed if compressed else np.savez)(path, vertices=motion.vertices, faces=motion.faces)
+    mapped = load_poses(path, map_over=0)
+    assert isinstance(mapped.vertices, np.memmap) and np.array_equal(mapped.vertices, motion.vertices)
+    release_pages(mapped.vertices)  # dropped pages read back the same
+    assert np.array_equal(mapped.vertices[5], motion.vertices[5])
+    tol, options = _windowed(20, motion.n_vertices), FitOptions(target_rel_rms=TARGET)
+    parts = fit_poses(mapped, options, tolerances=tol)
+    whole = fit_poses(motion, options, tolerances=tol)
+    assert (parts.topology, parts.coefficients) == (whole.topology, whole.coefficients)
+    bad = motion.vertices.copy()
+    bad[7, 3, 1] = np.inf
+    (np.savez_compressed if compressed else np.savez)(path, vertices=bad, faces=motion.faces)
+    with pytest.raises(Exception, match="frame 7, vertex 3"):
+        load_poses(path, map_over=0)

@@ -184,10 +184,12 @@ def test_cancel_reaches_every_task(store, fit_job):
     assert windows.task_done(store.queue, running, {}, store.blobs) is None
 
 
-def test_ranged_blob_reads(store):
+def test_ranged_blob_reads(store, tmp_path):
     key = windows.frames_key("job_x")
     store.blobs.put(bytes(range(256)) * 4, key=key)
     assert store.blobs.get_range(key, 250, 10) == bytes([250, 251, 252, 253, 254, 255, 0, 1, 2, 3])
     assert store.blobs.get_range(key, 1020, 10) == bytes([252, 253, 254, 255])  # the end of the blob
+    store.blobs.get_file(key, tmp_path / "copy")  # the planning task's copy of the stored poses
+    assert (tmp_path / "copy").read_bytes() == bytes(range(256)) * 4
     windows.release_blobs(store.blobs, "job_x", 2)
     assert not store.blobs.exists(key)
