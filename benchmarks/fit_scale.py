@@ -332,7 +332,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n({part}) {record['started']} to {record['ended']}, load average {record['load_start']} -> "
               f"{record['load_end']}")
         print(service_table(record["service"]["rows"]) if part == "c" else markdown_table(record["rows"]))
-    print("\nGoals (issue 21):")
+    print("\nGoals (issues 21 and 31):")
     for g in out["goals"]:
         print(f"- {g['goal']}: {g['measured']} -> {g['verdict']}")
     if args.json:

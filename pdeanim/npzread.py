@@ -65,8 +65,9 @@ def _header(zf: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, error: type[I
 
 
 def read_npz(source: str | Path | bytes, names: tuple[str, ...], check: Checker,
-             error: type[InputError] = InputError) -> dict[str, np.ndarray]:
-    """The members ``names`` (without ``.npy``) of an .npz that exist, after ``check`` accepted their headers.
+             error: type[InputError] = InputError, skip: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """The members ``names`` (without ``.npy``) of an .npz that exist, after ``check`` accepted their headers
+    (those in ``skip`` are checked but not read).
 
     Malformed archives (bad zip, encrypted or unknown-method members, corrupt streams, bad npy headers,
     truncated data) raise ``error``; pickled (object) arrays are never loaded.
@@ -82,6 +83,8 @@ def read_npz(source: str | Path | bytes, names: tuple[str, ...], check: Checker,
             check(headers)
             out = {}
             for name, head in headers.items():
+                if name in skip:
+                    continue
                 with zf.open(members[name]) as member:
                     arr = npy_format.read_array(member, allow_pickle=False)
                 if arr.shape != head.shape or arr.dtype != head.dtype:
@@ -97,3 +100,89 @@ def read_npz(source: str | Path | bytes, names: tuple[str, ...], check: Checker,
                                  "raise the limit") from exc
     except _FAILURES as exc:
         raise error(f"not a valid .npz file ({type(exc).__name__}: {exc})") from exc
+
+
+MAP_CHUNK_BYTES = 1 << 24
+"""A member inflated into a file (:func:`mapped_member`) is read, checked and written this many bytes at a
+time."""
+
+
+def mapped_member(path: str | Path, name: str, check_chunk: Callable[[np.ndarray, int], None],
+                  error: type[InputError] = InputError, tmp_dir: str | None = None,
+                  into: Path | None = None) -> np.memmap | None:
+    """Member ``name`` of the .npz at ``path`` as a read-only float32 array mapped from a file, so that its
+    values live in the page cache rather than in this process's memory: the .npz itself where the member is
+    stored uncompressed as little-endian float32, else an unlinked temporary file in ``tmp_dir`` that the
+    member is inflated (and converted to float32) into, MAP_CHUNK_BYTES at a time. ``check_chunk`` sees every
+    chunk of values as float32 with the flat index of its first (e.g. to refuse non-finite values). None
+    where the member is not a
+    C-ordered numeric array of 2 or more dimensions (read it with :func:`read_npz`). The caller checks the
+    headers first (:func:`read_npz`'s ``check``); :func:`release_pages` drops what was read of it. ``into``:
+    the values are always written to this file (raw float32, C order), which the caller then owns."""
+    import tempfile
+
+    try:
+        with open(path, "rb") as fh, zipfile.ZipFile(fh) as zf:
+            info = {i.filename.removesuffix(".npy"): i for i in zf.infolist()}[name]
+            head = _header(zf, info, name, error)
+            with zf.open(info) as member:
+                version = npy_format.read_magic(member)
+                read = (npy_format.read_array_header_1_0 if version == (1, 0)
+                        else npy_format.read_array_header_2_0)
+                shape, fortran, dtype = read(member)
+                data_at = member.tell()
+                if fortran or len(shape) < 2 or head.count == 0 or dtype.kind not in "fiu":
+                    return None
+                shape = tuple(int(s) for s in shape)
+                if into is None and info.compress_type == zipfile.ZIP_STORED and dtype == np.dtype("<f4"):
+                    fh.seek(info.header_offset + 26)
+                    name_len, extra_len = np.frombuffer(fh.read(4), "<u2")
+                    offset = info.header_offset + 30 + int(name_len) + int(extra_len) + data_at
+                    _check_file_chunks(fh, offset, head.count, check_chunk)
+                    return np.memmap(fh.name, np.float32, "r", offset, shape)
+                # kept open by the mapping
+                out = tempfile.TemporaryFile(dir=tmp_dir) if into is None else open(into, "w+b")  # noqa: SIM115
+                per = max(1, MAP_CHUNK_BYTES // dtype.itemsize)
+                left = head.count
+                while left:
+                    n = min(per, left)
+                    raw = member.read(n * dtype.itemsize)
+                    if len(raw) != n * dtype.itemsize:
+                        raise error(f"member {name!r} of the .npz ends before its data")
+                    values = np.frombuffer(raw, dtype).astype(np.float32)
+                    check_chunk(values, head.count - left)
+                    out.write(values.tobytes())
+                    left -= n
+                out.flush()
+                return np.memmap(out, np.float32, "r", 0, shape)
+    except InputError:
+        raise
+    except MemoryError as exc:
+        from .outofmemory import out_of_memory
+
+        raise out_of_memory(exc, "the .npz arrays do not fit in memory: use fewer frames or vertices, or "
+                                 "raise the limit") from exc
+    except _FAILURES as exc:
+        raise error(f"not a valid .npz file ({type(exc).__name__}: {exc})") from exc
+
+
+def _check_file_chunks(fh, offset: int, count: int, check_chunk: Callable[[np.ndarray, int], None]) -> None:  # noqa: ANN001
+    """``check_chunk`` on every MAP_CHUNK_BYTES of ``count`` float32 values at ``offset`` of ``fh``."""
+    fh.seek(offset)
+    per = MAP_CHUNK_BYTES // 4
+    for start in range(0, count, per):
+        values = np.fromfile(fh, np.float32, min(per, count - start))
+        if len(values) != min(per, count - start):
+            raise EOFError("the member ends before its data")
+        check_chunk(values, start)
+
+
+def release_pages(values: np.ndarray) -> None:
+    """Drop from this process's resident memory the pages of a file-mapped array (:func:`mapped_member`) that
+    were read so far (they stay in the page cache and are read again when touched); nothing for other
+    arrays."""
+    import mmap
+
+    mm = getattr(values, "_mmap", None)
+    if isinstance(mm, mmap.mmap) and hasattr(mm, "madvise"):
+        mm.madvise(mmap.MADV_DONTNEED)

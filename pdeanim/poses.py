@@ -81,8 +81,9 @@ def make_poses(vertices: np.ndarray, faces: np.ndarray | None, times: np.ndarray
 
 
 def validate_pose_arrays(vertices: np.ndarray, faces: np.ndarray, times: np.ndarray,
-                         limits: PoseLimits | None = None) -> None:
-    """Raise PosesInputError (or LimitError) naming the first problem found."""
+                         limits: PoseLimits | None = None, values_checked: bool = False) -> None:
+    """Raise PosesInputError (or LimitError) naming the first problem found (``values_checked``: the vertices'
+    values were already found finite, e.g. chunk by chunk as they were read)."""
     limits = limits or PoseLimits()
     if vertices.ndim != 3 or vertices.shape[-1] != 3:
         raise PosesInputError(f"vertices must have shape (F, V, 3), got {vertices.shape}")
@@ -97,7 +98,7 @@ def validate_pose_arrays(vertices: np.ndarray, faces: np.ndarray, times: np.ndar
         raise LimitError("frames x vertices x 3", vertices.size, limits.max_values)
     if vertices.dtype.kind not in "fiu":
         raise PosesInputError(f"vertices must be real numbers, got dtype {vertices.dtype}")
-    if not np.all(np.isfinite(vertices)):
+    if not values_checked and not np.all(np.isfinite(vertices)):
         bad = np.argwhere(~np.isfinite(vertices))[0]
         raise PosesInputError(
             f"vertices contain NaN or infinite values (first at frame {bad[0]}, vertex {bad[1]})"
@@ -159,6 +160,44 @@ def load_poses_npz(source: str | Path | bytes, limits: PoseLimits | None = None)
     data = read_npz(source, ("vertices", "faces", "times"), lambda h: check_npz_headers(h, limits),
                     PosesInputError)
     return make_poses(data["vertices"], data.get("faces"), data.get("times"), {"source": "npz"}, limits)
+
+
+def load_poses_npz_mapped(path: str | Path, limits: PoseLimits | None = None,
+                          tmp_dir: str | None = None, into: Path | None = None) -> Poses | None:
+    """:func:`load_poses_npz` of a file, its vertices (F, V, 3) float32 mapped from a file instead of held in
+    memory (:func:`pdeanim.npzread.mapped_member`: the .npz itself where they are stored uncompressed as
+    float32, else a temporary file they are inflated into), for fits that read the frames a window at a time
+    (:mod:`pdeanim.fit.windowed` drops each window's pages once done). Falls back to :func:`load_poses_npz`
+    where the vertices cannot be mapped (a single frame, Fortran order); with ``into`` (the vertices written
+    to that file as raw float32, see :func:`pdeanim.npzread.mapped_member`) None there instead."""
+    from .npzread import mapped_member
+
+    limits = limits or PoseLimits()
+    headers: dict = {}
+
+    def check(found: dict) -> None:
+        check_npz_headers(found, limits)
+        headers.update(found)
+
+    small = read_npz(path, ("vertices", "faces", "times"), check, PosesInputError, skip=("vertices",))
+
+    def finite(values: np.ndarray, first: int) -> None:
+        if not np.all(np.isfinite(values)):
+            at = (first + int(np.argmin(np.isfinite(values)))) // 3
+            n_verts = int(np.prod(headers["vertices"].shape[1:-1]))
+            raise PosesInputError(f"vertices contain NaN or infinite values (first at frame {at // n_verts}, "
+                                  f"vertex {at % n_verts})")
+
+    vertices = mapped_member(path, "vertices", finite, PosesInputError, tmp_dir, into)
+    if vertices is None:
+        return None if into is not None else load_poses_npz(path, limits)
+    f = small.get("faces")
+    f = np.zeros((0, 3), np.int32) if f is None else np.asarray(f)
+    times = small.get("times")
+    times = np.arange(vertices.shape[0], dtype=np.float64) / DEFAULT_FPS if times is None else times
+    validate_pose_arrays(vertices, f, np.asarray(times), limits, values_checked=True)
+    return Poses(vertices, f.astype(np.int32, copy=False), np.asarray(times, dtype=np.float64),
+                 {"source": "npz"})
 
 
 def save_poses(path: str | Path, poses: Poses) -> None:

@@ -104,7 +104,16 @@ def run_fit(job: dict, blobs: BlobStore, settings: Settings, progress: Progress,
     tol, options = settings.fit_tolerances(), job["params"]["params"]
     stored = job["poses"]
     if isinstance(stored.get("n_frames"), int) and isinstance(stored.get("n_vertices"), int):
-        _fit_in_tasks(stored["n_frames"], stored["n_vertices"], options, settings, tol)
+        if _fit_in_tasks(stored["n_frames"], stored["n_vertices"], options, settings, tol):
+            from pdeanim.fit import FitOptions
+
+            from .windowtasks import plan_fit_streamed
+
+            fit_options = FitOptions.from_dict(options).validate()
+            planned = plan_fit_streamed(job["id"], stored["blob_key"], limits, fit_options, tol, blobs,
+                                        _labelled(progress), workdir)
+            if planned is not None:
+                return planned
     poses = load_poses_npz(blobs.get(stored["blob_key"]), limits)
     if _fit_in_tasks(poses.n_frames, poses.n_vertices, options, settings, tol):
         from pdeanim.fit import FitOptions

@@ -41,6 +41,37 @@ def plan_fit(job_id: str, poses, options, tol, blobs: BlobStore, progress: Progr
     return {"windowed": {"windows": plan.n_windows, "frames": poses.n_frames, "vertices": poses.n_vertices}}
 
 
+def plan_fit_streamed(job_id: str, blob_key: str, limits, options, tol, blobs: BlobStore,  # noqa: ANN001
+                      progress: Progress, workdir: Path) -> dict | None:
+    """:func:`plan_fit` without the poses in memory: the stored POSES.npz is copied to the work directory,
+    its vertices inflated straight into the raw float32 frames file that the window tasks read
+    (:func:`pdeanim.poses.load_poses_npz_mapped`), the plan made on that file's mapping (the curves read only
+    their sampled frames) and the file stored as it is: the same plan and frames, bit for bit. None where the
+    vertices cannot be streamed (one frame, Fortran order): the caller then loads the poses."""
+    from pdeanim.npzread import release_pages
+    from pdeanim.poses import load_poses_npz_mapped
+
+    progress = sub_progress(progress, 0.0, keys.PLAN_SHARE)
+    workdir.mkdir(parents=True, exist_ok=True)
+    npz, raw = workdir / "poses.npz", workdir / "frames.f32"
+    try:
+        blobs.get_file(blob_key, npz)
+        poses = load_poses_npz_mapped(npz, limits, into=raw)
+        npz.unlink()
+        if poses is None:
+            return None
+        plan = windowed.plan_windows(poses, options, tol, sub_progress(progress, 0.0, 0.8))
+        release_pages(poses.vertices)
+        progress(0.85, f"fit: store {poses.n_frames} frames for {plan.n_windows} window tasks")
+        blobs.put_file(raw, key=keys.frames_key(job_id))
+        blobs.put(plan.to_bytes(), key=keys.plan_key(job_id))
+    finally:
+        npz.unlink(missing_ok=True)
+        raw.unlink(missing_ok=True)
+    progress(1.0, f"fit: {plan.n_windows} window tasks")
+    return {"windowed": {"windows": plan.n_windows, "frames": poses.n_frames, "vertices": poses.n_vertices}}
+
+
 def window_frames(blobs: BlobStore, fit_job: str, plan: windowed.WindowPlan, index: int) -> np.ndarray:
     """(w, V, 3) float32 frames of window ``index``: a ranged read of the stored raw poses."""
     f0, f1 = plan.window(index)

@@ -80,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
     """Load, fit, write the clip, print a short summary."""
     from ..clip import write_clip_file
     from ..fit import FitOptions, fit_poses, target_shortfall
+    from ..fit.options import FitTolerances
     from ..posefiles import load_poses
     from ..progress import cli_progress
 
@@ -102,7 +103,10 @@ def run(args: argparse.Namespace) -> int:
         bones=_bones_for(args),
     )
     start = time.perf_counter()
-    poses = load_poses(args.poses, fps=args.fps, animation=args.animation)
+    # a long .npz is read a window of frames at a time from a file mapping (the frames stay in the page
+    # cache, not in the fit's memory) where the fit would run in windows
+    poses = load_poses(args.poses, fps=args.fps, animation=args.animation,
+                       map_over=FitTolerances().window_fit_values)
     used = (poses.meta or {}).get("animation")
     if isinstance(used, dict):
         print(f"animation: {used.get('name') or '(unnamed)'} (index {used.get('index')})")

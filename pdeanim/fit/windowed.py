@@ -43,6 +43,7 @@ from ..model.metrics import bbox_diagonal
 from ..model.parameterisation import curve_parameters
 from ..model.spacefit import SpaceProjection, project_items, search_D
 from ..model.spline import spline_residuals
+from ..npzread import release_pages
 from ..poses import Poses, make_poses
 from ..progress import Progress, sub_progress
 from .encode import unpacked_coefficients
@@ -379,10 +380,11 @@ with bases, 10.7 KB without)."""
 
 @dataclass
 class WindowCodes:
-    """One window's share of the clip: its knots' frames (S_w+1,), integer knot codes (C, 3, 4, S_w+1) on its
-    own knot steps (C, 3), with a shared time basis of its own (format §3.4) its integer weights (r_w, C, 3,
-    4) and basis (r_w, S_w+1) float32 (the codes are then the residual; r_w may be 0), its segments' signed
-    time constants (S_w, C, 3), its errors (stored clip and unrounded floor) and rate-control trials."""
+    """One window's share of the clip: its knots' frames (S_w+1,), integer knot codes (C, 3, 4, S_w+1) (int16
+    where they fit, else int32) on its own knot steps (C, 3), with a shared time basis of its own (format
+    §3.4) its integer weights (r_w, C, 3, 4) and basis (r_w, S_w+1) float32 (the codes are then the residual;
+    r_w may be 0), its segments' signed time constants (S_w, C, 3), its errors (stored clip and unrounded
+    floor) and rate-control trials."""
 
     index: int
     codes: np.ndarray
@@ -471,7 +473,7 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
     dd = d * d
     fitted = best.fitted.segm
     return WindowCodes(
-        index, np.ascontiguousarray(np.moveaxis(codes, 0, -1), np.int32), arrays["knot_step"],
+        index, _narrow_codes(np.moveaxis(codes, 0, -1)), arrays["knot_step"],
         (f0 + fitted.bounds).astype(np.int32), arrays["m"], weights.astype(np.int32), basis, dd.sum(axis=1),
         d.max(axis=1, initial=0.0), np.bincount(p.curve_of, dd.sum(axis=0), minlength=C),
         Errors.of(d, p.curve_of, C).curve_max, float((floor_d * floor_d).sum()),
@@ -479,6 +481,14 @@ def encode_window(model: WindowModel, frames: np.ndarray, index: int, progress: 
         {"tolerance": quant.tolerance, "knot_rms": quant.knot_rms, "knot_cap": quant.knot_cap,
          "segments": fitted.n_segments, "dense": best.dense is not None, "knot_rank": rank,
          "shared_weights": bool(header.get(SHARED_KEY)), "met": bool(best.meets)})
+
+
+def _narrow_codes(codes: np.ndarray) -> np.ndarray:
+    """Knot codes (C, 3, 4, S_w+1) as int16 where they all fit (most windows), else int32: a windowed fit
+    holds every window's codes until the join, which widens them exactly."""
+    lo, hi = np.iinfo(np.int16).min, np.iinfo(np.int16).max
+    small = codes.size == 0 or (codes.min() >= lo and codes.max() <= hi)
+    return np.ascontiguousarray(codes, np.int16 if small else np.int32)
 
 
 def _start(plan: WindowPlan, index: int, spline: bool) -> np.ndarray | None:
@@ -632,11 +642,18 @@ def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: Fit
     """The clip of ``poses`` fitted in windows of frames, every step in this process (see the module
     docstring); its report has the keys of an in-memory fit's."""
     start = time.perf_counter()
-    X = poses.vertices
-    plan = plan_windows(poses, options, tol, sub_progress(progress, 0.0, 0.1), curves)
+    X = poses.vertices  # frames mapped from a file (pdeanim.poses.load_poses_npz_mapped) are read a window
+    plan = plan_windows(poses, options, tol, sub_progress(progress, 0.0, 0.1), curves)  # at a time and their
+    release_pages(X)  # pages dropped once it is done
     W = plan.n_windows
     progress(0.1, f"space fit ({plan.n_frames} frames in {W} windows)")
-    space = join_space(plan, (gram_window(plan, X[slice(*plan.window(i))], i) for i in range(W)))
+
+    def gram(i: int) -> GramPart:
+        part = gram_window(plan, X[slice(*plan.window(i))], i)
+        release_pages(X)
+        return part
+
+    space = join_space(plan, (gram(i) for i in range(W)))
     t_space = time.perf_counter()
     model = WindowModel(plan, space)
     codes = []
@@ -644,6 +661,7 @@ def fit_windowed(poses: Poses, options: FitOptions, progress: Progress, tol: Fit
         f0, f1 = plan.window(i)
         codes.append(encode_window(model, X[f0:f1], i, sub_progress(progress, 0.2 + 0.7 * i / W,
                                                                     0.2 + 0.7 * (i + 1) / W)))
+        release_pages(X)
     t_codes = time.perf_counter()
     progress(0.92, "join")
     parts = join_clip(plan, space, codes)

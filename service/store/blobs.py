@@ -47,6 +47,10 @@ class BlobStore(Protocol):
         """``length`` bytes of the blob under ``key`` from byte ``start`` (a window's frames of raw poses)."""
         ...
 
+    def get_file(self, key: str, path: Path) -> None:
+        """Write the blob under ``key`` to the file ``path`` without reading it into memory."""
+        ...
+
     def exists(self, key: str) -> bool:
         """Whether ``key`` is stored."""
         ...
@@ -171,6 +175,13 @@ class LocalBlobStore:
         except FileNotFoundError as exc:
             raise BlobNotFound(key) from exc
 
+    def get_file(self, key: str, path: Path) -> None:
+        """Copy the blob under ``key`` to ``path``; BlobNotFound if absent."""
+        try:
+            shutil.copyfile(self._path(key), path)
+        except FileNotFoundError as exc:
+            raise BlobNotFound(key) from exc
+
     def exists(self, key: str) -> bool:
         """Whether a blob is stored under ``key``."""
         return self._path(key).is_file()
@@ -287,6 +298,17 @@ class S3BlobStore:
         try:
             return self.client.get_object(Bucket=self.bucket, Key=self._name(key),
                                           Range=f"bytes={start}-{start + length - 1}")["Body"].read()
+        except ClientError as exc:
+            if exc.response.get("Error", {}).get("Code") in ("NoSuchKey", "404"):
+                raise BlobNotFound(key) from exc
+            raise
+
+    def get_file(self, key: str, path: Path) -> None:
+        """Download the blob under ``key`` to ``path``; BlobNotFound if absent."""
+        from botocore.exceptions import ClientError
+
+        try:
+            self.client.download_file(self.bucket, self._name(key), str(path))
         except ClientError as exc:
             if exc.response.get("Error", {}).get("Code") in ("NoSuchKey", "404"):
                 raise BlobNotFound(key) from exc

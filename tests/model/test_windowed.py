@@ -206,3 +206,27 @@ def test_windows_of_a_low_rank_motion_share_one_set_of_knot_weights():
     assert _decoded_rms(shared, poses) == pytest.approx(shared.report["rms"], rel=1e-6)
     size = [len(p.topology) + len(p.coefficients) for p in (shared, own)]
     assert size[0] < 0.9 * size[1], size
+
+
+@pytest.mark.parametrize("compressed", [False, True])
+def test_poses_mapped_from_a_file_give_the_clip_of_poses_in_memory(motion, tmp_path, compressed):
+    """A long .npz read a window at a time from a file mapping (the CLI's path for windowed fits: the .npz
+    itself when stored uncompressed, else a temporary file it is inflated into) fits the very same clip."""
+    from pdeanim.npzread import release_pages
+    from pdeanim.posefiles import load_poses
+
+    path = tmp_path / "poses.npz"
+    (np.savez_compressed if compressed else np.savez)(path, vertices=motion.vertices, faces=motion.faces)
+    mapped = load_poses(path, map_over=0)
+    assert isinstance(mapped.vertices, np.memmap) and np.array_equal(mapped.vertices, motion.vertices)
+    release_pages(mapped.vertices)  # dropped pages read back the same
+    assert np.array_equal(mapped.vertices[5], motion.vertices[5])
+    tol, options = _windowed(20, motion.n_vertices), FitOptions(target_rel_rms=TARGET)
+    parts = fit_poses(mapped, options, tolerances=tol)
+    whole = fit_poses(motion, options, tolerances=tol)
+    assert (parts.topology, parts.coefficients) == (whole.topology, whole.coefficients)
+    bad = motion.vertices.copy()
+    bad[7, 3, 1] = np.inf
+    (np.savez_compressed if compressed else np.savez)(path, vertices=bad, faces=motion.faces)
+    with pytest.raises(Exception, match="frame 7, vertex 3"):
+        load_poses(path, map_over=0)

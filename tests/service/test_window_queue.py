@@ -184,10 +184,38 @@ def test_cancel_reaches_every_task(store, fit_job):
     assert windows.task_done(store.queue, running, {}, store.blobs) is None
 
 
-def test_ranged_blob_reads(store):
+def test_ranged_blob_reads(store, tmp_path):
     key = windows.frames_key("job_x")
     store.blobs.put(bytes(range(256)) * 4, key=key)
     assert store.blobs.get_range(key, 250, 10) == bytes([250, 251, 252, 253, 254, 255, 0, 1, 2, 3])
     assert store.blobs.get_range(key, 1020, 10) == bytes([252, 253, 254, 255])  # the end of the blob
+    store.blobs.get_file(key, tmp_path / "copy")  # the planning task's copy of the stored poses
+    assert (tmp_path / "copy").read_bytes() == bytes(range(256)) * 4
     windows.release_blobs(store.blobs, "job_x", 2)
     assert not store.blobs.exists(key)
+
+
+def test_streamed_planning_stores_the_plan_and_frames_of_the_in_memory_one(store, tmp_path):
+    """The planning task that inflates the stored poses straight into the frames file (no poses in memory)
+    stores the very plan and raw frames of the one that loads them."""
+    import numpy as np
+    import trimesh
+
+    from pdeanim.fit import FitOptions, FitTolerances
+    from pdeanim.poses import load_poses_npz, make_poses, poses_to_bytes
+    from pdeanim_worker.windowtasks import plan_fit, plan_fit_streamed
+
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    t = np.linspace(0.0, 1.0, 40)[:, None, None]
+    x = np.asarray(mesh.vertices)[None] * (1.0 + 0.2 * np.sin(2 * np.pi * t))
+    key = store.blobs.put(poses_to_bytes(make_poses(x.astype(np.float32), np.asarray(mesh.faces))))
+    tol = FitTolerances(window_fit_values=0, window_values=10 * len(mesh.vertices))
+    options = FitOptions(target_rel_rms=3e-3)
+    streamed = plan_fit_streamed("job_s", key, None, options, tol, store.blobs, lambda *_: None,
+                                 tmp_path / "s")
+    loaded = plan_fit("job_m", load_poses_npz(store.blobs.get(key)), options, tol, store.blobs,
+                      lambda *_: None, tmp_path / "m")
+    assert streamed == loaded and streamed["windowed"]["windows"] == 4
+    for of in (windows.frames_key, windows.plan_key):
+        assert store.blobs.get(of("job_s")) == store.blobs.get(of("job_m"))
+    assert not list((tmp_path / "s").iterdir())  # the copies in the work directory are gone
