@@ -139,7 +139,7 @@ def mapped_member(path: str | Path, name: str, check_chunk: Callable[[np.ndarray
                     name_len, extra_len = np.frombuffer(fh.read(4), "<u2")
                     offset = info.header_offset + 30 + int(name_len) + int(extra_len) + data_at
                     _check_file_chunks(fh, offset, head.count, check_chunk)
-                    return np.memmap(fh.name, np.float32, "r", offset, shape)
+                    return _map(fh.name, offset, shape)
                 # kept open by the mapping
                 out = tempfile.TemporaryFile(dir=tmp_dir) if into is None else open(into, "w+b")  # noqa: SIM115
                 per = max(1, MAP_CHUNK_BYTES // dtype.itemsize)
@@ -154,7 +154,7 @@ def mapped_member(path: str | Path, name: str, check_chunk: Callable[[np.ndarray
                     out.write(values.tobytes())
                     left -= n
                 out.flush()
-                return np.memmap(out, np.float32, "r", 0, shape)
+                return _map(out, 0, shape)
     except InputError:
         raise
     except MemoryError as exc:
@@ -164,6 +164,22 @@ def mapped_member(path: str | Path, name: str, check_chunk: Callable[[np.ndarray
                                  "raise the limit") from exc
     except _FAILURES as exc:
         raise error(f"not a valid .npz file ({type(exc).__name__}: {exc})") from exc
+
+
+def _map(file, offset: int, shape: tuple[int, ...]) -> np.memmap:  # noqa: ANN001 - a path or an open file
+    """A read-only float32 mapping of ``shape`` at ``offset`` of ``file``. A mapping counts against the
+    address-space limit (RLIMIT_AS): where mmap fails for want of it (ENOMEM), a MemoryError that names the
+    mapping's size, so the caller reports out of memory (CLI exit 4) rather than a bad file."""
+    import errno
+
+    try:
+        return np.memmap(file, np.float32, "r", offset, shape)
+    except OSError as exc:
+        if exc.errno != errno.ENOMEM:
+            raise
+        failed = MemoryError(f"mapping {int(np.prod(shape)) * 4} bytes of poses: {exc}")
+        failed.needed = int(np.prod(shape)) * 4
+        raise failed from exc
 
 
 def _check_file_chunks(fh, offset: int, count: int, check_chunk: Callable[[np.ndarray, int], None]) -> None:  # noqa: ANN001
