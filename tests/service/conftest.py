@@ -80,7 +80,9 @@ def backend_kind(request) -> str:
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The PostgreSQL run of a module that tests HTTP routes over the store (``POSTGRES_NIGHTLY = True``) is
     marked slow: CI runs those routes on SQLite, and the store, queue, worker, deletion and scale-out tests on
-    both backends; script/test-nightly runs the routes on PostgreSQL too."""
+    both backends; script/test-nightly runs the routes on PostgreSQL too. Modules whose PostgreSQL run only
+    repeats what SQLite shows (process lifecycle, window tasks through the job route) are marked the same way
+    to keep CI's time."""
     for item in items:
         params = getattr(getattr(item, "callspec", None), "params", {})
         if params.get("backend_kind") == "postgres" and getattr(item.module, "POSTGRES_NIGHTLY", False):

@@ -20,6 +20,8 @@ from pdeanim_service.store.context import Store
 from .conftest import running_services
 from .harness import PDEANIM, ROOT, Services, client, make_key, process_env, wait_job
 
+POSTGRES_NIGHTLY = True  # routes over the store (keys, long polls): CI runs them on SQLite (conftest)
+
 CYCLIC = {"mode": "eel", "frames": 12, "n_curves": 21, "points": 24, "modes": 4}
 LONG_SIM = {"frames": 2000, "target_tets": 600, "substeps": 20, "iterations": 8}  # tens of seconds even idle
 OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n"

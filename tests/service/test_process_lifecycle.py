@@ -16,6 +16,8 @@ from pdeanim_service.store.scratch import alive
 from .harness import ROOT, Services, client, make_key
 from .test_worker import HEAVY, children, job_processes, submit, wait_state
 
+POSTGRES_NIGHTLY = True  # process lifecycle, the same on both backends: CI runs it on SQLite (conftest)
+
 GONE_SECONDS = 15.0  # they die within about a second; the margin is for a loaded machine
 
 
