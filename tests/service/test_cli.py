@@ -8,6 +8,8 @@ import subprocess
 from .conftest import Backend
 from .harness import PDEANIM, Services, client, make_key, process_env, wait_job
 
+POSTGRES_NIGHTLY = True  # CLI over the store: CI runs it on SQLite (conftest)
+
 
 def test_keys_create_prints_a_working_key(module_backend, tmp_path):
     env = process_env(module_backend)

@@ -16,6 +16,8 @@ from pdeanim_service.api.uploadslots import BodyPace, UploadSlots
 
 from .harness import Services, client, make_key
 
+POSTGRES_NIGHTLY = True  # upload scheduling, the same on both backends: CI runs it on SQLite (conftest)
+
 TET_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 BOUNDARY = "slowloris-boundary"
 DELAY_BOUND = 2.0  # seconds another tenant's upload may be delayed by the slow one (issue 34's goal)
