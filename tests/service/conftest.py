@@ -82,8 +82,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     marked slow: CI runs those routes on SQLite, and the store, queue, worker, deletion and scale-out tests on
     both backends; script/test-nightly runs the routes on PostgreSQL too. Modules whose PostgreSQL run only
     repeats what SQLite shows (process lifecycle, window tasks through the job route, the CLI, upload
-    fairness) are marked the same way
-    to keep CI's time."""
+    fairness) are marked the same way to keep CI's time."""
     for item in items:
         params = getattr(getattr(item, "callspec", None), "params", {})
         if params.get("backend_kind") == "postgres" and getattr(item.module, "POSTGRES_NIGHTLY", False):
