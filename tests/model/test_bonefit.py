@@ -14,7 +14,7 @@ from pdeanim.clip import load_clip
 from pdeanim.fit import FitOptions, FitTolerances, fit_poses
 from pdeanim.fit.bonefit import BONE_SHARE, SLOPE_STEPS, BoneBudgets, rd_cost
 from pdeanim.gltf.read import read_animated_poses
-from pdeanim.poses import make_poses
+from pdeanim.poses import Poses, make_poses
 from tests.model.test_bones_decompose import bending_tube
 
 CESIUM_MAN = Path(__file__).parents[1] / "gltf" / "data" / "CesiumMan.glb"
@@ -97,13 +97,19 @@ def test_skinned_gltf_keeps_its_joints():
     assert any(c["residual"] for c in b["tried"])  # a clip with residual curves was measured too
 
 
-def test_the_slope_rule_takes_a_finer_bone_layer_where_it_cuts_the_max_error_cheaply():
+def _cesium_budgets() -> tuple[BoneBudgets, float, Poses]:
+    """CesiumMan's own skin at 10 fps: its bone-budget search, RMS goal (3e-3 of the diagonal) and poses."""
     poses = read_animated_poses(CESIUM_MAN, fps=10)
     skin = skin_bones(CESIUM_MAN, poses)
     diag = float(np.linalg.norm(np.ptp(poses.vertices[0], axis=0)))
     goal = 3e-3 * diag
     t = (poses.times - poses.times[0]) / (poses.times[-1] - poses.times[0])
     search = BoneBudgets(skin.motion, skin.rest, poses.vertices, t, False, goal)
+    return search, goal, poses
+
+
+def test_the_slope_rule_takes_a_finer_bone_layer_where_it_cuts_the_max_error_cheaply():
+    search, goal, _ = _cesium_budgets()
     coarsest = search.coarsest(0.95, 0.97 * 3 * goal)
     slope = FitTolerances().skin_rd_slope
     chosen = search.by_slope(coarsest, slope, 0.95, 0.97 * 3 * goal)
@@ -119,12 +125,7 @@ def test_the_slope_rule_takes_a_finer_bone_layer_where_it_cuts_the_max_error_che
 
 
 def test_budget_search_finds_the_coarsest_bone_layer_within_a_share():
-    poses = read_animated_poses(CESIUM_MAN, fps=10)
-    skin = skin_bones(CESIUM_MAN, poses)
-    diag = float(np.linalg.norm(np.ptp(poses.vertices[0], axis=0)))
-    goal = 3e-3 * diag
-    t = (poses.times - poses.times[0]) / (poses.times[-1] - poses.times[0])
-    search = BoneBudgets(skin.motion, skin.rest, poses.vertices, t, False, goal)
+    search, goal, poses = _cesium_budgets()
     found = search.coarsest(0.5, None)
     trials = search.trials()
     chosen = next(x for x in trials if x["budget_rms"] == found)
